@@ -1,0 +1,82 @@
+//! Measurement types every estimator consumes.
+//!
+//! A measurement carries everything an estimator needs to use it (the emitter's position
+//! and velocity as the receiver computes them, the noise it should assume) and nothing of
+//! the truth. Sources produce them; the engine hands each batch to every estimator.
+
+use crate::core::{EmitterId, GpsTime, System};
+use nalgebra::{Matrix3, Vector3};
+
+/// A pseudorange (and optionally a pseudorange rate) to one emitter.
+///
+/// Model (seed 000 eqs. 9, 14, 16):
+/// ```text
+/// ρ  = ‖r_e − r‖ + b_sys + ε_ρ          (b_sys: receiver clock offset of the system, m)
+/// ρ̇  = (r − r_e)/‖r − r_e‖ · (v − v_e) + ḃ + ε_ρ̇
+/// ```
+/// The emitter position is the one at transmission time, already rotated into the ECEF
+/// frame at reception time (Sagnac), and the pseudorange is already corrected for the
+/// emitter clock and the atmospheric models the receiver applies, as a receiver's
+/// navigation processor does before its filter.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RangeMeasurement {
+    pub emitter: EmitterId,
+    /// Emitter position (ECEF, m).
+    pub emitter_pos_ecef_m: Vector3<f64>,
+    /// Emitter velocity (ECEF, m/s); zero for towers.
+    pub emitter_vel_ecef_mps: Vector3<f64>,
+    /// Corrected pseudorange (m).
+    pub pseudorange_m: f64,
+    /// 1-σ noise the estimator should assume for the pseudorange (m).
+    pub sigma_m: f64,
+    /// Corrected pseudorange rate (m/s), if the receiver measured one.
+    pub range_rate_mps: Option<f64>,
+    /// 1-σ noise the estimator should assume for the pseudorange rate (m/s).
+    pub sigma_rate_mps: f64,
+    /// Carrier-to-noise density (dB-Hz) the receiver reports.
+    pub cn0_dbhz: f64,
+    /// Elevation of the emitter seen from the receiver's true position (rad); informative.
+    pub elevation_rad: f64,
+}
+
+impl RangeMeasurement {
+    /// The system of the emitter, which selects the clock offset state.
+    pub fn system(&self) -> System {
+        self.emitter.system
+    }
+}
+
+/// A position fix from another positioning method (FM fingerprinting, a magnetic
+/// landmark): `L = r + ε`, `ε ~ N(0, R_f)` (seed 000 eqs. 18–19).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PositionFix {
+    pub pos_ecef_m: Vector3<f64>,
+    pub cov_m2: Matrix3<f64>,
+}
+
+/// One measurement of any kind.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Measurement {
+    Range(RangeMeasurement),
+    Position(PositionFix),
+}
+
+/// All measurements one source produced at one instant.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct MeasurementBatch {
+    /// Reception time (GPST, the receiver's true time; the clock offset is in the ranges).
+    pub t: GpsTime,
+    /// Name of the source that produced the batch (e.g. `"gnss"`).
+    pub source: String,
+    pub items: Vec<Measurement>,
+}
+
+impl MeasurementBatch {
+    /// The range measurements in the batch.
+    pub fn ranges(&self) -> impl Iterator<Item = &RangeMeasurement> {
+        self.items.iter().filter_map(|m| match m {
+            Measurement::Range(r) => Some(r),
+            _ => None,
+        })
+    }
+}

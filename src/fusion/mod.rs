@@ -1,0 +1,10 @@
+//! The fusion engine: measurement types, filters and the estimators a world lists.
+//!
+//! Depends only on `core` and its own measurement types, so every filter can be tested on
+//! synthetic measurements.
+
+pub mod ekf11;
+pub mod estimator;
+pub mod linear_kf;
+pub mod measurement;
+pub mod wls;

@@ -1,0 +1,8 @@
+//! hybridnav: a discrete-event, signal-level simulator for multi-source positioning.
+//!
+//! See `docs/architecture.md` for the bird's-eye view, the code map and the invariants.
+
+pub mod core;
+pub mod fusion;
+pub mod gnss;
+pub mod motion;

@@ -1,0 +1,1 @@
+//! Platform truth motion (to be written)
