@@ -2,7 +2,13 @@
 //!
 //! See `docs/architecture.md` for the bird's-eye view, the code map and the invariants.
 
+pub mod cli;
 pub mod core;
+pub mod engine;
 pub mod fusion;
 pub mod gnss;
+pub mod io;
+pub mod metrics;
+pub mod montecarlo;
 pub mod motion;
+pub mod world;

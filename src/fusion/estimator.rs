@@ -1,1 +1,226 @@
-//! (to be written)
+//! The estimators a world lists, behind one small trait the engine drives.
+
+use crate::core::GpsTime;
+use crate::fusion::measurement::MeasurementBatch;
+use nalgebra::{Matrix3, Vector3};
+
+/// An estimator's output at one epoch.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Estimate {
+    pub t: GpsTime,
+    pub pos_ecef_m: Vector3<f64>,
+    pub vel_ecef_mps: Option<Vector3<f64>>,
+    /// Position covariance (ECEF, m²).
+    pub cov_pos_m2: Matrix3<f64>,
+}
+
+/// What one estimator did with one batch.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct EpochOutcome {
+    /// The estimate after the batch, if the estimator has one.
+    pub estimate: Option<Estimate>,
+    /// Measurements used.
+    pub used: u32,
+    /// Measurements rejected (gate, numerical failure).
+    pub rejected: u32,
+    /// GDOP of the measurements used, when the estimator computed one.
+    pub gdop: Option<f64>,
+    /// True when the estimator detected a numerical failure and reset or refused the epoch.
+    pub numerical_failure: bool,
+}
+
+/// An estimator the engine drives: it consumes batches from the sources it names and
+/// keeps its own latest estimate.
+pub trait Estimator: Send {
+    /// The name the world gives it (the row name in the papers' tables).
+    fn name(&self) -> &str;
+    /// True when it consumes batches of the named source.
+    fn consumes(&self, source: &str) -> bool;
+    /// Processes one batch (predicting to its time first).
+    fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome;
+    /// The latest estimate.
+    fn latest(&self) -> Option<Estimate>;
+}
+
+use crate::core::System;
+use crate::fusion::ekf11::{Ekf11, Ekf11Config, IsbConfig, UpdateOutcome};
+use crate::fusion::measurement::RangeMeasurement;
+use crate::fusion::wls::{self, WlsOptions};
+
+/// Seed 000's EKF driven epoch by epoch: initialised from a weighted-least-squares fix,
+/// then predicted to each batch's time and updated with each range and range rate.
+pub struct EkfEstimator {
+    name: String,
+    systems: Vec<System>,
+    ekf: Ekf11,
+    last_t: Option<GpsTime>,
+    /// Ranges of the current batch from the systems this estimator uses (reused buffer).
+    scratch: Vec<RangeMeasurement>,
+    /// Emitter geometry of the current batch for the GDOP (reused buffer).
+    geometry: Vec<(Vector3<f64>, usize)>,
+}
+
+impl EkfEstimator {
+    /// An estimator using `systems`. When it mixes GPS and BeiDou and the configuration has
+    /// no inter-system-bias state, one is switched on with its defaults: a receiver's BDS
+    /// ranges carry a hardware and time-scale bias relative to GPS that a shared clock
+    /// would turn into position error.
+    ///
+    /// # Errors
+    /// When the configuration is invalid.
+    pub fn new(name: &str, systems: &[System], cfg: Option<Ekf11Config>) -> Result<Self, String> {
+        let mut cfg = cfg.unwrap_or_default();
+        if systems.contains(&System::Bds) && systems.iter().any(|s| *s != System::Bds) && cfg.isb_bds.is_none() {
+            cfg.isb_bds = Some(IsbConfig::default());
+        }
+        let ekf = Ekf11::new(cfg).map_err(|e| e.to_string())?;
+        Ok(Self {
+            name: name.to_string(),
+            systems: systems.to_vec(),
+            ekf,
+            last_t: None,
+            scratch: Vec::with_capacity(64),
+            geometry: Vec::with_capacity(64),
+        })
+    }
+
+    fn estimate(&self, t: GpsTime) -> Option<Estimate> {
+        self.ekf.is_initialised().then(|| Estimate {
+            t,
+            pos_ecef_m: self.ekf.position_ecef(),
+            vel_ecef_mps: Some(self.ekf.velocity_ecef()),
+            cov_pos_m2: self.ekf.position_covariance(),
+        })
+    }
+}
+
+/// Fills `scratch` with the batch's ranges from `systems`.
+fn select_ranges(batch: &MeasurementBatch, systems: &[System], scratch: &mut Vec<RangeMeasurement>) {
+    scratch.clear();
+    scratch.extend(batch.ranges().filter(|m| systems.contains(&m.system())).copied());
+}
+
+/// GDOP of the ranges in `ranges` seen from `rx`, one clock per system present.
+fn gdop_of(rx: &Vector3<f64>, ranges: &[RangeMeasurement], geometry: &mut Vec<(Vector3<f64>, usize)>) -> Option<f64> {
+    let mut present = [false; wls::MAX_CLOCKS];
+    for m in ranges {
+        present[wls::system_index(m.system())] = true;
+    }
+    let mut map = [0usize; wls::MAX_CLOCKS];
+    let mut n_clocks = 0;
+    for (i, p) in present.iter().enumerate() {
+        if *p {
+            map[i] = n_clocks;
+            n_clocks += 1;
+        }
+    }
+    geometry.clear();
+    geometry.extend(ranges.iter().map(|m| (m.emitter_pos_ecef_m, map[wls::system_index(m.system())])));
+    wls::dop(rx, geometry, n_clocks).map(|d| d.gdop)
+}
+
+impl Estimator for EkfEstimator {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn consumes(&self, source: &str) -> bool {
+        source == "gnss"
+    }
+
+    fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
+        select_ranges(batch, &self.systems, &mut self.scratch);
+        let mut out = EpochOutcome::default();
+        if !self.ekf.is_initialised() {
+            // The first fix comes from least squares on this epoch alone; until one exists
+            // the epoch counts as an epoch without a fix.
+            let Ok(fix) = wls::solve(self.scratch.iter(), &WlsOptions::default()) else {
+                return out;
+            };
+            let clock = self.systems.iter().find_map(|s| fix.clock_m(*s)).unwrap_or(0.0);
+            let pos_sigma = fix.cov_pos_ecef_m2.trace().max(0.0).sqrt().max(1.0);
+            if self.ekf.initialise(fix.pos_ecef_m, clock, pos_sigma, 10.0 * pos_sigma).is_err() {
+                out.numerical_failure = true;
+                return out;
+            }
+            self.last_t = Some(batch.t);
+            out.used = fix.n_measurements as u32;
+            out.gdop = Some(fix.dop.gdop);
+            out.estimate = self.estimate(batch.t);
+            return out;
+        }
+        let dt = self.last_t.map_or(0.0, |l| batch.t.seconds_since(l));
+        self.last_t = Some(batch.t);
+        if self.ekf.predict(dt.max(0.0)).is_err() {
+            // A prediction that cannot be computed resets the filter; the next epoch
+            // re-initialises it from least squares. The reset is reported, never hidden.
+            out.numerical_failure = true;
+            self.ekf = Ekf11::new(*self.ekf.config()).unwrap_or_else(|_| unreachable!("config validated at build"));
+            return out;
+        }
+        for m in &self.scratch {
+            let r = self.ekf.update_range(m);
+            for o in std::iter::once(r.range).chain(r.rate) {
+                match o {
+                    UpdateOutcome::Accepted { .. } => out.used += 1,
+                    UpdateOutcome::Rejected { .. } => out.rejected += 1,
+                }
+            }
+        }
+        out.gdop = gdop_of(&self.ekf.position_ecef(), &self.scratch, &mut self.geometry);
+        out.estimate = self.estimate(batch.t);
+        out
+    }
+
+    fn latest(&self) -> Option<Estimate> {
+        self.last_t.and_then(|t| self.estimate(t))
+    }
+}
+
+/// Epoch-by-epoch weighted least squares: no memory, no fix with too few satellites.
+pub struct WlsEstimator {
+    name: String,
+    systems: Vec<System>,
+    scratch: Vec<RangeMeasurement>,
+    latest: Option<Estimate>,
+}
+
+impl WlsEstimator {
+    /// An estimator using `systems`, one clock per system.
+    pub fn new(name: &str, systems: &[System]) -> Self {
+        Self { name: name.to_string(), systems: systems.to_vec(), scratch: Vec::with_capacity(64), latest: None }
+    }
+}
+
+impl Estimator for WlsEstimator {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn consumes(&self, source: &str) -> bool {
+        source == "gnss"
+    }
+
+    fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
+        select_ranges(batch, &self.systems, &mut self.scratch);
+        let opts = WlsOptions { initial_pos_ecef_m: self.latest.map(|e| e.pos_ecef_m), ..WlsOptions::default() };
+        let mut out = EpochOutcome::default();
+        match wls::solve(self.scratch.iter(), &opts) {
+            Ok(fix) => {
+                let e = Estimate { t: batch.t, pos_ecef_m: fix.pos_ecef_m, vel_ecef_mps: None, cov_pos_m2: fix.cov_pos_ecef_m2 };
+                self.latest = Some(e);
+                out.estimate = Some(e);
+                out.used = fix.n_measurements as u32;
+                out.gdop = Some(fix.dop.gdop);
+            }
+            Err(_) => {
+                out.rejected = self.scratch.len() as u32;
+            }
+        }
+        out
+    }
+
+    fn latest(&self) -> Option<Estimate> {
+        self.latest
+    }
+}

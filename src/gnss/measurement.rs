@@ -1,1 +1,393 @@
-//! (to be written)
+//! The GNSS receiver as a measurement source: pseudoranges, pseudorange rates and C/N0
+//! from broadcast orbits, with the receiver clock, the atmosphere, broadcast-orbit errors,
+//! tracking noise, an elevation mask and manual satellite shielding.
+//!
+//! Truth and correction (per satellite s, reception time t_r, transmission t_t = t_r − τ):
+//!
+//! ```text
+//! τ        solves  τ = ‖R_z(−Ω̇e τ)·r_s(t_t) − r_r(t_r)‖ / c      (light time + Sagnac)
+//! ρ_raw    = ‖·‖ + c(δt_r + ISB_sys − δt_s) + I_true + T_true + e_ure + ε_dll
+//! ρ_corr   = ρ_raw + c·δt_s − I_model − T_model
+//!          = ‖·‖ + c(δt_r + ISB_sys) + (I_true − I_model) + (T_true − T_model) + e_ure + ε_dll
+//! ρ̇_corr  = u·(v_s − v_r) + c·δṫ_r + ε_fll,     u = (r_s − r_r)/‖r_s − r_r‖
+//! ```
+//! `I_model` is Klobuchar (IS-GPS-200 §20.3.3.5.2.5) scaled by (f_L1/f)² for BeiDou B1I;
+//! `I_true = I_model·(1 + k_s)` with a per-satellite, per-trial residual factor
+//! k_s ~ N(0, σ_iono²) (Klobuchar removes roughly half of the delay; σ_iono = 0.5 by
+//! default). `T_model` is Saastamoinen; `T_true = T_model·(1 + k_T)`, k_T ~ N(0, σ_trop²)
+//! per trial. The broadcast orbit-and-clock error `e_ure` is a first-order Gauss–Markov
+//! process per satellite (σ_URE, τ_URE). ε_dll and ε_fll come from the C/N0 through the
+//! tracking-loop models of [`crate::gnss::link`].
+//!
+//! The σ the receiver reports to estimators is its own error model, which knows the
+//! magnitudes but not the realisations:
+//! σ² = σ_dll² + σ_URE² + (σ_iono·I_model)² + (σ_trop·T_model)².
+
+use crate::core::geodesy::{azimuth_elevation_with, ecef_to_enu_rotation};
+use crate::core::rng::{StreamRng, TrialRng};
+use crate::core::{EmitterId, Geodetic, SimTime, System, C_MPS};
+use crate::engine::{SampleContext, Source};
+use crate::fusion::measurement::{Measurement, MeasurementBatch, RangeMeasurement};
+use crate::gnss::atmosphere::{saastamoinen_m, Klobuchar};
+use crate::gnss::link::TrackingConfig;
+use crate::gnss::receiver_clock::ReceiverClock;
+use crate::gnss::rinex_nav::NavData;
+use nalgebra::{Matrix3, Vector3};
+use rand::Rng;
+use rand_distr::StandardNormal;
+use serde::Deserialize;
+use std::sync::Arc;
+
+/// Earth rotation rate used for the Sagnac correction (IS-GPS-200), rad/s.
+const OMEGA_E_RAD_S: f64 = 7.292_115_146_7e-5;
+/// GPS L1 and BeiDou B1I carrier frequencies (Hz).
+pub const F_L1_HZ: f64 = 1_575.42e6;
+pub const F_B1I_HZ: f64 = 1_561.098e6;
+
+fn default_systems() -> Vec<System> {
+    vec![System::Gps]
+}
+fn default_rate_hz() -> f64 {
+    1.0
+}
+fn default_mask_deg() -> f64 {
+    10.0
+}
+fn default_true() -> bool {
+    true
+}
+
+/// Error budget of the simulated GNSS receiver beyond tracking noise.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct GnssErrorConfig {
+    /// 1-σ broadcast orbit + clock error (user range error) for GPS, m.
+    pub ure_gps_m: f64,
+    /// 1-σ user range error for BeiDou, m.
+    pub ure_bds_m: f64,
+    /// Correlation time of the user range error, s.
+    pub ure_tau_s: f64,
+    /// 1-σ relative residual of the Klobuchar model (0.5: half the delay remains).
+    pub iono_residual: f64,
+    /// 1-σ relative residual of the Saastamoinen model.
+    pub tropo_residual: f64,
+    /// Relative humidity used by the receiver's troposphere model (0–1).
+    pub humidity: f64,
+}
+
+impl Default for GnssErrorConfig {
+    fn default() -> Self {
+        Self { ure_gps_m: 0.8, ure_bds_m: 1.2, ure_tau_s: 1800.0, iono_residual: 0.5, tropo_residual: 0.05, humidity: 0.5 }
+    }
+}
+
+/// `[sensors.gnss]` in a world file.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct GnssConfig {
+    /// Systems tracked: `"gps"`, `"bds"`.
+    #[serde(default = "default_systems")]
+    pub systems: Vec<System>,
+    /// Measurement rate (Hz).
+    #[serde(default = "default_rate_hz")]
+    pub rate_hz: f64,
+    /// Elevation mask (degrees).
+    #[serde(default = "default_mask_deg")]
+    pub elevation_mask_deg: f64,
+    /// Whether pseudorange rates are output.
+    #[serde(default = "default_true")]
+    pub range_rates: bool,
+    /// Tracking loops and the loss-of-lock threshold.
+    #[serde(default)]
+    pub tracking: TrackingConfig,
+    /// Orbit, clock and atmosphere error budget.
+    #[serde(default)]
+    pub errors: GnssErrorConfig,
+}
+
+impl Default for GnssConfig {
+    fn default() -> Self {
+        Self {
+            systems: default_systems(),
+            rate_hz: default_rate_hz(),
+            elevation_mask_deg: default_mask_deg(),
+            range_rates: true,
+            tracking: TrackingConfig::default(),
+            errors: GnssErrorConfig::default(),
+        }
+    }
+}
+
+/// Manual shielding over a time window, as in seed 000's experiments.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Shielding {
+    pub from_s: f64,
+    pub to_s: f64,
+    pub rule: ShieldingRule,
+}
+
+/// Which satellites survive a shielding window.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ShieldingRule {
+    /// Keep only the N highest satellites of each system.
+    KeepHighest(usize),
+    /// Keep only these satellites.
+    Keep(Vec<EmitterId>),
+    /// Remove these satellites.
+    Block(Vec<EmitterId>),
+}
+
+/// Per-satellite state of the simulated receiver.
+struct Channel {
+    sat: EmitterId,
+    rng: StreamRng,
+    ure_m: f64,
+    iono_factor: f64,
+}
+
+/// A satellite above the mask at one epoch, before shielding.
+#[derive(Clone, Copy)]
+struct Candidate {
+    channel: usize,
+    el_rad: f64,
+    az_rad: f64,
+    pos_rot: Vector3<f64>,
+    vel_rot: Vector3<f64>,
+}
+
+/// The GNSS receiver source.
+pub struct GnssSource {
+    cfg: GnssConfig,
+    nav: Arc<NavData>,
+    klobuchar: Option<Klobuchar>,
+    shielding: Vec<Shielding>,
+    clock: ReceiverClock,
+    clock_rng: StreamRng,
+    tropo_factor: f64,
+    channels: Vec<Channel>,
+    candidates: Vec<Candidate>,
+    step_ns: i64,
+    end: SimTime,
+    last_sim: Option<SimTime>,
+}
+
+impl GnssSource {
+    /// Builds the receiver for one trial. `clock` is the receiver's clock (already drawn
+    /// from its own stream).
+    pub fn new(
+        cfg: GnssConfig,
+        nav: Arc<NavData>,
+        shielding: Vec<Shielding>,
+        clock: ReceiverClock,
+        rng: &TrialRng,
+        end: SimTime,
+    ) -> Self {
+        let mut trop_rng = rng.stream("gnss/tropo");
+        let z: f64 = trop_rng.sample(StandardNormal);
+        let tropo_factor = cfg.errors.tropo_residual * z;
+        let channels = nav
+            .satellites()
+            .into_iter()
+            .filter(|s| cfg.systems.contains(&s.system))
+            .map(|sat| {
+                let mut r = rng.stream(&format!("gnss/{sat}"));
+                let sigma_ure = match sat.system {
+                    System::Bds => cfg.errors.ure_bds_m,
+                    _ => cfg.errors.ure_gps_m,
+                };
+                let z_ure: f64 = r.sample(StandardNormal);
+                let z_iono: f64 = r.sample(StandardNormal);
+                let ure_m = sigma_ure * z_ure;
+                let iono_factor = cfg.errors.iono_residual * z_iono;
+                Channel { sat, rng: r, ure_m, iono_factor }
+            })
+            .collect::<Vec<_>>();
+        let step_ns = (1e9 / cfg.rate_hz).round() as i64;
+        let klobuchar = nav.klobuchar;
+        Self {
+            candidates: Vec::with_capacity(channels.len()),
+            channels,
+            cfg,
+            nav,
+            klobuchar,
+            shielding,
+            clock,
+            clock_rng: rng.stream("gnss/receiver_clock"),
+            tropo_factor,
+            step_ns,
+            end,
+            last_sim: None,
+        }
+    }
+
+    fn sigma_ure(&self, sys: System) -> f64 {
+        match sys {
+            System::Bds => self.cfg.errors.ure_bds_m,
+            _ => self.cfg.errors.ure_gps_m,
+        }
+    }
+
+    /// Applies the shielding windows active at `t_s` to the candidates.
+    fn apply_shielding(&mut self, t_s: f64) {
+        for w in &self.shielding {
+            if t_s < w.from_s || t_s >= w.to_s {
+                continue;
+            }
+            let channels = &self.channels;
+            match &w.rule {
+                ShieldingRule::KeepHighest(n) => {
+                    // Keep the N highest satellites of each system. Sorting by system,
+                    // then elevation (highest first), then id makes the choice independent
+                    // of the order of the navigation file.
+                    self.candidates.sort_by(|a, b| {
+                        let (sa, sb) = (channels[a.channel].sat, channels[b.channel].sat);
+                        sa.system.cmp(&sb.system).then(b.el_rad.total_cmp(&a.el_rad)).then(sa.cmp(&sb))
+                    });
+                    let mut kept = 0usize;
+                    let mut current: Option<System> = None;
+                    self.candidates.retain(|c| {
+                        let sys = channels[c.channel].sat.system;
+                        if current != Some(sys) {
+                            current = Some(sys);
+                            kept = 0;
+                        }
+                        kept += 1;
+                        kept <= *n
+                    });
+                }
+                ShieldingRule::Keep(list) => self.candidates.retain(|c| list.contains(&channels[c.channel].sat)),
+                ShieldingRule::Block(list) => self.candidates.retain(|c| !list.contains(&channels[c.channel].sat)),
+            }
+        }
+    }
+}
+
+/// Position and velocity of a satellite at transmission time, rotated into the ECEF frame
+/// of the reception time, with the light time τ found by fixed-point iteration.
+fn transmit_geometry(
+    eph: &crate::gnss::ephemeris::Ephemeris,
+    t_rx: crate::core::GpsTime,
+    rx: &Vector3<f64>,
+) -> (Vector3<f64>, Vector3<f64>) {
+    let mut tau = 0.075;
+    let mut st = eph.state(t_rx.add_seconds(-tau));
+    let mut pos = st.pos_ecef_m;
+    for _ in 0..4 {
+        st = eph.state(t_rx.add_seconds(-tau));
+        let (s, c) = (OMEGA_E_RAD_S * tau).sin_cos();
+        let rz = Matrix3::new(c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0);
+        pos = rz * st.pos_ecef_m;
+        let new_tau = (pos - rx).norm() / C_MPS;
+        if (new_tau - tau).abs() < 1e-12 {
+            tau = new_tau;
+            break;
+        }
+        tau = new_tau;
+    }
+    let (s, c) = (OMEGA_E_RAD_S * tau).sin_cos();
+    let rz = Matrix3::new(c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0);
+    (pos, rz * st.vel_ecef_mps)
+}
+
+impl Source for GnssSource {
+    fn name(&self) -> &str {
+        "gnss"
+    }
+
+    fn first_sample(&self) -> SimTime {
+        SimTime(0)
+    }
+
+    fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
+        let truth = ctx.truth;
+        let dt_s = self.last_sim.map_or(0.0, |l| (truth.sim.0 - l.0) as f64 * 1e-9);
+        self.last_sim = Some(truth.sim);
+        if dt_s > 0.0 {
+            self.clock.step(dt_s, &mut self.clock_rng);
+        }
+        out.t = truth.t;
+        out.source.clear();
+        out.source.push_str("gnss");
+
+        let rx = truth.pos_ecef_m;
+        let rx_geo = Geodetic::from_ecef(&rx);
+        let rot = ecef_to_enu_rotation(rx_geo.lat_rad, rx_geo.lon_rad);
+        let mask = self.cfg.elevation_mask_deg.to_radians();
+
+        self.candidates.clear();
+        for (i, ch) in self.channels.iter().enumerate() {
+            let Some(eph) = self.nav.select(ch.sat, truth.t) else { continue };
+            if !eph.is_healthy() {
+                continue;
+            }
+            let (pos_rot, vel_rot) = transmit_geometry(eph, truth.t, &rx);
+            let (az, el) = azimuth_elevation_with(&rot, &rx, &pos_rot);
+            if el < mask {
+                continue;
+            }
+            self.candidates.push(Candidate { channel: i, el_rad: el, az_rad: az, pos_rot, vel_rot });
+        }
+        self.apply_shielding(truth.sim.seconds());
+
+        let rx_bias_s = self.clock.bias_s();
+        let rx_drift = self.clock.drift_s_per_s();
+        for k in 0..self.candidates.len() {
+            let c = self.candidates[k];
+            let sat = self.channels[c.channel].sat;
+            let cn0 = self.cfg.tracking.cn0_dbhz(sat.system, c.el_rad);
+            if !self.cfg.tracking.in_lock(cn0) {
+                continue;
+            }
+            let sigma_dll = self.cfg.tracking.code_sigma_m(sat.system, cn0);
+            let sigma_rate = self.cfg.tracking.rate_sigma_mps(sat.system, cn0);
+            let sigma_ure = self.sigma_ure(sat.system);
+            let freq_scale = if sat.system == System::Bds { (F_L1_HZ / F_B1I_HZ).powi(2) } else { 1.0 };
+            let iono_model = self
+                .klobuchar
+                .map_or(0.0, |k| k.delay_l1_m(rx_geo.lat_rad, rx_geo.lon_rad, c.az_rad, c.el_rad, truth.t))
+                * freq_scale;
+            let tropo_model = saastamoinen_m(rx_geo.lat_rad, rx_geo.h_m, c.el_rad, self.cfg.errors.humidity);
+
+            let ch = &mut self.channels[c.channel];
+            // The user range error evolves as a first-order Gauss–Markov process between
+            // epochs: e_k = φ e_{k−1} + σ√(1 − φ²) n_k, φ = exp(−Δt/τ).
+            if dt_s > 0.0 {
+                let phi = (-dt_s / self.cfg.errors.ure_tau_s).exp();
+                let n: f64 = ch.rng.sample(StandardNormal);
+                ch.ure_m = phi * ch.ure_m + sigma_ure * (1.0 - phi * phi).sqrt() * n;
+            }
+            let n_code: f64 = ch.rng.sample(StandardNormal);
+            let n_rate: f64 = ch.rng.sample(StandardNormal);
+
+            let los = c.pos_rot - rx;
+            let range = los.norm();
+            let u = los / range;
+            let isb_s = self.clock.isb_s(sat.system);
+            let pseudorange_m = range
+                + C_MPS * (rx_bias_s + isb_s)
+                + iono_model * ch.iono_factor
+                + tropo_model * self.tropo_factor
+                + ch.ure_m
+                + sigma_dll * n_code;
+            let range_rate = u.dot(&(c.vel_rot - truth.vel_ecef_mps)) + C_MPS * rx_drift + sigma_rate * n_rate;
+            let sigma_m = (sigma_dll.powi(2)
+                + sigma_ure.powi(2)
+                + (self.cfg.errors.iono_residual * iono_model).powi(2)
+                + (self.cfg.errors.tropo_residual * tropo_model).powi(2))
+            .sqrt();
+            out.items.push(Measurement::Range(RangeMeasurement {
+                emitter: sat,
+                emitter_pos_ecef_m: c.pos_rot,
+                emitter_vel_ecef_mps: c.vel_rot,
+                pseudorange_m,
+                sigma_m,
+                range_rate_mps: self.cfg.range_rates.then_some(range_rate),
+                sigma_rate_mps: sigma_rate,
+                cn0_dbhz: cn0,
+                elevation_rad: c.el_rad,
+            }));
+        }
+        let next = SimTime(truth.sim.0 + self.step_ns);
+        (next <= self.end).then_some(next)
+    }
+}

@@ -1,0 +1,215 @@
+//! The command line: clap definitions turned into validated actions in one place.
+
+use crate::core::{EmitterId, GpsTime};
+use crate::io::atomic::write_atomic;
+use crate::montecarlo::{run_trials, summarise, RunOptions};
+use crate::world::load_world;
+use anyhow::{bail, Context, Result};
+use clap::{Args, Parser, Subcommand};
+use std::path::{Path, PathBuf};
+
+/// hybridnav: discrete-event, signal-level simulator for GNSS + terrestrial-signal +
+/// inertial positioning.
+#[derive(Debug, Parser)]
+#[command(name = "hybridnav", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Run the Monte Carlo trials of a world and write OUT/summary.json.
+    Run(RunArgs),
+    /// Validate a world file and print a summary of it.
+    Check {
+        /// The world file.
+        world: PathBuf,
+    },
+    /// Broadcast ephemeris tools.
+    #[command(subcommand)]
+    Ephemeris(EphemerisCommand),
+}
+
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// The world file (default: worlds/default.toml).
+    pub world: Option<PathBuf>,
+    /// Number of trials (default: the world's [montecarlo] trials).
+    #[arg(long)]
+    pub trials: Option<u64>,
+    /// Master seed (default: the world's [montecarlo] seed).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Output directory.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// No progress bar and no table.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum EphemerisCommand {
+    /// Print satellite positions and clocks as CSV (ECEF metres, clock in seconds).
+    Positions {
+        /// RINEX 2 or 3 navigation file.
+        #[arg(long)]
+        nav: PathBuf,
+        /// First epoch (ISO-8601; GPST unless it ends in Z or UTC).
+        #[arg(long)]
+        start: String,
+        /// Last epoch (inclusive).
+        #[arg(long)]
+        end: String,
+        /// Step in seconds.
+        #[arg(long)]
+        step: f64,
+        /// Satellites, e.g. G05,C01 (default: all GPS and BeiDou satellites in the file).
+        #[arg(long, value_delimiter = ',')]
+        sats: Vec<String>,
+    },
+    /// Write a RINEX 3 navigation file for the nominal GPS and BeiDou constellations.
+    Synth {
+        /// Start epoch (ISO-8601; GPST unless it ends in Z or UTC).
+        #[arg(long)]
+        start: String,
+        /// Hours of ephemerides to write.
+        #[arg(long, default_value_t = 48.0)]
+        hours: f64,
+        /// Output file.
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
+/// The default world: `worlds/default.toml` in the current directory, else the one next
+/// to the sources this binary was built from.
+fn default_world() -> PathBuf {
+    let local = PathBuf::from("worlds/default.toml");
+    if local.exists() {
+        local
+    } else {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/default.toml")
+    }
+}
+
+/// Runs a parsed command line.
+///
+/// # Errors
+/// Every user-facing failure, with a message saying what was wrong and what was expected.
+pub fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Run(a) => cmd_run(a),
+        Command::Check { world } => {
+            let w = load_world(&world)?;
+            print!("{}", w.summary());
+            println!("ok");
+            Ok(())
+        }
+        Command::Ephemeris(EphemerisCommand::Positions { nav, start, end, step, sats }) => {
+            cmd_positions(&nav, &start, &end, step, &sats)
+        }
+        Command::Ephemeris(EphemerisCommand::Synth { start, hours, out }) => cmd_synth(&start, hours, &out),
+    }
+}
+
+fn cmd_run(a: RunArgs) -> Result<()> {
+    let path = a.world.unwrap_or_else(default_world);
+    let world = load_world(&path)?;
+    let trials = a.trials.unwrap_or(world.file.montecarlo.trials);
+    if trials == 0 {
+        bail!("--trials must be at least 1");
+    }
+    let threads = match a.threads {
+        Some(0) => bail!("--threads must be at least 1"),
+        Some(t) => t,
+        None => std::thread::available_parallelism().map_or(1, |n| n.get()),
+    };
+    let opts = RunOptions { trials, seed: a.seed.unwrap_or(world.file.montecarlo.seed), threads, progress: !a.quiet };
+    std::fs::create_dir_all(&a.out).with_context(|| format!("cannot create output directory {}", a.out.display()))?;
+    let results = run_trials(&world, &opts).map_err(anyhow::Error::msg)?;
+    let summary = summarise(&world, &opts, &results);
+    let mut json = serde_json::to_string_pretty(&summary)?;
+    json.push('\n');
+    let out = a.out.join("summary.json");
+    write_atomic(&out, json.as_bytes())?;
+    if !a.quiet {
+        print!("{}", summary.table());
+        println!("wrote {}", out.display());
+    }
+    Ok(())
+}
+
+fn cmd_positions(nav: &Path, start: &str, end: &str, step: f64, sats: &[String]) -> Result<()> {
+    use std::io::Write;
+    let data = crate::gnss::rinex_nav::read_nav_file(nav)?;
+    let t0 = GpsTime::parse_iso(start).map_err(anyhow::Error::msg).context("--start")?;
+    let t1 = GpsTime::parse_iso(end).map_err(anyhow::Error::msg).context("--end")?;
+    if !(step.is_finite() && step > 0.0) {
+        bail!("--step must be a positive number of seconds, got {step}");
+    }
+    if t1 < t0 {
+        bail!("--end ({t1}) is before --start ({t0})");
+    }
+    let n_steps = (t1.seconds_since(t0) / step).floor() as u64 + 1;
+    if n_steps > 10_000_000 {
+        bail!("{n_steps} epochs requested; at most 10 000 000 (use a larger --step)");
+    }
+    let ids: Vec<EmitterId> = if sats.is_empty() {
+        data.satellites()
+    } else {
+        sats.iter().map(|s| s.parse::<EmitterId>().map_err(anyhow::Error::msg)).collect::<Result<_>>()?
+    };
+    let stdout = std::io::stdout();
+    let mut w = std::io::BufWriter::new(stdout.lock());
+    writeln!(w, "sat,gpst_week,gpst_tow_s,x_m,y_m,z_m,clock_s")?;
+    let mut missing = Vec::new();
+    for k in 0..n_steps {
+        let t = t0.add_seconds(k as f64 * step);
+        for id in &ids {
+            match data.select(*id, t) {
+                Some(eph) => {
+                    let s = eph.state(t);
+                    writeln!(
+                        w,
+                        "{id},{},{:.3},{:.3},{:.3},{:.3},{:.12e}",
+                        t.week(),
+                        t.tow_s(),
+                        s.pos_ecef_m.x,
+                        s.pos_ecef_m.y,
+                        s.pos_ecef_m.z,
+                        s.clock_s
+                    )?;
+                }
+                None => missing.push((*id, t)),
+            }
+        }
+    }
+    w.flush()?;
+    if !missing.is_empty() {
+        eprintln!(
+            "note: {} satellite-epochs had no healthy ephemeris within its fit interval (first: {} at {})",
+            missing.len(),
+            missing[0].0,
+            missing[0].1
+        );
+    }
+    Ok(())
+}
+
+fn cmd_synth(start: &str, hours: f64, out: &Path) -> Result<()> {
+    let t0 = GpsTime::parse_iso(start).map_err(anyhow::Error::msg).context("--start")?;
+    if !(hours.is_finite() && hours > 0.0 && hours <= 24.0 * 31.0) {
+        bail!("--hours must be within (0, 744], got {hours}");
+    }
+    let ephs = crate::gnss::synth::synth_nav(t0, hours, 2.0);
+    let klob = crate::gnss::synth::default_klobuchar();
+    crate::gnss::synth::write_rinex3_nav(&ephs, Some(&klob), t0.gpst_minus_utc_s() as i32, out)
+        .with_context(|| format!("cannot write {}", out.display()))?;
+    eprintln!("wrote {} ephemerides to {}", ephs.len(), out.display());
+    Ok(())
+}

@@ -1,0 +1,3 @@
+//! Writing results: atomic files and the run summary.
+
+pub mod atomic;

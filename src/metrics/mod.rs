@@ -1,0 +1,142 @@
+//! Error statistics of estimators against the truth.
+//!
+//! The σ-levels follow the convention of seed 000's tables: the 68.27 %, 95.45 % and
+//! 99.73 % percentiles of the 3-D position error (the fractions of a Gaussian within 1, 2
+//! and 3 σ). Percentiles use linear interpolation between order statistics (Hyndman & Fan
+//! type 7, numpy's default), so a user can recompute them from `trials.parquet`.
+
+use serde::Serialize;
+
+/// The probability masses of the 1σ, 2σ and 3σ levels.
+pub const SIGMA_LEVELS: [f64; 3] = [0.6827, 0.9545, 0.9973];
+
+/// Summary statistics of a set of errors (metres).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Default)]
+pub struct ErrorStats {
+    pub sigma1: f64,
+    pub sigma2: f64,
+    pub sigma3: f64,
+    pub mean: f64,
+    pub std: f64,
+    pub rmse: f64,
+    pub max: f64,
+    /// Number of samples the statistics were computed from.
+    pub count: usize,
+}
+
+/// The `p`-quantile (0 ≤ p ≤ 1) of sorted data, type 7 (linear interpolation).
+///
+/// # Panics
+/// Never: an empty slice gives NaN.
+pub fn quantile_sorted(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let h = (sorted.len() - 1) as f64 * p.clamp(0.0, 1.0);
+    let lo = h.floor() as usize;
+    let hi = (lo + 1).min(sorted.len() - 1);
+    sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
+}
+
+impl ErrorStats {
+    /// Statistics of `errors`; the slice is sorted in place. Returns `None` when empty or
+    /// when any error is not finite (a filter that diverged must be reported, not averaged).
+    pub fn from_errors(errors: &mut [f64]) -> Option<Self> {
+        if errors.is_empty() || errors.iter().any(|e| !e.is_finite()) {
+            return None;
+        }
+        errors.sort_by(f64::total_cmp);
+        let n = errors.len() as f64;
+        let mean = errors.iter().sum::<f64>() / n;
+        let var = if errors.len() > 1 {
+            errors.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / (n - 1.0)
+        } else {
+            0.0
+        };
+        let rmse = (errors.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
+        Some(Self {
+            sigma1: quantile_sorted(errors, SIGMA_LEVELS[0]),
+            sigma2: quantile_sorted(errors, SIGMA_LEVELS[1]),
+            sigma3: quantile_sorted(errors, SIGMA_LEVELS[2]),
+            mean,
+            std: var.sqrt(),
+            rmse,
+            max: *errors.last().unwrap_or(&f64::NAN),
+            count: errors.len(),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quantiles_match_numpy_type7() {
+        // numpy.percentile([1, 2, 3, 4, 5], [68.27, 95.45, 99.73]) = 3.7308, 4.818, 4.9892.
+        let v = [1.0, 2.0, 3.0, 4.0, 5.0];
+        assert!((quantile_sorted(&v, 0.6827) - 3.7308).abs() < 1e-12);
+        assert!((quantile_sorted(&v, 0.9545) - 4.818).abs() < 1e-12);
+        assert!((quantile_sorted(&v, 0.9973) - 4.9892).abs() < 1e-12);
+    }
+
+    #[test]
+    fn rayleigh_sigma_levels() {
+        // The 3-D error of an isotropic Gaussian with σ = 1 per axis follows a Maxwell
+        // distribution whose 68.27 % point is 1.8776 (chi with 3 degrees of freedom).
+        // Build a large deterministic sample from its inverse CDF by bisection.
+        let cdf = |r: f64| {
+            use std::f64::consts::PI;
+            libm_erf(r / 2f64.sqrt()) - (2.0 / PI).sqrt() * r * (-r * r / 2.0).exp()
+        };
+        let n = 20_000;
+        let mut samples: Vec<f64> = (0..n)
+            .map(|i| {
+                let u = (i as f64 + 0.5) / n as f64;
+                let (mut lo, mut hi) = (0.0, 10.0);
+                for _ in 0..60 {
+                    let mid = 0.5 * (lo + hi);
+                    if cdf(mid) < u {
+                        lo = mid
+                    } else {
+                        hi = mid
+                    }
+                }
+                0.5 * (lo + hi)
+            })
+            .collect();
+        let s = ErrorStats::from_errors(&mut samples).unwrap();
+        assert!((s.sigma1 - 1.8776).abs() < 2e-3, "{}", s.sigma1);
+        // Mean of the Maxwell distribution: 2·√(2/π) = 1.59577.
+        assert!((s.mean - 1.59577).abs() < 1e-3, "{}", s.mean);
+        // RMS of a 3-D unit Gaussian: √3.
+        assert!((s.rmse - 3f64.sqrt()).abs() < 2e-3, "{}", s.rmse);
+    }
+
+    /// erf by Abramowitz & Stegun 7.1.26 refined with a series; accurate to 1e-9 here.
+    fn libm_erf(x: f64) -> f64 {
+        // Series for |x| < 3, continued fraction beyond.
+        if x.abs() < 3.0 {
+            let mut sum = x;
+            let mut term = x;
+            let x2 = x * x;
+            for n in 1..200 {
+                term *= -x2 / n as f64;
+                let add = term / (2 * n + 1) as f64;
+                sum += add;
+                if add.abs() < 1e-17 {
+                    break;
+                }
+            }
+            2.0 / std::f64::consts::PI.sqrt() * sum
+        } else {
+            1.0f64.copysign(x)
+        }
+    }
+
+    #[test]
+    fn non_finite_is_refused() {
+        assert!(ErrorStats::from_errors(&mut [1.0, f64::NAN]).is_none());
+        assert!(ErrorStats::from_errors(&mut []).is_none());
+    }
+}

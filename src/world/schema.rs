@@ -1,0 +1,164 @@
+//! The serde schema of world files. Every table denies unknown keys, so a typo is an
+//! error that names the key and its line, never a silently ignored setting.
+
+use crate::core::System;
+use crate::fusion::ekf11::Ekf11Config;
+use crate::fusion::estimator::{EkfEstimator, Estimator, WlsEstimator};
+use crate::gnss::measurement::GnssConfig;
+use crate::gnss::receiver_clock::ClockConfig;
+use crate::motion::TrajectoryConfig;
+use serde::Deserialize;
+
+/// A whole world file.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WorldFile {
+    pub world: WorldSection,
+    pub platform: PlatformSection,
+    #[serde(default)]
+    pub receiver: ReceiverSection,
+    #[serde(default)]
+    pub sensors: SensorsSection,
+    #[serde(default)]
+    pub shielding: Vec<ShieldingSpec>,
+    #[serde(default, rename = "estimator")]
+    pub estimators: Vec<EstimatorSpec>,
+    #[serde(default)]
+    pub montecarlo: MonteCarloSection,
+}
+
+/// `[world]`: name, place, time and navigation data.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WorldSection {
+    pub name: String,
+    #[serde(default)]
+    pub description: Option<String>,
+    /// Origin of the local ENU frame.
+    pub origin: Origin,
+    /// Start time, ISO-8601; GPST unless suffixed `Z`, `UTC` or `BDT`.
+    pub start: String,
+    /// Scenario length (s); defaults to the trajectory's length.
+    #[serde(default)]
+    pub duration_s: Option<f64>,
+    /// RINEX navigation file relative to this world file, or `"builtin:nominal-gps-bds"`.
+    #[serde(default)]
+    pub ephemeris: Option<String>,
+}
+
+/// A geodetic point in degrees and metres (WGS-84 ellipsoidal height).
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Origin {
+    pub lat_deg: f64,
+    pub lon_deg: f64,
+    #[serde(default)]
+    pub h_m: f64,
+}
+
+/// What carries the receiver.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum PlatformKind {
+    Car,
+    Pedestrian,
+    /// An abstract point target (seeds 001 and 003).
+    Target,
+}
+
+/// `[platform]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlatformSection {
+    pub kind: PlatformKind,
+    pub trajectory: TrajectoryConfig,
+}
+
+/// `[receiver]`.
+#[derive(Clone, Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct ReceiverSection {
+    #[serde(default)]
+    pub clock: ClockConfig,
+}
+
+/// `[sensors]`.
+#[derive(Clone, Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct SensorsSection {
+    #[serde(default)]
+    pub gnss: Option<GnssConfig>,
+}
+
+/// One `[[shielding]]` window: exactly one of `keep_highest`, `keep`, `block`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ShieldingSpec {
+    /// Start of the window, seconds after the world start.
+    pub from_s: f64,
+    /// End of the window (exclusive).
+    pub to_s: f64,
+    #[serde(default)]
+    pub keep_highest: Option<usize>,
+    #[serde(default)]
+    pub keep: Option<Vec<String>>,
+    #[serde(default)]
+    pub block: Option<Vec<String>>,
+}
+
+/// The filter an estimator runs.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum FilterKind {
+    /// Seed 000's 11-state EKF (position, velocity, acceleration, clock, drift).
+    Ekf11,
+    /// Epoch-by-epoch weighted least squares.
+    Wls,
+}
+
+/// One `[[estimator]]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EstimatorSpec {
+    /// Row name in the tables (the paper's own names, e.g. `"GPS"`, `"GPS+DTMB"`).
+    pub name: String,
+    /// Systems whose measurements it uses.
+    pub sources: Vec<System>,
+    pub filter: FilterKind,
+    /// EKF tuning (filter = "ekf11").
+    #[serde(default)]
+    pub ekf: Option<Ekf11Config>,
+}
+
+fn one() -> u64 {
+    1
+}
+
+/// `[montecarlo]`.
+#[derive(Clone, Copy, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MonteCarloSection {
+    #[serde(default = "one")]
+    pub trials: u64,
+    #[serde(default = "one")]
+    pub seed: u64,
+}
+
+impl Default for MonteCarloSection {
+    fn default() -> Self {
+        Self { trials: 1, seed: 1 }
+    }
+}
+
+impl EstimatorSpec {
+    /// Builds the estimator this table describes.
+    ///
+    /// # Errors
+    /// When its configuration is unusable.
+    pub fn build(&self) -> Result<Box<dyn Estimator>, String> {
+        Ok(match self.filter {
+            FilterKind::Ekf11 => Box::new(EkfEstimator::new(&self.name, &self.sources, self.ekf)?),
+            FilterKind::Wls => Box::new(WlsEstimator::new(&self.name, &self.sources)),
+        })
+    }
+}

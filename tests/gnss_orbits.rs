@@ -1,0 +1,313 @@
+//! Broadcast orbits against precise (SP3) orbits, and the navigation readers on real and
+//! broken files.
+//!
+//! The data live in `../shared/data/gnss` beside the crate (`/work/shared/data/gnss` for a
+//! crate at `/work/main`); when a file is missing the test says "skipped: … not found" and
+//! passes, so the crate builds and tests anywhere.
+//!
+//! Comparison: at every SP3 epoch, for every satellite with an SP3 position, the broadcast
+//! state of the ephemeris `NavData::select` picks is compared in ECEF at the same GPS time.
+//! Differences include the broadcast error proper, the antenna-phase-centre vs
+//! centre-of-mass offset (up to about 1 m, more for BeiDou whose broadcast refers to the
+//! B3I phase centre) and frame differences (WGS-84/CGCS2000 vs IGS05/IGS14, centimetres).
+
+use hybridnav::core::{EmitterId, GpsTime, System};
+use hybridnav::gnss::ephemeris::{Ephemeris, GPS_OMEGA_E_RAD_PER_S};
+use hybridnav::gnss::rinex_nav::{parse_nav, read_nav_file, NavData, RinexError};
+use hybridnav::gnss::sp3::{read_sp3_file, Sp3Data};
+use nalgebra::Vector3;
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+/// The shared GNSS data directory.
+fn gnss_data_dir() -> PathBuf {
+    let manifest = Path::new(env!("CARGO_MANIFEST_DIR"));
+    manifest.parent().unwrap_or(manifest).join("shared").join("data").join("gnss")
+}
+
+/// The path of a data file, or `None` (with the reason printed) when it is absent.
+fn data_file(name: &str) -> Option<PathBuf> {
+    let p = gnss_data_dir().join(name);
+    if p.is_file() {
+        Some(p)
+    } else {
+        println!("skipped: {} not found", p.display());
+        None
+    }
+}
+
+/// Orbit classes reported separately.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+enum OrbitClass {
+    Gps,
+    BdsMeo,
+    BdsIgso,
+    BdsGeo,
+}
+
+impl OrbitClass {
+    fn name(self) -> &'static str {
+        match self {
+            OrbitClass::Gps => "GPS",
+            OrbitClass::BdsMeo => "BDS MEO",
+            OrbitClass::BdsIgso => "BDS IGSO",
+            OrbitClass::BdsGeo => "BDS GEO",
+        }
+    }
+}
+
+/// The BeiDou class from the PRN, as the BDS allocation lists it.
+fn bds_class_from_prn(prn: u16) -> OrbitClass {
+    match prn {
+        1..=5 | 59..=63 => OrbitClass::BdsGeo,
+        6..=10 | 13 | 16 | 31 | 38..=40 | 56 => OrbitClass::BdsIgso,
+        _ => OrbitClass::BdsMeo,
+    }
+}
+
+/// The class from the broadcast elements: geosynchronous (a > 35 000 km) with a small
+/// inclination is GEO (the BeiDou GEO elements carry the 5° frame tilt, hence < 20°),
+/// geosynchronous and inclined is IGSO, the rest MEO.
+fn class_from_orbit(e: &Ephemeris) -> OrbitClass {
+    if e.sat.system == System::Gps {
+        return OrbitClass::Gps;
+    }
+    let a = e.semi_major_axis_m();
+    if a < 35.0e6 {
+        OrbitClass::BdsMeo
+    } else if e.i0.to_degrees() < 20.0 {
+        OrbitClass::BdsGeo
+    } else {
+        OrbitClass::BdsIgso
+    }
+}
+
+/// Accumulated differences of one class.
+#[derive(Default, Debug)]
+struct Stats {
+    n: usize,
+    sum_sq: f64,
+    sum_sq_radial: f64,
+    sum_sq_along: f64,
+    sum_sq_cross: f64,
+    max_m: f64,
+    max_at: String,
+    sats: BTreeSet<EmitterId>,
+}
+
+impl Stats {
+    fn add(&mut self, sat: EmitterId, t: GpsTime, broadcast_pos: Vector3<f64>, broadcast_vel_ecef: Vector3<f64>, precise: Vector3<f64>) {
+        let d = broadcast_pos - precise;
+        // Radial / along-track / cross-track axes from the inertial velocity (the ECEF
+        // velocity of a GEO is nearly zero and defines no plane).
+        let v_inertial = broadcast_vel_ecef + Vector3::new(0.0, 0.0, GPS_OMEGA_E_RAD_PER_S).cross(&broadcast_pos);
+        let r_hat = broadcast_pos.normalize();
+        let c_hat = broadcast_pos.cross(&v_inertial).normalize();
+        let a_hat = c_hat.cross(&r_hat);
+        self.n += 1;
+        let n2 = d.norm_squared();
+        self.sum_sq += n2;
+        self.sum_sq_radial += d.dot(&r_hat).powi(2);
+        self.sum_sq_along += d.dot(&a_hat).powi(2);
+        self.sum_sq_cross += d.dot(&c_hat).powi(2);
+        if n2.sqrt() > self.max_m {
+            self.max_m = n2.sqrt();
+            self.max_at = format!("{sat} at {t}");
+        }
+        self.sats.insert(sat);
+    }
+
+    fn rms(&self, sum: f64) -> f64 {
+        if self.n == 0 {
+            f64::NAN
+        } else {
+            (sum / self.n as f64).sqrt()
+        }
+    }
+
+    fn rms_3d(&self) -> f64 {
+        self.rms(self.sum_sq)
+    }
+
+    fn report(&self, class: OrbitClass) -> String {
+        let sats: Vec<String> = self.sats.iter().map(|s| s.to_string()).collect();
+        format!(
+            "{:<9} samples {:>5}  sats {:>2}  RMS 3-D {:>7.3} m  (R {:.3} / A {:.3} / C {:.3})  max {:>7.3} m ({})  [{}]",
+            class.name(),
+            self.n,
+            self.sats.len(),
+            self.rms_3d(),
+            self.rms(self.sum_sq_radial),
+            self.rms(self.sum_sq_along),
+            self.rms(self.sum_sq_cross),
+            self.max_m,
+            self.max_at,
+            sats.join(" ")
+        )
+    }
+}
+
+/// Compares every SP3 sample of the accepted satellites with the selected broadcast
+/// ephemeris.
+fn compare(nav: &NavData, sp3: &Sp3Data, accept: impl Fn(EmitterId) -> bool) -> BTreeMap<OrbitClass, Stats> {
+    let mut out: BTreeMap<OrbitClass, Stats> = BTreeMap::new();
+    for sat in sp3.satellites().into_iter().filter(|s| accept(*s)) {
+        for (t, sample) in sp3.track(sat) {
+            let Some(eph) = nav.select(sat, t) else { continue };
+            let st = eph.state(t);
+            out.entry(class_from_orbit(eph)).or_default().add(sat, t, st.pos_ecef_m, st.vel_ecef_mps, sample.pos_ecef_m);
+        }
+    }
+    out
+}
+
+fn print_span(label: &str, sp3: &Sp3Data) {
+    if let (Some(a), Some(b)) = (sp3.epochs.first(), sp3.epochs.last()) {
+        println!("{label}: {} epochs from {a} to {b}, SP3 frame {} ({})", sp3.epochs.len(), sp3.coordinate_system, sp3.agency);
+    }
+}
+
+#[test]
+fn gps_2010_broadcast_matches_igs_final_orbits() {
+    let (Some(nav_path), Some(sp3_path)) = (data_file("brdc1820.10n"), data_file("igs15904.sp3")) else { return };
+    let nav = read_nav_file(&nav_path).expect("brdc1820.10n parses");
+    let sp3 = read_sp3_file(&sp3_path).expect("igs15904.sp3 parses");
+    assert_eq!(sp3.epochs.len(), 96);
+    // G01 was unhealthy (health 63) all day: excluded by selection and explicitly.
+    let g01 = EmitterId::new(System::Gps, 1);
+    assert!(nav.ephemerides.iter().filter(|e| e.sat == g01).all(|e| !e.is_healthy()));
+    assert!(nav.select(g01, sp3.epochs[0]).is_none());
+    let stats = compare(&nav, &sp3, |s| s.system == System::Gps && s != g01);
+    print_span("brdc1820.10n vs igs15904.sp3", &sp3);
+    let gps = &stats[&OrbitClass::Gps];
+    println!("{}", gps.report(OrbitClass::Gps));
+    assert!(gps.sats.len() >= 30, "{} satellites compared", gps.sats.len());
+    assert!(gps.n > 2800, "{} samples", gps.n);
+    assert!(gps.rms_3d() <= 2.5, "GPS RMS {} m", gps.rms_3d());
+    assert!(gps.max_m < 15.0, "GPS max {} m", gps.max_m);
+}
+
+#[test]
+fn mixed_2020_gps_and_beidou_broadcast_match_precise_orbits() {
+    let (Some(nav_path), Some(sp3_path)) = (data_file("ESBC00DNK_R_20201770000_01D_MN.rnx"), data_file("Sta21114.sp3")) else {
+        return;
+    };
+    let nav = read_nav_file(&nav_path).expect("ESBC00DNK nav parses");
+    let sp3 = read_sp3_file(&sp3_path).expect("Sta21114.sp3 parses");
+    let stats = compare(&nav, &sp3, |s| s.system.is_gnss());
+    print_span("ESBC00DNK_R_20201770000_01D_MN.rnx vs Sta21114.sp3", &sp3);
+    for (class, s) in &stats {
+        println!("{}", s.report(*class));
+    }
+    let limits = [(OrbitClass::Gps, 2.5), (OrbitClass::BdsMeo, 2.5), (OrbitClass::BdsIgso, 4.0), (OrbitClass::BdsGeo, 25.0)];
+    for (class, limit) in limits {
+        let s = stats.get(&class).unwrap_or_else(|| panic!("no {} samples", class.name()));
+        assert!(s.n >= 50, "{}: only {} samples", class.name(), s.n);
+        assert!(s.rms_3d() <= limit, "{}: RMS {} m > {limit} m", class.name(), s.rms_3d());
+    }
+}
+
+#[test]
+fn beidou_classes_by_prn_agree_with_the_orbits() {
+    let Some(nav_path) = data_file("ESBC00DNK_R_20201770000_01D_MN.rnx") else { return };
+    let nav = read_nav_file(&nav_path).expect("parses");
+    let mut seen = BTreeMap::new();
+    for e in nav.ephemerides.iter().filter(|e| e.sat.system == System::Bds) {
+        let by_orbit = class_from_orbit(e);
+        assert_eq!(by_orbit, bds_class_from_prn(e.sat.number), "{}: a = {} km, i0 = {}°", e.sat, e.semi_major_axis_m() / 1e3, e.i0.to_degrees());
+        assert_eq!(by_orbit == OrbitClass::BdsGeo, e.is_bds_geo(), "{}", e.sat);
+        *seen.entry(by_orbit).or_insert(0) += 1;
+    }
+    assert_eq!(seen.len(), 3, "{seen:?}");
+}
+
+#[test]
+fn skipped_systems_are_counted_per_letter() {
+    let Some(nav_path) = data_file("ESBC00DNK_R_20201770000_01D_MN.rnx") else { return };
+    let nav = read_nav_file(&nav_path).expect("parses");
+    // Record counts by first-column letter of the file body (also in its B_SUM comments).
+    let expected: BTreeMap<char, usize> = [('E', 1602), ('J', 15), ('R', 510), ('S', 2130)].into_iter().collect();
+    assert_eq!(nav.skipped, expected);
+    assert_eq!(nav.ephemerides.iter().filter(|e| e.sat.system == System::Gps).count(), 257);
+    assert_eq!(nav.ephemerides.iter().filter(|e| e.sat.system == System::Bds).count(), 357);
+    assert_eq!(nav.leap_seconds, Some(18));
+    let k = nav.klobuchar.expect("GPSA/GPSB present");
+    assert_eq!(k.alpha[0], 4.6566e-09);
+    assert_eq!(k.beta[1], 9.8304e+04);
+    let sats = nav.satellites();
+    assert!(sats.windows(2).all(|w| w[0] < w[1]));
+}
+
+#[test]
+fn rinex2_files_of_2005_and_2010_read() {
+    if let Some(p) = data_file("07590920.05n") {
+        let nav = read_nav_file(&p).expect("07590920.05n parses");
+        assert!(!nav.ephemerides.is_empty());
+        assert_eq!(nav.leap_seconds, Some(13));
+        assert!(nav.klobuchar.is_some());
+        // 2005-04-02 is in GPS week 1316.
+        assert!(nav.ephemerides.iter().all(|e| e.toe.week() == 1316 || e.toe.week() == 1315), "weeks");
+    }
+    if let Some(p) = data_file("brdc1820.10n") {
+        let nav = read_nav_file(&p).expect("brdc1820.10n parses");
+        assert_eq!(nav.leap_seconds, Some(15));
+        assert!(nav.satellites().len() >= 31);
+        assert!(nav.skipped.is_empty());
+    }
+}
+
+#[test]
+fn truncated_record_reports_its_line() {
+    let Some(p) = data_file("brdc1820.10n") else { return };
+    let text = std::fs::read_to_string(&p).expect("readable");
+    // Keep the header (8 lines), one full record and 3 lines of the next.
+    let cut: Vec<&str> = text.lines().take(8 + 8 + 3).collect();
+    let err = parse_nav(&cut.join("\n"), "brdc1820.10n").unwrap_err();
+    println!("{err}");
+    assert!(matches!(err, RinexError::Truncated { .. }));
+    assert_eq!(err.line(), Some(20));
+    let msg = err.to_string();
+    assert!(msg.contains("brdc1820.10n") && msg.contains("line 20") && msg.contains("G02"), "{msg}");
+}
+
+#[test]
+fn garbage_numbers_report_file_line_and_field() {
+    let Some(p) = data_file("brdc1820.10n") else { return };
+    let text = std::fs::read_to_string(&p).expect("readable");
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    // Line 11 (1-based) is the second orbit line of G01: spoil √A.
+    lines[10] = lines[10].replace("0.515480139732D+04", "0.5154801XX732D+04");
+    let err = parse_nav(&lines.join("\n"), "brdc1820.10n").unwrap_err();
+    println!("{err}");
+    assert_eq!(err.line(), Some(11));
+    assert!(err.to_string().contains("0.5154801XX732D+04"));
+}
+
+#[test]
+fn empty_and_wrong_files_are_refused_clearly() {
+    let err = parse_nav("", "empty.10n").unwrap_err();
+    println!("{err}");
+    assert_eq!(err.line(), Some(1));
+    assert!(err.to_string().contains("empty.10n"));
+    if let Some(p) = data_file("07590920.05o") {
+        let err = read_nav_file(&p).unwrap_err();
+        println!("{err}");
+        assert!(matches!(err, RinexError::WrongFileType { .. }), "{err}");
+        assert!(err.to_string().contains("OBSERVATION DATA"));
+    }
+    if let Some(p) = data_file("igs15904.sp3") {
+        let err = read_nav_file(&p).unwrap_err();
+        println!("{err}");
+        assert!(err.to_string().contains("RINEX VERSION / TYPE"));
+    }
+    let missing = gnss_data_dir().join("no-such-file.rnx");
+    let err = read_nav_file(&missing).unwrap_err();
+    assert!(matches!(err, RinexError::Io { .. }));
+    assert!(read_sp3_file(&missing).is_err());
+    // A navigation file is not an SP3 file.
+    if let Some(p) = data_file("brdc1820.10n") {
+        let err = read_sp3_file(&p).unwrap_err();
+        println!("{err}");
+        assert_eq!(err.line(), Some(1));
+    }
+}
