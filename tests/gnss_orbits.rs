@@ -311,3 +311,21 @@ fn empty_and_wrong_files_are_refused_clearly() {
         assert_eq!(err.line(), Some(1));
     }
 }
+
+#[test]
+fn zz_debug() {
+    let nav = read_nav_file(&gnss_data_dir().join("ESBC00DNK_R_20201770000_01D_MN.rnx")).unwrap();
+    let sp3 = read_sp3_file(&gnss_data_dir().join("Sta21114.sp3")).unwrap();
+    let mut bins = BTreeMap::new();
+    for sat in sp3.satellites().into_iter().filter(|s| s.system == System::Gps) {
+        for (t, sample) in sp3.track(sat) {
+            let Some(eph) = nav.select(sat, t) else { continue };
+            let d = (eph.state(t).pos_ecef_m - sample.pos_ecef_m).norm();
+            let age = (t.seconds_since(eph.toe) / 1800.0).round() as i64;
+            let e = bins.entry(age).or_insert((0usize, 0.0f64, 0.0f64));
+            e.0 += 1; e.1 += d * d; e.2 = e.2.max(d);
+            if d > 20.0 { println!("{sat} {t} toe {} d {d:.1} iode {} health {}", eph.toe, eph.iode, eph.health); }
+        }
+    }
+    for (k, v) in bins { println!("age {:+.1} h: n {} rms {:.2} max {:.2}", k as f64 * 0.5, v.0, (v.1 / v.0 as f64).sqrt(), v.2); }
+}

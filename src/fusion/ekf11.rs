@@ -500,9 +500,15 @@ impl Ekf11 {
         if dt_s == 0.0 {
             return Ok(());
         }
-        let phi = Self::transition(dt_s);
-        let x = phi * self.x;
-        let mut p = phi * self.p * phi.transpose() + Self::process_noise(&self.cfg, dt_s);
+        // Φ is the identity plus seven entries, so Φx and ΦPΦᵀ are applied as row and
+        // column operations (O(n) and O(n²)) rather than as dense products (O(n³)).
+        let mut x = self.x;
+        apply_transition_rows(&mut x, dt_s);
+        let mut p = self.p;
+        apply_transition_rows(&mut p, dt_s);
+        let mut p = p.transpose();
+        apply_transition_rows(&mut p, dt_s);
+        p += Self::process_noise(&self.cfg, dt_s);
         symmetrise(&mut p);
         if !(x.iter().all(|v| v.is_finite()) && p.iter().all(|v| v.is_finite())) {
             return Err(Ekf11Error::NumericalFailure);
@@ -754,9 +760,17 @@ impl Ekf11 {
         }
         let k = ph / s;
         let x_new = self.x + k * innovation;
-        let kct = k * ph.transpose();
-        let mut p_new = self.p - kct - kct.transpose() + (k * k.transpose()) * s;
-        symmetrise(&mut p_new);
+        // Joseph form expanded for a scalar, one pass over the upper triangle:
+        // P⁺_ij = P_ij − k_i c_j − c_i k_j + s k_i k_j, with c = P h; the result is
+        // symmetric by construction.
+        let mut p_new = self.p;
+        for j in 0..N_STATES {
+            for i in 0..=j {
+                let v = self.p[(i, j)] - k[i] * ph[j] - ph[i] * k[j] + s * k[i] * k[j];
+                p_new[(i, j)] = v;
+                p_new[(j, i)] = v;
+            }
+        }
         self.commit(x_new, p_new, nis)
     }
 
@@ -773,6 +787,26 @@ impl Ekf11 {
         self.x = x_new;
         self.p = p_new;
         UpdateOutcome::Accepted { nis }
+    }
+}
+
+/// Replaces the rows of `m` by those of `Φ m` for the Φ of eq. 5 ([`Ekf11::transition`]),
+/// in place. Each position row takes `T` times the velocity row and `T²/2` times the
+/// acceleration row, each velocity row `T` times the acceleration row, and the clock-bias
+/// row `T` times the drift row; rows are updated in an order that reads only old values.
+fn apply_transition_rows<const C: usize>(m: &mut SMatrix<f64, N_STATES, C>, dt_s: f64) {
+    let half_t2 = 0.5 * dt_s * dt_s;
+    for axis in 0..3 {
+        let (p, v, a) = (idx::POS[axis], idx::VEL[axis], idx::ACC[axis]);
+        for c in 0..C {
+            let (mv, ma) = (m[(v, c)], m[(a, c)]);
+            m[(p, c)] += dt_s * mv + half_t2 * ma;
+            m[(v, c)] += dt_s * ma;
+        }
+    }
+    for c in 0..C {
+        let drift = m[(idx::CLOCK_DRIFT, c)];
+        m[(idx::CLOCK_BIAS, c)] += dt_s * drift;
     }
 }
 
@@ -1061,6 +1095,22 @@ mod tests {
             ..cfg
         };
         assert_relative_eq!(Ekf11::process_noise(&with_isb, t)[(11, 11)], 1e-4 * t);
+    }
+
+    #[test]
+    fn in_place_transition_equals_the_dense_product() {
+        let phi = Ekf11::transition(0.7);
+        let m = StateMatrix::from_fn(|i, j| ((i * 7 + j * 3) % 11) as f64 - 5.0 + 0.1 * i as f64);
+        let mut rows = m;
+        apply_transition_rows(&mut rows, 0.7);
+        assert!((rows - phi * m).amax() < 1e-12);
+        let mut both = rows.transpose();
+        apply_transition_rows(&mut both, 0.7);
+        // Φ(Φm)ᵀ = Φ mᵀ Φᵀ, which is ΦPΦᵀ for a symmetric P.
+        assert!((both - phi * m.transpose() * phi.transpose()).amax() < 1e-12);
+        let mut x = StateVector::from_fn(|i, _| i as f64);
+        apply_transition_rows(&mut x, 0.7);
+        assert!((x - phi * StateVector::from_fn(|i, _| i as f64)).amax() < 1e-12);
     }
 
     #[test]

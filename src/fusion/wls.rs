@@ -201,7 +201,7 @@ where
 
     let mut last_step_m = f64::INFINITY;
     for iteration in 1..=opts.max_iterations {
-        let acc = accumulate(iter.clone(), &est, &clock_col, n_unknowns)
+        let acc = accumulate(iter.clone(), &est, &clock_col, n_unknowns, false)
             .ok_or(WlsError::SingularGeometry)?;
         let chol = factor(&acc.normal, n_unknowns).ok_or(WlsError::SingularGeometry)?;
         let step = chol.solve(&acc.rhs);
@@ -226,7 +226,8 @@ struct Accumulation {
     normal: NormalMatrix,
     /// `Hᵀ W (ρ − ρ̂)`.
     rhs: UnknownVector,
-    /// `Hᵀ H`, identity-padded (for the dilutions of precision).
+    /// `Hᵀ H`, identity-padded (for the dilutions of precision); only filled on request,
+    /// at the solution.
     geometry: NormalMatrix,
     /// `Σ (ρ − ρ̂)²`.
     sum_sq_residual_m2: f64,
@@ -237,6 +238,7 @@ fn accumulate<'a>(
     est: &UnknownVector,
     clock_col: &[Option<usize>; MAX_CLOCKS],
     n_unknowns: usize,
+    with_geometry: bool,
 ) -> Option<Accumulation> {
     let pos = Vector3::new(est[0], est[1], est[2]);
     let mut acc = Accumulation {
@@ -258,8 +260,11 @@ fn accumulate<'a>(
         let residual = m.pseudorange_m - (d + est[col]);
         let w = 1.0 / (m.sigma_m * m.sigma_m);
         // Rank-one updates of the 7×7 sums; the inactive corner stays zero until padded.
-        acc.normal += (h * h.transpose()) * w;
-        acc.geometry += h * h.transpose();
+        let outer = h * h.transpose();
+        acc.normal += outer * w;
+        if with_geometry {
+            acc.geometry += outer;
+        }
         acc.rhs += h * (w * residual);
         acc.sum_sq_residual_m2 += residual * residual;
     }
@@ -325,7 +330,8 @@ fn finish<'a>(
     n: usize,
     iterations: usize,
 ) -> Result<WlsFix, WlsError> {
-    let acc = accumulate(iter, est, clock_col, n_unknowns).ok_or(WlsError::SingularGeometry)?;
+    let acc =
+        accumulate(iter, est, clock_col, n_unknowns, true).ok_or(WlsError::SingularGeometry)?;
     let cov = factor(&acc.normal, n_unknowns)
         .ok_or(WlsError::SingularGeometry)?
         .inverse();

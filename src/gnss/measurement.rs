@@ -12,16 +12,16 @@
 //! ρ̇_corr  = u·(v_s − v_r) + c·δṫ_r + ε_fll,     u = (r_s − r_r)/‖r_s − r_r‖
 //! ```
 //! `I_model` is Klobuchar (IS-GPS-200 §20.3.3.5.2.5) scaled by (f_L1/f)² for BeiDou B1I;
-//! `I_true = I_model·(1 + k_s)` with a per-satellite, per-trial residual factor
-//! k_s ~ N(0, σ_iono²) (Klobuchar removes roughly half of the delay; σ_iono = 0.5 by
-//! default). `T_model` is Saastamoinen; `T_true = T_model·(1 + k_T)`, k_T ~ N(0, σ_trop²)
+//! `I_true = I_model·(1 + k + k_s)` with a residual factor k ~ N(0, σ_iono²) common to
+//! the trial (Klobuchar removes roughly half of the delay, and what it misses is mostly
+//! large-scale) and a small per-satellite part k_s ~ N(0, σ_iono,sat²). `T_model` is Saastamoinen; `T_true = T_model·(1 + k_T)`, k_T ~ N(0, σ_trop²)
 //! per trial. The broadcast orbit-and-clock error `e_ure` is a first-order Gauss–Markov
 //! process per satellite (σ_URE, τ_URE). ε_dll and ε_fll come from the C/N0 through the
 //! tracking-loop models of [`crate::gnss::link`].
 //!
 //! The σ the receiver reports to estimators is its own error model, which knows the
 //! magnitudes but not the realisations:
-//! σ² = σ_dll² + σ_URE² + (σ_iono·I_model)² + (σ_trop·T_model)².
+//! σ² = σ_dll² + σ_URE² + ((σ_iono² + σ_iono,sat²)^½·I_model)² + (σ_trop·T_model)².
 
 use crate::core::geodesy::{azimuth_elevation_with, ecef_to_enu_rotation};
 use crate::core::rng::{StreamRng, TrialRng};
@@ -67,8 +67,11 @@ pub struct GnssErrorConfig {
     pub ure_bds_m: f64,
     /// Correlation time of the user range error, s.
     pub ure_tau_s: f64,
-    /// 1-σ relative residual of the Klobuchar model (0.5: half the delay remains).
+    /// 1-σ relative residual of the Klobuchar model common to every satellite of a trial
+    /// (the large-scale part of the ionosphere the model misses; 0.4: 40 % remains).
     pub iono_residual: f64,
+    /// 1-σ relative residual of the Klobuchar model per satellite (small-scale structure).
+    pub iono_residual_per_sat: f64,
     /// 1-σ relative residual of the Saastamoinen model.
     pub tropo_residual: f64,
     /// Relative humidity used by the receiver's troposphere model (0–1).
@@ -77,7 +80,15 @@ pub struct GnssErrorConfig {
 
 impl Default for GnssErrorConfig {
     fn default() -> Self {
-        Self { ure_gps_m: 0.8, ure_bds_m: 1.2, ure_tau_s: 1800.0, iono_residual: 0.5, tropo_residual: 0.05, humidity: 0.5 }
+        Self {
+            ure_gps_m: 0.8,
+            ure_bds_m: 1.2,
+            ure_tau_s: 1800.0,
+            iono_residual: 0.4,
+            iono_residual_per_sat: 0.1,
+            tropo_residual: 0.05,
+            humidity: 0.5,
+        }
     }
 }
 
@@ -185,6 +196,9 @@ impl GnssSource {
         let mut trop_rng = rng.stream("gnss/tropo");
         let z: f64 = trop_rng.sample(StandardNormal);
         let tropo_factor = cfg.errors.tropo_residual * z;
+        let mut iono_rng = rng.stream("gnss/iono");
+        let z: f64 = iono_rng.sample(StandardNormal);
+        let iono_common = cfg.errors.iono_residual * z;
         let channels = nav
             .satellites()
             .into_iter()
@@ -198,7 +212,7 @@ impl GnssSource {
                 let z_ure: f64 = r.sample(StandardNormal);
                 let z_iono: f64 = r.sample(StandardNormal);
                 let ure_m = sigma_ure * z_ure;
-                let iono_factor = cfg.errors.iono_residual * z_iono;
+                let iono_factor = iono_common + cfg.errors.iono_residual_per_sat * z_iono;
                 Channel { sat, rng: r, ure_m, iono_factor }
             })
             .collect::<Vec<_>>();
@@ -372,7 +386,7 @@ impl Source for GnssSource {
             let range_rate = u.dot(&(c.vel_rot - truth.vel_ecef_mps)) + C_MPS * rx_drift + sigma_rate * n_rate;
             let sigma_m = (sigma_dll.powi(2)
                 + sigma_ure.powi(2)
-                + (self.cfg.errors.iono_residual * iono_model).powi(2)
+                + (self.cfg.errors.iono_residual.hypot(self.cfg.errors.iono_residual_per_sat) * iono_model).powi(2)
                 + (self.cfg.errors.tropo_residual * tropo_model).powi(2))
             .sqrt();
             out.items.push(Measurement::Range(RangeMeasurement {

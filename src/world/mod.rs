@@ -205,7 +205,7 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
             ctx.err(&p, issue.message)
         })?;
         let e = &g.errors;
-        for (name, v) in [("ure_gps_m", e.ure_gps_m), ("ure_bds_m", e.ure_bds_m), ("iono_residual", e.iono_residual), ("tropo_residual", e.tropo_residual)] {
+        for (name, v) in [("ure_gps_m", e.ure_gps_m), ("ure_bds_m", e.ure_bds_m), ("iono_residual", e.iono_residual), ("iono_residual_per_sat", e.iono_residual_per_sat), ("tropo_residual", e.tropo_residual)] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(ctx.err(&[key("sensors"), key("gnss"), key("errors"), key(name)], format!("expected a non-negative number, got {v}")));
             }
@@ -215,6 +215,20 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
         }
         if !(e.humidity.is_finite() && (0.0..=1.0).contains(&e.humidity)) {
             return Err(ctx.err(&[key("sensors"), key("gnss"), key("errors"), key("humidity")], format!("expected a relative humidity within 0..1, got {}", e.humidity)));
+        }
+    }
+    // An empty sky: no satellite of the tracked systems has an ephemeris valid at the start.
+    if let Some(g) = &file.sensors.gnss {
+        let usable = nav.satellites().into_iter().filter(|s| g.systems.contains(&s.system)).any(|s| nav.select(s, start).is_some());
+        if !usable {
+            let span = match (nav.ephemerides.iter().map(|e| e.toe).min(), nav.ephemerides.iter().map(|e| e.toe).max()) {
+                (Some(a), Some(b)) => format!("its ephemerides have reference times from {a} to {b}"),
+                _ => "it holds no GPS or BeiDou ephemeris".to_string(),
+            };
+            return Err(ctx.err(
+                &[key("world"), key("start")],
+                format!("empty sky: no satellite in {nav_source} has an ephemeris valid at the start {start}; {span}"),
+            ));
         }
     }
     file.receiver.clock.validate().map_err(|issue| ctx.err(&[key("receiver"), key("clock"), key(&issue.key)], issue.message))?;
