@@ -13,25 +13,46 @@ use std::path::Path;
 
 /// Real navigation data if available, else two days of the synthetic constellation.
 fn nav_data() -> (NavData, &'static str) {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(|p| p.join("shared/data/gnss"));
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(|p| p.join("shared/data/gnss"));
     if let Some(dir) = dir {
-        if let (Ok(gps), Ok(mixed)) = (read_nav_file(&dir.join("brdc1820.10n")), read_nav_file(&dir.join("ESBC00DNK_R_20201770000_01D_MN.rnx"))) {
+        if let (Ok(gps), Ok(mixed)) = (
+            read_nav_file(&dir.join("brdc1820.10n")),
+            read_nav_file(&dir.join("ESBC00DNK_R_20201770000_01D_MN.rnx")),
+        ) {
             let mut all = gps.ephemerides;
             all.extend(mixed.ephemerides);
-            return (NavData::new(all, gps.klobuchar, gps.leap_seconds), "brdc1820.10n + ESBC00DNK");
+            return (
+                NavData::new(all, gps.klobuchar, gps.leap_seconds),
+                "brdc1820.10n + ESBC00DNK",
+            );
         }
     }
     let start = GpsTime::parse_iso("2018-06-01T00:00:00").unwrap_or_default();
-    (NavData::new(synth_nav(start, 48.0, 2.0), Some(default_klobuchar()), Some(18)), "synthetic")
+    (
+        NavData::new(
+            synth_nav(start, 48.0, 2.0),
+            Some(default_klobuchar()),
+            Some(18),
+        ),
+        "synthetic",
+    )
 }
 
 fn pick(nav: &NavData, system: System, geo: bool) -> Option<Ephemeris> {
-    nav.ephemerides.iter().find(|e| e.sat.system == system && e.is_bds_geo() == geo && e.is_healthy()).cloned()
+    nav.ephemerides
+        .iter()
+        .find(|e| e.sat.system == system && e.is_bds_geo() == geo && e.is_healthy())
+        .cloned()
 }
 
 fn benches(c: &mut Criterion) {
     let (nav, source) = nav_data();
-    eprintln!("ephemerides from {source}: {} records", nav.ephemerides.len());
+    eprintln!(
+        "ephemerides from {source}: {} records",
+        nav.ephemerides.len()
+    );
     let gps = pick(&nav, System::Gps, false);
     let geo = pick(&nav, System::Bds, true);
     let mut group = c.benchmark_group("sat_state");
@@ -43,11 +64,21 @@ fn benches(c: &mut Criterion) {
     group.finish();
 
     let sats: Vec<EmitterId> = nav.satellites();
-    let t = nav.ephemerides.first().map(|e| e.toe.add_seconds(3000.0)).unwrap_or_default();
+    let t = nav
+        .ephemerides
+        .first()
+        .map(|e| e.toe.add_seconds(3000.0))
+        .unwrap_or_default();
     let g05 = EmitterId::new(System::Gps, 5);
-    c.bench_function("nav_select/one", |b| b.iter(|| nav.select(black_box(g05), black_box(t))));
+    c.bench_function("nav_select/one", |b| {
+        b.iter(|| nav.select(black_box(g05), black_box(t)))
+    });
     c.bench_function("nav_select/all_sats", |b| {
-        b.iter(|| sats.iter().filter(|s| nav.select(**s, black_box(t)).is_some()).count())
+        b.iter(|| {
+            sats.iter()
+                .filter(|s| nav.select(**s, black_box(t)).is_some())
+                .count()
+        })
     });
 }
 

@@ -453,6 +453,10 @@ struct NeesResult {
     single_pos: Vec<f64>,
     gate_rejections: usize,
     updates: usize,
+    /// Sums and counts of the NIS of every pseudorange and every range-rate update after
+    /// `SKIP` (accepted or gated), for the mean NIS, which is 1 for a consistent filter.
+    nis_range: (f64, usize),
+    nis_rate: (f64, usize),
 }
 
 /// Epochs left out of the statistics while the filter converges from its first fix.
@@ -485,6 +489,8 @@ fn nees_monte_carlo(
         single_pos: Vec::new(),
         gate_rejections: 0,
         updates: 0,
+        nis_range: (0.0, 0),
+        nis_rate: (0.0, 0),
     };
     for group in 0..groups {
         let mut g = NeesGroup {
@@ -537,6 +543,12 @@ fn nees_monte_carlo(
                     let pr = (p - r).norm() + x[9] + isb + 3.0 * gauss(&mut meas_rng);
                     let rate = u.dot(&(sv - v)) + x[10] + 0.05 * gauss(&mut meas_rng);
                     let out = ekf.update_range(&range_meas(s.id, p, sv, pr, Some(rate)));
+                    if epoch >= SKIP {
+                        let rate_nis = out.rate.map_or(f64::NAN, |o| o.nis());
+                        result.nis_range =
+                            (result.nis_range.0 + out.range.nis(), result.nis_range.1 + 1);
+                        result.nis_rate = (result.nis_rate.0 + rate_nis, result.nis_rate.1 + 1);
+                    }
                     for o in [Some(out.range), out.rate].into_iter().flatten() {
                         result.updates += 1;
                         match o {
@@ -602,14 +614,17 @@ fn check_nees(label: &str, cfg: Ekf11Config, sky_def: &[(f64, f64, System)]) {
         "{label}: {groups}×{runs} runs × 120 epochs. Position NEES mean {mean_pos:.3}, band per group \
          [{lo3:.3}, {hi3:.3}], {:.1} % of group-epochs inside; {}-state NEES mean {mean_full:.3}, band \
          [{lo_n:.3}, {hi_n:.3}], {:.1} % inside. Single runs: {:.2} % above χ²₀.₉₇₅(3), {:.2} % below \
-         χ²₀.₀₂₅(3). Gate rejections {}/{}.",
+         χ²₀.₀₂₅(3). Mean NIS: pseudorange {:.4}, range rate {:.4}. Gate rejections {}/{} ({:.3} %).",
         100.0 * cov_pos,
         res.n_full,
         100.0 * cov_full,
         100.0 * above,
         100.0 * below,
+        res.nis_range.0 / res.nis_range.1 as f64,
+        res.nis_rate.0 / res.nis_rate.1 as f64,
         res.gate_rejections,
-        res.updates
+        res.updates,
+        100.0 * res.gate_rejections as f64 / res.updates as f64
     );
     assert!(
         cov_pos >= 0.9,

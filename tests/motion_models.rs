@@ -13,14 +13,24 @@ fn parse(text: &str) -> Result<TrajectoryConfig, String> {
     struct Doc {
         trajectory: TrajectoryConfig,
     }
-    toml::from_str::<Doc>(text).map(|d| d.trajectory).map_err(|e| e.to_string())
+    toml::from_str::<Doc>(text)
+        .map(|d| d.trajectory)
+        .map_err(|e| e.to_string())
 }
 
 fn build(cfg: &TrajectoryConfig, trial: u64) -> Box<dyn Trajectory> {
-    cfg.build(&mut TrialRng::new(2024, trial).stream("motion/trajectory")).expect("valid configuration")
+    cfg.build(&mut TrialRng::new(2024, trial).stream("motion/trajectory"))
+        .expect("valid configuration")
 }
 
-fn waypoints(points: Vec<Vec<f64>>, speed: f64, accel: Option<f64>, lateral: Option<f64>, dwell: Option<f64>, laps: Option<u32>) -> TrajectoryConfig {
+fn waypoints(
+    points: Vec<Vec<f64>>,
+    speed: f64,
+    accel: Option<f64>,
+    lateral: Option<f64>,
+    dwell: Option<f64>,
+    laps: Option<u32>,
+) -> TrajectoryConfig {
     TrajectoryConfig::Waypoints {
         points_enu_m: points,
         speed_mps: speed,
@@ -46,7 +56,10 @@ fn distance_to_polyline(p: &Vector3<f64>, pts: &[Vector3<f64>]) -> f64 {
 fn point_strategy() -> impl Strategy<Value = Vec<Vec<f64>>> {
     prop::collection::vec((-500.0f64..500.0, -500.0f64..500.0, -5.0f64..5.0), 2..7)
         .prop_map(|v| v.into_iter().map(|(e, n, u)| vec![e, n, u]).collect())
-        .prop_filter("distinct consecutive points", |v: &Vec<Vec<f64>>| v.windows(2).all(|w| (w[0][0] - w[1][0]).hypot(w[0][1] - w[1][1]) > 1.0))
+        .prop_filter("distinct consecutive points", |v: &Vec<Vec<f64>>| {
+            v.windows(2)
+                .all(|w| (w[0][0] - w[1][0]).hypot(w[0][1] - w[1][1]) > 1.0)
+        })
 }
 
 proptest! {
@@ -130,21 +143,42 @@ proptest! {
 #[test]
 fn hundred_metre_legs_take_twenty_seconds_plus_ramps() {
     let pts = vec![vec![0.0, 0.0], vec![100.0, 0.0], vec![100.0, 100.0]];
-    assert!((build(&waypoints(pts.clone(), 10.0, None, None, None, None), 0).duration_s() - 20.0).abs() < 1e-12);
+    assert!(
+        (build(&waypoints(pts.clone(), 10.0, None, None, None, None), 0).duration_s() - 20.0).abs()
+            < 1e-12
+    );
     // Ramps of v/a = 5 s at each end, each covering 25 m at half speed: 20 + 5 s.
-    assert!((build(&waypoints(pts.clone(), 10.0, Some(2.0), None, None, None), 0).duration_s() - 25.0).abs() < 1e-9);
+    assert!(
+        (build(
+            &waypoints(pts.clone(), 10.0, Some(2.0), None, None, None),
+            0
+        )
+        .duration_s()
+            - 25.0)
+            .abs()
+            < 1e-9
+    );
     // Stopping 3 s at the corner: two 15 s legs plus the dwell.
-    assert!((build(&waypoints(pts, 10.0, Some(2.0), None, Some(3.0), None), 0).duration_s() - 33.0).abs() < 1e-9);
+    assert!(
+        (build(&waypoints(pts, 10.0, Some(2.0), None, Some(3.0), None), 0).duration_s() - 33.0)
+            .abs()
+            < 1e-9
+    );
 }
 
 /// ÿ samples at whole seconds from `t0` to the end, for `runs` independent trials of seed
 /// 001's model lengthened to `duration` s.
 fn singer_accels(runs: u64, duration: f64, t0: usize) -> Vec<Vec<f64>> {
-    let cfg = parse(&format!("trajectory = {{ kind = \"singer\", duration_s = {duration} }}")).unwrap();
+    let cfg = parse(&format!(
+        "trajectory = {{ kind = \"singer\", duration_s = {duration} }}"
+    ))
+    .unwrap();
     (0..runs)
         .map(|r| {
             let tr = build(&cfg, r);
-            (t0..=duration as usize).map(|k| tr.state_at(k as f64).acc_enu_mps2.y).collect()
+            (t0..=duration as usize)
+                .map(|k| tr.state_at(k as f64).acc_enu_mps2.y)
+                .collect()
         })
         .collect()
 }
@@ -157,7 +191,12 @@ fn singer_acceleration_has_the_papers_variance_and_correlation() {
     let runs = singer_accels(2000, 300.0, 50);
     let n: usize = runs.iter().map(Vec::len).sum();
     let mean = runs.iter().flatten().sum::<f64>() / n as f64;
-    let var = runs.iter().flatten().map(|a| (a - mean).powi(2)).sum::<f64>() / n as f64;
+    let var = runs
+        .iter()
+        .flatten()
+        .map(|a| (a - mean).powi(2))
+        .sum::<f64>()
+        / n as f64;
     eprintln!("Singer ÿ: mean {mean:.4} m/s², variance {var:.4} (m/s²)² vs σ_m² = 3.5");
     assert!(mean.abs() < 0.1, "mean {mean}");
     assert!((var / 3.5 - 1.0).abs() < 0.10, "variance {var}");
@@ -192,7 +231,10 @@ fn singer_x_is_uniform_and_runs_are_reproducible() {
     }
     assert_ne!(a.state_at(50.0).pos_enu_m.y, c.state_at(50.0).pos_enu_m.y);
     let s0 = a.state_at(0.0);
-    assert_eq!((s0.pos_enu_m.y, s0.vel_enu_mps.y, s0.acc_enu_mps2.y), (0.0, 11.0, 0.0));
+    assert_eq!(
+        (s0.pos_enu_m.y, s0.vel_enu_mps.y, s0.acc_enu_mps2.y),
+        (0.0, 11.0, 0.0)
+    );
 }
 
 /// Independent reference: RK4 integration of ṗ = v, v̇ = a, ȧ = M a.
@@ -214,7 +256,9 @@ fn rk4_turning(alpha: f64, omega: f64, x: [f64; 9], t_end: f64, dt: f64) -> [f64
     let steps = (t_end / dt).round() as usize;
     for _ in 0..steps {
         let k1 = f(&s);
-        let add = |a: &[f64; 9], k: &[f64; 9], c: f64| -> [f64; 9] { std::array::from_fn(|i| a[i] + c * k[i]) };
+        let add = |a: &[f64; 9], k: &[f64; 9], c: f64| -> [f64; 9] {
+            std::array::from_fn(|i| a[i] + c * k[i])
+        };
         let k2 = f(&add(&s, &k1, dt / 2.0));
         let k3 = f(&add(&s, &k2, dt / 2.0));
         let k4 = f(&add(&s, &k3, dt));
@@ -225,7 +269,10 @@ fn rk4_turning(alpha: f64, omega: f64, x: [f64; 9], t_end: f64, dt: f64) -> [f64
 
 #[test]
 fn plane_turning_without_noise_matches_an_independent_integration() {
-    let tr = build(&parse("trajectory = { kind = \"plane_turning\", noise_var_m2ps4 = 0 }").unwrap(), 0);
+    let tr = build(
+        &parse("trajectory = { kind = \"plane_turning\", noise_var_m2ps4 = 0 }").unwrap(),
+        0,
+    );
     let x0 = [0.0, 0.0, 0.0, 4.0, -4.0, 4.0, 0.5, -0.5, -0.5];
     for t in [1.0, 2.0, 3.0, 10.0, 57.5, 100.0] {
         let want = rk4_turning(0.03, 0.1, x0, t, 1e-3);
@@ -242,7 +289,12 @@ fn plane_turning_without_noise_matches_an_independent_integration() {
             s.acc_enu_mps2.z,
         ];
         for i in 0..9 {
-            assert!((got[i] - want[i]).abs() < 1e-8 * (1.0 + want[i].abs()), "t = {t}, component {i}: {} vs {}", got[i], want[i]);
+            assert!(
+                (got[i] - want[i]).abs() < 1e-8 * (1.0 + want[i].abs()),
+                "t = {t}, component {i}: {} vs {}",
+                got[i],
+                want[i]
+            );
         }
     }
     // The horizontal acceleration turns counter-clockwise at ω and decays at α:
@@ -270,19 +322,56 @@ fn plane_turning_paper_run_is_reproducible() {
 fn configuration_errors_name_their_key() {
     let key = |text: &str| parse(text).unwrap().validate().unwrap_err().key;
     assert_eq!(key("trajectory = { kind = \"waypoints\", points_enu_m = [[0, 0], [5, 0]], speed_mps = -3 }"), "speed_mps");
-    assert_eq!(key("trajectory = { kind = \"waypoints\", points_enu_m = [[0, 0]], speed_mps = 3 }"), "points_enu_m");
-    assert_eq!(key("trajectory = { kind = \"waypoints\", points_enu_m = [[2, 2], [2, 2]], speed_mps = 3 }"), "points_enu_m");
+    assert_eq!(
+        key("trajectory = { kind = \"waypoints\", points_enu_m = [[0, 0]], speed_mps = 3 }"),
+        "points_enu_m"
+    );
+    assert_eq!(
+        key(
+            "trajectory = { kind = \"waypoints\", points_enu_m = [[2, 2], [2, 2]], speed_mps = 3 }"
+        ),
+        "points_enu_m"
+    );
     assert_eq!(key("trajectory = { kind = \"waypoints\", points_enu_m = [[0, 0], [5, 0]], speed_mps = 3, accel_mps2 = 0 }"), "accel_mps2");
     assert_eq!(key("trajectory = { kind = \"waypoints\", points_enu_m = [[0, 0], [5, 0]], speed_mps = 3, laps = 0 }"), "laps");
-    assert_eq!(key("trajectory = { kind = \"singer\", alpha_per_s = -0.1 }"), "alpha_per_s");
-    assert_eq!(key("trajectory = { kind = \"singer\", duration_s = 1e7 }"), "duration_s");
-    assert_eq!(key("trajectory = { kind = \"singer\", step_s = 0 }"), "step_s");
-    assert_eq!(key("trajectory = { kind = \"singer\", step_s = 1e-5, duration_s = 864000 }"), "step_s");
-    assert_eq!(key("trajectory = { kind = \"plane_turning\", noise_var_m2ps4 = -1 }"), "noise_var_m2ps4");
-    assert_eq!(key("trajectory = { kind = \"static\", position_enu_m = [0, 0, 0], duration_s = -1 }"), "duration_s");
-    let issue = parse("trajectory = { kind = \"waypoints\", points_enu_m = [[0, 0], [5, 0]], speed_mps = -3 }").unwrap().validate().unwrap_err();
-    assert!(issue.message.contains("expected") && issue.message.contains("-3"), "{}", issue.message);
+    assert_eq!(
+        key("trajectory = { kind = \"singer\", alpha_per_s = -0.1 }"),
+        "alpha_per_s"
+    );
+    assert_eq!(
+        key("trajectory = { kind = \"singer\", duration_s = 1e7 }"),
+        "duration_s"
+    );
+    assert_eq!(
+        key("trajectory = { kind = \"singer\", step_s = 0 }"),
+        "step_s"
+    );
+    assert_eq!(
+        key("trajectory = { kind = \"singer\", step_s = 1e-5, duration_s = 864000 }"),
+        "step_s"
+    );
+    assert_eq!(
+        key("trajectory = { kind = \"plane_turning\", noise_var_m2ps4 = -1 }"),
+        "noise_var_m2ps4"
+    );
+    assert_eq!(
+        key("trajectory = { kind = \"static\", position_enu_m = [0, 0, 0], duration_s = -1 }"),
+        "duration_s"
+    );
+    let issue = parse(
+        "trajectory = { kind = \"waypoints\", points_enu_m = [[0, 0], [5, 0]], speed_mps = -3 }",
+    )
+    .unwrap()
+    .validate()
+    .unwrap_err();
+    assert!(
+        issue.message.contains("expected") && issue.message.contains("-3"),
+        "{}",
+        issue.message
+    );
     // Misspelt keys are serde errors that name the key.
-    let e = parse("trajectory = { kind = \"waypoints\", points = [[0, 0], [5, 0]], speed_mps = 3 }").unwrap_err();
+    let e =
+        parse("trajectory = { kind = \"waypoints\", points = [[0, 0], [5, 0]], speed_mps = 3 }")
+            .unwrap_err();
     assert!(e.contains("points"), "{e}");
 }

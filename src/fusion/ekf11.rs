@@ -800,7 +800,9 @@ fn apply_transition_rows<const C: usize>(m: &mut SMatrix<f64, N_STATES, C>, dt_s
         let (p, v, a) = (idx::POS[axis], idx::VEL[axis], idx::ACC[axis]);
         for c in 0..C {
             let (mv, ma) = (m[(v, c)], m[(a, c)]);
-            m[(p, c)] += dt_s * mv + half_t2 * ma;
+            // Summed in the order of the dense product, so that both give the same
+            // rounding on ECEF coordinates, whose last bit is a nanometre.
+            m[(p, c)] = (m[(p, c)] + dt_s * mv) + half_t2 * ma;
             m[(v, c)] += dt_s * ma;
         }
     }

@@ -69,7 +69,14 @@ impl Klobuchar {
     /// The model is defined for satellites above the horizon; for negative elevations the
     /// formulas still give a finite (night-time floor or larger) value, which is returned
     /// as is because the caller decides visibility.
-    pub fn delay_l1_m(&self, lat_rad: f64, lon_rad: f64, az_rad: f64, el_rad: f64, t: GpsTime) -> f64 {
+    pub fn delay_l1_m(
+        &self,
+        lat_rad: f64,
+        lon_rad: f64,
+        az_rad: f64,
+        el_rad: f64,
+        t: GpsTime,
+    ) -> f64 {
         // The algorithm works in semicircles (π rad), as the broadcast coefficients do.
         let e_sc = el_rad / PI;
         let phi_u = lat_rad / PI;
@@ -94,7 +101,14 @@ impl Klobuchar {
     }
 
     /// The same delay on BeiDou B1I (1561.098 MHz): the L1 delay times (f_L1 / f_B1I)².
-    pub fn delay_b1i_m(&self, lat_rad: f64, lon_rad: f64, az_rad: f64, el_rad: f64, t: GpsTime) -> f64 {
+    pub fn delay_b1i_m(
+        &self,
+        lat_rad: f64,
+        lon_rad: f64,
+        az_rad: f64,
+        el_rad: f64,
+        t: GpsTime,
+    ) -> f64 {
         self.delay_l1_m(lat_rad, lon_rad, az_rad, el_rad, t) * iono_scale_from_l1(F_B1I_HZ)
     }
 }
@@ -108,17 +122,25 @@ impl Klobuchar {
 /// below sea level); above 10 km, at or below the horizon, or for non-finite inputs the
 /// function returns 0, since the model is not meant for those cases.
 pub fn saastamoinen_m(lat_rad: f64, h_m: f64, el_rad: f64, humidity: f64) -> f64 {
-    // `!(x > y)` also catches NaN, which must not leak into a pseudorange.
-    if !(el_rad > 0.0) || !(h_m <= 1.0e4) || !lat_rad.is_finite() {
+    // Comparisons with NaN are false, so NaN inputs fall out here too and never leak into
+    // a pseudorange.
+    let in_domain = el_rad > 0.0 && h_m <= 1.0e4 && lat_rad.is_finite();
+    if !in_domain {
         return 0.0;
     }
     let h = h_m.max(0.0);
-    let humi = if humidity.is_finite() { humidity.clamp(0.0, 1.0) } else { 0.0 };
+    let humi = if humidity.is_finite() {
+        humidity.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     let pressure_hpa = 1013.25 * (1.0 - 2.2557e-5 * h).powf(5.2568);
     let temp_k = 15.0 - 6.5e-3 * h + 273.16;
     let vapour_hpa = 6.108 * humi * ((17.15 * temp_k - 4684.0) / (temp_k - 38.45)).exp();
     let cos_z = (PI / 2.0 - el_rad).cos();
-    let dry_m = 0.0022768 * pressure_hpa / (1.0 - 0.00266 * (2.0 * lat_rad).cos() - 0.00028 * h / 1e3) / cos_z;
+    let dry_m = 0.0022768 * pressure_hpa
+        / (1.0 - 0.00266 * (2.0 * lat_rad).cos() - 0.00028 * h / 1e3)
+        / cos_z;
     let wet_m = 0.002277 * (1255.0 / temp_k + 0.05) * vapour_hpa / cos_z;
     dry_m + wet_m
 }
@@ -163,11 +185,23 @@ mod tests {
         let lam_i = 116.0 / 180.0;
         let t_gps = 54_000.0 - 43_200.0 * lam_i;
         let t = GpsTime::from_week_tow(1590, 345_600.0 + t_gps);
-        let d = k.delay_l1_m(40f64.to_radians(), 116f64.to_radians(), 0.0, 30f64.to_radians(), t);
+        let d = k.delay_l1_m(
+            40f64.to_radians(),
+            116f64.to_radians(),
+            0.0,
+            30f64.to_radians(),
+            t,
+        );
         let expected = C_MPS * 1.67190e-8;
         assert!((d - expected).abs() < 1e-4 * expected, "{d} vs {expected}");
         // B1I scaling.
-        let b = k.delay_b1i_m(40f64.to_radians(), 116f64.to_radians(), 0.0, 30f64.to_radians(), t);
+        let b = k.delay_b1i_m(
+            40f64.to_radians(),
+            116f64.to_radians(),
+            0.0,
+            30f64.to_radians(),
+            t,
+        );
         assert!((b / d - (1575.42f64 / 1561.098).powi(2)).abs() < 1e-12);
         assert!((iono_scale_from_l1(F_B1I_HZ) - 1.018_435).abs() < 1e-5);
     }
@@ -194,7 +228,10 @@ mod tests {
         assert_eq!(saastamoinen_m(0.5, f64::NAN, 1.0, 0.5), 0.0);
         assert_eq!(saastamoinen_m(0.5, 0.0, f64::NAN, 0.5), 0.0);
         // Negative heights are clamped to the sea-level value.
-        assert_eq!(saastamoinen_m(0.5, -50.0, 1.0, 0.5), saastamoinen_m(0.5, 0.0, 1.0, 0.5));
+        assert_eq!(
+            saastamoinen_m(0.5, -50.0, 1.0, 0.5),
+            saastamoinen_m(0.5, 0.0, 1.0, 0.5)
+        );
         // Delay decreases with height.
         assert!(saastamoinen_m(0.5, 2000.0, 1.0, 0.5) < saastamoinen_m(0.5, 0.0, 1.0, 0.5));
     }

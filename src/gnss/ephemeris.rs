@@ -64,7 +64,6 @@
 
 use crate::core::{EmitterId, GpsTime, System};
 use nalgebra::{Matrix3, Vector3};
-use std::borrow::Borrow;
 use std::f64::consts::{PI, TAU};
 
 /// GPS value of the Earth's gravitational constant μ (m³/s²), IS-GPS-200 Table 20-IV.
@@ -209,9 +208,9 @@ pub fn week_crossover(dt_s: f64) -> f64 {
 /// ```
 ///
 /// Uses the GPS value of Ω̇e; the BeiDou value differs by 1.5e-13 rad/s, i.e. by 1e-8 m
-/// over a 0.08 s travel time. Accepts a vector or a reference to one.
-pub fn sagnac_rotate<V: Borrow<Vector3<f64>>>(pos_ecef: V, travel_time_s: f64) -> Vector3<f64> {
-    let p = pos_ecef.borrow();
+/// over a 0.08 s travel time.
+pub fn sagnac_rotate(pos_ecef_m: &Vector3<f64>, travel_time_s: f64) -> Vector3<f64> {
+    let p = pos_ecef_m;
     let (s, c) = (GPS_OMEGA_E_RAD_PER_S * travel_time_s).sin_cos();
     Vector3::new(c * p.x + s * p.y, -s * p.x + c * p.y, p.z)
 }
@@ -239,8 +238,16 @@ impl Ephemeris {
     /// system the GPS ones.
     fn constants(&self) -> SystemConstants {
         match self.sat.system {
-            System::Bds => SystemConstants { mu: BDS_MU_M3_PER_S2, omega_e: BDS_OMEGA_E_RAD_PER_S, f_rel: BDS_F_S_PER_SQRT_M },
-            _ => SystemConstants { mu: GPS_MU_M3_PER_S2, omega_e: GPS_OMEGA_E_RAD_PER_S, f_rel: GPS_F_S_PER_SQRT_M },
+            System::Bds => SystemConstants {
+                mu: BDS_MU_M3_PER_S2,
+                omega_e: BDS_OMEGA_E_RAD_PER_S,
+                f_rel: BDS_F_S_PER_SQRT_M,
+            },
+            _ => SystemConstants {
+                mu: GPS_MU_M3_PER_S2,
+                omega_e: GPS_OMEGA_E_RAD_PER_S,
+                f_rel: GPS_F_S_PER_SQRT_M,
+            },
         }
     }
 
@@ -309,15 +316,25 @@ impl Ephemeris {
         let toe_sow = self.toe_sow_s();
         // GEO elements live in a frame fixed at toe, so the node does not follow the Earth's
         // rotation during tk; that rotation is applied afterwards by Rz.
-        let node_rate = if geo { self.omega_dot } else { self.omega_dot - k.omega_e };
+        let node_rate = if geo {
+            self.omega_dot
+        } else {
+            self.omega_dot - k.omega_e
+        };
         let node = self.omega0 + node_rate * tk - k.omega_e * toe_sow;
         let (sin_o, cos_o) = node.sin_cos();
         let (sin_i, cos_i) = inc.sin_cos();
 
-        let pos = Vector3::new(xp * cos_o - yp * cos_i * sin_o, xp * sin_o + yp * cos_i * cos_o, yp * sin_i);
+        let pos = Vector3::new(
+            xp * cos_o - yp * cos_i * sin_o,
+            xp * sin_o + yp * cos_i * cos_o,
+            yp * sin_i,
+        );
         let vel = Vector3::new(
-            xp_dot * cos_o - yp_dot * cos_i * sin_o + yp * sin_i * sin_o * i_dot - pos.y * node_rate,
-            xp_dot * sin_o + yp_dot * cos_i * cos_o - yp * sin_i * cos_o * i_dot + pos.x * node_rate,
+            xp_dot * cos_o - yp_dot * cos_i * sin_o + yp * sin_i * sin_o * i_dot
+                - pos.y * node_rate,
+            xp_dot * sin_o + yp_dot * cos_i * cos_o - yp * sin_i * cos_o * i_dot
+                + pos.x * node_rate,
             yp_dot * sin_i + yp * cos_i * i_dot,
         );
 
@@ -339,7 +356,12 @@ impl Ephemeris {
         let clock_s = self.af0 + dt * (self.af1 + dt * self.af2) + rel_scale * sin_e;
         let clock_drift_s_per_s = self.af1 + 2.0 * self.af2 * dt + rel_scale * cos_e * e_dot;
 
-        SatState { pos_ecef_m, vel_ecef_mps, clock_s, clock_drift_s_per_s }
+        SatState {
+            pos_ecef_m,
+            vel_ecef_mps,
+            clock_s,
+            clock_drift_s_per_s,
+        }
     }
 }
 
@@ -435,9 +457,14 @@ pub(crate) mod tests {
         for &tk in &[0.0, 600.0, -3600.0] {
             let t = eph.toe.add_seconds(tk);
             let s = eph.state(t);
-            let lon = 1.0 - GPS_OMEGA_E_RAD_PER_S * 345_600.0 + (n - GPS_OMEGA_E_RAD_PER_S) * tk + 0.25;
+            let lon =
+                1.0 - GPS_OMEGA_E_RAD_PER_S * 345_600.0 + (n - GPS_OMEGA_E_RAD_PER_S) * tk + 0.25;
             let expect = Vector3::new(a * lon.cos(), a * lon.sin(), 0.0);
-            assert!((s.pos_ecef_m - expect).norm() < 1e-6, "tk {tk}: {:?} vs {expect:?}", s.pos_ecef_m);
+            assert!(
+                (s.pos_ecef_m - expect).norm() < 1e-6,
+                "tk {tk}: {:?} vs {expect:?}",
+                s.pos_ecef_m
+            );
             // Speed in ECEF: (n − Ω̇e) A, tangential.
             let v = (n - GPS_OMEGA_E_RAD_PER_S) * a;
             let expect_v = Vector3::new(-v * lon.sin(), v * lon.cos(), 0.0);
@@ -465,7 +492,11 @@ pub(crate) mod tests {
         let c1 = eph.state(t.add_seconds(h)).clock_s;
         let c0 = eph.state(t.add_seconds(-h)).clock_s;
         let drift_fd = (c1 - c0) / (2.0 * h);
-        assert!((drift_fd - s.clock_drift_s_per_s).abs() < 1e-15, "{}: drift", eph.sat);
+        assert!(
+            (drift_fd - s.clock_drift_s_per_s).abs() < 1e-15,
+            "{}: drift",
+            eph.sat
+        );
     }
 
     #[test]
@@ -527,7 +558,11 @@ pub(crate) mod tests {
         // clock 269.108429 µs. Broadcast orbits agree to a few metres.
         let s = g02_2010().state(GpsTime::from_week_tow(1590, 345_600.0));
         let sp3 = Vector3::new(-14_889_160.729, -5_131_952.946, -21_416_801.336);
-        assert!((s.pos_ecef_m - sp3).norm() < 5.0, "{}", (s.pos_ecef_m - sp3).norm());
+        assert!(
+            (s.pos_ecef_m - sp3).norm() < 5.0,
+            "{}",
+            (s.pos_ecef_m - sp3).norm()
+        );
         // SP3 clocks exclude the relativistic term, like af0..af2.
         let rel = g02_2010().relativistic_correction_s(GpsTime::from_week_tow(1590, 345_600.0));
         assert!((s.clock_s - rel - 269.108429e-6).abs() < 5e-9);
@@ -536,7 +571,11 @@ pub(crate) mod tests {
         let c05 = c05_2020();
         let s = c05.state(GpsTime::from_week_tow(2111, 345_600.0));
         let sp3 = Vector3::new(21_892_326.139, 36_001_717.218, -1_109_124.143);
-        assert!((s.pos_ecef_m - sp3).norm() < 50.0, "{}", (s.pos_ecef_m - sp3).norm());
+        assert!(
+            (s.pos_ecef_m - sp3).norm() < 50.0,
+            "{}",
+            (s.pos_ecef_m - sp3).norm()
+        );
     }
 
     #[test]
@@ -557,9 +596,9 @@ pub(crate) mod tests {
     fn sagnac_rotation() {
         let p = Vector3::new(20_000e3, 0.0, 10_000e3);
         let tau = 0.07;
-        let r = sagnac_rotate(p, tau);
-        let r2 = sagnac_rotate(&p, tau);
-        assert_eq!(r, r2);
+        let r = sagnac_rotate(&p, tau);
+        // Rotating back restores the point.
+        assert!((sagnac_rotate(&r, -tau) - p).norm() < 1e-6);
         // The point moves west (negative y) by ≈ x Ω̇e τ ≈ 102 m; z is untouched, norm kept.
         assert!((r.y + 20_000e3 * GPS_OMEGA_E_RAD_PER_S * tau).abs() < 1e-3);
         assert_eq!(r.z, p.z);

@@ -139,21 +139,40 @@ pub fn noise_density_dbw_per_hz(noise_temp_k: f64) -> f64 {
 /// C/N0 (dB-Hz) of a transmitter of `eirp_dbw` at `range_m` on `freq_hz`, received with
 /// `rx_gain_dbi` by a system of noise temperature `noise_temp_k`, with `extra_loss_db` of
 /// further losses: `EIRP − FSPL + G_r − 10 log10(k T_sys) − L`.
-pub fn cn0_dbhz(eirp_dbw: f64, range_m: f64, freq_hz: f64, rx_gain_dbi: f64, noise_temp_k: f64, extra_loss_db: f64) -> f64 {
-    eirp_dbw - fspl_db(range_m, freq_hz) + rx_gain_dbi - noise_density_dbw_per_hz(noise_temp_k) - extra_loss_db
+pub fn cn0_dbhz(
+    eirp_dbw: f64,
+    range_m: f64,
+    freq_hz: f64,
+    rx_gain_dbi: f64,
+    noise_temp_k: f64,
+    extra_loss_db: f64,
+) -> f64 {
+    eirp_dbw - fspl_db(range_m, freq_hz) + rx_gain_dbi
+        - noise_density_dbw_per_hz(noise_temp_k)
+        - extra_loss_db
 }
 
 /// Gain (dBic) of a patch antenna at elevation `el_rad`:
 /// `G_zenith + (G_horizon − G_zenith)(1 − sin el)^k`, continuing below the horizon (the
 /// elevation is clamped to ±90°).
-pub fn patch_gain_dbic(el_rad: f64, gain_zenith_dbic: f64, gain_horizon_dbic: f64, exponent: f64) -> f64 {
+pub fn patch_gain_dbic(
+    el_rad: f64,
+    gain_zenith_dbic: f64,
+    gain_horizon_dbic: f64,
+    exponent: f64,
+) -> f64 {
     let el = el_rad.clamp(-FRAC_PI_2, FRAC_PI_2);
     gain_zenith_dbic + (gain_horizon_dbic - gain_zenith_dbic) * (1.0 - el.sin()).powf(exponent)
 }
 
 /// DLL thermal-noise jitter (chips, 1-σ) of an early-minus-late power discriminator:
 /// `√(B_L d/(2 C/N0) · [1 + 2/((2 − d) T C/N0)])`.
-pub fn dll_sigma_chips(cn0_dbhz: f64, loop_bandwidth_hz: f64, spacing_chips: f64, integration_s: f64) -> f64 {
+pub fn dll_sigma_chips(
+    cn0_dbhz: f64,
+    loop_bandwidth_hz: f64,
+    spacing_chips: f64,
+    integration_s: f64,
+) -> f64 {
     let c = 10f64.powf(cn0_dbhz / 10.0);
     let d = spacing_chips;
     (loop_bandwidth_hz * d / (2.0 * c) * (1.0 + 2.0 / ((2.0 - d) * integration_s * c))).sqrt()
@@ -161,9 +180,15 @@ pub fn dll_sigma_chips(cn0_dbhz: f64, loop_bandwidth_hz: f64, spacing_chips: f64
 
 /// FLL thermal-noise frequency jitter (Hz, 1-σ):
 /// `1/(2πT) · √(4 F B_n/(C/N0) · [1 + 1/(T C/N0)])`.
-pub fn fll_sigma_hz(cn0_dbhz: f64, loop_bandwidth_hz: f64, integration_s: f64, noise_factor: f64) -> f64 {
+pub fn fll_sigma_hz(
+    cn0_dbhz: f64,
+    loop_bandwidth_hz: f64,
+    integration_s: f64,
+    noise_factor: f64,
+) -> f64 {
     let c = 10f64.powf(cn0_dbhz / 10.0);
-    (4.0 * noise_factor * loop_bandwidth_hz / c * (1.0 + 1.0 / (integration_s * c))).sqrt() / (2.0 * PI * integration_s)
+    (4.0 * noise_factor * loop_bandwidth_hz / c * (1.0 + 1.0 / (integration_s * c))).sqrt()
+        / (2.0 * PI * integration_s)
 }
 
 /// Tracking loops, antenna and link budget of a GNSS receiver (`[sensors.gnss.tracking]`).
@@ -224,13 +249,23 @@ impl Default for TrackingConfig {
     }
 }
 
-fn in_range(key: &str, v: f64, lo: f64, hi: f64, open_lo: bool, what: &str) -> Result<(), ConfigIssue> {
+fn in_range(
+    key: &str,
+    v: f64,
+    lo: f64,
+    hi: f64,
+    open_lo: bool,
+    what: &str,
+) -> Result<(), ConfigIssue> {
     let ok = v.is_finite() && v <= hi && if open_lo { v > lo } else { v >= lo };
     if ok {
         Ok(())
     } else {
         let b = if open_lo { "(" } else { "[" };
-        Err(ConfigIssue::new(key, format!("expected {what} within {b}{lo}, {hi}], got {v}")))
+        Err(ConfigIssue::new(
+            key,
+            format!("expected {what} within {b}{lo}, {hi}], got {v}"),
+        ))
     }
 }
 
@@ -242,12 +277,50 @@ impl TrackingConfig {
     /// integration times, a spacing outside (0, 1] chip, a loop too wide for its update rate
     /// (B·T > 0.5), or values outside physically sensible ranges.
     pub fn validate(&self) -> Result<(), ConfigIssue> {
-        in_range("dll_bandwidth_hz", self.dll_bandwidth_hz, 0.0, 50.0, true, "a DLL bandwidth in Hz")?;
-        in_range("correlator_spacing_chips", self.correlator_spacing_chips, 0.0, 1.0, true, "a correlator spacing in chips")?;
-        in_range("integration_time_s", self.integration_time_s, 0.0, 1.0, true, "an integration time in s")?;
-        in_range("fll_bandwidth_hz", self.fll_bandwidth_hz, 0.0, 50.0, true, "an FLL bandwidth in Hz")?;
-        in_range("fll_noise_factor", self.fll_noise_factor, 1.0, 2.0, false, "an FLL noise factor")?;
-        for (key, b) in [("dll_bandwidth_hz", self.dll_bandwidth_hz), ("fll_bandwidth_hz", self.fll_bandwidth_hz)] {
+        in_range(
+            "dll_bandwidth_hz",
+            self.dll_bandwidth_hz,
+            0.0,
+            50.0,
+            true,
+            "a DLL bandwidth in Hz",
+        )?;
+        in_range(
+            "correlator_spacing_chips",
+            self.correlator_spacing_chips,
+            0.0,
+            1.0,
+            true,
+            "a correlator spacing in chips",
+        )?;
+        in_range(
+            "integration_time_s",
+            self.integration_time_s,
+            0.0,
+            1.0,
+            true,
+            "an integration time in s",
+        )?;
+        in_range(
+            "fll_bandwidth_hz",
+            self.fll_bandwidth_hz,
+            0.0,
+            50.0,
+            true,
+            "an FLL bandwidth in Hz",
+        )?;
+        in_range(
+            "fll_noise_factor",
+            self.fll_noise_factor,
+            1.0,
+            2.0,
+            false,
+            "an FLL noise factor",
+        )?;
+        for (key, b) in [
+            ("dll_bandwidth_hz", self.dll_bandwidth_hz),
+            ("fll_bandwidth_hz", self.fll_bandwidth_hz),
+        ] {
             if b * self.integration_time_s > 0.5 {
                 return Err(ConfigIssue::new(
                     key,
@@ -259,28 +332,105 @@ impl TrackingConfig {
                 ));
             }
         }
-        in_range("lock_threshold_dbhz", self.lock_threshold_dbhz, 0.0, 60.0, false, "a C/N0 threshold in dB-Hz")?;
-        in_range("antenna_gain_zenith_dbic", self.antenna_gain_zenith_dbic, -30.0, 20.0, false, "an antenna gain in dBic")?;
-        in_range("antenna_gain_horizon_dbic", self.antenna_gain_horizon_dbic, -40.0, 20.0, false, "an antenna gain in dBic")?;
-        in_range("antenna_pattern_exponent", self.antenna_pattern_exponent, 0.0, 10.0, true, "a pattern exponent")?;
-        in_range("noise_temp_k", self.noise_temp_k, 1.0, 10_000.0, false, "a system noise temperature in K")?;
-        in_range("implementation_loss_db", self.implementation_loss_db, 0.0, 30.0, false, "a loss in dB")?;
-        in_range("gps_power_margin_db", self.gps_power_margin_db, -20.0, 20.0, false, "a power margin in dB")?;
-        in_range("bds_power_margin_db", self.bds_power_margin_db, -20.0, 20.0, false, "a power margin in dB")?;
-        in_range("power_margin_rolloff_db", self.power_margin_rolloff_db, 0.0, 20.0, false, "a margin roll-off in dB")?;
-        in_range("extra_attenuation_db", self.extra_attenuation_db, 0.0, 100.0, false, "an attenuation in dB")?;
+        in_range(
+            "lock_threshold_dbhz",
+            self.lock_threshold_dbhz,
+            0.0,
+            60.0,
+            false,
+            "a C/N0 threshold in dB-Hz",
+        )?;
+        in_range(
+            "antenna_gain_zenith_dbic",
+            self.antenna_gain_zenith_dbic,
+            -30.0,
+            20.0,
+            false,
+            "an antenna gain in dBic",
+        )?;
+        in_range(
+            "antenna_gain_horizon_dbic",
+            self.antenna_gain_horizon_dbic,
+            -40.0,
+            20.0,
+            false,
+            "an antenna gain in dBic",
+        )?;
+        in_range(
+            "antenna_pattern_exponent",
+            self.antenna_pattern_exponent,
+            0.0,
+            10.0,
+            true,
+            "a pattern exponent",
+        )?;
+        in_range(
+            "noise_temp_k",
+            self.noise_temp_k,
+            1.0,
+            10_000.0,
+            false,
+            "a system noise temperature in K",
+        )?;
+        in_range(
+            "implementation_loss_db",
+            self.implementation_loss_db,
+            0.0,
+            30.0,
+            false,
+            "a loss in dB",
+        )?;
+        in_range(
+            "gps_power_margin_db",
+            self.gps_power_margin_db,
+            -20.0,
+            20.0,
+            false,
+            "a power margin in dB",
+        )?;
+        in_range(
+            "bds_power_margin_db",
+            self.bds_power_margin_db,
+            -20.0,
+            20.0,
+            false,
+            "a power margin in dB",
+        )?;
+        in_range(
+            "power_margin_rolloff_db",
+            self.power_margin_rolloff_db,
+            0.0,
+            20.0,
+            false,
+            "a margin roll-off in dB",
+        )?;
+        in_range(
+            "extra_attenuation_db",
+            self.extra_attenuation_db,
+            0.0,
+            100.0,
+            false,
+            "an attenuation in dB",
+        )?;
         Ok(())
     }
 
     /// Receive antenna gain (dBic) at elevation `el_rad`.
     pub fn antenna_gain_dbic(&self, el_rad: f64) -> f64 {
-        patch_gain_dbic(el_rad, self.antenna_gain_zenith_dbic, self.antenna_gain_horizon_dbic, self.antenna_pattern_exponent)
+        patch_gain_dbic(
+            el_rad,
+            self.antenna_gain_zenith_dbic,
+            self.antenna_gain_horizon_dbic,
+            self.antenna_pattern_exponent,
+        )
     }
 
     /// Power (dBW) a 0 dBic RHCP antenna receives from a satellite of `system` at elevation
     /// `el_rad`: `P_min + m_sys − m_roll(1 − sin el)`; −∞ for terrestrial systems.
     pub fn received_power_dbw(&self, system: System, el_rad: f64) -> f64 {
-        let Some(sig) = Signal::of_system(system) else { return f64::NEG_INFINITY };
+        let Some(sig) = Signal::of_system(system) else {
+            return f64::NEG_INFINITY;
+        };
         let margin = match sig {
             Signal::GpsL1Ca => self.gps_power_margin_db,
             Signal::BdsB1i => self.bds_power_margin_db,
@@ -305,20 +455,33 @@ impl TrackingConfig {
 
     /// DLL jitter (chips, 1-σ) at `cn0_dbhz`.
     pub fn code_sigma_chips(&self, cn0_dbhz: f64) -> f64 {
-        dll_sigma_chips(cn0_dbhz, self.dll_bandwidth_hz, self.correlator_spacing_chips, self.integration_time_s)
+        dll_sigma_chips(
+            cn0_dbhz,
+            self.dll_bandwidth_hz,
+            self.correlator_spacing_chips,
+            self.integration_time_s,
+        )
     }
 
     /// Pseudorange thermal noise (m, 1-σ) of `system` at `cn0_dbhz`; +∞ for terrestrial
     /// systems (their receivers model their own tracking).
     pub fn code_sigma_m(&self, system: System, cn0_dbhz: f64) -> f64 {
-        Signal::of_system(system).map_or(f64::INFINITY, |s| self.code_sigma_chips(cn0_dbhz) * s.chip_length_m())
+        Signal::of_system(system).map_or(f64::INFINITY, |s| {
+            self.code_sigma_chips(cn0_dbhz) * s.chip_length_m()
+        })
     }
 
     /// Pseudorange-rate thermal noise (m/s, 1-σ) of `system` at `cn0_dbhz`, from the FLL;
     /// +∞ for terrestrial systems.
     pub fn rate_sigma_mps(&self, system: System, cn0_dbhz: f64) -> f64 {
         Signal::of_system(system).map_or(f64::INFINITY, |s| {
-            s.wavelength_m() * fll_sigma_hz(cn0_dbhz, self.fll_bandwidth_hz, self.integration_time_s, self.fll_noise_factor)
+            s.wavelength_m()
+                * fll_sigma_hz(
+                    cn0_dbhz,
+                    self.fll_bandwidth_hz,
+                    self.integration_time_s,
+                    self.fll_noise_factor,
+                )
         })
     }
 }
@@ -366,7 +529,10 @@ mod tests {
         let mut last = (f64::INFINITY, f64::INFINITY);
         for i in 0..=40 {
             let cn0 = 20.0 + i as f64;
-            let now = (cfg.code_sigma_m(System::Gps, cn0), cfg.rate_sigma_mps(System::Bds, cn0));
+            let now = (
+                cfg.code_sigma_m(System::Gps, cn0),
+                cfg.rate_sigma_mps(System::Bds, cn0),
+            );
             assert!(now.0 < last.0 && now.1 < last.1, "at {cn0} dB-Hz");
             last = now;
         }
@@ -392,7 +558,10 @@ mod tests {
         assert!((z - 48.475).abs() < 1e-2);
         let zb = cfg.cn0_dbhz(System::Bds, FRAC_PI_2);
         let tb = cfg.cn0_dbhz(System::Bds, 10f64.to_radians());
-        assert!((45.0..=50.0).contains(&zb) && (35.0..=40.0).contains(&tb), "{zb} {tb}");
+        assert!(
+            (45.0..=50.0).contains(&zb) && (35.0..=40.0).contains(&tb),
+            "{zb} {tb}"
+        );
         // Monotonic in elevation; below the threshold nothing is tracked.
         let mut last = f64::NEG_INFINITY;
         for d in 0..=90 {
@@ -401,7 +570,10 @@ mod tests {
             last = c;
         }
         assert!(!cfg.in_lock(27.9) && cfg.in_lock(28.0));
-        let shaded = TrackingConfig { extra_attenuation_db: 25.0, ..TrackingConfig::default() };
+        let shaded = TrackingConfig {
+            extra_attenuation_db: 25.0,
+            ..TrackingConfig::default()
+        };
         assert!(!shaded.in_lock(shaded.cn0_dbhz(System::Gps, 0.3)));
         assert_eq!(cfg.cn0_dbhz(System::Dtmb, 1.0), f64::NEG_INFINITY);
         assert_eq!(cfg.code_sigma_m(System::Tcofdm, 40.0), f64::INFINITY);
@@ -411,13 +583,50 @@ mod tests {
     fn validation_names_keys() {
         assert!(TrackingConfig::default().validate().is_ok());
         let key = |c: TrackingConfig| c.validate().unwrap_err().key;
-        assert_eq!(key(TrackingConfig { dll_bandwidth_hz: 0.0, ..Default::default() }), "dll_bandwidth_hz");
-        assert_eq!(key(TrackingConfig { correlator_spacing_chips: 1.5, ..Default::default() }), "correlator_spacing_chips");
-        assert_eq!(key(TrackingConfig { integration_time_s: f64::NAN, ..Default::default() }), "integration_time_s");
-        assert_eq!(key(TrackingConfig { fll_bandwidth_hz: 40.0, ..Default::default() }), "fll_bandwidth_hz");
-        assert_eq!(key(TrackingConfig { lock_threshold_dbhz: -1.0, ..Default::default() }), "lock_threshold_dbhz");
-        assert_eq!(key(TrackingConfig { noise_temp_k: 0.0, ..Default::default() }), "noise_temp_k");
-        let parsed: TrackingConfig = toml::from_str("dll_bandwidth_hz = 0.5\nlock_threshold_dbhz = 30\n").unwrap();
+        assert_eq!(
+            key(TrackingConfig {
+                dll_bandwidth_hz: 0.0,
+                ..Default::default()
+            }),
+            "dll_bandwidth_hz"
+        );
+        assert_eq!(
+            key(TrackingConfig {
+                correlator_spacing_chips: 1.5,
+                ..Default::default()
+            }),
+            "correlator_spacing_chips"
+        );
+        assert_eq!(
+            key(TrackingConfig {
+                integration_time_s: f64::NAN,
+                ..Default::default()
+            }),
+            "integration_time_s"
+        );
+        assert_eq!(
+            key(TrackingConfig {
+                fll_bandwidth_hz: 40.0,
+                ..Default::default()
+            }),
+            "fll_bandwidth_hz"
+        );
+        assert_eq!(
+            key(TrackingConfig {
+                lock_threshold_dbhz: -1.0,
+                ..Default::default()
+            }),
+            "lock_threshold_dbhz"
+        );
+        assert_eq!(
+            key(TrackingConfig {
+                noise_temp_k: 0.0,
+                ..Default::default()
+            }),
+            "noise_temp_k"
+        );
+        let parsed: TrackingConfig =
+            toml::from_str("dll_bandwidth_hz = 0.5\nlock_threshold_dbhz = 30\n").unwrap();
         assert_eq!(parsed.dll_bandwidth_hz, 0.5);
         assert_eq!(parsed.integration_time_s, 0.02);
         assert!(toml::from_str::<TrackingConfig>("dll_bw = 0.5").is_err());

@@ -111,7 +111,9 @@ impl ClockConfig {
     /// The power-law coefficients (h₀ in s, h₋₂ in 1/s) this configuration selects.
     /// A custom oscillator with a missing coefficient reads it as 0 (validation refuses it).
     pub fn h_coefficients(&self) -> (f64, f64) {
-        self.oscillator.preset().unwrap_or((self.h0_s.unwrap_or(0.0), self.h_minus2_hz.unwrap_or(0.0)))
+        self.oscillator
+            .preset()
+            .unwrap_or((self.h0_s.unwrap_or(0.0), self.h_minus2_hz.unwrap_or(0.0)))
     }
 
     /// Checks every value.
@@ -138,29 +140,44 @@ impl ClockConfig {
             }
         }
         let b = self.initial_bias_s;
-        check("initial_bias_s", b.is_finite() && b.abs() <= 1.0, || format!("expected an initial bias in s within ±1, got {b}"))?;
+        check("initial_bias_s", b.is_finite() && b.abs() <= 1.0, || {
+            format!("expected an initial bias in s within ±1, got {b}")
+        })?;
         let d = self.initial_drift_s_per_s;
-        check("initial_drift_s_per_s", d.is_finite() && d.abs() <= 1e-3, || {
-            format!("expected an initial drift in s/s within ±1e-3, got {d}")
-        })?;
+        check(
+            "initial_drift_s_per_s",
+            d.is_finite() && d.abs() <= 1e-3,
+            || format!("expected an initial drift in s/s within ±1e-3, got {d}"),
+        )?;
         let s = self.initial_bias_sigma_s;
-        check("initial_bias_sigma_s", s.is_finite() && (0.0..=1.0).contains(&s), || {
-            format!("expected a non-negative 1-σ in s of at most 1, got {s}")
-        })?;
+        check(
+            "initial_bias_sigma_s",
+            s.is_finite() && (0.0..=1.0).contains(&s),
+            || format!("expected a non-negative 1-σ in s of at most 1, got {s}"),
+        )?;
         let s = self.initial_drift_sigma_s_per_s;
-        check("initial_drift_sigma_s_per_s", s.is_finite() && (0.0..=1e-3).contains(&s), || {
-            format!("expected a non-negative 1-σ in s/s of at most 1e-3, got {s}")
-        })?;
+        check(
+            "initial_drift_sigma_s_per_s",
+            s.is_finite() && (0.0..=1e-3).contains(&s),
+            || format!("expected a non-negative 1-σ in s/s of at most 1e-3, got {s}"),
+        )?;
         for (key, map, lo) in [
             ("inter_system_bias_ns", &self.inter_system_bias_ns, -1e6),
-            ("isb_random_walk_ns_per_sqrt_s", &self.isb_random_walk_ns_per_sqrt_s, 0.0),
+            (
+                "isb_random_walk_ns_per_sqrt_s",
+                &self.isb_random_walk_ns_per_sqrt_s,
+                0.0,
+            ),
         ] {
             for (sys, v) in map {
                 check(key, *sys != System::Gps, || {
                     format!("GPS is the receiver's reference time scale, so it has no inter-system bias; remove the \"gps\" entry of {key}")
                 })?;
                 check(key, v.is_finite() && *v >= lo && v.abs() <= 1e6, || {
-                    format!("expected a finite value within [{lo}, 1e6] for {}, got {v}", sys.name())
+                    format!(
+                        "expected a finite value within [{lo}, 1e6] for {}, got {v}",
+                        sys.name()
+                    )
                 })?;
             }
         }
@@ -174,7 +191,12 @@ pub fn clock_process_noise(h0_s: f64, h_minus2_hz: f64, dt_s: f64) -> Matrix2<f6
     let sb = h0_s / 2.0;
     let sd = 2.0 * PI * PI * h_minus2_hz;
     let t = dt_s;
-    Matrix2::new(sb * t + sd * t.powi(3) / 3.0, sd * t * t / 2.0, sd * t * t / 2.0, sd * t)
+    Matrix2::new(
+        sb * t + sd * t.powi(3) / 3.0,
+        sd * t * t / 2.0,
+        sd * t * t / 2.0,
+        sd * t,
+    )
 }
 
 /// The Allan variance `h₀/(2τ) + (2π²/3) h₋₂ τ` of the two-state clock at averaging time τ.
@@ -191,7 +213,9 @@ pub fn overlapping_allan_variance(x: &[f64], tau0_s: f64, m: usize) -> Option<f6
     }
     let n = x.len() - 2 * m;
     let tau = m as f64 * tau0_s;
-    let sum: f64 = (0..n).map(|i| (x[i + 2 * m] - 2.0 * x[i + m] + x[i]).powi(2)).sum();
+    let sum: f64 = (0..n)
+        .map(|i| (x[i + 2 * m] - 2.0 * x[i + m] + x[i]).powi(2))
+        .sum();
     Some(sum / (2.0 * tau * tau * n as f64))
 }
 
@@ -233,21 +257,39 @@ impl ReceiverClock {
         let (h0, hm2) = cfg.h_coefficients();
         let n_b: f64 = rng.sample(StandardNormal);
         let n_d: f64 = rng.sample(StandardNormal);
-        let bias = finite_or_zero(cfg.initial_bias_s) + non_negative(cfg.initial_bias_sigma_s) * n_b;
-        let drift = finite_or_zero(cfg.initial_drift_s_per_s) + non_negative(cfg.initial_drift_sigma_s_per_s) * n_d;
-        let mut systems: Vec<System> = cfg.inter_system_bias_ns.keys().chain(cfg.isb_random_walk_ns_per_sqrt_s.keys()).copied().collect();
+        let bias =
+            finite_or_zero(cfg.initial_bias_s) + non_negative(cfg.initial_bias_sigma_s) * n_b;
+        let drift = finite_or_zero(cfg.initial_drift_s_per_s)
+            + non_negative(cfg.initial_drift_sigma_s_per_s) * n_d;
+        let mut systems: Vec<System> = cfg
+            .inter_system_bias_ns
+            .keys()
+            .chain(cfg.isb_random_walk_ns_per_sqrt_s.keys())
+            .copied()
+            .collect();
         systems.sort();
         systems.dedup();
         let isb = systems
             .into_iter()
             .filter(|s| *s != System::Gps)
             .map(|s| {
-                let b = finite_or_zero(cfg.inter_system_bias_ns.get(&s).copied().unwrap_or(0.0)) * 1e-9;
-                let q = non_negative(cfg.isb_random_walk_ns_per_sqrt_s.get(&s).copied().unwrap_or(0.0)) * 1e-9;
+                let b =
+                    finite_or_zero(cfg.inter_system_bias_ns.get(&s).copied().unwrap_or(0.0)) * 1e-9;
+                let q = non_negative(
+                    cfg.isb_random_walk_ns_per_sqrt_s
+                        .get(&s)
+                        .copied()
+                        .unwrap_or(0.0),
+                ) * 1e-9;
                 (s, b, q)
             })
             .collect();
-        Self { h0_s: non_negative(h0), h_minus2_hz: non_negative(hm2), state: Vector2::new(bias, drift), isb }
+        Self {
+            h0_s: non_negative(h0),
+            h_minus2_hz: non_negative(hm2),
+            state: Vector2::new(bias, drift),
+            isb,
+        }
     }
 
     /// Validates the configuration, then builds the clock.
@@ -296,7 +338,10 @@ impl ReceiverClock {
 
     /// The inter-system bias of `sys` (s): 0 for GPS and for systems not configured.
     pub fn isb_s(&self, sys: System) -> f64 {
-        self.isb.iter().find(|(s, _, _)| *s == sys).map_or(0.0, |(_, b, _)| *b)
+        self.isb
+            .iter()
+            .find(|(s, _, _)| *s == sys)
+            .map_or(0.0, |(_, b, _)| *b)
     }
 
     /// The power-law coefficients (h₀ in s, h₋₂ in 1/s) in use.
@@ -330,7 +375,10 @@ mod tests {
 
     #[test]
     fn validation_names_keys() {
-        let mut c = ClockConfig { oscillator: Oscillator::Custom, ..Default::default() };
+        let mut c = ClockConfig {
+            oscillator: Oscillator::Custom,
+            ..Default::default()
+        };
         assert_eq!(c.validate().unwrap_err().key, "h0_s");
         c.h0_s = Some(1e-20);
         assert_eq!(c.validate().unwrap_err().key, "h_minus2_hz");
@@ -338,16 +386,34 @@ mod tests {
         assert_eq!(c.validate().unwrap_err().key, "h_minus2_hz");
         c.h_minus2_hz = Some(1e-22);
         assert!(c.validate().is_ok());
-        let c = ClockConfig { h0_s: Some(1e-20), ..Default::default() };
+        let c = ClockConfig {
+            h0_s: Some(1e-20),
+            ..Default::default()
+        };
         assert_eq!(c.validate().unwrap_err().key, "h0_s");
-        let c = ClockConfig { initial_bias_sigma_s: -1.0, ..Default::default() };
+        let c = ClockConfig {
+            initial_bias_sigma_s: -1.0,
+            ..Default::default()
+        };
         assert_eq!(c.validate().unwrap_err().key, "initial_bias_sigma_s");
-        let c = ClockConfig { initial_drift_s_per_s: f64::NAN, ..Default::default() };
+        let c = ClockConfig {
+            initial_drift_s_per_s: f64::NAN,
+            ..Default::default()
+        };
         assert_eq!(c.validate().unwrap_err().key, "initial_drift_s_per_s");
-        let c = ClockConfig { inter_system_bias_ns: [(System::Gps, 3.0)].into(), ..Default::default() };
+        let c = ClockConfig {
+            inter_system_bias_ns: [(System::Gps, 3.0)].into(),
+            ..Default::default()
+        };
         assert_eq!(c.validate().unwrap_err().key, "inter_system_bias_ns");
-        let c = ClockConfig { isb_random_walk_ns_per_sqrt_s: [(System::Bds, -3.0)].into(), ..Default::default() };
-        assert_eq!(c.validate().unwrap_err().key, "isb_random_walk_ns_per_sqrt_s");
+        let c = ClockConfig {
+            isb_random_walk_ns_per_sqrt_s: [(System::Bds, -3.0)].into(),
+            ..Default::default()
+        };
+        assert_eq!(
+            c.validate().unwrap_err().key,
+            "isb_random_walk_ns_per_sqrt_s"
+        );
     }
 
     #[test]
@@ -388,15 +454,23 @@ mod tests {
         clock.step(f64::NAN, &mut rng);
         assert!((clock.drift_s_per_s() - 2e-7).abs() < 1e-22);
         // Random initial bias: its spread across trials matches the configured σ.
-        let c = ClockConfig { initial_bias_sigma_s: 1e-6, ..Default::default() };
-        let b: Vec<f64> = (0..4000).map(|i| ReceiverClock::new(&c, &mut TrialRng::new(5, i).stream("c")).bias_s()).collect();
+        let c = ClockConfig {
+            initial_bias_sigma_s: 1e-6,
+            ..Default::default()
+        };
+        let b: Vec<f64> = (0..4000)
+            .map(|i| ReceiverClock::new(&c, &mut TrialRng::new(5, i).stream("c")).bias_s())
+            .collect();
         let var = b.iter().map(|x| x * x).sum::<f64>() / b.len() as f64;
         assert!((var.sqrt() / 1e-6 - 1.0).abs() < 0.05, "{}", var.sqrt());
     }
 
     #[test]
     fn isb_random_walk_spreads_as_sqrt_t() {
-        let c = ClockConfig { isb_random_walk_ns_per_sqrt_s: [(System::Bds, 0.1)].into(), ..Default::default() };
+        let c = ClockConfig {
+            isb_random_walk_ns_per_sqrt_s: [(System::Bds, 0.1)].into(),
+            ..Default::default()
+        };
         let n = 2000;
         let mut acc = 0.0;
         for i in 0..n {
@@ -437,14 +511,20 @@ mod tests {
         // τ = 0.1 s is dominated by white FM (h₀/2τ), τ = 10 s by random-walk FM
         // ((2π²/3) h₋₂ τ); both must match the model within 10 %.
         for osc in [Oscillator::Tcxo, Oscillator::Ocxo] {
-            let cfg = ClockConfig { oscillator: osc, ..Default::default() };
+            let cfg = ClockConfig {
+                oscillator: osc,
+                ..Default::default()
+            };
             let (h0, hm2) = cfg.h_coefficients();
             let ms = [1usize, 100];
             let got = simulated_avar(&cfg, 0.1, 1_000_000, 4, &ms);
             for (g, m) in got.iter().zip(ms) {
                 let tau = m as f64 * 0.1;
                 let want = allan_variance_model(h0, hm2, tau);
-                assert!((g / want - 1.0).abs() < 0.10, "{osc:?} τ = {tau} s: simulated {g:e}, model {want:e}");
+                assert!(
+                    (g / want - 1.0).abs() < 0.10,
+                    "{osc:?} τ = {tau} s: simulated {g:e}, model {want:e}"
+                );
             }
         }
     }

@@ -50,19 +50,38 @@ pub enum RinexError {
     },
     /// A line or field does not hold what the format requires.
     #[error("{file}, line {line}: expected {expected}, found {found}")]
-    Syntax { file: String, line: usize, expected: String, found: String },
+    Syntax {
+        file: String,
+        line: usize,
+        expected: String,
+        found: String,
+    },
     /// A record ends before all its lines were read.
     #[error("{file}, line {line}: truncated {sat} record: expected {expected}, found {found}")]
-    Truncated { file: String, line: usize, sat: String, expected: String, found: String },
+    Truncated {
+        file: String,
+        line: usize,
+        sat: String,
+        expected: String,
+        found: String,
+    },
     /// The RINEX version is not one this reader knows.
     #[error("{file}, line {line}: unsupported RINEX version '{version}': expected 2.xx or 3.0x")]
-    UnsupportedVersion { file: String, line: usize, version: String },
+    UnsupportedVersion {
+        file: String,
+        line: usize,
+        version: String,
+    },
     /// The file is RINEX, but not navigation data.
     #[error(
         "{file}, line {line}: not a navigation file: expected file type 'N' (navigation data) in column 21 \
          of the RINEX VERSION / TYPE line, found '{found}'"
     )]
-    WrongFileType { file: String, line: usize, found: String },
+    WrongFileType {
+        file: String,
+        line: usize,
+        found: String,
+    },
 }
 
 impl RinexError {
@@ -114,7 +133,10 @@ pub struct NavData {
 /// [`parse_nav`].
 pub fn read_nav_file(path: &Path) -> Result<NavData, RinexError> {
     let file = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| RinexError::Io { file: file.clone(), source })?;
+    let bytes = std::fs::read(path).map_err(|source| RinexError::Io {
+        file: file.clone(),
+        source,
+    })?;
     // RINEX is ASCII; bytes beyond it are replaced rather than rejected so that a stray
     // byte in a comment does not make a whole file unreadable. A replaced byte inside a
     // data field still fails that field's parse with a line number.
@@ -138,8 +160,18 @@ struct Ctx<'a> {
 }
 
 impl Ctx<'_> {
-    fn syntax(&self, line_idx: usize, expected: impl Into<String>, found: impl Into<String>) -> RinexError {
-        RinexError::Syntax { file: self.file.to_string(), line: line_idx + 1, expected: expected.into(), found: found.into() }
+    fn syntax(
+        &self,
+        line_idx: usize,
+        expected: impl Into<String>,
+        found: impl Into<String>,
+    ) -> RinexError {
+        RinexError::Syntax {
+            file: self.file.to_string(),
+            line: line_idx + 1,
+            expected: expected.into(),
+            found: found.into(),
+        }
     }
 }
 
@@ -174,9 +206,15 @@ pub(crate) fn parse_fortran_f64(field: &str) -> Result<Option<f64>, String> {
     if t.is_empty() {
         return Ok(None);
     }
-    let normalised: String = t.chars().map(|c| if c == 'D' || c == 'd' { 'E' } else { c }).collect();
+    let normalised: String = t
+        .chars()
+        .map(|c| if c == 'D' || c == 'd' { 'E' } else { c })
+        .collect();
     // Rust accepts "inf" and "NaN", which are never valid RINEX numbers.
-    if normalised.chars().any(|c| c.is_ascii_alphabetic() && c != 'E' && c != 'e') {
+    if normalised
+        .chars()
+        .any(|c| c.is_ascii_alphabetic() && c != 'E' && c != 'e')
+    {
         return Err(t.to_string());
     }
     match normalised.parse::<f64>() {
@@ -228,7 +266,14 @@ fn days_in_month(y: i64, m: i64) -> i64 {
 /// A GPS time from a calendar date read in the GPS time scale (which has no leap
 /// seconds, so the conversion is pure day counting). `None` when any field is out of
 /// range (years 1980–2200, seconds 0 ≤ s < 61), which callers turn into a parse error.
-pub(crate) fn gpst_from_calendar(y: i64, mo: i64, d: i64, h: i64, mi: i64, sec: f64) -> Option<GpsTime> {
+pub(crate) fn gpst_from_calendar(
+    y: i64,
+    mo: i64,
+    d: i64,
+    h: i64,
+    mi: i64,
+    sec: f64,
+) -> Option<GpsTime> {
     if !(1980..=2200).contains(&y)
         || !(1..=12).contains(&mo)
         || d < 1
@@ -294,7 +339,11 @@ pub fn parse_nav(text: &str, file_name: &str) -> Result<NavData, RinexError> {
     let ctx = Ctx { file: file_name };
     let lines: Vec<&str> = text.lines().collect();
     let header = parse_header(&ctx, &lines)?;
-    let mut nav = NavData { klobuchar: header.klobuchar, leap_seconds: header.leap_seconds, ..NavData::default() };
+    let mut nav = NavData {
+        klobuchar: header.klobuchar,
+        leap_seconds: header.leap_seconds,
+        ..NavData::default()
+    };
     if header.version < 3.0 {
         parse_body_v2(&ctx, &lines, &header, &mut nav)?;
     } else {
@@ -310,22 +359,38 @@ fn parse_header(ctx: &Ctx<'_>, lines: &[&str]) -> Result<Header, RinexError> {
         None => return Err(ctx.syntax(0, "a 'RINEX VERSION / TYPE' header line", "an empty file")),
     };
     if cols(first, 60, 80).map(str::trim) != Some("RINEX VERSION / TYPE") {
-        return Err(ctx.syntax(0, "a 'RINEX VERSION / TYPE' header line (label in columns 61-80)", quote(first)));
+        return Err(ctx.syntax(
+            0,
+            "a 'RINEX VERSION / TYPE' header line (label in columns 61-80)",
+            quote(first),
+        ));
     }
     let version_text = cols(first, 0, 9).unwrap_or("").trim();
-    let version: f64 = version_text.parse().map_err(|_| RinexError::UnsupportedVersion {
-        file: ctx.file.to_string(),
-        line: 1,
-        version: version_text.to_string(),
-    })?;
+    let version: f64 = version_text
+        .parse()
+        .map_err(|_| RinexError::UnsupportedVersion {
+            file: ctx.file.to_string(),
+            line: 1,
+            version: version_text.to_string(),
+        })?;
     if !(2.0..3.1).contains(&version) {
-        return Err(RinexError::UnsupportedVersion { file: ctx.file.to_string(), line: 1, version: version_text.to_string() });
+        return Err(RinexError::UnsupportedVersion {
+            file: ctx.file.to_string(),
+            line: 1,
+            version: version_text.to_string(),
+        });
     }
-    let file_type = cols(first, 20, 21).and_then(|s| s.chars().next()).unwrap_or(' ');
+    let file_type = cols(first, 20, 21)
+        .and_then(|s| s.chars().next())
+        .unwrap_or(' ');
     let known_v2_other = version < 3.0 && (file_type == 'G' || file_type == 'H');
     if file_type != 'N' && !known_v2_other {
         let what = cols(first, 20, 40).unwrap_or("").trim();
-        return Err(RinexError::WrongFileType { file: ctx.file.to_string(), line: 1, found: what.to_string() });
+        return Err(RinexError::WrongFileType {
+            file: ctx.file.to_string(),
+            line: 1,
+            found: what.to_string(),
+        });
     }
 
     let mut alpha: Option<[f64; 4]> = None;
@@ -339,7 +404,13 @@ fn parse_header(ctx: &Ctx<'_>, lines: &[&str]) -> Result<Header, RinexError> {
                     (Some(alpha), Some(beta)) => Some(Klobuchar { alpha, beta }),
                     _ => None,
                 };
-                return Ok(Header { version, file_type, klobuchar, leap_seconds, body_start: idx + 1 });
+                return Ok(Header {
+                    version,
+                    file_type,
+                    klobuchar,
+                    leap_seconds,
+                    body_start: idx + 1,
+                });
             }
             "ION ALPHA" => alpha = Some(header_coefficients(ctx, idx, line, 2)?),
             "ION BETA" => beta = Some(header_coefficients(ctx, idx, line, 2)?),
@@ -352,10 +423,13 @@ fn parse_header(ctx: &Ctx<'_>, lines: &[&str]) -> Result<Header, RinexError> {
             },
             "LEAP SECONDS" => {
                 let field = cols(line, 0, 6).unwrap_or("");
-                let v: i32 = field
-                    .trim()
-                    .parse()
-                    .map_err(|_| ctx.syntax(idx, "the number of leap seconds (integer, columns 1-6)", quote(field)))?;
+                let v: i32 = field.trim().parse().map_err(|_| {
+                    ctx.syntax(
+                        idx,
+                        "the number of leap seconds (integer, columns 1-6)",
+                        quote(field),
+                    )
+                })?;
                 leap_seconds = Some(v);
             }
             _ => {}
@@ -365,7 +439,12 @@ fn parse_header(ctx: &Ctx<'_>, lines: &[&str]) -> Result<Header, RinexError> {
 }
 
 /// Four D12.4 coefficients starting at column `start`.
-fn header_coefficients(ctx: &Ctx<'_>, idx: usize, line: &str, start: usize) -> Result<[f64; 4], RinexError> {
+fn header_coefficients(
+    ctx: &Ctx<'_>,
+    idx: usize,
+    line: &str,
+    start: usize,
+) -> Result<[f64; 4], RinexError> {
     let mut out = [0.0; 4];
     for (k, v) in out.iter_mut().enumerate() {
         let (a, b) = (start + 12 * k, start + 12 * (k + 1));
@@ -375,7 +454,12 @@ fn header_coefficients(ctx: &Ctx<'_>, idx: usize, line: &str, start: usize) -> R
             _ => {
                 return Err(ctx.syntax(
                     idx,
-                    format!("ionospheric coefficient {} of 4 (a number in columns {}-{})", k + 1, a + 1, b),
+                    format!(
+                        "ionospheric coefficient {} of 4 (a number in columns {}-{})",
+                        k + 1,
+                        a + 1,
+                        b
+                    ),
                     quote(field),
                 ))
             }
@@ -417,7 +501,12 @@ const GPS_FIELD_NAMES: [[&str; 4]; 7] = [
     ["i0", "Crc", "omega", "OMEGA DOT"],
     ["IDOT", "codes on L2", "GPS week", "L2 P data flag"],
     ["SV accuracy", "SV health", "TGD", "IODC"],
-    ["transmission time of message", "fit interval", "spare", "spare"],
+    [
+        "transmission time of message",
+        "fit interval",
+        "spare",
+        "spare",
+    ],
 ];
 const BDS_FIELD_NAMES: [[&str; 4]; 7] = [
     ["AODE", "Crs", "Delta n", "M0"],
@@ -443,41 +532,86 @@ const OPTIONAL_FIELDS: [[bool; 4]; 7] = [
 ];
 
 /// Reads the 4 fields of an orbit line at the given columns.
-fn orbit_fields(ctx: &Ctx<'_>, idx: usize, line: &str, first_col: usize, sat: EmitterId) -> Result<[Option<f64>; 4], RinexError> {
+fn orbit_fields(
+    ctx: &Ctx<'_>,
+    idx: usize,
+    line: &str,
+    first_col: usize,
+    sat: EmitterId,
+) -> Result<[Option<f64>; 4], RinexError> {
     let mut out = [None; 4];
     for (k, v) in out.iter_mut().enumerate() {
         let (a, b) = (first_col + 19 * k, first_col + 19 * (k + 1));
-        let field = cols(line, a, b).ok_or_else(|| ctx.syntax(idx, format!("ASCII text in a {sat} record"), quote(line)))?;
+        let field = cols(line, a, b)
+            .ok_or_else(|| ctx.syntax(idx, format!("ASCII text in a {sat} record"), quote(line)))?;
         *v = parse_fortran_f64(field).map_err(|bad| {
-            ctx.syntax(idx, format!("a number (D19.12) in columns {}-{} of a {sat} record", a + 1, b), quote(&bad))
+            ctx.syntax(
+                idx,
+                format!(
+                    "a number (D19.12) in columns {}-{} of a {sat} record",
+                    a + 1,
+                    b
+                ),
+                quote(&bad),
+            )
         })?;
     }
     Ok(out)
 }
 
 /// The three clock fields of an epoch line starting at `first_col`.
-fn clock_fields(ctx: &Ctx<'_>, idx: usize, line: &str, first_col: usize, sat: EmitterId) -> Result<[Option<f64>; 3], RinexError> {
+fn clock_fields(
+    ctx: &Ctx<'_>,
+    idx: usize,
+    line: &str,
+    first_col: usize,
+    sat: EmitterId,
+) -> Result<[Option<f64>; 3], RinexError> {
     let mut out = [None; 3];
-    let names = ["af0 (SV clock bias)", "af1 (SV clock drift)", "af2 (SV clock drift rate)"];
+    let names = [
+        "af0 (SV clock bias)",
+        "af1 (SV clock drift)",
+        "af2 (SV clock drift rate)",
+    ];
     for (k, v) in out.iter_mut().enumerate() {
         let (a, b) = (first_col + 19 * k, first_col + 19 * (k + 1));
-        let field = cols(line, a, b).ok_or_else(|| ctx.syntax(idx, format!("ASCII text in a {sat} record"), quote(line)))?;
+        let field = cols(line, a, b)
+            .ok_or_else(|| ctx.syntax(idx, format!("ASCII text in a {sat} record"), quote(line)))?;
         match parse_fortran_f64(field) {
             Ok(Some(x)) => *v = Some(x),
-            _ => return Err(ctx.syntax(idx, format!("{} of {sat}: a number in columns {}-{}", names[k], a + 1, b), quote(field))),
+            _ => {
+                return Err(ctx.syntax(
+                    idx,
+                    format!("{} of {sat}: a number in columns {}-{}", names[k], a + 1, b),
+                    quote(field),
+                ))
+            }
         }
     }
     Ok(out)
 }
 
 /// Reads an integer field of an epoch line.
-fn int_field(ctx: &Ctx<'_>, idx: usize, line: &str, a: usize, b: usize, what: &str) -> Result<i64, RinexError> {
+fn int_field(
+    ctx: &Ctx<'_>,
+    idx: usize,
+    line: &str,
+    a: usize,
+    b: usize,
+    what: &str,
+) -> Result<i64, RinexError> {
     let field = cols(line, a, b).unwrap_or("");
-    field
-        .trim()
-        .parse::<i64>()
-        .map_err(|_| ctx.syntax(idx, format!("{what} (integer in columns {}-{})", a + 1, b), quote(field)))
+    field.trim().parse::<i64>().map_err(|_| {
+        ctx.syntax(
+            idx,
+            format!("{what} (integer in columns {}-{})", a + 1, b),
+            quote(field),
+        )
+    })
 }
+
+/// The 7×4 orbit fields of a record and the line index of each orbit line.
+type OrbitLines = ([[Option<f64>; 4]; 7], [usize; 7]);
 
 /// Collects the 7 orbit lines following the epoch line at `idx`.
 fn collect_orbit_lines(
@@ -487,7 +621,7 @@ fn collect_orbit_lines(
     sat: EmitterId,
     first_col: usize,
     is_record_start: fn(&str) -> bool,
-) -> Result<([[Option<f64>; 4]; 7], [usize; 7]), RinexError> {
+) -> Result<OrbitLines, RinexError> {
     let mut orbit = [[None; 4]; 7];
     let mut orbit_line = [0usize; 7];
     for k in 0..7 {
@@ -511,7 +645,11 @@ fn collect_orbit_lines(
                 line: li + 1,
                 sat: sat.to_string(),
                 expected,
-                found: if is_blank(line) { "a blank line".into() } else { format!("the start of another record {}", quote(line)) },
+                found: if is_blank(line) {
+                    "a blank line".into()
+                } else {
+                    format!("the start of another record {}", quote(line))
+                },
             });
         }
         orbit[k] = orbit_fields(ctx, li, line, first_col, sat)?;
@@ -530,7 +668,12 @@ fn skip_record(lines: &[&str], idx: usize, is_record_start: fn(&str) -> bool) ->
     j
 }
 
-fn parse_body_v2(ctx: &Ctx<'_>, lines: &[&str], header: &Header, nav: &mut NavData) -> Result<(), RinexError> {
+fn parse_body_v2(
+    ctx: &Ctx<'_>,
+    lines: &[&str],
+    header: &Header,
+    nav: &mut NavData,
+) -> Result<(), RinexError> {
     let mut idx = header.body_start;
     while idx < lines.len() {
         let line = lines[idx];
@@ -539,7 +682,11 @@ fn parse_body_v2(ctx: &Ctx<'_>, lines: &[&str], header: &Header, nav: &mut NavDa
             continue;
         }
         if !v2_record_start(line) {
-            return Err(ctx.syntax(idx, "the first line of a record (PRN in columns 1-2, then the epoch)", quote(line)));
+            return Err(ctx.syntax(
+                idx,
+                "the first line of a record (PRN in columns 1-2, then the epoch)",
+                quote(line),
+            ));
         }
         if header.file_type != 'N' {
             // RINEX 2 GLONASS ('G') and SBAS ('H') navigation files: nothing for us.
@@ -550,37 +697,70 @@ fn parse_body_v2(ctx: &Ctx<'_>, lines: &[&str], header: &Header, nav: &mut NavDa
         }
         let prn = int_field(ctx, idx, line, 0, 2, "the satellite PRN")?;
         if !(1..=99).contains(&prn) {
-            return Err(ctx.syntax(idx, "a PRN 1-99 in columns 1-2", quote(cols(line, 0, 2).unwrap_or(""))));
+            return Err(ctx.syntax(
+                idx,
+                "a PRN 1-99 in columns 1-2",
+                quote(cols(line, 0, 2).unwrap_or("")),
+            ));
         }
         let sat = EmitterId::new(System::Gps, prn as u16);
         let yy = int_field(ctx, idx, line, 2, 5, "the two-digit year")?;
-        let year = if yy < 80 { 2000 + yy } else if yy < 100 { 1900 + yy } else { yy };
+        let year = if yy < 80 {
+            2000 + yy
+        } else if yy < 100 {
+            1900 + yy
+        } else {
+            yy
+        };
         let mo = int_field(ctx, idx, line, 5, 8, "the month")?;
         let d = int_field(ctx, idx, line, 8, 11, "the day")?;
         let h = int_field(ctx, idx, line, 11, 14, "the hour")?;
         let mi = int_field(ctx, idx, line, 14, 17, "the minute")?;
         let sec_field = cols(line, 17, 22).unwrap_or("");
-        let sec = parse_fortran_f64(sec_field)
-            .ok()
-            .flatten()
-            .ok_or_else(|| ctx.syntax(idx, "the seconds of the epoch (F5.1 in columns 18-22)", quote(sec_field)))?;
-        let toc = gpst_from_calendar(year, mo, d, h, mi, sec)
-            .ok_or_else(|| ctx.syntax(idx, format!("a valid epoch date and time for {sat}"), quote(cols(line, 2, 22).unwrap_or(""))))?;
+        let sec = parse_fortran_f64(sec_field).ok().flatten().ok_or_else(|| {
+            ctx.syntax(
+                idx,
+                "the seconds of the epoch (F5.1 in columns 18-22)",
+                quote(sec_field),
+            )
+        })?;
+        let toc = gpst_from_calendar(year, mo, d, h, mi, sec).ok_or_else(|| {
+            ctx.syntax(
+                idx,
+                format!("a valid epoch date and time for {sat}"),
+                quote(cols(line, 2, 22).unwrap_or("")),
+            )
+        })?;
         let clock = clock_fields(ctx, idx, line, 22, sat)?;
         let (orbit, orbit_line) = collect_orbit_lines(ctx, lines, idx, sat, 3, v2_record_start)?;
-        let raw = RawRecord { sat, clock, orbit, orbit_line };
-        nav.ephemerides.push(build_ephemeris(ctx, &raw, toc, false)?);
+        let raw = RawRecord {
+            sat,
+            clock,
+            orbit,
+            orbit_line,
+        };
+        nav.ephemerides
+            .push(build_ephemeris(ctx, &raw, toc, false)?);
         idx += 8;
         if let Some(next) = lines.get(idx) {
             if !is_blank(next) && !v2_record_start(next) {
-                return Err(ctx.syntax(idx, format!("a new record after the 7 orbit lines of {sat}"), quote(next)));
+                return Err(ctx.syntax(
+                    idx,
+                    format!("a new record after the 7 orbit lines of {sat}"),
+                    quote(next),
+                ));
             }
         }
     }
     Ok(())
 }
 
-fn parse_body_v3(ctx: &Ctx<'_>, lines: &[&str], header: &Header, nav: &mut NavData) -> Result<(), RinexError> {
+fn parse_body_v3(
+    ctx: &Ctx<'_>,
+    lines: &[&str],
+    header: &Header,
+    nav: &mut NavData,
+) -> Result<(), RinexError> {
     let mut idx = header.body_start;
     while idx < lines.len() {
         let line = lines[idx];
@@ -589,7 +769,11 @@ fn parse_body_v3(ctx: &Ctx<'_>, lines: &[&str], header: &Header, nav: &mut NavDa
             continue;
         }
         if !v3_record_start(line) {
-            return Err(ctx.syntax(idx, "the first line of a record (satellite id such as G05 or C01 in columns 1-3)", quote(line)));
+            return Err(ctx.syntax(
+                idx,
+                "the first line of a record (satellite id such as G05 or C01 in columns 1-3)",
+                quote(line),
+            ));
         }
         let letter = line.chars().next().unwrap_or(' ');
         let system = match letter {
@@ -601,13 +785,23 @@ fn parse_body_v3(ctx: &Ctx<'_>, lines: &[&str], header: &Header, nav: &mut NavDa
                 continue;
             }
             _ => {
-                return Err(ctx.syntax(idx, "a satellite system letter G, R, E, C, J, S or I in column 1", quote(line)));
+                return Err(ctx.syntax(
+                    idx,
+                    "a satellite system letter G, R, E, C, J, S or I in column 1",
+                    quote(line),
+                ));
             }
         };
         let prn_field = cols(line, 1, 3).unwrap_or("");
         let prn: u16 = match prn_field.trim().parse() {
             Ok(p) if (1..=99).contains(&p) => p,
-            _ => return Err(ctx.syntax(idx, "a satellite number 01-99 in columns 2-3", quote(prn_field))),
+            _ => {
+                return Err(ctx.syntax(
+                    idx,
+                    "a satellite number 01-99 in columns 2-3",
+                    quote(prn_field),
+                ))
+            }
         };
         let sat = EmitterId::new(system, prn);
         let year = int_field(ctx, idx, line, 3, 8, "the year")?;
@@ -616,18 +810,36 @@ fn parse_body_v3(ctx: &Ctx<'_>, lines: &[&str], header: &Header, nav: &mut NavDa
         let h = int_field(ctx, idx, line, 14, 17, "the hour")?;
         let mi = int_field(ctx, idx, line, 17, 20, "the minute")?;
         let s = int_field(ctx, idx, line, 20, 23, "the second")?;
-        let calendar = gpst_from_calendar(year, mo, d, h, mi, s as f64)
-            .ok_or_else(|| ctx.syntax(idx, format!("a valid epoch date and time for {sat}"), quote(cols(line, 3, 23).unwrap_or(""))))?;
+        let calendar = gpst_from_calendar(year, mo, d, h, mi, s as f64).ok_or_else(|| {
+            ctx.syntax(
+                idx,
+                format!("a valid epoch date and time for {sat}"),
+                quote(cols(line, 3, 23).unwrap_or("")),
+            )
+        })?;
         // BeiDou epochs are read in BDT: the same calendar reading is 14 s later in GPST.
-        let toc = if system == System::Bds { calendar.add_ns(BDT_WEEK_OFFSET_NS) } else { calendar };
+        let toc = if system == System::Bds {
+            calendar.add_ns(BDT_WEEK_OFFSET_NS)
+        } else {
+            calendar
+        };
         let clock = clock_fields(ctx, idx, line, 23, sat)?;
         let (orbit, orbit_line) = collect_orbit_lines(ctx, lines, idx, sat, 4, v3_record_start)?;
-        let raw = RawRecord { sat, clock, orbit, orbit_line };
+        let raw = RawRecord {
+            sat,
+            clock,
+            orbit,
+            orbit_line,
+        };
         nav.ephemerides.push(build_ephemeris(ctx, &raw, toc, true)?);
         idx += 8;
         if let Some(next) = lines.get(idx) {
             if !is_blank(next) && !v3_record_start(next) {
-                return Err(ctx.syntax(idx, format!("a new record after the 7 orbit lines of {sat}"), quote(next)));
+                return Err(ctx.syntax(
+                    idx,
+                    format!("a new record after the 7 orbit lines of {sat}"),
+                    quote(next),
+                ));
             }
         }
     }
@@ -636,16 +848,30 @@ fn parse_body_v3(ctx: &Ctx<'_>, lines: &[&str], header: &Header, nav: &mut NavDa
 
 /// Turns the raw fields of a GPS or BeiDou record into an [`Ephemeris`], checking that
 /// every required field is present and physically meaningful.
-fn build_ephemeris(ctx: &Ctx<'_>, raw: &RawRecord, toc: GpsTime, use_record_week: bool) -> Result<Ephemeris, RinexError> {
+fn build_ephemeris(
+    ctx: &Ctx<'_>,
+    raw: &RawRecord,
+    toc: GpsTime,
+    use_record_week: bool,
+) -> Result<Ephemeris, RinexError> {
     let sat = raw.sat;
-    let names = if sat.system == System::Bds { &BDS_FIELD_NAMES } else { &GPS_FIELD_NAMES };
+    let names = if sat.system == System::Bds {
+        &BDS_FIELD_NAMES
+    } else {
+        &GPS_FIELD_NAMES
+    };
     let get = |l: usize, f: usize| -> Result<f64, RinexError> {
         match raw.orbit[l][f] {
             Some(v) => Ok(v),
             None if OPTIONAL_FIELDS[l][f] => Ok(0.0),
             None => Err(ctx.syntax(
                 raw.orbit_line[l],
-                format!("{} of {sat} (broadcast orbit line {}, field {})", names[l][f], l + 1, f + 1),
+                format!(
+                    "{} of {sat} (broadcast orbit line {}, field {})",
+                    names[l][f],
+                    l + 1,
+                    f + 1
+                ),
                 "a blank field",
             )),
         }
@@ -655,7 +881,11 @@ fn build_ephemeris(ctx: &Ctx<'_>, raw: &RawRecord, toc: GpsTime, use_record_week
         if (0.0..4.294_967_295e9).contains(&v) {
             Ok(v.round() as u32)
         } else {
-            Err(ctx.syntax(raw.orbit_line[l], format!("{} of {sat}: a non-negative integer", names[l][f]), format!("{v}")))
+            Err(ctx.syntax(
+                raw.orbit_line[l],
+                format!("{} of {sat}: a non-negative integer", names[l][f]),
+                format!("{v}"),
+            ))
         }
     };
     let sow = |l: usize, f: usize| -> Result<f64, RinexError> {
@@ -664,7 +894,11 @@ fn build_ephemeris(ctx: &Ctx<'_>, raw: &RawRecord, toc: GpsTime, use_record_week
         if (-(SECONDS_PER_WEEK as f64)..2.0 * SECONDS_PER_WEEK as f64).contains(&v) {
             Ok(v)
         } else {
-            Err(ctx.syntax(raw.orbit_line[l], format!("{} of {sat}: seconds of week", names[l][f]), format!("{v}")))
+            Err(ctx.syntax(
+                raw.orbit_line[l],
+                format!("{} of {sat}: seconds of week", names[l][f]),
+                format!("{v}"),
+            ))
         }
     };
 
@@ -672,14 +906,26 @@ fn build_ephemeris(ctx: &Ctx<'_>, raw: &RawRecord, toc: GpsTime, use_record_week
     let week_offset_ns = if bds { BDT_WEEK_OFFSET_NS } else { 0 };
     let toe_sow = sow(2, 0)?;
     if !(0.0..SECONDS_PER_WEEK as f64).contains(&toe_sow) {
-        return Err(ctx.syntax(raw.orbit_line[2], format!("Toe of {sat}: seconds of week in 0..604800"), format!("{toe_sow}")));
+        return Err(ctx.syntax(
+            raw.orbit_line[2],
+            format!("Toe of {sat}: seconds of week in 0..604800"),
+            format!("{toe_sow}"),
+        ));
     }
     let week = get(4, 2)?;
     let toe = if use_record_week && week > 0.0 {
         if !(0.0..10_000.0).contains(&week) || week.fract() != 0.0 {
-            return Err(ctx.syntax(raw.orbit_line[4], format!("{} of {sat}: a whole week number", names[4][2]), format!("{week}")));
+            return Err(ctx.syntax(
+                raw.orbit_line[4],
+                format!("{} of {sat}: a whole week number", names[4][2]),
+                format!("{week}"),
+            ));
         }
-        let base = if bds { GpsTime::from_bdt_week_sow(week as i64, toe_sow) } else { GpsTime::from_week_tow(week as i64, toe_sow) };
+        let base = if bds {
+            GpsTime::from_bdt_week_sow(week as i64, toe_sow)
+        } else {
+            GpsTime::from_week_tow(week as i64, toe_sow)
+        };
         // Some writers put the week of transmission rather than of toe; the toe nearest
         // toc is the one meant.
         if base.seconds_since(toc).abs() > SECONDS_PER_WEEK as f64 / 2.0 {
@@ -696,7 +942,15 @@ fn build_ephemeris(ctx: &Ctx<'_>, raw: &RawRecord, toc: GpsTime, use_record_week
         toc
     } else {
         let tx = sow(6, 0)?;
-        let week_start = GpsTime::from_ns(toe.ns() - ((if bds { toe.bdt_week_sow().1 } else { toe.tow_s() }) * 1e9).round() as i64);
+        let week_start = GpsTime::from_ns(
+            toe.ns()
+                - ((if bds {
+                    toe.bdt_week_sow().1
+                } else {
+                    toe.tow_s()
+                }) * 1e9)
+                    .round() as i64,
+        );
         week_start.add_seconds(tx)
     };
 
@@ -732,19 +986,36 @@ fn build_ephemeris(ctx: &Ctx<'_>, raw: &RawRecord, toc: GpsTime, use_record_week
         fit_interval_h: if bds { 0.0 } else { get(6, 1)? },
     };
     if !(0.0..1.0).contains(&eph.e) {
-        return Err(ctx.syntax(raw.orbit_line[1], format!("eccentricity of {sat} in [0, 1)"), format!("{}", eph.e)));
+        return Err(ctx.syntax(
+            raw.orbit_line[1],
+            format!("eccentricity of {sat} in [0, 1)"),
+            format!("{}", eph.e),
+        ));
     }
     if eph.sqrt_a <= 0.0 {
-        return Err(ctx.syntax(raw.orbit_line[1], format!("sqrt(A) of {sat} > 0"), format!("{}", eph.sqrt_a)));
+        return Err(ctx.syntax(
+            raw.orbit_line[1],
+            format!("sqrt(A) of {sat} > 0"),
+            format!("{}", eph.sqrt_a),
+        ));
     }
     Ok(eph)
 }
 
 impl NavData {
     /// Navigation data from ephemerides (sorted here) and header values.
-    pub fn new(mut ephemerides: Vec<Ephemeris>, klobuchar: Option<Klobuchar>, leap_seconds: Option<i32>) -> Self {
+    pub fn new(
+        mut ephemerides: Vec<Ephemeris>,
+        klobuchar: Option<Klobuchar>,
+        leap_seconds: Option<i32>,
+    ) -> Self {
         ephemerides.sort_by(eph_order);
-        Self { ephemerides, klobuchar, leap_seconds, skipped: BTreeMap::new() }
+        Self {
+            ephemerides,
+            klobuchar,
+            leap_seconds,
+            skipped: BTreeMap::new(),
+        }
     }
 
     /// Restores the sort order [`NavData::select`] relies on.
@@ -766,14 +1037,25 @@ impl NavData {
     }
 
     /// As [`NavData::select`] with an explicit bound on |t − toe| (s).
-    pub fn select_with_max_age(&self, sat: EmitterId, t: GpsTime, max_age_s: f64) -> Option<&Ephemeris> {
-        debug_assert!(self.ephemerides.windows(2).all(|w| eph_order(&w[0], &w[1]) != std::cmp::Ordering::Greater));
+    pub fn select_with_max_age(
+        &self,
+        sat: EmitterId,
+        t: GpsTime,
+        max_age_s: f64,
+    ) -> Option<&Ephemeris> {
+        debug_assert!(self
+            .ephemerides
+            .windows(2)
+            .all(|w| eph_order(&w[0], &w[1]) != std::cmp::Ordering::Greater));
         let max_age_ns = (max_age_s * 1e9) as i64;
         let eph = &self.ephemerides;
         let earliest = t.ns().saturating_sub(max_age_ns);
         let start = eph.partition_point(|e| (e.sat, e.toe.ns()) < (sat, earliest));
         let mut best: Option<&Ephemeris> = None;
-        for e in eph[start..].iter().take_while(|e| e.sat == sat && e.toe.ns() <= t.ns().saturating_add(max_age_ns)) {
+        for e in eph[start..]
+            .iter()
+            .take_while(|e| e.sat == sat && e.toe.ns() <= t.ns().saturating_add(max_age_ns))
+        {
             if !e.is_healthy() {
                 continue;
             }
@@ -781,7 +1063,8 @@ impl NavData {
                 None => Some(e),
                 Some(b) => {
                     let (de, db) = ((e.toe.ns() - t.ns()).abs(), (b.toe.ns() - t.ns()).abs());
-                    if de < db || (de == db && (e.transmit_time, e.toe) >= (b.transmit_time, b.toe)) {
+                    if de < db || (de == db && (e.transmit_time, e.toe) >= (b.transmit_time, b.toe))
+                    {
                         Some(e)
                     } else {
                         Some(b)
@@ -794,7 +1077,12 @@ impl NavData {
 
     /// The satellites with at least one ephemeris, sorted and unique.
     pub fn satellites(&self) -> Vec<EmitterId> {
-        self.ephemerides.iter().map(|e| e.sat).collect::<BTreeSet<_>>().into_iter().collect()
+        self.ephemerides
+            .iter()
+            .map(|e| e.sat)
+            .collect::<BTreeSet<_>>()
+            .into_iter()
+            .collect()
     }
 }
 
@@ -807,13 +1095,15 @@ fn eph_order(a: &Ephemeris, b: &Ephemeris) -> std::cmp::Ordering {
 mod tests {
     use super::*;
 
-    const V2_HEADER: &str = "     2              NAVIGATION DATA                         RINEX VERSION / TYPE
+    const V2_HEADER: &str =
+        "     2              NAVIGATION DATA                         RINEX VERSION / TYPE
     0.4657D-08  0.1490D-07 -0.5960D-07 -0.1192D-06          ION ALPHA
     0.8192D+05  0.8192D+05 -0.6554D+05 -0.5243D+06          ION BETA
     15                                                      LEAP SECONDS
                                                             END OF HEADER
 ";
-    const V2_G02: &str = " 2 10  7  1  0  0  0.0 0.269108917564D-03 0.318323145621D-11 0.000000000000D+00
+    const V2_G02: &str =
+        " 2 10  7  1  0  0  0.0 0.269108917564D-03 0.318323145621D-11 0.000000000000D+00
     0.850000000000D+02 0.414375000000D+02 0.525557597442D-08 0.165772167412D+01
     0.232271850109D-05 0.960697804112D-02 0.617466866970D-05 0.515359739113D+04
     0.345600000000D+06-0.558793544769D-08-0.127458719764D+01 0.167638063431D-06
@@ -823,7 +1113,8 @@ mod tests {
     0.338418000000D+06 0.400000000000D+01 0.000000000000D+00 0.000000000000D+00
 ";
 
-    const V3_MIXED: &str = "     3.05           NAVIGATION DATA     MIXED               RINEX VERSION / TYPE
+    const V3_MIXED: &str =
+        "     3.05           NAVIGATION DATA     MIXED               RINEX VERSION / TYPE
 GPSA   4.6566e-09  1.4901e-08 -5.9605e-08 -1.1921E-07       IONOSPHERIC CORR
 GPSB   8.1920e+04  9.8304e+04 -6.5536e+04 -5.2429E+05       IONOSPHERIC CORR
     18                                                      LEAP SECONDS
@@ -875,17 +1166,34 @@ G01 2020 06 25 04 00 00 1.604342833161e-05 7.048583938740e-12 0.000000000000e+00
     #[test]
     fn reads_rinex3_mixed_and_counts_skipped() {
         let nav = parse_nav(V3_MIXED, "mixed.rnx").unwrap();
-        assert_eq!(nav.satellites(), vec![EmitterId::new(System::Gps, 1), EmitterId::new(System::Bds, 5)]);
+        assert_eq!(
+            nav.satellites(),
+            vec![
+                EmitterId::new(System::Gps, 1),
+                EmitterId::new(System::Bds, 5)
+            ]
+        );
         assert_eq!(nav.skipped.get(&'R'), Some(&1));
         assert_eq!(nav.skipped.get(&'E'), Some(&1));
         assert_eq!(nav.skipped.len(), 2);
         assert_eq!(nav.leap_seconds, Some(18));
         assert_eq!(nav.klobuchar.unwrap().beta[1], 9.8304e+04);
-        let c05 = nav.ephemerides.iter().find(|e| e.sat.system == System::Bds).unwrap();
+        let c05 = nav
+            .ephemerides
+            .iter()
+            .find(|e| e.sat.system == System::Bds)
+            .unwrap();
         assert_eq!(*c05, crate::gnss::ephemeris::tests::c05_2020());
         // BDT 2020-06-24 22:00:00 is 22:00:14 GPST.
-        assert_eq!(c05.toc, GpsTime::from_gpst_calendar(2020, 6, 24, 22, 0, 14, 0));
-        let g01 = nav.ephemerides.iter().find(|e| e.sat.system == System::Gps).unwrap();
+        assert_eq!(
+            c05.toc,
+            GpsTime::from_gpst_calendar(2020, 6, 24, 22, 0, 14, 0)
+        );
+        let g01 = nav
+            .ephemerides
+            .iter()
+            .find(|e| e.sat.system == System::Gps)
+            .unwrap();
         assert_eq!(g01.toe, GpsTime::from_week_tow(2111, 360_000.0));
         assert_eq!(g01.iodc, 1);
         assert_eq!(g01.fit_interval_h, 4.0);
@@ -893,9 +1201,16 @@ G01 2020 06 25 04 00 00 1.604342833161e-05 7.048583938740e-12 0.000000000000e+00
 
     #[test]
     fn calendar_agrees_with_core_time() {
-        for &(y, mo, d, h, mi, s) in &[(1980, 1, 6, 0, 0, 0), (2010, 7, 1, 0, 0, 0), (2020, 2, 29, 23, 59, 59), (2100, 3, 1, 12, 0, 0)] {
+        for &(y, mo, d, h, mi, s) in &[
+            (1980, 1, 6, 0, 0, 0),
+            (2010, 7, 1, 0, 0, 0),
+            (2020, 2, 29, 23, 59, 59),
+            (2100, 3, 1, 12, 0, 0),
+        ] {
             let mine = gpst_from_calendar(y, mo, d, h, mi, s as f64).unwrap();
-            let core = GpsTime::from_gpst_calendar(y as i32, mo as u8, d as u8, h as u8, mi as u8, s as u8, 0);
+            let core = GpsTime::from_gpst_calendar(
+                y as i32, mo as u8, d as u8, h as u8, mi as u8, s as u8, 0,
+            );
             assert_eq!(mine, core);
             assert_eq!(gpst_calendar(mine), (y, mo, d, h, mi, s, 0));
         }
@@ -922,30 +1237,60 @@ G01 2020 06 25 04 00 00 1.604342833161e-05 7.048583938740e-12 0.000000000000e+00
         let rec: Vec<&str> = V2_G02.lines().take(6).collect();
         let text = format!("{V2_HEADER}{}\n", rec.join("\n"));
         let err = parse_nav(&text, "cut.10n").unwrap_err();
-        assert!(matches!(err, RinexError::Truncated { line: 12, .. }), "{err}");
+        assert!(
+            matches!(err, RinexError::Truncated { line: 12, .. }),
+            "{err}"
+        );
         let msg = err.to_string();
-        assert!(msg.contains("cut.10n") && msg.contains("line 12") && msg.contains("G02") && msg.contains("orbit line 6 of 7"), "{msg}");
+        assert!(
+            msg.contains("cut.10n")
+                && msg.contains("line 12")
+                && msg.contains("G02")
+                && msg.contains("orbit line 6 of 7"),
+            "{msg}"
+        );
     }
 
     #[test]
     fn garbage_numbers_are_reported() {
-        let text = format!("{V2_HEADER}{}", V2_G02.replace("0.525557597442D-08", "0.52555759x442D-08"));
+        let text = format!(
+            "{V2_HEADER}{}",
+            V2_G02.replace("0.525557597442D-08", "0.52555759x442D-08")
+        );
         let err = parse_nav(&text, "bad.10n").unwrap_err();
         let msg = err.to_string();
         assert_eq!(err.line(), Some(7), "{msg}");
-        assert!(msg.contains("a number") && msg.contains("0.52555759x442D-08"), "{msg}");
+        assert!(
+            msg.contains("a number") && msg.contains("0.52555759x442D-08"),
+            "{msg}"
+        );
         // A blank required field.
-        let text = format!("{V2_HEADER}{}", V2_G02.replace("0.515359739113D+04", "                  "));
+        let text = format!(
+            "{V2_HEADER}{}",
+            V2_G02.replace("0.515359739113D+04", "                  ")
+        );
         let msg = parse_nav(&text, "bad.10n").unwrap_err().to_string();
-        assert!(msg.contains("sqrt(A) of G02") && msg.contains("line 8"), "{msg}");
+        assert!(
+            msg.contains("sqrt(A) of G02") && msg.contains("line 8"),
+            "{msg}"
+        );
         // An impossible eccentricity.
-        let text = format!("{V2_HEADER}{}", V2_G02.replace("0.960697804112D-02", "0.160697804112D+01"));
+        let text = format!(
+            "{V2_HEADER}{}",
+            V2_G02.replace("0.960697804112D-02", "0.160697804112D+01")
+        );
         let msg = parse_nav(&text, "bad.10n").unwrap_err().to_string();
         assert!(msg.contains("eccentricity"), "{msg}");
         // A bad date.
-        let text = format!("{V2_HEADER}{}", V2_G02.replace(" 2 10  7  1", " 2 10 13  1"));
+        let text = format!(
+            "{V2_HEADER}{}",
+            V2_G02.replace(" 2 10  7  1", " 2 10 13  1")
+        );
         let msg = parse_nav(&text, "bad.10n").unwrap_err().to_string();
-        assert!(msg.contains("line 6") && msg.contains("valid epoch"), "{msg}");
+        assert!(
+            msg.contains("line 6") && msg.contains("valid epoch"),
+            "{msg}"
+        );
     }
 
     #[test]
@@ -955,13 +1300,18 @@ G01 2020 06 25 04 00 00 1.604342833161e-05 7.048583938740e-12 0.000000000000e+00
         assert!(err.to_string().contains("empty file"), "{err}");
         let err = parse_nav("hello\n", "x.rnx").unwrap_err();
         assert!(err.to_string().contains("RINEX VERSION / TYPE"), "{err}");
-        let obs = "     2.10           OBSERVATION DATA    G (GPS)             RINEX VERSION / TYPE\n";
+        let obs =
+            "     2.10           OBSERVATION DATA    G (GPS)             RINEX VERSION / TYPE\n";
         let err = parse_nav(obs, "x.05o").unwrap_err();
         assert!(matches!(err, RinexError::WrongFileType { .. }), "{err}");
         assert!(err.to_string().contains("OBSERVATION DATA"), "{err}");
-        let v4 = "     4.00           N: GNSS NAV DATA    M: MIXED            RINEX VERSION / TYPE\n";
+        let v4 =
+            "     4.00           N: GNSS NAV DATA    M: MIXED            RINEX VERSION / TYPE\n";
         let err = parse_nav(v4, "x.rnx").unwrap_err();
-        assert!(matches!(err, RinexError::UnsupportedVersion { .. }), "{err}");
+        assert!(
+            matches!(err, RinexError::UnsupportedVersion { .. }),
+            "{err}"
+        );
         let err = parse_nav(&V2_HEADER.replace("END OF HEADER", "COMMENT"), "x.rnx").unwrap_err();
         assert!(err.to_string().contains("END OF HEADER"), "{err}");
         let err = parse_nav(&V2_HEADER.replace("0.1490D-07", "0.1490Q-07"), "x.rnx").unwrap_err();
@@ -978,7 +1328,9 @@ G01 2020 06 25 04 00 00 1.604342833161e-05 7.048583938740e-12 0.000000000000e+00
                 let _ = parse_nav(&text[..cut], "prefix");
             }
         }
-        let weird = text.replace("0.850000000000D+02", "0.8500000000€0D+02").replace("ION ALPHA", "ION ÄLPHA");
+        let weird = text
+            .replace("0.850000000000D+02", "0.8500000000€0D+02")
+            .replace("ION ALPHA", "ION ÄLPHA");
         assert!(parse_nav(&weird, "weird").is_err());
         for cut in 0..V3_MIXED.len() {
             let _ = parse_nav(&V3_MIXED[..cut], "prefix3");
@@ -996,28 +1348,57 @@ G01 2020 06 25 04 00 00 1.604342833161e-05 7.048583938740e-12 0.000000000000e+00
             e.health = health;
             e
         };
-        let nav = NavData::new(vec![mk(2.0, 0, 0.0), mk(0.0, 0, -100.0), mk(4.0, 1, 0.0), mk(0.0, 0, -50.0)], None, None);
+        let nav = NavData::new(
+            vec![
+                mk(2.0, 0, 0.0),
+                mk(0.0, 0, -100.0),
+                mk(4.0, 1, 0.0),
+                mk(0.0, 0, -50.0),
+            ],
+            None,
+            None,
+        );
         let t = base.toe;
         // Two with toe = 0: the later transmitted one wins.
-        assert_eq!(nav.select(base.sat, t).unwrap().transmit_time, base.toe.add_seconds(-50.0));
+        assert_eq!(
+            nav.select(base.sat, t).unwrap().transmit_time,
+            base.toe.add_seconds(-50.0)
+        );
         // At 1.5 h the 2 h one is nearest.
-        assert_eq!(nav.select(base.sat, t.add_seconds(5400.0)).unwrap().toe, base.toe.add_seconds(7200.0));
+        assert_eq!(
+            nav.select(base.sat, t.add_seconds(5400.0)).unwrap().toe,
+            base.toe.add_seconds(7200.0)
+        );
         // At 4 h the unhealthy 4 h one is skipped; the 2 h one is 2 h away.
-        assert_eq!(nav.select(base.sat, t.add_seconds(14_400.0)).unwrap().toe, base.toe.add_seconds(7200.0));
+        assert_eq!(
+            nav.select(base.sat, t.add_seconds(14_400.0)).unwrap().toe,
+            base.toe.add_seconds(7200.0)
+        );
         // Beyond 4 h of the last healthy one: nothing.
-        assert!(nav.select(base.sat, t.add_seconds(7200.0 + 14_401.0)).is_none());
+        assert!(nav
+            .select(base.sat, t.add_seconds(7200.0 + 14_401.0))
+            .is_none());
         assert!(nav.select(base.sat, t.add_seconds(-14_401.0)).is_none());
         assert!(nav.select(EmitterId::new(System::Gps, 3), t).is_none());
         assert!(nav.select(EmitterId::new(System::Dtmb, 2), t).is_none());
         // Exactly halfway between two healthy ones: the later issue.
-        assert_eq!(nav.select(base.sat, t.add_seconds(3600.0)).unwrap().toe, base.toe.add_seconds(7200.0));
+        assert_eq!(
+            nav.select(base.sat, t.add_seconds(3600.0)).unwrap().toe,
+            base.toe.add_seconds(7200.0)
+        );
     }
 
     #[test]
     fn rinex2_week_comes_from_the_date() {
         // A week field written modulo 1024 (566 = 1590 − 1024) does not matter in RINEX 2.
-        let text = format!("{V2_HEADER}{}", V2_G02.replace("0.159000000000D+04", "0.566000000000D+03"));
+        let text = format!(
+            "{V2_HEADER}{}",
+            V2_G02.replace("0.159000000000D+04", "0.566000000000D+03")
+        );
         let nav = parse_nav(&text, "w.10n").unwrap();
-        assert_eq!(nav.ephemerides[0].toe, GpsTime::from_week_tow(1590, 345_600.0));
+        assert_eq!(
+            nav.ephemerides[0].toe,
+            GpsTime::from_week_tow(1590, 345_600.0)
+        );
     }
 }

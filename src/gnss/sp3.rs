@@ -37,7 +37,12 @@ pub enum Sp3Error {
     },
     /// A line or field does not hold what the format requires.
     #[error("{file}, line {line}: expected {expected}, found {found}")]
-    Syntax { file: String, line: usize, expected: String, found: String },
+    Syntax {
+        file: String,
+        line: usize,
+        expected: String,
+        found: String,
+    },
 }
 
 impl Sp3Error {
@@ -82,7 +87,11 @@ pub struct Sp3Data {
 impl Sp3Data {
     /// The satellites with at least one sample, sorted.
     pub fn satellites(&self) -> Vec<EmitterId> {
-        self.samples.iter().filter(|(_, v)| v.iter().any(Option::is_some)).map(|(k, _)| *k).collect()
+        self.samples
+            .iter()
+            .filter(|(_, v)| v.iter().any(Option::is_some))
+            .map(|(k, _)| *k)
+            .collect()
     }
 
     /// The sample of `sat` at epoch index `epoch_index`, if any.
@@ -93,7 +102,10 @@ impl Sp3Data {
     /// All valid samples of `sat` with their epochs.
     pub fn track(&self, sat: EmitterId) -> impl Iterator<Item = (GpsTime, &Sp3Sample)> + '_ {
         let v = self.samples.get(&sat);
-        self.epochs.iter().enumerate().filter_map(move |(i, t)| Some((*t, v?.get(i)?.as_ref()?)))
+        self.epochs
+            .iter()
+            .enumerate()
+            .filter_map(move |(i, t)| Some((*t, v?.get(i)?.as_ref()?)))
     }
 }
 
@@ -103,7 +115,10 @@ impl Sp3Data {
 /// [`Sp3Error::Io`] when the file cannot be read, otherwise as [`parse_sp3`].
 pub fn read_sp3_file(path: &Path) -> Result<Sp3Data, Sp3Error> {
     let file = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| Sp3Error::Io { file: file.clone(), source })?;
+    let bytes = std::fs::read(path).map_err(|source| Sp3Error::Io {
+        file: file.clone(),
+        source,
+    })?;
     parse_sp3(&String::from_utf8_lossy(&bytes), &file)
 }
 
@@ -121,7 +136,14 @@ pub fn parse_sp3(text: &str, file_name: &str) -> Result<Sp3Data, Sp3Error> {
         file: file_name.to_string(),
         line: idx + 1,
         expected: expected.to_string(),
-        found: if found.trim().is_empty() { "a blank field".to_string() } else { format!("'{}'", found.trim_end().chars().take(40).collect::<String>()) },
+        found: if found.trim().is_empty() {
+            "a blank field".to_string()
+        } else {
+            format!(
+                "'{}'",
+                found.trim_end().chars().take(40).collect::<String>()
+            )
+        },
     };
     let cols = |line: &str, a: usize, b: usize| -> Option<String> {
         let b = b.min(line.len());
@@ -133,10 +155,16 @@ pub fn parse_sp3(text: &str, file_name: &str) -> Result<Sp3Data, Sp3Error> {
     };
 
     let lines: Vec<&str> = text.lines().collect();
-    let first = lines.first().ok_or_else(|| err(0, "an SP3 header line starting with '#c' or '#d'", ""))?;
+    let first = lines
+        .first()
+        .ok_or_else(|| err(0, "an SP3 header line starting with '#c' or '#d'", ""))?;
     let version = first.chars().nth(1).unwrap_or(' ');
     if !first.starts_with('#') || !matches!(version, 'a' | 'b' | 'c' | 'd') {
-        return Err(err(0, "an SP3 header line starting with '#a', '#b', '#c' or '#d'", first));
+        return Err(err(
+            0,
+            "an SP3 header line starting with '#a', '#b', '#c' or '#d'",
+            first,
+        ));
     }
     let mut data = Sp3Data {
         version,
@@ -169,7 +197,13 @@ pub fn parse_sp3(text: &str, file_name: &str) -> Result<Sp3Data, Sp3Error> {
         } else if line.starts_with('*') {
             let num = |a: usize, b: usize, what: &str| -> Result<i64, Sp3Error> {
                 let f = cols(line, a, b).unwrap_or_default();
-                f.trim().parse::<i64>().map_err(|_| err(idx, &format!("the epoch {what} (columns {}-{})", a + 1, b), &f))
+                f.trim().parse::<i64>().map_err(|_| {
+                    err(
+                        idx,
+                        &format!("the epoch {what} (columns {}-{})", a + 1, b),
+                        &f,
+                    )
+                })
             };
             let y = num(3, 7, "year")?;
             let mo = num(8, 10, "month")?;
@@ -181,27 +215,40 @@ pub fn parse_sp3(text: &str, file_name: &str) -> Result<Sp3Data, Sp3Error> {
                 .ok()
                 .flatten()
                 .ok_or_else(|| err(idx, "the epoch seconds (columns 21-31)", &sec_text))?;
-            let cal = gpst_from_calendar(y, mo, d, h, mi, sec).ok_or_else(|| err(idx, "a valid epoch date and time", line))?;
+            let cal = gpst_from_calendar(y, mo, d, h, mi, sec)
+                .ok_or_else(|| err(idx, "a valid epoch date and time", line))?;
             let t = match offset_ns {
                 Some(o) => cal.add_ns(o),
                 None => {
                     // UTC reading: GPST = UTC + leap seconds at that date.
-                    let leap = GpsTime::from_utc(y as i32, mo as u8, d as u8, 0, 0, 0, 0).gpst_minus_utc_s();
+                    let leap = GpsTime::from_utc(y as i32, mo as u8, d as u8, 0, 0, 0, 0)
+                        .gpst_minus_utc_s();
                     cal.add_ns(leap * 1_000_000_000)
                 }
             };
             data.epochs.push(t);
         } else if line.starts_with('P') {
             if data.epochs.is_empty() {
-                return Err(err(idx, "an epoch line ('*') before the first position record", line));
+                return Err(err(
+                    idx,
+                    "an epoch line ('*') before the first position record",
+                    line,
+                ));
             }
-            let id = cols(line, 1, 4).ok_or_else(|| err(idx, "a satellite id in columns 2-4", line))?;
+            let id =
+                cols(line, 1, 4).ok_or_else(|| err(idx, "a satellite id in columns 2-4", line))?;
             let letter = id.chars().next().unwrap_or(' ');
             // SP3-a files write GPS satellites as a bare number.
             let letter = if letter == ' ' { 'G' } else { letter };
             let prn: u16 = match id.get(1..).map(str::trim).and_then(|s| s.parse().ok()) {
                 Some(p) if (1..=99).contains(&p) => p,
-                _ => return Err(err(idx, "a satellite id such as G01 or C05 in columns 2-4", &id)),
+                _ => {
+                    return Err(err(
+                        idx,
+                        "a satellite id such as G01 or C05 in columns 2-4",
+                        &id,
+                    ))
+                }
             };
             let system = match letter {
                 'G' => System::Gps,
@@ -221,20 +268,35 @@ pub fn parse_sp3(text: &str, file_name: &str) -> Result<Sp3Data, Sp3Error> {
                     Ok(Some(x)) => x,
                     // A blank clock is a missing clock; a blank coordinate is an error.
                     Ok(None) if k == 3 => 999_999.999_999,
-                    _ => return Err(err(idx, &format!("the {what} of {letter}{prn:02} (F14.6 in columns {}-{})", a + 1, b), &f)),
+                    _ => {
+                        return Err(err(
+                            idx,
+                            &format!(
+                                "the {what} of {letter}{prn:02} (F14.6 in columns {}-{})",
+                                a + 1,
+                                b
+                            ),
+                            &f,
+                        ))
+                    }
                 };
             }
             let sat = EmitterId::new(system, prn);
             let n_epochs = data.epochs.len();
             let track = data.samples.entry(sat).or_default();
             track.resize(n_epochs, None);
-            let absent = (v[0] == 0.0 && v[1] == 0.0 && v[2] == 0.0) || v[..3].iter().any(|c| c.abs() >= BAD_VALUE);
+            let absent = (v[0] == 0.0 && v[1] == 0.0 && v[2] == 0.0)
+                || v[..3].iter().any(|c| c.abs() >= BAD_VALUE);
             track[n_epochs - 1] = if absent {
                 None
             } else {
                 Some(Sp3Sample {
                     pos_ecef_m: Vector3::new(v[0], v[1], v[2]) * 1e3,
-                    clock_s: if v[3].abs() >= BAD_VALUE { None } else { Some(v[3] * 1e-6) },
+                    clock_s: if v[3].abs() >= BAD_VALUE {
+                        None
+                    } else {
+                        Some(v[3] * 1e-6)
+                    },
                 })
             };
         } else if line.starts_with("EOF") {
@@ -244,7 +306,11 @@ pub fn parse_sp3(text: &str, file_name: &str) -> Result<Sp3Data, Sp3Error> {
         // action.
     }
     if data.epochs.is_empty() {
-        return Err(err(lines.len(), "at least one epoch line ('*')", "end of file"));
+        return Err(err(
+            lines.len(),
+            "at least one epoch line ('*')",
+            "end of file",
+        ));
     }
     let n = data.epochs.len();
     for track in data.samples.values_mut() {

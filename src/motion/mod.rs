@@ -76,7 +76,10 @@ pub struct ConfigIssue {
 impl ConfigIssue {
     /// An issue with `key`.
     pub fn new(key: impl Into<String>, message: impl Into<String>) -> Self {
-        Self { key: key.into(), message: message.into() }
+        Self {
+            key: key.into(),
+            message: message.into(),
+        }
     }
 }
 
@@ -89,13 +92,23 @@ impl fmt::Display for ConfigIssue {
 impl std::error::Error for ConfigIssue {}
 
 /// Checks that `value` is finite and inside `[lo, hi]` (or `(lo, hi]` when `open_lo`).
-pub(crate) fn check_range(key: &str, value: f64, lo: f64, hi: f64, open_lo: bool, what: &str) -> Result<(), ConfigIssue> {
+pub(crate) fn check_range(
+    key: &str,
+    value: f64,
+    lo: f64,
+    hi: f64,
+    open_lo: bool,
+    what: &str,
+) -> Result<(), ConfigIssue> {
     let ok = value.is_finite() && value <= hi && if open_lo { value > lo } else { value >= lo };
     if ok {
         Ok(())
     } else {
         let bracket = if open_lo { "(" } else { "[" };
-        Err(ConfigIssue::new(key, format!("expected {what} within {bracket}{lo}, {hi}], got {value}")))
+        Err(ConfigIssue::new(
+            key,
+            format!("expected {what} within {bracket}{lo}, {hi}], got {value}"),
+        ))
     }
 }
 
@@ -104,15 +117,32 @@ pub(crate) fn check_finite(key: &str, values: &[f64], what: &str) -> Result<(), 
     if values.iter().all(|v| v.is_finite()) {
         Ok(())
     } else {
-        Err(ConfigIssue::new(key, format!("expected {what} with finite components, got {values:?}")))
+        Err(ConfigIssue::new(
+            key,
+            format!("expected {what} with finite components, got {values:?}"),
+        ))
     }
 }
 
 /// Checks a stochastic model's duration and step: both positive, the duration at most ten
 /// days and the number of steps at most [`MAX_STEPS`].
 pub(crate) fn check_duration_and_step(duration_s: f64, step_s: f64) -> Result<(), ConfigIssue> {
-    check_range("duration_s", duration_s, 0.0, MAX_DURATION_S, true, "a duration in seconds")?;
-    check_range("step_s", step_s, 0.0, duration_s, true, "a step in seconds no longer than duration_s")?;
+    check_range(
+        "duration_s",
+        duration_s,
+        0.0,
+        MAX_DURATION_S,
+        true,
+        "a duration in seconds",
+    )?;
+    check_range(
+        "step_s",
+        step_s,
+        0.0,
+        duration_s,
+        true,
+        "a step in seconds no longer than duration_s",
+    )?;
     let steps = (duration_s / step_s).ceil();
     if steps > MAX_STEPS {
         return Err(ConfigIssue::new(
@@ -288,11 +318,34 @@ impl TrajectoryConfig {
     /// than [`MAX_STEPS`] samples.
     pub fn validate(&self) -> Result<(), ConfigIssue> {
         match self {
-            TrajectoryConfig::Waypoints { .. } => waypoints::WaypointPlan::from_config(self).map(|_| ()),
-            TrajectoryConfig::Singer { initial_state, alpha_per_s, accel_var_m2ps4, step_s, duration_s, height_m } => {
+            TrajectoryConfig::Waypoints { .. } => {
+                waypoints::WaypointPlan::from_config(self).map(|_| ())
+            }
+            TrajectoryConfig::Singer {
+                initial_state,
+                alpha_per_s,
+                accel_var_m2ps4,
+                step_s,
+                duration_s,
+                height_m,
+            } => {
                 check_finite("initial_state", initial_state, "[x, ẋ, y, ẏ, ÿ]")?;
-                check_range("alpha_per_s", *alpha_per_s, 0.0, 1.0e3, true, "a manoeuvre frequency in 1/s")?;
-                check_range("accel_var_m2ps4", *accel_var_m2ps4, 0.0, 1.0e4, false, "an acceleration variance in (m/s²)²")?;
+                check_range(
+                    "alpha_per_s",
+                    *alpha_per_s,
+                    0.0,
+                    1.0e3,
+                    true,
+                    "a manoeuvre frequency in 1/s",
+                )?;
+                check_range(
+                    "accel_var_m2ps4",
+                    *accel_var_m2ps4,
+                    0.0,
+                    1.0e4,
+                    false,
+                    "an acceleration variance in (m/s²)²",
+                )?;
                 check_range("height_m", *height_m, -1.0e4, 1.0e5, false, "a height in m")?;
                 check_duration_and_step(*duration_s, *step_s)
             }
@@ -307,16 +360,55 @@ impl TrajectoryConfig {
                 duration_s,
             } => {
                 check_finite("initial_position_m", initial_position_m, "a position in m")?;
-                check_finite("initial_velocity_mps", initial_velocity_mps, "a velocity in m/s")?;
-                check_finite("initial_accel_mps2", initial_accel_mps2, "an acceleration in m/s²")?;
-                check_range("attenuation_per_s", *attenuation_per_s, 0.0, 1.0e3, false, "an attenuation coefficient in 1/s")?;
-                check_range("turn_rate_rad_per_s", *turn_rate_rad_per_s, -1.0e3, 1.0e3, false, "an angular velocity in rad/s")?;
-                check_range("noise_var_m2ps4", *noise_var_m2ps4, 0.0, 1.0e4, false, "a process noise variance in (m/s²)²")?;
+                check_finite(
+                    "initial_velocity_mps",
+                    initial_velocity_mps,
+                    "a velocity in m/s",
+                )?;
+                check_finite(
+                    "initial_accel_mps2",
+                    initial_accel_mps2,
+                    "an acceleration in m/s²",
+                )?;
+                check_range(
+                    "attenuation_per_s",
+                    *attenuation_per_s,
+                    0.0,
+                    1.0e3,
+                    false,
+                    "an attenuation coefficient in 1/s",
+                )?;
+                check_range(
+                    "turn_rate_rad_per_s",
+                    *turn_rate_rad_per_s,
+                    -1.0e3,
+                    1.0e3,
+                    false,
+                    "an angular velocity in rad/s",
+                )?;
+                check_range(
+                    "noise_var_m2ps4",
+                    *noise_var_m2ps4,
+                    0.0,
+                    1.0e4,
+                    false,
+                    "a process noise variance in (m/s²)²",
+                )?;
                 check_duration_and_step(*duration_s, *step_s)
             }
-            TrajectoryConfig::Static { position_enu_m, duration_s } => {
+            TrajectoryConfig::Static {
+                position_enu_m,
+                duration_s,
+            } => {
                 check_finite("position_enu_m", position_enu_m, "a position in m")?;
-                check_range("duration_s", *duration_s, 0.0, MAX_DURATION_S, true, "a duration in seconds")
+                check_range(
+                    "duration_s",
+                    *duration_s,
+                    0.0,
+                    MAX_DURATION_S,
+                    true,
+                    "a duration in seconds",
+                )
             }
         }
     }
@@ -329,18 +421,25 @@ impl TrajectoryConfig {
     pub fn build(&self, rng: &mut impl Rng) -> Result<Box<dyn Trajectory>, ConfigIssue> {
         self.validate()?;
         Ok(match self {
-            TrajectoryConfig::Waypoints { .. } => Box::new(waypoints::WaypointPlan::from_config(self)?),
-            TrajectoryConfig::Singer { initial_state, alpha_per_s, accel_var_m2ps4, step_s, duration_s, height_m } => {
-                Box::new(singer::SingerTrajectory::generate(
-                    *initial_state,
-                    *alpha_per_s,
-                    *accel_var_m2ps4,
-                    *step_s,
-                    *duration_s,
-                    *height_m,
-                    rng,
-                ))
+            TrajectoryConfig::Waypoints { .. } => {
+                Box::new(waypoints::WaypointPlan::from_config(self)?)
             }
+            TrajectoryConfig::Singer {
+                initial_state,
+                alpha_per_s,
+                accel_var_m2ps4,
+                step_s,
+                duration_s,
+                height_m,
+            } => Box::new(singer::SingerTrajectory::generate(
+                *initial_state,
+                *alpha_per_s,
+                *accel_var_m2ps4,
+                *step_s,
+                *duration_s,
+                *height_m,
+                rng,
+            )),
             TrajectoryConfig::PlaneTurning {
                 initial_position_m,
                 initial_velocity_mps,
@@ -363,9 +462,13 @@ impl TrajectoryConfig {
                 },
                 rng,
             )),
-            TrajectoryConfig::Static { position_enu_m, duration_s } => {
-                Box::new(StaticTrajectory { position_enu_m: Vector3::from(*position_enu_m), duration_s: *duration_s })
-            }
+            TrajectoryConfig::Static {
+                position_enu_m,
+                duration_s,
+            } => Box::new(StaticTrajectory {
+                position_enu_m: Vector3::from(*position_enu_m),
+                duration_s: *duration_s,
+            }),
         })
     }
 }
@@ -424,9 +527,18 @@ mod tests {
         );
         let p = parse("trajectory = { kind = \"plane_turning\" }").unwrap();
         match p {
-            TrajectoryConfig::PlaneTurning { initial_velocity_mps, attenuation_per_s, turn_rate_rad_per_s, noise_var_m2ps4, .. } => {
+            TrajectoryConfig::PlaneTurning {
+                initial_velocity_mps,
+                attenuation_per_s,
+                turn_rate_rad_per_s,
+                noise_var_m2ps4,
+                ..
+            } => {
                 assert_eq!(initial_velocity_mps, [4.0, -4.0, 4.0]);
-                assert_eq!((attenuation_per_s, turn_rate_rad_per_s, noise_var_m2ps4), (0.03, 0.1, 0.01));
+                assert_eq!(
+                    (attenuation_per_s, turn_rate_rad_per_s, noise_var_m2ps4),
+                    (0.03, 0.1, 0.01)
+                );
             }
             other => panic!("{other:?}"),
         }
@@ -484,9 +596,15 @@ mod tests {
             height_m: 0.0,
         };
         assert_eq!(bad.validate().unwrap_err().key, "step_s");
-        let bad = TrajectoryConfig::Static { position_enu_m: [0.0, f64::INFINITY, 0.0], duration_s: 10.0 };
+        let bad = TrajectoryConfig::Static {
+            position_enu_m: [0.0, f64::INFINITY, 0.0],
+            duration_s: 10.0,
+        };
         assert_eq!(bad.validate().unwrap_err().key, "position_enu_m");
-        let bad = TrajectoryConfig::Static { position_enu_m: [0.0; 3], duration_s: 0.0 };
+        let bad = TrajectoryConfig::Static {
+            position_enu_m: [0.0; 3],
+            duration_s: 0.0,
+        };
         assert_eq!(bad.validate().unwrap_err().key, "duration_s");
         let mut rng = TrialRng::new(1, 0).stream("motion/test");
         assert_eq!(bad.build(&mut rng).err().unwrap().key, "duration_s");
@@ -494,7 +612,10 @@ mod tests {
 
     #[test]
     fn static_is_static_and_clamps() {
-        let cfg = TrajectoryConfig::Static { position_enu_m: [1.0, 2.0, 3.0], duration_s: 10.0 };
+        let cfg = TrajectoryConfig::Static {
+            position_enu_m: [1.0, 2.0, 3.0],
+            duration_s: 10.0,
+        };
         let t = cfg.build(&mut TrialRng::new(1, 0).stream("m")).unwrap();
         assert_eq!(t.duration_s(), 10.0);
         let s = t.state_at(20.0);
@@ -510,7 +631,9 @@ mod tests {
         assert_eq!(heading_of(&Vector3::new(0.0, 1.0, 0.0)), Some(0.0));
         assert!((heading_of(&Vector3::new(1.0, 0.0, 0.0)).unwrap() - FRAC_PI_2).abs() < 1e-15);
         assert!((heading_of(&Vector3::new(0.0, -1.0, 0.0)).unwrap() - PI).abs() < 1e-15);
-        assert!((heading_of(&Vector3::new(-1.0, 0.0, 0.0)).unwrap() - 3.0 * FRAC_PI_2).abs() < 1e-15);
+        assert!(
+            (heading_of(&Vector3::new(-1.0, 0.0, 0.0)).unwrap() - 3.0 * FRAC_PI_2).abs() < 1e-15
+        );
         assert_eq!(heading_of(&Vector3::new(0.0, 0.0, 1.0)), None);
     }
 }

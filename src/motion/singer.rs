@@ -81,7 +81,8 @@ pub fn singer_process_noise_closed_form(alpha: f64, accel_var: f64, t: f64) -> M
     let at = a * t;
     let e1 = (-at).exp();
     let e2 = (-2.0 * at).exp();
-    let q11 = (1.0 - e2 + 2.0 * at + 2.0 * at.powi(3) / 3.0 - 2.0 * at * at - 4.0 * at * e1) / (2.0 * a.powi(5));
+    let q11 = (1.0 - e2 + 2.0 * at + 2.0 * at.powi(3) / 3.0 - 2.0 * at * at - 4.0 * at * e1)
+        / (2.0 * a.powi(5));
     let q12 = (e2 + 1.0 - 2.0 * e1 + 2.0 * at * e1 - 2.0 * at + at * at) / (2.0 * a.powi(4));
     let q13 = (1.0 - e2 - 2.0 * at * e1) / (2.0 * a.powi(3));
     let q22 = (4.0 * e1 - 3.0 - e2 + 2.0 * at) / (2.0 * a.powi(3));
@@ -94,17 +95,22 @@ pub fn singer_process_noise_closed_form(alpha: f64, accel_var: f64, t: f64) -> M
 const GL8: [(f64, f64); 8] = [
     (-0.960_289_856_497_536_2, 0.101_228_536_290_376_26),
     (-0.796_666_477_413_626_7, 0.222_381_034_453_374_47),
-    (-0.525_532_409_916_329_0, 0.313_706_645_877_887_3),
-    (-0.183_434_642_495_649_8, 0.362_683_783_378_362_0),
-    (0.183_434_642_495_649_8, 0.362_683_783_378_362_0),
-    (0.525_532_409_916_329_0, 0.313_706_645_877_887_3),
+    (-0.525_532_409_916_329, 0.313_706_645_877_887_3),
+    (-0.183_434_642_495_649_8, 0.362_683_783_378_362),
+    (0.183_434_642_495_649_8, 0.362_683_783_378_362),
+    (0.525_532_409_916_329, 0.313_706_645_877_887_3),
     (0.796_666_477_413_626_7, 0.222_381_034_453_374_47),
     (0.960_289_856_497_536_2, 0.101_228_536_290_376_26),
 ];
 
 /// `2ασ² ∫ g gᵀ ds` over `[0, t]` by composite 8-point Gauss–Legendre with `pieces`
 /// sub-intervals.
-pub(crate) fn singer_process_noise_quadrature(alpha: f64, accel_var: f64, t: f64, pieces: usize) -> Matrix3<f64> {
+pub(crate) fn singer_process_noise_quadrature(
+    alpha: f64,
+    accel_var: f64,
+    t: f64,
+    pieces: usize,
+) -> Matrix3<f64> {
     let mut q = Matrix3::zeros();
     let h = t / pieces as f64;
     for p in 0..pieces {
@@ -143,7 +149,12 @@ pub(crate) fn psd_sqrt(q: &Matrix3<f64>) -> Matrix3<f64> {
 
 /// Position, velocity and acceleration at fraction `u` ∈ [0, 1] of a step of length `h`
 /// of the quintic that matches position, velocity and acceleration at both ends.
-pub(crate) fn quintic_hermite(s0: &Vector3<f64>, s1: &Vector3<f64>, h: f64, u: f64) -> Vector3<f64> {
+pub(crate) fn quintic_hermite(
+    s0: &Vector3<f64>,
+    s1: &Vector3<f64>,
+    h: f64,
+    u: f64,
+) -> Vector3<f64> {
     let (p0, v0, a0) = (s0.x, s0.y, s0.z);
     let (p1, v1, a1) = (s1.x, s1.y, s1.z);
     let dp = p1 - p0;
@@ -192,11 +203,22 @@ impl SingerTrajectory {
         let mut s = Vector3::new(y0, vy0, ay0);
         knots.push(s);
         for _ in 0..steps {
-            let n = Vector3::new(rng.sample(StandardNormal), rng.sample(StandardNormal), rng.sample(StandardNormal));
+            let n = Vector3::new(
+                rng.sample(StandardNormal),
+                rng.sample(StandardNormal),
+                rng.sample(StandardNormal),
+            );
             s = f * s + sq * n;
             knots.push(s);
         }
-        Self { x0_m: x0, vx_mps: vx, height_m, step_s, duration_s, knots }
+        Self {
+            x0_m: x0,
+            vx_mps: vx,
+            height_m,
+            step_s,
+            duration_s,
+            knots,
+        }
     }
 
     /// The generated `[y, ẏ, ÿ]` samples, one per step from t = 0.
@@ -238,7 +260,12 @@ mod tests {
             for i in 0..3 {
                 for j in 0..3 {
                     let rel = (a[(i, j)] - b[(i, j)]).abs() / b[(i, j)].abs();
-                    assert!(rel < 1e-9, "α={alpha} T={t} ({i},{j}): {} vs {}", a[(i, j)], b[(i, j)]);
+                    assert!(
+                        rel < 1e-9,
+                        "α={alpha} T={t} ({i},{j}): {} vs {}",
+                        a[(i, j)],
+                        b[(i, j)]
+                    );
                 }
             }
         }
@@ -272,7 +299,11 @@ mod tests {
         for &(a, t) in &[(0.1, 1.0), (1e-3, 0.5), (3.0, 2.0)] {
             let q = singer_process_noise(a, 3.5, t);
             let exact = 3.5 * -(-2.0 * a * t).exp_m1();
-            assert!((q[(2, 2)] - exact).abs() < 1e-12 * exact.max(1e-300), "{} vs {exact}", q[(2, 2)]);
+            assert!(
+                (q[(2, 2)] - exact).abs() < 1e-12 * exact.max(1e-300),
+                "{} vs {exact}",
+                q[(2, 2)]
+            );
         }
     }
 
@@ -309,7 +340,15 @@ mod tests {
     fn noise_free_singer_is_deterministic_decay() {
         // With σ² = 0 the manoeuvre decays: ÿ(t) = ÿ₀ e^{−αt}.
         let mut rng = TrialRng::new(3, 0).stream("motion/singer");
-        let tr = SingerTrajectory::generate([0.0, 14.0, 0.0, 11.0, 2.0], 0.1, 0.0, 1.0, 50.0, 0.0, &mut rng);
+        let tr = SingerTrajectory::generate(
+            [0.0, 14.0, 0.0, 11.0, 2.0],
+            0.1,
+            0.0,
+            1.0,
+            50.0,
+            0.0,
+            &mut rng,
+        );
         for k in [0usize, 1, 7, 50] {
             let s = tr.state_at(k as f64);
             assert!((s.acc_enu_mps2.y - 2.0 * (-0.1 * k as f64).exp()).abs() < 1e-12);
@@ -324,7 +363,15 @@ mod tests {
     fn paper_run_is_reproducible_and_clamped() {
         let run = |seed| {
             let mut rng = TrialRng::new(seed, 0).stream("motion/trajectory");
-            SingerTrajectory::generate([4000.0, 14.0, 0.0, 11.0, 0.0], 0.1, 3.5, 1.0, 100.0, 0.0, &mut rng)
+            SingerTrajectory::generate(
+                [4000.0, 14.0, 0.0, 11.0, 0.0],
+                0.1,
+                3.5,
+                1.0,
+                100.0,
+                0.0,
+                &mut rng,
+            )
         };
         let a = run(1);
         let b = run(1);

@@ -131,7 +131,11 @@ pub fn propagate(
     let dv = c1h * ah;
     let dp = c2h * ah;
     (
-        Vector3::new(p.x + tau * v.x + dp.re, p.y + tau * v.y + dp.im, p.z + tau * v.z + c2z.re * a.z),
+        Vector3::new(
+            p.x + tau * v.x + dp.re,
+            p.y + tau * v.y + dp.im,
+            p.z + tau * v.z + c2z.re * a.z,
+        ),
         Vector3::new(v.x + dv.re, v.y + dv.im, v.z + c1z.re * a.z),
         Vector3::new(a_new.re, a_new.im, ez.re * a.z),
     )
@@ -179,15 +183,36 @@ impl PlaneTurningTrajectory {
         let steps = ((p.duration_s / p.step_s) - 1e-9).ceil().max(1.0) as usize;
         let sigma = p.noise_var_m2ps4.max(0.0).sqrt();
         let mut knots = Vec::with_capacity(steps + 1);
-        let mut s = [p.initial_position_m, p.initial_velocity_mps, p.initial_accel_mps2];
+        let mut s = [
+            p.initial_position_m,
+            p.initial_velocity_mps,
+            p.initial_accel_mps2,
+        ];
         knots.push(s);
         for _ in 0..steps {
-            let (pos, vel, acc) = propagate(p.attenuation_per_s, p.turn_rate_rad_per_s, &s[0], &s[1], &s[2], p.step_s);
-            let w = Vector3::new(rng.sample::<f64, _>(StandardNormal), rng.sample(StandardNormal), rng.sample(StandardNormal));
+            let (pos, vel, acc) = propagate(
+                p.attenuation_per_s,
+                p.turn_rate_rad_per_s,
+                &s[0],
+                &s[1],
+                &s[2],
+                p.step_s,
+            );
+            let w = Vector3::new(
+                rng.sample::<f64, _>(StandardNormal),
+                rng.sample(StandardNormal),
+                rng.sample(StandardNormal),
+            );
             s = [pos, vel, acc + sigma * w];
             knots.push(s);
         }
-        Self { alpha: p.attenuation_per_s, omega: p.turn_rate_rad_per_s, step_s: p.step_s, duration_s: p.duration_s, knots }
+        Self {
+            alpha: p.attenuation_per_s,
+            omega: p.turn_rate_rad_per_s,
+            step_s: p.step_s,
+            duration_s: p.duration_s,
+            knots,
+        }
     }
 
     /// The states (p, v, a) just after each step instant, from t = 0.
@@ -203,7 +228,13 @@ impl Trajectory for PlaneTurningTrajectory {
         let tau = (t - k as f64 * self.step_s).clamp(0.0, self.step_s);
         let [p, v, a] = &self.knots[k];
         let (pos, vel, acc) = propagate(self.alpha, self.omega, p, v, a, tau);
-        TruthState { t_s: t, pos_enu_m: pos, vel_enu_mps: vel, acc_enu_mps2: acc, heading_rad: heading_of(&vel).unwrap_or(0.0) }
+        TruthState {
+            t_s: t,
+            pos_enu_m: pos,
+            vel_enu_mps: vel,
+            acc_enu_mps2: acc,
+            heading_rad: heading_of(&vel).unwrap_or(0.0),
+        }
     }
     fn duration_s(&self) -> f64 {
         self.duration_s
@@ -242,10 +273,20 @@ mod tests {
 
     #[test]
     fn transition_is_the_matrix_exponential() {
-        for &(al, om, tau) in &[(0.03, 0.1, 1.0), (0.03, 0.1, 0.37), (0.0, 0.0, 2.0), (0.5, -0.8, 3.0), (1e-9, 1e-9, 1.0)] {
+        for &(al, om, tau) in &[
+            (0.03, 0.1, 1.0),
+            (0.03, 0.1, 0.37),
+            (0.0, 0.0, 2.0),
+            (0.5, -0.8, 3.0),
+            (1e-9, 1e-9, 1.0),
+        ] {
             let f = transition_matrix(al, om, tau);
             let e = (continuous_a(al, om) * tau).exp();
-            assert!((f - e).abs().max() < 1e-12, "α={al} ω={om} τ={tau}: {}", (f - e).abs().max());
+            assert!(
+                (f - e).abs().max() < 1e-12,
+                "α={al} ω={om} τ={tau}: {}",
+                (f - e).abs().max()
+            );
         }
     }
 
@@ -253,7 +294,9 @@ mod tests {
     fn noise_free_run_equals_closed_form_and_hand_iteration() {
         let mut rng = TrialRng::new(1, 0).stream("motion/trajectory");
         let tr = PlaneTurningTrajectory::generate(&paper(0.0), &mut rng);
-        let x0 = SMatrix::<f64, 9, 1>::from_column_slice(&[0.0, 0.0, 0.0, 4.0, -4.0, 4.0, 0.5, -0.5, -0.5]);
+        let x0 = SMatrix::<f64, 9, 1>::from_column_slice(&[
+            0.0, 0.0, 0.0, 4.0, -4.0, 4.0, 0.5, -0.5, -0.5,
+        ]);
         // Hand-iterated first steps: X(k+1) = Φ(1) X(k).
         let phi = transition_matrix(0.03, 0.1, 1.0);
         let mut x = x0;
@@ -294,7 +337,14 @@ mod tests {
         let tr = PlaneTurningTrajectory::generate(&paper(0.01), &mut rng);
         let k = tr.knots();
         assert_eq!(k.len(), 101);
-        assert_eq!(k[0], [Vector3::zeros(), Vector3::new(4.0, -4.0, 4.0), Vector3::new(0.5, -0.5, -0.5)]);
+        assert_eq!(
+            k[0],
+            [
+                Vector3::zeros(),
+                Vector3::new(4.0, -4.0, 4.0),
+                Vector3::new(0.5, -0.5, -0.5)
+            ]
+        );
         let mut w2 = 0.0;
         for i in 0..100 {
             let (p, v, a) = propagate(0.03, 0.1, &k[i][0], &k[i][1], &k[i][2], 1.0);

@@ -46,7 +46,10 @@
 //! rest (so a stopped car keeps pointing along its leg); a vertical leg keeps the heading of
 //! the leg before it.
 
-use super::{check_range, clamp_time, heading_of, ConfigIssue, Trajectory, TrajectoryConfig, TruthState, MAX_DURATION_S};
+use super::{
+    check_range, clamp_time, heading_of, ConfigIssue, Trajectory, TrajectoryConfig, TruthState,
+    MAX_DURATION_S,
+};
 use nalgebra::Vector3;
 
 /// Largest speed a waypoint platform may have (m/s).
@@ -62,9 +65,17 @@ const MIN_PIECE_M: f64 = 1e-9;
 
 #[derive(Clone, Debug, PartialEq)]
 enum Geom {
-    Line { start: Vector3<f64>, dir: Vector3<f64> },
+    Line {
+        start: Vector3<f64>,
+        dir: Vector3<f64>,
+    },
     /// Starts at `center − radius·n1` heading along `d1`, turning towards `n1`.
-    Arc { center: Vector3<f64>, d1: Vector3<f64>, n1: Vector3<f64>, radius: f64 },
+    Arc {
+        center: Vector3<f64>,
+        d1: Vector3<f64>,
+        n1: Vector3<f64>,
+        radius: f64,
+    },
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -81,7 +92,12 @@ impl Piece {
     fn frame(&self, s: f64) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
         match &self.geom {
             Geom::Line { start, dir } => (start + dir * s, *dir, Vector3::zeros()),
-            Geom::Arc { center, d1, n1, radius } => {
+            Geom::Arc {
+                center,
+                d1,
+                n1,
+                radius,
+            } => {
                 let (sn, cs) = (s / radius).sin_cos();
                 let pos = center + (d1 * sn - n1 * cs) * *radius;
                 let tangent = d1 * cs + n1 * sn;
@@ -95,7 +111,12 @@ impl Piece {
 #[derive(Clone, Debug, PartialEq)]
 enum PhaseKind {
     /// Motion along `piece` from arc length `s0` at speed `v0` with tangential acceleration `a`.
-    Move { piece: usize, s0: f64, v0: f64, a: f64 },
+    Move {
+        piece: usize,
+        s0: f64,
+        v0: f64,
+        a: f64,
+    },
     /// At rest at `pos`, pointing along `tangent`.
     Hold { pos: Vector3<f64>, heading_rad: f64 },
 }
@@ -142,30 +163,72 @@ impl WaypointPlan {
     /// # Errors
     /// A [`ConfigIssue`] naming the field at fault.
     pub fn from_config(cfg: &TrajectoryConfig) -> Result<Self, ConfigIssue> {
-        let TrajectoryConfig::Waypoints { points_enu_m, speed_mps, accel_mps2, lateral_accel_mps2, dwell_s, laps, height_m } = cfg
+        let TrajectoryConfig::Waypoints {
+            points_enu_m,
+            speed_mps,
+            accel_mps2,
+            lateral_accel_mps2,
+            dwell_s,
+            laps,
+            height_m,
+        } = cfg
         else {
             return Err(ConfigIssue::new("kind", "expected kind = \"waypoints\""));
         };
-        check_range("speed_mps", *speed_mps, 0.0, MAX_SPEED_MPS, true, "a positive speed in m/s")?;
+        check_range(
+            "speed_mps",
+            *speed_mps,
+            0.0,
+            MAX_SPEED_MPS,
+            true,
+            "a positive speed in m/s",
+        )?;
         if let Some(a) = accel_mps2 {
-            check_range("accel_mps2", *a, 0.0, 100.0, true, "a positive acceleration in m/s²")?;
+            check_range(
+                "accel_mps2",
+                *a,
+                0.0,
+                100.0,
+                true,
+                "a positive acceleration in m/s²",
+            )?;
         }
         if let Some(a) = lateral_accel_mps2 {
-            check_range("lateral_accel_mps2", *a, 0.0, 100.0, true, "a positive lateral acceleration in m/s²")?;
+            check_range(
+                "lateral_accel_mps2",
+                *a,
+                0.0,
+                100.0,
+                true,
+                "a positive lateral acceleration in m/s²",
+            )?;
         }
         if let Some(d) = dwell_s {
-            check_range("dwell_s", *d, 0.0, 86_400.0, false, "a dwell time in seconds")?;
+            check_range(
+                "dwell_s",
+                *d,
+                0.0,
+                86_400.0,
+                false,
+                "a dwell time in seconds",
+            )?;
         }
         if let Some(h) = height_m {
             check_range("height_m", *h, -1.0e4, 1.0e5, false, "a height in m")?;
         }
         if *laps == Some(0) {
-            return Err(ConfigIssue::new("laps", "expected at least 1 lap, got 0 (omit laps to drive the polyline once)"));
+            return Err(ConfigIssue::new(
+                "laps",
+                "expected at least 1 lap, got 0 (omit laps to drive the polyline once)",
+            ));
         }
 
         // Points: two or three finite coordinates each.
         if points_enu_m.len() < 2 {
-            return Err(points_issue(format!("expected at least two waypoints, got {}", points_enu_m.len())));
+            return Err(points_issue(format!(
+                "expected at least two waypoints, got {}",
+                points_enu_m.len()
+            )));
         }
         let up = height_m.unwrap_or(0.0);
         let mut pts: Vec<Vector3<f64>> = Vec::with_capacity(points_enu_m.len());
@@ -181,9 +244,14 @@ impl WaypointPlan {
                 }
             };
             if !(v.iter().all(|c| c.is_finite() && c.abs() <= 1.0e8)) {
-                return Err(points_issue(format!("waypoint {i} is {p:?}; expected finite coordinates within ±1e8 m")));
+                return Err(points_issue(format!(
+                    "waypoint {i} is {p:?}; expected finite coordinates within ±1e8 m"
+                )));
             }
-            if pts.last().is_none_or(|q: &Vector3<f64>| (v - q).norm() > MIN_PIECE_M) {
+            if pts
+                .last()
+                .is_none_or(|q: &Vector3<f64>| (v - q).norm() > MIN_PIECE_M)
+            {
                 pts.push(v);
             }
         }
@@ -197,7 +265,9 @@ impl WaypointPlan {
             pts.pop();
         }
         if pts.len() < 2 {
-            return Err(points_issue("all waypoints are the same point: the path has zero length"));
+            return Err(points_issue(
+                "all waypoints are the same point: the path has zero length",
+            ));
         }
 
         // The vertex sequence actually driven.
@@ -208,7 +278,10 @@ impl WaypointPlan {
                 if pts.len().saturating_mul(n) > MAX_VERTICES {
                     return Err(ConfigIssue::new(
                         "laps",
-                        format!("{n} laps of {} waypoints is more than {MAX_VERTICES} path vertices", pts.len()),
+                        format!(
+                            "{n} laps of {} waypoints is more than {MAX_VERTICES} path vertices",
+                            pts.len()
+                        ),
                     ));
                 }
                 let mut v = Vec::with_capacity(pts.len() * n + 1);
@@ -220,21 +293,34 @@ impl WaypointPlan {
             }
         };
         let length_m: f64 = vertices.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
-        let lower_bound_s = length_m / speed_mps + dwell_s.unwrap_or(0.0) * (vertices.len() as f64 - 2.0);
+        let lower_bound_s =
+            length_m / speed_mps + dwell_s.unwrap_or(0.0) * (vertices.len() as f64 - 2.0);
         if lower_bound_s > MAX_DURATION_S {
-            let key = if laps.is_some_and(|n| n > 1) { "laps" } else { "speed_mps" };
+            let key = if laps.is_some_and(|n| n > 1) {
+                "laps"
+            } else {
+                "speed_mps"
+            };
             return Err(ConfigIssue::new(
                 key,
                 format!("the path takes at least {lower_bound_s:.0} s; expected at most {MAX_DURATION_S} s (ten days)"),
             ));
         }
 
-        let lim = Limits { speed: *speed_mps, accel: *accel_mps2, lateral: *lateral_accel_mps2, dwell: dwell_s.unwrap_or(0.0) };
+        let lim = Limits {
+            speed: *speed_mps,
+            accel: *accel_mps2,
+            lateral: *lateral_accel_mps2,
+            dwell: dwell_s.unwrap_or(0.0),
+        };
         let plan = Self::plan(&vertices, &lim, dwell_s.is_some_and(|d| d > 0.0));
         if !(plan.duration_s.is_finite() && plan.duration_s <= MAX_DURATION_S) {
             return Err(ConfigIssue::new(
                 "speed_mps",
-                format!("the path takes {} s; expected at most {MAX_DURATION_S} s (ten days)", plan.duration_s),
+                format!(
+                    "the path takes {} s; expected at most {MAX_DURATION_S} s (ten days)",
+                    plan.duration_s
+                ),
             ));
         }
         Ok(plan)
@@ -250,7 +336,14 @@ impl WaypointPlan {
         self.pieces.iter().map(|p| p.length_m).sum()
     }
 
-    fn corner(lim: &Limits, stop_at_waypoints: bool, l_in: f64, l_out: f64, d_in: &Vector3<f64>, d_out: &Vector3<f64>) -> Corner {
+    fn corner(
+        lim: &Limits,
+        stop_at_waypoints: bool,
+        l_in: f64,
+        l_out: f64,
+        d_in: &Vector3<f64>,
+        d_out: &Vector3<f64>,
+    ) -> Corner {
         if stop_at_waypoints {
             return Corner::Stop { dwell: lim.dwell };
         }
@@ -258,8 +351,14 @@ impl WaypointPlan {
         if theta < STRAIGHT_RAD {
             return Corner::Pass;
         }
-        let Some(a_lat) = lim.lateral else { return Corner::Pass };
-        let stop_or_pass = if lim.accel.is_some() { Corner::Stop { dwell: 0.0 } } else { Corner::Pass };
+        let Some(a_lat) = lim.lateral else {
+            return Corner::Pass;
+        };
+        let stop_or_pass = if lim.accel.is_some() {
+            Corner::Stop { dwell: 0.0 }
+        } else {
+            Corner::Pass
+        };
         if theta > std::f64::consts::PI - REVERSAL_RAD {
             return stop_or_pass;
         }
@@ -268,30 +367,54 @@ impl WaypointPlan {
         if radius < 1e-6 {
             return stop_or_pass;
         }
-        Corner::Arc { radius, trim: radius * tan_half }
+        Corner::Arc {
+            radius,
+            trim: radius * tan_half,
+        }
     }
 
     fn plan(vertices: &[Vector3<f64>], lim: &Limits, stop_at_waypoints: bool) -> Self {
         let n_seg = vertices.len() - 1;
         let lens: Vec<f64> = vertices.windows(2).map(|w| (w[1] - w[0]).norm()).collect();
-        let dirs: Vec<Vector3<f64>> = vertices.windows(2).zip(&lens).map(|(w, l)| (w[1] - w[0]) / *l).collect();
+        let dirs: Vec<Vector3<f64>> = vertices
+            .windows(2)
+            .zip(&lens)
+            .map(|(w, l)| (w[1] - w[0]) / *l)
+            .collect();
         // corners[j] is the corner at vertex j (1..n_seg); the ends are free.
         let corners: Vec<Corner> = (0..=n_seg)
             .map(|j| {
                 if j == 0 || j == n_seg {
                     Corner::Pass
                 } else {
-                    Self::corner(lim, stop_at_waypoints, lens[j - 1], lens[j], &dirs[j - 1], &dirs[j])
+                    Self::corner(
+                        lim,
+                        stop_at_waypoints,
+                        lens[j - 1],
+                        lens[j],
+                        &dirs[j - 1],
+                        &dirs[j],
+                    )
                 }
             })
             .collect();
-        let trim = |c: &Corner| if let Corner::Arc { trim, .. } = c { *trim } else { 0.0 };
+        let trim = |c: &Corner| {
+            if let Corner::Arc { trim, .. } = c {
+                *trim
+            } else {
+                0.0
+            }
+        };
 
         // Pieces grouped in runs that start and end at rest (when ramps are on).
         let mut pieces: Vec<Piece> = Vec::new();
         let mut runs: Vec<(Vec<usize>, f64)> = vec![(Vec::new(), 0.0)];
         let mut last_heading = heading_of(&dirs[0]).unwrap_or(0.0);
-        let mut push = |pieces: &mut Vec<Piece>, runs: &mut Vec<(Vec<usize>, f64)>, geom: Geom, length_m: f64, vmax_mps: f64| {
+        let mut push = |pieces: &mut Vec<Piece>,
+                        runs: &mut Vec<(Vec<usize>, f64)>,
+                        geom: Geom,
+                        length_m: f64,
+                        vmax_mps: f64| {
             if length_m < MIN_PIECE_M {
                 return;
             }
@@ -300,7 +423,12 @@ impl WaypointPlan {
                 Geom::Arc { d1, .. } => *d1,
             };
             last_heading = heading_of(&tangent).unwrap_or(last_heading);
-            pieces.push(Piece { geom, length_m, vmax_mps, heading_fallback_rad: last_heading });
+            pieces.push(Piece {
+                geom,
+                length_m,
+                vmax_mps,
+                heading_fallback_rad: last_heading,
+            });
             if let Some(run) = runs.last_mut() {
                 run.0.push(pieces.len() - 1);
             }
@@ -309,7 +437,16 @@ impl WaypointPlan {
             let t0 = trim(&corners[i]);
             let t1 = trim(&corners[i + 1]);
             let start = vertices[i] + dirs[i] * t0;
-            push(&mut pieces, &mut runs, Geom::Line { start, dir: dirs[i] }, lens[i] - t0 - t1, lim.speed);
+            push(
+                &mut pieces,
+                &mut runs,
+                Geom::Line {
+                    start,
+                    dir: dirs[i],
+                },
+                lens[i] - t0 - t1,
+                lim.speed,
+            );
             if i + 1 < n_seg {
                 match corners[i + 1] {
                     Corner::Pass => {}
@@ -323,7 +460,18 @@ impl WaypointPlan {
                             (Some(_), Some(a_lat)) => lim.speed.min((a_lat * radius).sqrt()),
                             _ => lim.speed,
                         };
-                        push(&mut pieces, &mut runs, Geom::Arc { center: a_start + n1 * radius, d1, n1, radius }, radius * theta, vmax);
+                        push(
+                            &mut pieces,
+                            &mut runs,
+                            Geom::Arc {
+                                center: a_start + n1 * radius,
+                                d1,
+                                n1,
+                                radius,
+                            },
+                            radius * theta,
+                            vmax,
+                        );
                     }
                     Corner::Stop { dwell } => {
                         if let Some(run) = runs.last_mut() {
@@ -347,14 +495,36 @@ impl WaypointPlan {
                 None => {
                     for &p in run {
                         let dur = pieces[p].length_m / lim.speed;
-                        phases.push(Phase { t0: t, dur, kind: PhaseKind::Move { piece: p, s0: 0.0, v0: lim.speed, a: 0.0 } });
+                        phases.push(Phase {
+                            t0: t,
+                            dur,
+                            kind: PhaseKind::Move {
+                                piece: p,
+                                s0: 0.0,
+                                v0: lim.speed,
+                                a: 0.0,
+                            },
+                        });
                         t += dur;
                     }
                 }
                 Some(a) => {
-                    let u = junction_speeds(run.iter().map(|&p| (pieces[p].length_m, pieces[p].vmax_mps)), a);
+                    let u = junction_speeds(
+                        run.iter()
+                            .map(|&p| (pieces[p].length_m, pieces[p].vmax_mps)),
+                        a,
+                    );
                     for (k, &p) in run.iter().enumerate() {
-                        t = trapezoid(&mut phases, t, p, pieces[p].length_m, pieces[p].vmax_mps, u[k], u[k + 1], a);
+                        t = trapezoid(
+                            &mut phases,
+                            t,
+                            p,
+                            pieces[p].length_m,
+                            pieces[p].vmax_mps,
+                            u[k],
+                            u[k + 1],
+                            a,
+                        );
                     }
                 }
             }
@@ -362,12 +532,21 @@ impl WaypointPlan {
                 let last = &pieces[*run.last().unwrap_or(&0)];
                 let (pos, tangent, _) = last.frame(last.length_m);
                 let heading_rad = heading_of(&tangent).unwrap_or(last.heading_fallback_rad);
-                phases.push(Phase { t0: t, dur: *dwell, kind: PhaseKind::Hold { pos, heading_rad } });
+                phases.push(Phase {
+                    t0: t,
+                    dur: *dwell,
+                    kind: PhaseKind::Hold { pos, heading_rad },
+                });
                 t += dwell;
             }
         }
         let length_m = lens.iter().sum();
-        Self { pieces, phases, duration_s: t, length_m }
+        Self {
+            pieces,
+            phases,
+            duration_s: t,
+            length_m,
+        }
     }
 }
 
@@ -391,8 +570,20 @@ fn junction_speeds(pieces: impl Iterator<Item = (f64, f64)>, a: f64) -> Vec<f64>
 
 /// Appends the accelerate / cruise / brake phases of one piece and returns the end time.
 #[allow(clippy::too_many_arguments)]
-fn trapezoid(phases: &mut Vec<Phase>, t0: f64, piece: usize, len: f64, vcap: f64, u0: f64, u1: f64, a: f64) -> f64 {
-    let peak = ((u0 * u0 + u1 * u1) / 2.0 + a * len).sqrt().min(vcap).max(u0.max(u1));
+fn trapezoid(
+    phases: &mut Vec<Phase>,
+    t0: f64,
+    piece: usize,
+    len: f64,
+    vcap: f64,
+    u0: f64,
+    u1: f64,
+    a: f64,
+) -> f64 {
+    let peak = ((u0 * u0 + u1 * u1) / 2.0 + a * len)
+        .sqrt()
+        .min(vcap)
+        .max(u0.max(u1));
     let d_acc = ((peak * peak - u0 * u0) / (2.0 * a)).max(0.0);
     let d_dec = ((peak * peak - u1 * u1) / (2.0 * a)).max(0.0);
     let d_cruise = (len - d_acc - d_dec).max(0.0);
@@ -400,7 +591,16 @@ fn trapezoid(phases: &mut Vec<Phase>, t0: f64, piece: usize, len: f64, vcap: f64
     let mut s = 0.0;
     let mut add = |dur: f64, v0: f64, acc: f64, dist: f64| {
         if dur > 1e-12 {
-            phases.push(Phase { t0: t, dur, kind: PhaseKind::Move { piece, s0: s, v0, a: acc } });
+            phases.push(Phase {
+                t0: t,
+                dur,
+                kind: PhaseKind::Move {
+                    piece,
+                    s0: s,
+                    v0,
+                    a: acc,
+                },
+            });
             t += dur;
             s += dist;
         }
@@ -416,7 +616,13 @@ impl Trajectory for WaypointPlan {
         let t = clamp_time(t_s, self.duration_s);
         let idx = self.phases.partition_point(|p| p.t0 <= t).saturating_sub(1);
         let Some(ph) = self.phases.get(idx) else {
-            return TruthState { t_s: t, pos_enu_m: Vector3::zeros(), vel_enu_mps: Vector3::zeros(), acc_enu_mps2: Vector3::zeros(), heading_rad: 0.0 };
+            return TruthState {
+                t_s: t,
+                pos_enu_m: Vector3::zeros(),
+                vel_enu_mps: Vector3::zeros(),
+                acc_enu_mps2: Vector3::zeros(),
+                heading_rad: 0.0,
+            };
         };
         let tau = (t - ph.t0).clamp(0.0, ph.dur);
         match &ph.kind {
@@ -453,7 +659,14 @@ mod tests {
     use super::*;
     use std::f64::consts::FRAC_PI_2;
 
-    fn cfg(points: &[&[f64]], speed: f64, accel: Option<f64>, lateral: Option<f64>, dwell: Option<f64>, laps: Option<u32>) -> TrajectoryConfig {
+    fn cfg(
+        points: &[&[f64]],
+        speed: f64,
+        accel: Option<f64>,
+        lateral: Option<f64>,
+        dwell: Option<f64>,
+        laps: Option<u32>,
+    ) -> TrajectoryConfig {
         TrajectoryConfig::Waypoints {
             points_enu_m: points.iter().map(|p| p.to_vec()).collect(),
             speed_mps: speed,
@@ -478,7 +691,10 @@ mod tests {
         assert!((p.polyline_length_m() - 200.0).abs() < 1e-12);
         let s = p.state_at(5.0);
         assert!((s.pos_enu_m - Vector3::new(50.0, 0.0, 0.0)).norm() < 1e-12);
-        assert!((s.heading_rad - FRAC_PI_2).abs() < 1e-12, "east leg heads 90°");
+        assert!(
+            (s.heading_rad - FRAC_PI_2).abs() < 1e-12,
+            "east leg heads 90°"
+        );
         let s = p.state_at(15.0);
         assert!((s.pos_enu_m - Vector3::new(100.0, 50.0, 0.0)).norm() < 1e-12);
         assert!(s.heading_rad.abs() < 1e-12, "north leg heads 0°");
@@ -498,7 +714,14 @@ mod tests {
         assert!(p.state_at(25.0).vel_enu_mps.norm() < 1e-12);
         assert!((p.state_at(25.0).pos_enu_m - Vector3::new(100.0, 100.0, 0.0)).norm() < 1e-9);
         // Short path: a triangle that peaks below the cruise speed.
-        let p = plan(&cfg(&[&[0.0, 0.0], &[16.0, 0.0]], 10.0, Some(2.0), None, None, None));
+        let p = plan(&cfg(
+            &[&[0.0, 0.0], &[16.0, 0.0]],
+            10.0,
+            Some(2.0),
+            None,
+            None,
+            None,
+        ));
         assert!((p.duration_s() - 2.0 * (16.0f64 / 2.0).sqrt()).abs() < 1e-9);
     }
 
@@ -525,7 +748,14 @@ mod tests {
         // At mid-arc the heading is 45°, half-way between the legs.
         assert!((mid.heading_rad - FRAC_PI_2 / 2.0).abs() < 1e-9);
         // Tight corner with ramps: legs of 10 m cap R at 5 m, so the speed there is √10.
-        let p = plan(&cfg(&[&[0.0, 0.0], &[10.0, 0.0], &[10.0, 10.0]], 10.0, Some(2.0), Some(2.0), None, None));
+        let p = plan(&cfg(
+            &[&[0.0, 0.0], &[10.0, 0.0], &[10.0, 10.0]],
+            10.0,
+            Some(2.0),
+            Some(2.0),
+            None,
+            None,
+        ));
         let mut on_arc = 0;
         for i in 0..=1000 {
             let s = p.state_at(p.duration_s() * i as f64 / 1000.0);
@@ -533,7 +763,9 @@ mod tests {
             assert!(v <= 10.0 + 1e-9);
             if v > 1e-9 {
                 let along = s.acc_enu_mps2.dot(&s.vel_enu_mps) / v;
-                let lateral = (s.acc_enu_mps2.norm_squared() - along * along).max(0.0).sqrt();
+                let lateral = (s.acc_enu_mps2.norm_squared() - along * along)
+                    .max(0.0)
+                    .sqrt();
                 assert!(lateral <= 2.0 + 1e-9, "lateral {lateral}");
                 if lateral > 1e-9 {
                     on_arc += 1;
@@ -552,11 +784,30 @@ mod tests {
         assert!((p.duration_s() - 80.0).abs() < 1e-9);
         assert!(p.state_at(40.0).pos_enu_m.norm() < 1e-9);
         // A closed list (last = first) is the same loop.
-        let sq5: &[&[f64]] = &[&[0.0, 0.0], &[100.0, 0.0], &[100.0, 100.0], &[0.0, 100.0], &[0.0, 0.0]];
-        assert!((plan(&cfg(sq5, 10.0, None, None, None, Some(1))).duration_s() - 40.0).abs() < 1e-9);
+        let sq5: &[&[f64]] = &[
+            &[0.0, 0.0],
+            &[100.0, 0.0],
+            &[100.0, 100.0],
+            &[0.0, 100.0],
+            &[0.0, 0.0],
+        ];
+        assert!(
+            (plan(&cfg(sq5, 10.0, None, None, None, Some(1))).duration_s() - 40.0).abs() < 1e-9
+        );
         // A two-point "loop" is a shuttle that stops at each end when ramps are on.
-        let p = plan(&cfg(&[&[0.0, 0.0], &[50.0, 0.0]], 5.0, Some(1.0), Some(1.0), None, Some(1)));
-        assert!((p.duration_s() - 2.0 * (10.0 + 5.0)).abs() < 1e-9, "{}", p.duration_s());
+        let p = plan(&cfg(
+            &[&[0.0, 0.0], &[50.0, 0.0]],
+            5.0,
+            Some(1.0),
+            Some(1.0),
+            None,
+            Some(1),
+        ));
+        assert!(
+            (p.duration_s() - 2.0 * (10.0 + 5.0)).abs() < 1e-9,
+            "{}",
+            p.duration_s()
+        );
         assert!(p.state_at(15.0).vel_enu_mps.norm() < 1e-9);
     }
 
@@ -565,17 +816,66 @@ mod tests {
         let key = |c: TrajectoryConfig| WaypointPlan::from_config(&c).unwrap_err().key;
         assert_eq!(key(cfg(L, 0.0, None, None, None, None)), "speed_mps");
         assert_eq!(key(cfg(L, f64::NAN, None, None, None, None)), "speed_mps");
-        assert_eq!(key(cfg(L, 10.0, Some(-1.0), None, None, None)), "accel_mps2");
-        assert_eq!(key(cfg(L, 10.0, None, Some(0.0), None, None)), "lateral_accel_mps2");
+        assert_eq!(
+            key(cfg(L, 10.0, Some(-1.0), None, None, None)),
+            "accel_mps2"
+        );
+        assert_eq!(
+            key(cfg(L, 10.0, None, Some(0.0), None, None)),
+            "lateral_accel_mps2"
+        );
         assert_eq!(key(cfg(L, 10.0, None, None, Some(-1.0), None)), "dwell_s");
         assert_eq!(key(cfg(L, 10.0, None, None, None, Some(0))), "laps");
-        assert_eq!(key(cfg(&[&[0.0, 0.0]], 10.0, None, None, None, None)), "points_enu_m");
-        assert_eq!(key(cfg(&[&[1.0, 1.0], &[1.0, 1.0]], 10.0, None, None, None, None)), "points_enu_m");
-        assert_eq!(key(cfg(&[&[1.0], &[2.0, 1.0]], 10.0, None, None, None, None)), "points_enu_m");
-        assert_eq!(key(cfg(&[&[1.0, f64::INFINITY], &[2.0, 1.0]], 10.0, None, None, None, None)), "points_enu_m");
-        assert_eq!(key(cfg(&[&[0.0, 0.0], &[1.0e6, 0.0]], 0.001, None, None, None, None)), "speed_mps");
+        assert_eq!(
+            key(cfg(&[&[0.0, 0.0]], 10.0, None, None, None, None)),
+            "points_enu_m"
+        );
+        assert_eq!(
+            key(cfg(
+                &[&[1.0, 1.0], &[1.0, 1.0]],
+                10.0,
+                None,
+                None,
+                None,
+                None
+            )),
+            "points_enu_m"
+        );
+        assert_eq!(
+            key(cfg(&[&[1.0], &[2.0, 1.0]], 10.0, None, None, None, None)),
+            "points_enu_m"
+        );
+        assert_eq!(
+            key(cfg(
+                &[&[1.0, f64::INFINITY], &[2.0, 1.0]],
+                10.0,
+                None,
+                None,
+                None,
+                None
+            )),
+            "points_enu_m"
+        );
+        assert_eq!(
+            key(cfg(
+                &[&[0.0, 0.0], &[1.0e6, 0.0]],
+                0.001,
+                None,
+                None,
+                None,
+                None
+            )),
+            "speed_mps"
+        );
         assert_eq!(key(cfg(L, 10.0, None, None, None, Some(u32::MAX))), "laps");
-        let mut c = cfg(&[&[0.0, 0.0, 1.0], &[5.0, 0.0, 1.0]], 1.0, None, None, None, None);
+        let mut c = cfg(
+            &[&[0.0, 0.0, 1.0], &[5.0, 0.0, 1.0]],
+            1.0,
+            None,
+            None,
+            None,
+            None,
+        );
         if let TrajectoryConfig::Waypoints { height_m, .. } = &mut c {
             *height_m = Some(3.0);
         }
@@ -584,7 +884,14 @@ mod tests {
 
     #[test]
     fn vertical_leg_keeps_the_previous_heading() {
-        let p = plan(&cfg(&[&[0.0, 0.0, 0.0], &[10.0, 0.0, 0.0], &[10.0, 0.0, 10.0]], 1.0, None, None, None, None));
+        let p = plan(&cfg(
+            &[&[0.0, 0.0, 0.0], &[10.0, 0.0, 0.0], &[10.0, 0.0, 10.0]],
+            1.0,
+            None,
+            None,
+            None,
+            None,
+        ));
         assert!((p.state_at(15.0).heading_rad - FRAC_PI_2).abs() < 1e-12);
         assert!((p.state_at(15.0).pos_enu_m.z - 5.0).abs() < 1e-12);
     }

@@ -1,0 +1,45 @@
+//! Helpers shared by the integration tests.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// The repository root.
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The shared GNSS data directory, or `None` (with the reason printed) when absent.
+pub fn shared_gnss() -> Option<PathBuf> {
+    let p = repo().join("../shared/data/gnss");
+    if p.join("brdc1820.10n").exists() {
+        Some(p)
+    } else {
+        eprintln!("skipped: {} not found (the real GNSS files live in ../shared, which CI provides)", p.display());
+        None
+    }
+}
+
+/// A fresh temporary directory for one test.
+pub fn tmp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("hybridnav-it-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("create temp dir");
+    d
+}
+
+/// Runs the `hybridnav` binary.
+pub fn hybridnav(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hybridnav")).args(args).current_dir(repo()).output().expect("run hybridnav")
+}
+
+/// Writes `text` to `dir/name` and returns the path.
+pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).expect("write test file");
+    p
+}
+
+/// The default world's text.
+pub fn default_world_text() -> String {
+    std::fs::read_to_string(repo().join("worlds/default.toml")).expect("read default world")
+}

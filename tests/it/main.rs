@@ -1,0 +1,6 @@
+//! The one integration-test binary (as ripgrep does): each module tests one area through
+//! the public API or the `hybridnav` binary.
+
+mod cli;
+mod common;
+mod skeleton;
