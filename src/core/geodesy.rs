@@ -176,14 +176,29 @@ mod tests {
         let b = WGS84_A_M * (1.0 - WGS84_F);
         let p = Geodetic::from_deg(90.0, 0.0, 0.0).to_ecef();
         assert!((p.z - b).abs() < 1e-6 && p.x.abs() < 1e-6);
-        // IGS station BJFS (Fangshan, Beijing), ITRF coordinates published in the IGS site
-        // log: X = -2148744.3 m, Y = 4426641.2 m, Z = 4044655.9 m, i.e. 39.6086° N,
-        // 115.8925° E, 87.4 m ellipsoidal height (values from the IGS site log, independent
-        // of this code).
+        // IGS station BJFS (Fangshan, Beijing): X = -2148744.3 m, Y = 4426641.2 m,
+        // Z = 4044655.9 m is 39.6086° N, 115.8925° E, 87.46 m ellipsoidal height (the IGS
+        // site log; pymap3d's ecef2geodetic gives 39.608601°, 115.892488°, 87.460 m).
         let g = Geodetic::from_ecef(&Vector3::new(-2_148_744.3, 4_426_641.2, 4_044_655.9));
         assert!((g.lat_deg() - 39.6086).abs() < 1e-4, "{}", g.lat_deg());
         assert!((g.lon_deg() - 115.8925).abs() < 1e-4, "{}", g.lon_deg());
         assert!((g.h_m - 87.4).abs() < 0.5, "{}", g.h_m);
+    }
+
+    #[test]
+    fn matches_pymap3d() {
+        // Reference values computed with pymap3d 3.x (an independent implementation):
+        // geodetic2ecef(40.0040, 116.3870, 50.0), geodetic2enu(40.01, 116.40, 80.0,
+        // 40.0040, 116.3870, 50.0) and geodetic2aer(40.5, 117.0, 20000.0, same origin).
+        let o = Geodetic::from_deg(40.0040, 116.3870, 50.0);
+        let p = o.to_ecef();
+        assert!((p - Vector3::new(-2_174_365.653_789, 4_382_727.778_704, 4_078_357.934_260)).norm() < 1e-5);
+        let f = EnuFrame::new(o);
+        let enu = f.enu_of_ecef(&Geodetic::from_deg(40.01, 116.40, 80.0).to_ecef());
+        assert!((enu - Vector3::new(1_109.972_080, 666.297_927, 29.868_660)).norm() < 1e-5, "{enu}");
+        let (az, el) = azimuth_elevation(&p, &Geodetic::from_deg(40.5, 117.0, 20_000.0).to_ecef());
+        assert!((az.to_degrees() - 43.240_992_637).abs() < 1e-8, "{}", az.to_degrees());
+        assert!((el.to_degrees() - 14.372_879_988).abs() < 1e-8, "{}", el.to_degrees());
     }
 
     #[test]
