@@ -521,6 +521,10 @@ mod tests {
             for (g, m) in got.iter().zip(ms) {
                 let tau = m as f64 * 0.1;
                 let want = allan_variance_model(h0, hm2, tau);
+                eprintln!(
+                    "{osc:?} τ = {tau} s: simulated σ_y² = {g:.4e}, model {want:.4e} ({:+.2} %)",
+                    100.0 * (g / want - 1.0)
+                );
                 assert!(
                     (g / want - 1.0).abs() < 0.10,
                     "{osc:?} τ = {tau} s: simulated {g:e}, model {want:e}"

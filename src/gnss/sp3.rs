@@ -374,6 +374,19 @@ EOF
         assert_eq!(e.line(), Some(4));
     }
 
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(300))]
+        /// Random single-character damage gives Ok or a typed error, never a panic.
+        #[test]
+        fn damaged_files_never_panic(pos in 0usize..2000, c in proptest::char::any()) {
+            let mut chars: Vec<char> = SAMPLE.chars().collect();
+            let at = pos % chars.len();
+            chars[at] = c;
+            let text: String = chars.into_iter().collect();
+            let _ = parse_sp3(&text, "fuzz");
+        }
+    }
+
     #[test]
     fn errors_name_the_line() {
         let e = parse_sp3("", "e.sp3").unwrap_err();

@@ -157,7 +157,7 @@ pub(crate) fn check_duration_and_step(duration_s: f64, step_s: f64) -> Result<()
 /// when the direction has (almost) no horizontal part.
 pub(crate) fn heading_of(v: &Vector3<f64>) -> Option<f64> {
     let h = v.x.hypot(v.y);
-    if h <= 1e-12 * (1.0 + v.z.abs()) || h == 0.0 {
+    if h <= 1e-12 * (1.0 + v.z.abs()) {
         return None;
     }
     let mut az = v.x.atan2(v.y);

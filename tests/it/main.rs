@@ -3,4 +3,6 @@
 
 mod cli;
 mod common;
+mod fusion_filters;
+mod motion_models;
 mod skeleton;

@@ -63,7 +63,11 @@ fn point_strategy() -> impl Strategy<Value = Vec<Vec<f64>>> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig {
+        cases: 64,
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    })]
 
     /// With ramps and rounded corners the motion is smooth: velocity is the derivative of
     /// position, acceleration the derivative of velocity (up to its switching instants),
