@@ -41,3 +41,54 @@ fn trials_depend_only_on_seed_and_index() {
     let c = run_trial(&w, 11, 5).unwrap();
     assert_ne!(a, c);
 }
+
+/// The default world in open sky with white measurement errors only: the conditions under
+/// which seed 000's EKF model is exactly right about the measurements.
+fn open_sky_white_world() -> String {
+    let s = default_world_text();
+    let i = s.find("# An urban canyon").unwrap();
+    let j = s.find("[[estimator]]").unwrap();
+    let s = format!("{}{}", &s[..i], &s[j..]);
+    // A straight road at constant speed: the truth has no jerk, so a small acceleration PSD
+    // in the filter is the right model and the filter should be consistent.
+    let s = s.replace(
+        "points_enu_m = [[0, 0], [850, 0], [850, 12], [0, 12]], speed_mps = 10.0, accel_mps2 = 1.5, lateral_accel_mps2 = 2.0,",
+        "points_enu_m = [[0, 0], [1500, 900]], speed_mps = 10.0,",
+    );
+    let s = s.replace("filter = \"ekf11\"\n", "filter = \"ekf11\"\nekf = { accel_psd_m2ps5 = [0.01, 0.01, 0.01] }\n");
+    s.replace(
+        "elevation_mask_deg = 10.0",
+        "elevation_mask_deg = 10.0\n\n[sensors.gnss.errors]\nure_tau_s = 0.001\niono_residual = 0.0\niono_residual_per_sat = 0.0\ntropo_residual = 0.0\n",
+    )
+}
+
+#[test]
+fn full_chain_nees_is_within_its_chi2_band_in_open_sky() {
+    use hybridnav::fusion::ekf11::chi2;
+    let text = open_sky_white_world();
+    let w = parse_world(&text, &repo().join("worlds/default.toml")).unwrap();
+    let runs = 50;
+    let results: Vec<_> = (0..runs).map(|i| run_trial(&w, 21, i).unwrap()).collect();
+    // Two-sided 95 % band of the run-averaged NEES: N·ε̄ ~ χ²(3N).
+    let dof = 3.0 * runs as f64;
+    let (lo, hi) = (chi2::quantile(0.025, dof) / runs as f64, chi2::quantile(0.975, dof) / runs as f64);
+    for k in [1usize, 2] {
+        let n_epochs = results[0].estimators[k].epochs.len();
+        let mut inside = 0;
+        let mut counted = 0;
+        let mut grand = 0.0;
+        for e in 0..n_epochs {
+            if results[0].estimators[k].epochs[e].t_s < 20.0 {
+                continue; // Let the filter converge from its least-squares start.
+            }
+            let mean = results.iter().map(|r| r.estimators[k].epochs[e].nees_pos.unwrap()).sum::<f64>() / runs as f64;
+            grand += mean;
+            counted += 1;
+            inside += usize::from((lo..=hi).contains(&mean));
+        }
+        let share = inside as f64 / counted as f64;
+        let name = &results[0].estimators[k].name;
+        eprintln!("{name}: mean NEES {:.3}, {:.1} % of epochs inside [{lo:.3}, {hi:.3}]", grand / counted as f64, 100.0 * share);
+        assert!(share >= 0.9, "{name}: only {:.1} % of epochs inside the 95 % band", 100.0 * share);
+    }
+}
