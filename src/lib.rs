@@ -4,9 +4,11 @@
 
 pub mod cli;
 pub mod core;
+pub mod dtmb;
 pub mod engine;
 pub mod fusion;
 pub mod gnss;
+pub mod inertial;
 pub mod io;
 pub mod metrics;
 pub mod montecarlo;

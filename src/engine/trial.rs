@@ -2,10 +2,11 @@
 
 use super::queue::{EventKind, EventQueue};
 use super::{SampleContext, Truth};
-use crate::core::{SimTime, TrialRng};
+use crate::core::{EnuFrame, GpsTime, SimTime, TrialRng};
 use crate::fusion::estimator::Estimate;
 use crate::fusion::measurement::MeasurementBatch;
-use crate::world::World;
+use crate::motion::Trajectory;
+use crate::world::{TrialSetup, World};
 use nalgebra::Vector3;
 
 /// One estimator's record at one measurement epoch.
@@ -40,20 +41,20 @@ pub struct TrialResult {
 }
 
 /// Truth at a simulation time.
-pub fn truth_at(world: &World, trajectory: &dyn crate::motion::Trajectory, sim: SimTime) -> Truth {
+pub fn truth_at(frame: &EnuFrame, start: GpsTime, trajectory: &dyn Trajectory, sim: SimTime) -> Truth {
     let enu = trajectory.state_at(sim.seconds());
     Truth {
         sim,
-        t: sim.to_gps(world.start),
-        pos_ecef_m: world.frame.ecef_of_enu(&enu.pos_enu_m),
-        vel_ecef_mps: world.frame.ecef_vector_of_enu(&enu.vel_enu_mps),
+        t: sim.to_gps(start),
+        pos_ecef_m: frame.ecef_of_enu(&enu.pos_enu_m),
+        vel_ecef_mps: frame.ecef_vector_of_enu(&enu.vel_enu_mps),
         enu,
     }
 }
 
-fn errors(world: &World, truth: &Truth, est: &Estimate) -> (f64, f64, Option<f64>) {
+fn errors(frame: &EnuFrame, truth: &Truth, est: &Estimate) -> (f64, f64, Option<f64>) {
     let e: Vector3<f64> = est.pos_ecef_m - truth.pos_ecef_m;
-    let e_enu = world.frame.enu_vector_of_ecef(&e);
+    let e_enu = frame.enu_vector_of_ecef(&e);
     let nees = est.cov_pos_m2.try_inverse().map(|pinv| (e.transpose() * pinv * e)[(0, 0)]).filter(|v| v.is_finite());
     (e.norm(), (e_enu.x * e_enu.x + e_enu.y * e_enu.y).sqrt(), nees)
 }
@@ -68,6 +69,14 @@ fn errors(world: &World, truth: &Truth, est: &Estimate) -> (f64, f64, Option<f64
 pub fn run_trial(world: &World, seed: u64, trial: u64) -> Result<TrialResult, String> {
     let rng = TrialRng::new(seed, trial);
     let mut setup = world.build_trial(&rng)?;
+    let estimators = simulate(&world.frame, world.start, &mut setup);
+    Ok(TrialResult { trial, estimators })
+}
+
+/// The event loop of one trial: samples every source when it asks, hands each batch to
+/// the estimators that consume it, records their errors against the truth, and makes each
+/// estimator's latest estimate visible to every source at its next event.
+pub fn simulate(frame: &EnuFrame, start: GpsTime, setup: &mut TrialSetup) -> Vec<EstimatorTrace> {
     let mut queue = EventQueue::with_capacity(setup.sources.len() + 1);
     for (i, s) in setup.sources.iter().enumerate() {
         queue.schedule(s.first_sample(), EventKind::Sample(i));
@@ -87,7 +96,7 @@ pub fn run_trial(world: &World, seed: u64, trial: u64) -> Result<TrialResult, St
             EventKind::End => break,
             EventKind::Sample(i) => i,
         };
-        let truth = truth_at(world, setup.trajectory.as_ref(), ev.t);
+        let truth = truth_at(frame, start, setup.trajectory.as_ref(), ev.t);
         batch.items.clear();
         let ctx = SampleContext { truth: &truth, estimates: &latest };
         let source = &mut setup.sources[source_idx];
@@ -103,7 +112,7 @@ pub fn run_trial(world: &World, seed: u64, trial: u64) -> Result<TrialResult, St
             latest[k] = est.latest();
             let (err_3d_m, err_h_m, nees_pos) = match &out.estimate {
                 Some(e) => {
-                    let (e3, eh, n) = errors(world, &truth, e);
+                    let (e3, eh, n) = errors(frame, &truth, e);
                     (Some(e3), Some(eh), n)
                 }
                 None => (None, None, None),
@@ -120,5 +129,80 @@ pub fn run_trial(world: &World, seed: u64, trial: u64) -> Result<TrialResult, St
             });
         }
     }
-    Ok(TrialResult { trial, estimators: traces })
+    traces
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::Geodetic;
+    use crate::engine::Source;
+    use crate::fusion::estimator::{EpochOutcome, Estimator};
+    use crate::fusion::measurement::{Measurement, PositionFix};
+    use crate::motion::TrajectoryConfig;
+    use nalgebra::Matrix3;
+    use std::sync::{Arc, Mutex};
+
+    /// A source that reports the truth as a position fix every second and records which
+    /// estimate it saw at each of its events.
+    struct Probe {
+        seen: Arc<Mutex<Vec<Option<f64>>>>,
+        period: i64,
+    }
+
+    impl Source for Probe {
+        fn name(&self) -> &str {
+            "probe"
+        }
+        fn first_sample(&self) -> SimTime {
+            SimTime(0)
+        }
+        fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
+            self.seen.lock().unwrap().push(ctx.estimates[0].map(|e| e.t.seconds_since(GpsTime::from_ns(0))));
+            out.t = ctx.truth.t;
+            out.items.push(Measurement::Position(PositionFix { pos_ecef_m: ctx.truth.pos_ecef_m, cov_m2: Matrix3::identity() }));
+            Some(SimTime(ctx.truth.sim.0 + self.period))
+        }
+    }
+
+    /// An estimator that echoes the last fix it was given.
+    struct Echo(Option<Estimate>);
+
+    impl Estimator for Echo {
+        fn name(&self) -> &str {
+            "echo"
+        }
+        fn consumes(&self, source: &str) -> bool {
+            source == "probe"
+        }
+        fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
+            if let Some(Measurement::Position(f)) = batch.items.first() {
+                self.0 = Some(Estimate { t: batch.t, pos_ecef_m: f.pos_ecef_m, vel_ecef_mps: None, cov_pos_m2: f.cov_m2 });
+            }
+            EpochOutcome { estimate: self.0, used: 1, ..EpochOutcome::default() }
+        }
+        fn latest(&self) -> Option<Estimate> {
+            self.0
+        }
+    }
+
+    #[test]
+    fn estimates_close_the_loop_at_the_next_event() {
+        let seen = Arc::new(Mutex::new(Vec::new()));
+        let traj = TrajectoryConfig::Static { position_enu_m: [0.0, 0.0, 0.0], duration_s: 3.0 };
+        let mut setup = TrialSetup {
+            trajectory: traj.build(&mut TrialRng::new(0, 0).stream("t")).unwrap(),
+            sources: vec![Box::new(Probe { seen: Arc::clone(&seen), period: 1_000_000_000 })],
+            estimators: vec![Box::new(Echo(None))],
+            end: SimTime::from_seconds(3.0),
+        };
+        let start = GpsTime::from_ns(0);
+        let traces = simulate(&EnuFrame::new(Geodetic::from_deg(40.0, 116.0, 0.0)), start, &mut setup);
+        // Events at 0, 1, 2 and 3 s (the End event at 3 s was scheduled before the sample at
+        // 3 s, so it comes first and the loop stops there).
+        assert_eq!(traces[0].epochs.len(), 3);
+        assert!(traces[0].epochs.iter().all(|e| e.err_3d_m == Some(0.0)));
+        // At each event the source sees the estimate made from its previous sample.
+        assert_eq!(*seen.lock().unwrap(), vec![None, Some(0.0), Some(1.0)]);
+    }
 }
