@@ -4,5 +4,6 @@
 mod cli;
 mod common;
 mod fusion_filters;
+mod gnss_orbits;
 mod motion_models;
 mod skeleton;
