@@ -179,3 +179,30 @@ fn positions_csv_matches_precise_orbit() {
     assert!(err < 5.0, "broadcast vs precise G05: {err} m");
     assert_eq!(out.lines().count(), 1 + 3);
 }
+
+#[test]
+fn synth_reproduces_the_embedded_ephemeris_and_reads_back() {
+    let d = tmp_dir("synth");
+    let out = d.join("nominal.rnx");
+    let o = hybridnav(&["ephemeris", "synth", "--start", "2018-06-01T00:00:00", "--hours", "48", "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let written = std::fs::read(&out).unwrap();
+    let embedded = std::fs::read(repo().join("ephemeris/nominal-gps-bds.rnx")).unwrap();
+    assert!(written == embedded, "ephemeris synth no longer reproduces ephemeris/nominal-gps-bds.rnx");
+    // The file reads back through the CLI: the BeiDou GEO C01 stays over its longitude.
+    let o = hybridnav(&["ephemeris", "positions", "--nav", out.to_str().unwrap(), "--start", "2018-06-01T00:00:00", "--end", "2018-06-01T12:00:00", "--step", "3600", "--sats", "G01,C01"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let csv = String::from_utf8_lossy(&o.stdout);
+    let rows: Vec<Vec<String>> = csv.lines().skip(1).map(|l| l.split(',').map(String::from).collect()).collect();
+    assert_eq!(rows.len(), 2 * 13);
+    for r in rows.iter().filter(|r| r[0] == "C01") {
+        let (x, y, z): (f64, f64, f64) = (r[3].parse().unwrap(), r[4].parse().unwrap(), r[5].parse().unwrap());
+        let lon = y.atan2(x).to_degrees();
+        let radius = (x * x + y * y + z * z).sqrt();
+        assert!((lon - 140.0).abs() < 0.5, "C01 longitude {lon}");
+        assert!((radius - 42_164_000.0).abs() < 20_000.0, "C01 radius {radius}");
+    }
+    let o = hybridnav(&["ephemeris", "synth", "--start", "2018-06-01T00:00:00", "--hours", "0", "--out", out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--hours"), "{}", stderr(&o));
+}
