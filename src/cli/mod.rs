@@ -110,10 +110,16 @@ pub fn run(cli: Cli) -> Result<()> {
             println!("ok");
             Ok(())
         }
-        Command::Ephemeris(EphemerisCommand::Positions { nav, start, end, step, sats }) => {
-            cmd_positions(&nav, &start, &end, step, &sats)
+        Command::Ephemeris(EphemerisCommand::Positions {
+            nav,
+            start,
+            end,
+            step,
+            sats,
+        }) => cmd_positions(&nav, &start, &end, step, &sats),
+        Command::Ephemeris(EphemerisCommand::Synth { start, hours, out }) => {
+            cmd_synth(&start, hours, &out)
         }
-        Command::Ephemeris(EphemerisCommand::Synth { start, hours, out }) => cmd_synth(&start, hours, &out),
     }
 }
 
@@ -129,8 +135,14 @@ fn cmd_run(a: RunArgs) -> Result<()> {
         Some(t) => t,
         None => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };
-    let opts = RunOptions { trials, seed: a.seed.unwrap_or(world.file.montecarlo.seed), threads, progress: !a.quiet };
-    std::fs::create_dir_all(&a.out).with_context(|| format!("cannot create output directory {}", a.out.display()))?;
+    let opts = RunOptions {
+        trials,
+        seed: a.seed.unwrap_or(world.file.montecarlo.seed),
+        threads,
+        progress: !a.quiet,
+    };
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("cannot create output directory {}", a.out.display()))?;
     let results = run_trials(&world, &opts).map_err(anyhow::Error::msg)?;
     let summary = summarise(&world, &opts, &results);
     let mut json = serde_json::to_string_pretty(&summary)?;
@@ -147,8 +159,12 @@ fn cmd_run(a: RunArgs) -> Result<()> {
 fn cmd_positions(nav: &Path, start: &str, end: &str, step: f64, sats: &[String]) -> Result<()> {
     use std::io::Write;
     let data = crate::gnss::rinex_nav::read_nav_file(nav)?;
-    let t0 = GpsTime::parse_iso(start).map_err(anyhow::Error::msg).context("--start")?;
-    let t1 = GpsTime::parse_iso(end).map_err(anyhow::Error::msg).context("--end")?;
+    let t0 = GpsTime::parse_iso(start)
+        .map_err(anyhow::Error::msg)
+        .context("--start")?;
+    let t1 = GpsTime::parse_iso(end)
+        .map_err(anyhow::Error::msg)
+        .context("--end")?;
     if !(step.is_finite() && step > 0.0) {
         bail!("--step must be a positive number of seconds, got {step}");
     }
@@ -162,7 +178,9 @@ fn cmd_positions(nav: &Path, start: &str, end: &str, step: f64, sats: &[String])
     let ids: Vec<EmitterId> = if sats.is_empty() {
         data.satellites()
     } else {
-        sats.iter().map(|s| s.parse::<EmitterId>().map_err(anyhow::Error::msg)).collect::<Result<_>>()?
+        sats.iter()
+            .map(|s| s.parse::<EmitterId>().map_err(anyhow::Error::msg))
+            .collect::<Result<_>>()?
     };
     let stdout = std::io::stdout();
     let mut w = std::io::BufWriter::new(stdout.lock());
@@ -202,7 +220,9 @@ fn cmd_positions(nav: &Path, start: &str, end: &str, step: f64, sats: &[String])
 }
 
 fn cmd_synth(start: &str, hours: f64, out: &Path) -> Result<()> {
-    let t0 = GpsTime::parse_iso(start).map_err(anyhow::Error::msg).context("--start")?;
+    let t0 = GpsTime::parse_iso(start)
+        .map_err(anyhow::Error::msg)
+        .context("--start")?;
     if !(hours.is_finite() && hours > 0.0 && hours <= 24.0 * 31.0) {
         bail!("--hours must be within (0, 744], got {hours}");
     }

@@ -31,7 +31,11 @@ pub struct Geodetic {
 impl Geodetic {
     /// From degrees and metres.
     pub fn from_deg(lat_deg: f64, lon_deg: f64, h_m: f64) -> Self {
-        Self { lat_rad: lat_deg.to_radians(), lon_rad: lon_deg.to_radians(), h_m }
+        Self {
+            lat_rad: lat_deg.to_radians(),
+            lon_rad: lon_deg.to_radians(),
+            h_m,
+        }
     }
 
     /// ECEF coordinates (m).
@@ -56,8 +60,16 @@ impl Geodetic {
         let r = (x * x + y * y).sqrt();
         if r < 1e-9 {
             // On the polar axis longitude is arbitrary; report 0 and the polar height.
-            let lat = if z >= 0.0 { std::f64::consts::FRAC_PI_2 } else { -std::f64::consts::FRAC_PI_2 };
-            return Self { lat_rad: lat, lon_rad: 0.0, h_m: z.abs() - b };
+            let lat = if z >= 0.0 {
+                std::f64::consts::FRAC_PI_2
+            } else {
+                -std::f64::consts::FRAC_PI_2
+            };
+            return Self {
+                lat_rad: lat,
+                lon_rad: 0.0,
+                h_m: z.abs() - b,
+            };
         }
         let f = 54.0 * b * b * z * z;
         let g = r * r + (1.0 - e2) * z * z - e2 * (a * a - b * b);
@@ -66,7 +78,9 @@ impl Geodetic {
         let pp = f / (3.0 * (s + 1.0 / s + 1.0).powi(2) * g * g);
         let q = (1.0 + 2.0 * e2 * e2 * pp).sqrt();
         let r0 = -(pp * e2 * r) / (1.0 + q)
-            + (0.5 * a * a * (1.0 + 1.0 / q) - pp * (1.0 - e2) * z * z / (q * (1.0 + q)) - 0.5 * pp * r * r)
+            + (0.5 * a * a * (1.0 + 1.0 / q)
+                - pp * (1.0 - e2) * z * z / (q * (1.0 + q))
+                - 0.5 * pp * r * r)
                 .max(0.0)
                 .sqrt();
         let u = ((r - e2 * r0).powi(2) + z * z).sqrt();
@@ -75,7 +89,11 @@ impl Geodetic {
         let h = u * (1.0 - b * b / (a * v));
         let lat = ((z + ep2 * z0) / r).atan();
         let lon = y.atan2(x);
-        Self { lat_rad: lat, lon_rad: lon, h_m: h }
+        Self {
+            lat_rad: lat,
+            lon_rad: lon,
+            h_m: h,
+        }
     }
 
     /// Latitude in degrees.
@@ -147,12 +165,20 @@ impl EnuFrame {
 /// `observer`, both ECEF; the local vertical is the ellipsoid normal at the observer.
 pub fn azimuth_elevation(observer: &Vector3<f64>, target: &Vector3<f64>) -> (f64, f64) {
     let g = Geodetic::from_ecef(observer);
-    azimuth_elevation_with(&ecef_to_enu_rotation(g.lat_rad, g.lon_rad), observer, target)
+    azimuth_elevation_with(
+        &ecef_to_enu_rotation(g.lat_rad, g.lon_rad),
+        observer,
+        target,
+    )
 }
 
 /// As [`azimuth_elevation`] with the observer's ECEF → ENU rotation given, for hot loops
 /// that see many targets from one place.
-pub fn azimuth_elevation_with(rot: &Matrix3<f64>, observer: &Vector3<f64>, target: &Vector3<f64>) -> (f64, f64) {
+pub fn azimuth_elevation_with(
+    rot: &Matrix3<f64>,
+    observer: &Vector3<f64>,
+    target: &Vector3<f64>,
+) -> (f64, f64) {
     let d = rot * (target - observer);
     let horiz = (d.x * d.x + d.y * d.y).sqrt();
     let el = d.z.atan2(horiz);
@@ -192,13 +218,27 @@ mod tests {
         // 40.0040, 116.3870, 50.0) and geodetic2aer(40.5, 117.0, 20000.0, same origin).
         let o = Geodetic::from_deg(40.0040, 116.3870, 50.0);
         let p = o.to_ecef();
-        assert!((p - Vector3::new(-2_174_365.653_789, 4_382_727.778_704, 4_078_357.934_260)).norm() < 1e-5);
+        assert!(
+            (p - Vector3::new(-2_174_365.653_789, 4_382_727.778_704, 4_078_357.934_260)).norm()
+                < 1e-5
+        );
         let f = EnuFrame::new(o);
         let enu = f.enu_of_ecef(&Geodetic::from_deg(40.01, 116.40, 80.0).to_ecef());
-        assert!((enu - Vector3::new(1_109.972_080, 666.297_927, 29.868_660)).norm() < 1e-5, "{enu}");
+        assert!(
+            (enu - Vector3::new(1_109.972_080, 666.297_927, 29.868_660)).norm() < 1e-5,
+            "{enu}"
+        );
         let (az, el) = azimuth_elevation(&p, &Geodetic::from_deg(40.5, 117.0, 20_000.0).to_ecef());
-        assert!((az.to_degrees() - 43.240_992_637).abs() < 1e-8, "{}", az.to_degrees());
-        assert!((el.to_degrees() - 14.372_879_988).abs() < 1e-8, "{}", el.to_degrees());
+        assert!(
+            (az.to_degrees() - 43.240_992_637).abs() < 1e-8,
+            "{}",
+            az.to_degrees()
+        );
+        assert!(
+            (el.to_degrees() - 14.372_879_988).abs() < 1e-8,
+            "{}",
+            el.to_degrees()
+        );
     }
 
     #[test]

@@ -5,7 +5,9 @@ use std::str::FromStr;
 
 /// A positioning system. Each system has its own receiver clock offset in a filter
 /// (inter-system biases), except where a world says two systems share a clock.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum System {
     /// GPS L1 C/A.
@@ -88,9 +90,12 @@ impl FromStr for EmitterId {
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let s = s.trim();
         let mut chars = s.chars();
-        let letter = chars.next().ok_or_else(|| "empty emitter id: expected e.g. G05 or C01".to_string())?;
-        let system = System::from_letter(letter.to_ascii_uppercase())
-            .ok_or_else(|| format!("emitter id '{s}': expected a system letter G, C, D or T followed by a number"))?;
+        let letter = chars
+            .next()
+            .ok_or_else(|| "empty emitter id: expected e.g. G05 or C01".to_string())?;
+        let system = System::from_letter(letter.to_ascii_uppercase()).ok_or_else(|| {
+            format!("emitter id '{s}': expected a system letter G, C, D or T followed by a number")
+        })?;
         let number: u16 = chars
             .as_str()
             .trim()

@@ -63,7 +63,8 @@ impl TrialRng {
     pub fn stream_seed(&self, name: &str) -> [u8; 32] {
         let h = fnv1a64(name.as_bytes());
         let mut words = [0u64; 4];
-        let mut state = splitmix64(self.master_seed ^ splitmix64(self.trial ^ 0x5851_f42d_4c95_7f2d));
+        let mut state =
+            splitmix64(self.master_seed ^ splitmix64(self.trial ^ 0x5851_f42d_4c95_7f2d));
         for (i, w) in words.iter_mut().enumerate() {
             state = splitmix64(state ^ h.rotate_left(17 * i as u32 + 1));
             *w = state;
@@ -89,8 +90,16 @@ mod tests {
 
     #[test]
     fn same_key_same_sequence() {
-        let a: Vec<u64> = TrialRng::new(7, 3).stream("gnss/G05/noise").random_iter().take(8).collect();
-        let b: Vec<u64> = TrialRng::new(7, 3).stream("gnss/G05/noise").random_iter().take(8).collect();
+        let a: Vec<u64> = TrialRng::new(7, 3)
+            .stream("gnss/G05/noise")
+            .random_iter()
+            .take(8)
+            .collect();
+        let b: Vec<u64> = TrialRng::new(7, 3)
+            .stream("gnss/G05/noise")
+            .random_iter()
+            .take(8)
+            .collect();
         assert_eq!(a, b);
     }
 

@@ -96,12 +96,30 @@ impl GpsTime {
 
     /// Builds a time from a UTC calendar date, applying the leap seconds in force.
     pub fn from_utc(y: i32, mo: u8, d: u8, h: u8, mi: u8, s: u8, ns: u32) -> Self {
-        Self::from_epoch(Epoch::from_gregorian(y, mo, d, h, mi, s, ns, TimeScale::UTC))
+        Self::from_epoch(Epoch::from_gregorian(
+            y,
+            mo,
+            d,
+            h,
+            mi,
+            s,
+            ns,
+            TimeScale::UTC,
+        ))
     }
 
     /// Builds a time from a calendar date read in the GPS time scale.
     pub fn from_gpst_calendar(y: i32, mo: u8, d: u8, h: u8, mi: u8, s: u8, ns: u32) -> Self {
-        Self::from_epoch(Epoch::from_gregorian(y, mo, d, h, mi, s, ns, TimeScale::GPST))
+        Self::from_epoch(Epoch::from_gregorian(
+            y,
+            mo,
+            d,
+            h,
+            mi,
+            s,
+            ns,
+            TimeScale::GPST,
+        ))
     }
 
     /// Builds a time from a calendar date read in BeiDou time.
@@ -110,7 +128,9 @@ impl GpsTime {
     }
 
     fn from_epoch(e: Epoch) -> Self {
-        let ns = e.to_duration_in_time_scale(TimeScale::GPST).total_nanoseconds();
+        let ns = e
+            .to_duration_in_time_scale(TimeScale::GPST)
+            .total_nanoseconds();
         Self::from_ns(ns as i64)
     }
 
@@ -257,8 +277,14 @@ mod tests {
     #[test]
     fn leap_seconds() {
         // GPST − UTC was 15 s in mid-2010 (brdc1820.10n header) and 18 s in 2020.
-        assert_eq!(GpsTime::from_utc(2010, 7, 1, 0, 0, 0, 0).gpst_minus_utc_s(), 15);
-        assert_eq!(GpsTime::from_utc(2020, 6, 25, 0, 0, 0, 0).gpst_minus_utc_s(), 18);
+        assert_eq!(
+            GpsTime::from_utc(2010, 7, 1, 0, 0, 0, 0).gpst_minus_utc_s(),
+            15
+        );
+        assert_eq!(
+            GpsTime::from_utc(2020, 6, 25, 0, 0, 0, 0).gpst_minus_utc_s(),
+            18
+        );
         let utc = GpsTime::parse_iso("2020-06-25T00:00:00Z").unwrap();
         let gps = GpsTime::parse_iso("2020-06-25T00:00:18").unwrap();
         assert_eq!(utc, gps);
@@ -273,7 +299,10 @@ mod tests {
         assert_eq!(t.week(), 1356);
         assert_eq!(t.tow_s(), 14.0);
         let b = GpsTime::parse_iso("2020-06-25T00:00:00 BDT").unwrap();
-        assert_eq!(b.seconds_since(GpsTime::parse_iso("2020-06-25T00:00:00").unwrap()), 14.0);
+        assert_eq!(
+            b.seconds_since(GpsTime::parse_iso("2020-06-25T00:00:00").unwrap()),
+            14.0
+        );
     }
 
     #[test]

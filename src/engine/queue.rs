@@ -35,7 +35,10 @@ pub struct EventQueue {
 impl EventQueue {
     /// An empty queue with room for `capacity` pending events (one per source is typical).
     pub fn with_capacity(capacity: usize) -> Self {
-        Self { heap: BinaryHeap::with_capacity(capacity), next_seq: 0 }
+        Self {
+            heap: BinaryHeap::with_capacity(capacity),
+            next_seq: 0,
+        }
     }
 
     /// Schedules `kind` at `t`.
@@ -46,7 +49,9 @@ impl EventQueue {
 
     /// Removes and returns the earliest event (the first scheduled among equal times).
     pub fn pop(&mut self) -> Option<Event> {
-        self.heap.pop().map(|Reverse((t, seq, kind))| Event { t, seq, kind })
+        self.heap
+            .pop()
+            .map(|Reverse((t, seq, kind))| Event { t, seq, kind })
     }
 
     /// Number of pending events.
@@ -72,6 +77,14 @@ mod tests {
         q.schedule(SimTime(10), EventKind::Sample(1));
         q.schedule(SimTime(10), EventKind::End);
         let order: Vec<EventKind> = std::iter::from_fn(|| q.pop()).map(|e| e.kind).collect();
-        assert_eq!(order, vec![EventKind::Sample(7), EventKind::Sample(2), EventKind::Sample(1), EventKind::End]);
+        assert_eq!(
+            order,
+            vec![
+                EventKind::Sample(7),
+                EventKind::Sample(2),
+                EventKind::Sample(1),
+                EventKind::End
+            ]
+        );
     }
 }

@@ -41,7 +41,12 @@ pub struct TrialResult {
 }
 
 /// Truth at a simulation time.
-pub fn truth_at(frame: &EnuFrame, start: GpsTime, trajectory: &dyn Trajectory, sim: SimTime) -> Truth {
+pub fn truth_at(
+    frame: &EnuFrame,
+    start: GpsTime,
+    trajectory: &dyn Trajectory,
+    sim: SimTime,
+) -> Truth {
     let enu = trajectory.state_at(sim.seconds());
     Truth {
         sim,
@@ -55,8 +60,16 @@ pub fn truth_at(frame: &EnuFrame, start: GpsTime, trajectory: &dyn Trajectory, s
 fn errors(frame: &EnuFrame, truth: &Truth, est: &Estimate) -> (f64, f64, Option<f64>) {
     let e: Vector3<f64> = est.pos_ecef_m - truth.pos_ecef_m;
     let e_enu = frame.enu_vector_of_ecef(&e);
-    let nees = est.cov_pos_m2.try_inverse().map(|pinv| (e.transpose() * pinv * e)[(0, 0)]).filter(|v| v.is_finite());
-    (e.norm(), (e_enu.x * e_enu.x + e_enu.y * e_enu.y).sqrt(), nees)
+    let nees = est
+        .cov_pos_m2
+        .try_inverse()
+        .map(|pinv| (e.transpose() * pinv * e)[(0, 0)])
+        .filter(|v| v.is_finite());
+    (
+        e.norm(),
+        (e_enu.x * e_enu.x + e_enu.y * e_enu.y).sqrt(),
+        nees,
+    )
 }
 
 /// Runs trial `trial` of `world` under `seed`.
@@ -87,7 +100,10 @@ pub fn simulate(frame: &EnuFrame, start: GpsTime, setup: &mut TrialSetup) -> Vec
     let mut traces: Vec<EstimatorTrace> = setup
         .estimators
         .iter()
-        .map(|e| EstimatorTrace { name: e.name().to_string(), epochs: Vec::new() })
+        .map(|e| EstimatorTrace {
+            name: e.name().to_string(),
+            epochs: Vec::new(),
+        })
         .collect();
     let mut batch = MeasurementBatch::default();
 
@@ -98,7 +114,10 @@ pub fn simulate(frame: &EnuFrame, start: GpsTime, setup: &mut TrialSetup) -> Vec
         };
         let truth = truth_at(frame, start, setup.trajectory.as_ref(), ev.t);
         batch.items.clear();
-        let ctx = SampleContext { truth: &truth, estimates: &latest };
+        let ctx = SampleContext {
+            truth: &truth,
+            estimates: &latest,
+        };
         let source = &mut setup.sources[source_idx];
         if let Some(next) = source.sample(&ctx, &mut batch) {
             queue.schedule(next, EventKind::Sample(source_idx));
@@ -157,10 +176,20 @@ mod tests {
         fn first_sample(&self) -> SimTime {
             SimTime(0)
         }
-        fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
-            self.seen.lock().unwrap().push(ctx.estimates[0].map(|e| e.t.seconds_since(GpsTime::from_ns(0))));
+        fn sample(
+            &mut self,
+            ctx: &SampleContext<'_>,
+            out: &mut MeasurementBatch,
+        ) -> Option<SimTime> {
+            self.seen
+                .lock()
+                .unwrap()
+                .push(ctx.estimates[0].map(|e| e.t.seconds_since(GpsTime::from_ns(0))));
             out.t = ctx.truth.t;
-            out.items.push(Measurement::Position(PositionFix { pos_ecef_m: ctx.truth.pos_ecef_m, cov_m2: Matrix3::identity() }));
+            out.items.push(Measurement::Position(PositionFix {
+                pos_ecef_m: ctx.truth.pos_ecef_m,
+                cov_m2: Matrix3::identity(),
+            }));
             Some(SimTime(ctx.truth.sim.0 + self.period))
         }
     }
@@ -177,9 +206,18 @@ mod tests {
         }
         fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
             if let Some(Measurement::Position(f)) = batch.items.first() {
-                self.0 = Some(Estimate { t: batch.t, pos_ecef_m: f.pos_ecef_m, vel_ecef_mps: None, cov_pos_m2: f.cov_m2 });
+                self.0 = Some(Estimate {
+                    t: batch.t,
+                    pos_ecef_m: f.pos_ecef_m,
+                    vel_ecef_mps: None,
+                    cov_pos_m2: f.cov_m2,
+                });
             }
-            EpochOutcome { estimate: self.0, used: 1, ..EpochOutcome::default() }
+            EpochOutcome {
+                estimate: self.0,
+                used: 1,
+                ..EpochOutcome::default()
+            }
         }
         fn latest(&self) -> Option<Estimate> {
             self.0
@@ -189,15 +227,25 @@ mod tests {
     #[test]
     fn estimates_close_the_loop_at_the_next_event() {
         let seen = Arc::new(Mutex::new(Vec::new()));
-        let traj = TrajectoryConfig::Static { position_enu_m: [0.0, 0.0, 0.0], duration_s: 3.0 };
+        let traj = TrajectoryConfig::Static {
+            position_enu_m: [0.0, 0.0, 0.0],
+            duration_s: 3.0,
+        };
         let mut setup = TrialSetup {
             trajectory: traj.build(&mut TrialRng::new(0, 0).stream("t")).unwrap(),
-            sources: vec![Box::new(Probe { seen: Arc::clone(&seen), period: 1_000_000_000 })],
+            sources: vec![Box::new(Probe {
+                seen: Arc::clone(&seen),
+                period: 1_000_000_000,
+            })],
             estimators: vec![Box::new(Echo(None))],
             end: SimTime::from_seconds(3.0),
         };
         let start = GpsTime::from_ns(0);
-        let traces = simulate(&EnuFrame::new(Geodetic::from_deg(40.0, 116.0, 0.0)), start, &mut setup);
+        let traces = simulate(
+            &EnuFrame::new(Geodetic::from_deg(40.0, 116.0, 0.0)),
+            start,
+            &mut setup,
+        );
         // Events at 0, 1, 2 and 3 s (the End event at 3 s was scheduled before the sample at
         // 3 s, so it comes first and the loop stops there).
         assert_eq!(traces[0].epochs.len(), 3);

@@ -70,7 +70,10 @@ impl EkfEstimator {
     /// When the configuration is invalid.
     pub fn new(name: &str, systems: &[System], cfg: Option<Ekf11Config>) -> Result<Self, String> {
         let mut cfg = cfg.unwrap_or_default();
-        if systems.contains(&System::Bds) && systems.iter().any(|s| *s != System::Bds) && cfg.isb_bds.is_none() {
+        if systems.contains(&System::Bds)
+            && systems.iter().any(|s| *s != System::Bds)
+            && cfg.isb_bds.is_none()
+        {
             cfg.isb_bds = Some(IsbConfig::default());
         }
         let ekf = Ekf11::new(cfg).map_err(|e| e.to_string())?;
@@ -95,13 +98,26 @@ impl EkfEstimator {
 }
 
 /// Fills `scratch` with the batch's ranges from `systems`.
-fn select_ranges(batch: &MeasurementBatch, systems: &[System], scratch: &mut Vec<RangeMeasurement>) {
+fn select_ranges(
+    batch: &MeasurementBatch,
+    systems: &[System],
+    scratch: &mut Vec<RangeMeasurement>,
+) {
     scratch.clear();
-    scratch.extend(batch.ranges().filter(|m| systems.contains(&m.system())).copied());
+    scratch.extend(
+        batch
+            .ranges()
+            .filter(|m| systems.contains(&m.system()))
+            .copied(),
+    );
 }
 
 /// GDOP of the ranges in `ranges` seen from `rx`, one clock per system present.
-fn gdop_of(rx: &Vector3<f64>, ranges: &[RangeMeasurement], geometry: &mut Vec<(Vector3<f64>, usize)>) -> Option<f64> {
+fn gdop_of(
+    rx: &Vector3<f64>,
+    ranges: &[RangeMeasurement],
+    geometry: &mut Vec<(Vector3<f64>, usize)>,
+) -> Option<f64> {
     let mut present = [false; wls::MAX_CLOCKS];
     for m in ranges {
         present[wls::system_index(m.system())] = true;
@@ -115,7 +131,11 @@ fn gdop_of(rx: &Vector3<f64>, ranges: &[RangeMeasurement], geometry: &mut Vec<(V
         }
     }
     geometry.clear();
-    geometry.extend(ranges.iter().map(|m| (m.emitter_pos_ecef_m, map[wls::system_index(m.system())])));
+    geometry.extend(
+        ranges
+            .iter()
+            .map(|m| (m.emitter_pos_ecef_m, map[wls::system_index(m.system())])),
+    );
     wls::dop(rx, geometry, n_clocks).map(|d| d.gdop)
 }
 
@@ -137,9 +157,17 @@ impl Estimator for EkfEstimator {
             let Ok(fix) = wls::solve(self.scratch.iter(), &WlsOptions::default()) else {
                 return out;
             };
-            let clock = self.systems.iter().find_map(|s| fix.clock_m(*s)).unwrap_or(0.0);
+            let clock = self
+                .systems
+                .iter()
+                .find_map(|s| fix.clock_m(*s))
+                .unwrap_or(0.0);
             let pos_sigma = fix.cov_pos_ecef_m2.trace().max(0.0).sqrt().max(1.0);
-            if self.ekf.initialise(fix.pos_ecef_m, clock, pos_sigma, 10.0 * pos_sigma).is_err() {
+            if self
+                .ekf
+                .initialise(fix.pos_ecef_m, clock, pos_sigma, 10.0 * pos_sigma)
+                .is_err()
+            {
                 out.numerical_failure = true;
                 return out;
             }
@@ -155,7 +183,8 @@ impl Estimator for EkfEstimator {
             // A prediction that cannot be computed resets the filter; the next epoch
             // re-initialises it from least squares. The reset is reported, never hidden.
             out.numerical_failure = true;
-            self.ekf = Ekf11::new(*self.ekf.config()).unwrap_or_else(|_| unreachable!("config validated at build"));
+            self.ekf = Ekf11::new(*self.ekf.config())
+                .unwrap_or_else(|_| unreachable!("config validated at build"));
             return out;
         }
         for m in &self.scratch {
@@ -188,7 +217,12 @@ pub struct WlsEstimator {
 impl WlsEstimator {
     /// An estimator using `systems`, one clock per system.
     pub fn new(name: &str, systems: &[System]) -> Self {
-        Self { name: name.to_string(), systems: systems.to_vec(), scratch: Vec::with_capacity(64), latest: None }
+        Self {
+            name: name.to_string(),
+            systems: systems.to_vec(),
+            scratch: Vec::with_capacity(64),
+            latest: None,
+        }
     }
 }
 
@@ -203,11 +237,19 @@ impl Estimator for WlsEstimator {
 
     fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
         select_ranges(batch, &self.systems, &mut self.scratch);
-        let opts = WlsOptions { initial_pos_ecef_m: self.latest.map(|e| e.pos_ecef_m), ..WlsOptions::default() };
+        let opts = WlsOptions {
+            initial_pos_ecef_m: self.latest.map(|e| e.pos_ecef_m),
+            ..WlsOptions::default()
+        };
         let mut out = EpochOutcome::default();
         match wls::solve(self.scratch.iter(), &opts) {
             Ok(fix) => {
-                let e = Estimate { t: batch.t, pos_ecef_m: fix.pos_ecef_m, vel_ecef_mps: None, cov_pos_m2: fix.cov_pos_ecef_m2 };
+                let e = Estimate {
+                    t: batch.t,
+                    pos_ecef_m: fix.pos_ecef_m,
+                    vel_ecef_mps: None,
+                    cov_pos_m2: fix.cov_pos_ecef_m2,
+                };
                 self.latest = Some(e);
                 out.estimate = Some(e);
                 out.used = fix.n_measurements as u32;

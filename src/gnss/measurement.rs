@@ -213,7 +213,12 @@ impl GnssSource {
                 let z_iono: f64 = r.sample(StandardNormal);
                 let ure_m = sigma_ure * z_ure;
                 let iono_factor = iono_common + cfg.errors.iono_residual_per_sat * z_iono;
-                Channel { sat, rng: r, ure_m, iono_factor }
+                Channel {
+                    sat,
+                    rng: r,
+                    ure_m,
+                    iono_factor,
+                }
             })
             .collect::<Vec<_>>();
         let step_ns = (1e9 / cfg.rate_hz).round() as i64;
@@ -255,7 +260,10 @@ impl GnssSource {
                     // of the order of the navigation file.
                     self.candidates.sort_by(|a, b| {
                         let (sa, sb) = (channels[a.channel].sat, channels[b.channel].sat);
-                        sa.system.cmp(&sb.system).then(b.el_rad.total_cmp(&a.el_rad)).then(sa.cmp(&sb))
+                        sa.system
+                            .cmp(&sb.system)
+                            .then(b.el_rad.total_cmp(&a.el_rad))
+                            .then(sa.cmp(&sb))
                     });
                     let mut kept = 0usize;
                     let mut current: Option<System> = None;
@@ -269,8 +277,12 @@ impl GnssSource {
                         kept <= *n
                     });
                 }
-                ShieldingRule::Keep(list) => self.candidates.retain(|c| list.contains(&channels[c.channel].sat)),
-                ShieldingRule::Block(list) => self.candidates.retain(|c| !list.contains(&channels[c.channel].sat)),
+                ShieldingRule::Keep(list) => self
+                    .candidates
+                    .retain(|c| list.contains(&channels[c.channel].sat)),
+                ShieldingRule::Block(list) => self
+                    .candidates
+                    .retain(|c| !list.contains(&channels[c.channel].sat)),
             }
         }
     }
@@ -314,7 +326,9 @@ impl Source for GnssSource {
 
     fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
         let truth = ctx.truth;
-        let dt_s = self.last_sim.map_or(0.0, |l| (truth.sim.0 - l.0) as f64 * 1e-9);
+        let dt_s = self
+            .last_sim
+            .map_or(0.0, |l| (truth.sim.0 - l.0) as f64 * 1e-9);
         self.last_sim = Some(truth.sim);
         if dt_s > 0.0 {
             self.clock.step(dt_s, &mut self.clock_rng);
@@ -330,7 +344,9 @@ impl Source for GnssSource {
 
         self.candidates.clear();
         for (i, ch) in self.channels.iter().enumerate() {
-            let Some(eph) = self.nav.select(ch.sat, truth.t) else { continue };
+            let Some(eph) = self.nav.select(ch.sat, truth.t) else {
+                continue;
+            };
             if !eph.is_healthy() {
                 continue;
             }
@@ -339,7 +355,13 @@ impl Source for GnssSource {
             if el < mask {
                 continue;
             }
-            self.candidates.push(Candidate { channel: i, el_rad: el, az_rad: az, pos_rot, vel_rot });
+            self.candidates.push(Candidate {
+                channel: i,
+                el_rad: el,
+                az_rad: az,
+                pos_rot,
+                vel_rot,
+            });
         }
         self.apply_shielding(truth.sim.seconds());
 
@@ -355,12 +377,20 @@ impl Source for GnssSource {
             let sigma_dll = self.cfg.tracking.code_sigma_m(sat.system, cn0);
             let sigma_rate = self.cfg.tracking.rate_sigma_mps(sat.system, cn0);
             let sigma_ure = self.sigma_ure(sat.system);
-            let freq_scale = if sat.system == System::Bds { (F_L1_HZ / F_B1I_HZ).powi(2) } else { 1.0 };
-            let iono_model = self
-                .klobuchar
-                .map_or(0.0, |k| k.delay_l1_m(rx_geo.lat_rad, rx_geo.lon_rad, c.az_rad, c.el_rad, truth.t))
-                * freq_scale;
-            let tropo_model = saastamoinen_m(rx_geo.lat_rad, rx_geo.h_m, c.el_rad, self.cfg.errors.humidity);
+            let freq_scale = if sat.system == System::Bds {
+                (F_L1_HZ / F_B1I_HZ).powi(2)
+            } else {
+                1.0
+            };
+            let iono_model = self.klobuchar.map_or(0.0, |k| {
+                k.delay_l1_m(rx_geo.lat_rad, rx_geo.lon_rad, c.az_rad, c.el_rad, truth.t)
+            }) * freq_scale;
+            let tropo_model = saastamoinen_m(
+                rx_geo.lat_rad,
+                rx_geo.h_m,
+                c.el_rad,
+                self.cfg.errors.humidity,
+            );
 
             let ch = &mut self.channels[c.channel];
             // The user range error evolves as a first-order Gauss–Markov process between
@@ -383,10 +413,17 @@ impl Source for GnssSource {
                 + tropo_model * self.tropo_factor
                 + ch.ure_m
                 + sigma_dll * n_code;
-            let range_rate = u.dot(&(c.vel_rot - truth.vel_ecef_mps)) + C_MPS * rx_drift + sigma_rate * n_rate;
+            let range_rate =
+                u.dot(&(c.vel_rot - truth.vel_ecef_mps)) + C_MPS * rx_drift + sigma_rate * n_rate;
             let sigma_m = (sigma_dll.powi(2)
                 + sigma_ure.powi(2)
-                + (self.cfg.errors.iono_residual.hypot(self.cfg.errors.iono_residual_per_sat) * iono_model).powi(2)
+                + (self
+                    .cfg
+                    .errors
+                    .iono_residual
+                    .hypot(self.cfg.errors.iono_residual_per_sat)
+                    * iono_model)
+                    .powi(2)
                 + (self.cfg.errors.tropo_residual * tropo_model).powi(2))
             .sqrt();
             out.items.push(Measurement::Range(RangeMeasurement {

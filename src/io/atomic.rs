@@ -11,9 +11,21 @@ use std::path::Path;
 /// # Errors
 /// Any I/O error, with the path in the message. The temporary file is removed on failure.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let name = path.file_name().ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, format!("{}: not a file path", path.display())))?;
-    let tmp = dir.join(format!(".{}.{}.tmp", name.to_string_lossy(), std::process::id()));
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path.file_name().ok_or_else(|| {
+        io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!("{}: not a file path", path.display()),
+        )
+    })?;
+    let tmp = dir.join(format!(
+        ".{}.{}.tmp",
+        name.to_string_lossy(),
+        std::process::id()
+    ));
     let result = (|| {
         let mut f = fs::File::create(&tmp)?;
         f.write_all(bytes)?;
@@ -22,7 +34,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
     })();
     if let Err(e) = result {
         let _ = fs::remove_file(&tmp);
-        return Err(io::Error::new(e.kind(), format!("writing {}: {e}", path.display())));
+        return Err(io::Error::new(
+            e.kind(),
+            format!("writing {}: {e}", path.display()),
+        ));
     }
     Ok(())
 }
@@ -47,6 +62,9 @@ mod tests {
     #[test]
     fn unwritable_directory_names_the_path() {
         let e = write_atomic(Path::new("/nonexistent-dir-hybridnav/x.json"), b"x").unwrap_err();
-        assert!(e.to_string().contains("/nonexistent-dir-hybridnav/x.json"), "{e}");
+        assert!(
+            e.to_string().contains("/nonexistent-dir-hybridnav/x.json"),
+            "{e}"
+        );
     }
 }

@@ -63,7 +63,11 @@ pub fn run_trials(world: &World, opts: &RunOptions) -> Result<Vec<TrialResult>, 
         .num_threads(opts.threads.max(1))
         .build()
         .map_err(|e| format!("cannot start {} worker threads: {e}", opts.threads))?;
-    let bar = if opts.progress { ProgressBar::new(opts.trials) } else { ProgressBar::hidden() };
+    let bar = if opts.progress {
+        ProgressBar::new(opts.trials)
+    } else {
+        ProgressBar::hidden()
+    };
     bar.set_style(
         ProgressStyle::with_template("{spinner} trials {pos}/{len} [{bar:30}] {per_sec} eta {eta}")
             .unwrap_or_else(|_| ProgressStyle::default_bar())
@@ -85,7 +89,12 @@ pub fn run_trials(world: &World, opts: &RunOptions) -> Result<Vec<TrialResult>, 
 
 /// Reduces trials (in trial order) to the summary.
 pub fn summarise(world: &World, opts: &RunOptions, trials: &[TrialResult]) -> Summary {
-    let names: Vec<String> = world.file.estimators.iter().map(|e| e.name.clone()).collect();
+    let names: Vec<String> = world
+        .file
+        .estimators
+        .iter()
+        .map(|e| e.name.clone())
+        .collect();
     let estimators = names
         .iter()
         .enumerate()
@@ -115,7 +124,11 @@ pub fn summarise(world: &World, opts: &RunOptions, trials: &[TrialResult]) -> Su
                 name: name.clone(),
                 error_3d_m: ErrorStats::from_errors(&mut e3),
                 error_h_m: ErrorStats::from_errors(&mut eh),
-                availability: if epochs > 0 { (epochs - without) as f64 / epochs as f64 } else { 0.0 },
+                availability: if epochs > 0 {
+                    (epochs - without) as f64 / epochs as f64
+                } else {
+                    0.0
+                },
                 epochs,
                 epochs_without_fix: without,
                 mean_nees_pos: (nees_n > 0).then(|| nees_sum / nees_n as f64),
@@ -140,7 +153,11 @@ impl Summary {
     pub fn table(&self) -> String {
         use std::fmt::Write;
         let mut s = String::new();
-        let _ = writeln!(s, "{} — {} trial(s), seed {}", self.world, self.trials, self.seed);
+        let _ = writeln!(
+            s,
+            "{} — {} trial(s), seed {}",
+            self.world, self.trials, self.seed
+        );
         let _ = writeln!(
             s,
             "{:<16} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>7}",
@@ -152,15 +169,32 @@ impl Summary {
                     let _ = writeln!(
                         s,
                         "{:<16} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>6.1}%",
-                        e.name, x.sigma1, x.sigma2, x.sigma3, x.mean, x.std, x.rmse, x.max, 100.0 * e.availability
+                        e.name,
+                        x.sigma1,
+                        x.sigma2,
+                        x.sigma3,
+                        x.mean,
+                        x.std,
+                        x.rmse,
+                        x.max,
+                        100.0 * e.availability
                     );
                 }
                 None => {
-                    let _ = writeln!(s, "{:<16} {:>9} (no estimate in any epoch) {:>6.1}%", e.name, "-", 100.0 * e.availability);
+                    let _ = writeln!(
+                        s,
+                        "{:<16} {:>9} (no estimate in any epoch) {:>6.1}%",
+                        e.name,
+                        "-",
+                        100.0 * e.availability
+                    );
                 }
             }
         }
-        let _ = writeln!(s, "(3-D position error percentiles 68.27/95.45/99.73 % over all epochs of all trials)");
+        let _ = writeln!(
+            s,
+            "(3-D position error percentiles 68.27/95.45/99.73 % over all epochs of all trials)"
+        );
         s
     }
 }

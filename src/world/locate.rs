@@ -87,17 +87,32 @@ mod tests {
     #[test]
     fn finds_nested_keys_and_array_tables() {
         let text = "[world]\nname = \"x\"\n\n[[estimator]]\nname = \"a\"\n\n[[estimator]]\nname = \"b\"\nfilter = \"ekf\"\n";
-        let p = vec![PathSeg::Key("estimator".into()), PathSeg::Index(1), PathSeg::Key("filter".into())];
+        let p = vec![
+            PathSeg::Key("estimator".into()),
+            PathSeg::Index(1),
+            PathSeg::Key("filter".into()),
+        ];
         assert_eq!(locate(text, &p), (9, 10));
         let p = vec![PathSeg::Key("world".into()), PathSeg::Key("name".into())];
         assert_eq!(locate(text, &p), (2, 8));
-        assert_eq!(path_to_string(&[PathSeg::Key("estimator".into()), PathSeg::Index(1), PathSeg::Key("filter".into())]), "estimator[1].filter");
+        assert_eq!(
+            path_to_string(&[
+                PathSeg::Key("estimator".into()),
+                PathSeg::Index(1),
+                PathSeg::Key("filter".into())
+            ]),
+            "estimator[1].filter"
+        );
     }
 
     #[test]
     fn inline_tables() {
         let text = "[platform]\ntrajectory = { kind = \"waypoints\", speed_mps = -3 }\n";
-        let p = vec![PathSeg::Key("platform".into()), PathSeg::Key("trajectory".into()), PathSeg::Key("speed_mps".into())];
+        let p = vec![
+            PathSeg::Key("platform".into()),
+            PathSeg::Key("trajectory".into()),
+            PathSeg::Key("speed_mps".into()),
+        ];
         let (l, c) = locate(text, &p);
         assert_eq!(l, 2);
         assert_eq!(&text.lines().nth(1).unwrap()[c - 1..c + 1], "-3");

@@ -4,7 +4,11 @@ use crate::common::*;
 
 /// The 1-based line of the first occurrence of `needle` in the default world.
 fn line_of(needle: &str) -> usize {
-    default_world_text().lines().position(|l| l.contains(needle)).expect("needle in default world") + 1
+    default_world_text()
+        .lines()
+        .position(|l| l.contains(needle))
+        .expect("needle in default world")
+        + 1
 }
 
 fn stderr(o: &std::process::Output) -> String {
@@ -16,16 +20,41 @@ fn summary_is_identical_for_one_and_two_threads() {
     let d = tmp_dir("threads");
     let (a, b) = (d.join("a"), d.join("b"));
     for (out, threads) in [(&a, "1"), (&b, "2")] {
-        let o = hybridnav(&["run", "worlds/default.toml", "--trials", "6", "--seed", "7", "--threads", threads, "--quiet", "--out", out.to_str().unwrap()]);
+        let o = hybridnav(&[
+            "run",
+            "worlds/default.toml",
+            "--trials",
+            "6",
+            "--seed",
+            "7",
+            "--threads",
+            threads,
+            "--quiet",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
         assert!(o.status.success(), "{}", stderr(&o));
     }
     let sa = std::fs::read(a.join("summary.json")).unwrap();
     let sb = std::fs::read(b.join("summary.json")).unwrap();
     assert!(!sa.is_empty());
-    assert_eq!(sa, sb, "summary.json differs between --threads 1 and --threads 2");
+    assert_eq!(
+        sa, sb,
+        "summary.json differs between --threads 1 and --threads 2"
+    );
     // A different seed gives different numbers: the test above is not comparing constants.
     let c = d.join("c");
-    let o = hybridnav(&["run", "worlds/default.toml", "--trials", "6", "--seed", "8", "--quiet", "--out", c.to_str().unwrap()]);
+    let o = hybridnav(&[
+        "run",
+        "worlds/default.toml",
+        "--trials",
+        "6",
+        "--seed",
+        "8",
+        "--quiet",
+        "--out",
+        c.to_str().unwrap(),
+    ]);
     assert!(o.status.success());
     assert_ne!(sa, std::fs::read(c.join("summary.json")).unwrap());
 }
@@ -33,10 +62,25 @@ fn summary_is_identical_for_one_and_two_threads() {
 #[test]
 fn summary_has_the_documented_keys() {
     let d = tmp_dir("keys");
-    let o = hybridnav(&["run", "--trials", "2", "--quiet", "--out", d.to_str().unwrap()]);
+    let o = hybridnav(&[
+        "run",
+        "--trials",
+        "2",
+        "--quiet",
+        "--out",
+        d.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(d.join("summary.json")).unwrap()).unwrap();
-    for k in ["world", "seed", "trials", "estimators", "world_hash", "hybridnav_version"] {
+    let v: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("summary.json")).unwrap()).unwrap();
+    for k in [
+        "world",
+        "seed",
+        "trials",
+        "estimators",
+        "world_hash",
+        "hybridnav_version",
+    ] {
         assert!(v.get(k).is_some(), "missing key {k}");
     }
     assert_eq!(v["trials"], 2);
@@ -44,11 +88,16 @@ fn summary_has_the_documented_keys() {
     assert_eq!(est.len(), 3);
     for e in est {
         for k in ["sigma1", "sigma2", "sigma3", "mean", "std", "rmse", "max"] {
-            let x = e["error_3d_m"][k].as_f64().unwrap_or_else(|| panic!("{k} missing in {e}"));
+            let x = e["error_3d_m"][k]
+                .as_f64()
+                .unwrap_or_else(|| panic!("{k} missing in {e}"));
             assert!(x.is_finite() && x >= 0.0);
         }
         let s = &e["error_3d_m"];
-        assert!(s["sigma1"].as_f64() <= s["sigma2"].as_f64() && s["sigma2"].as_f64() <= s["sigma3"].as_f64());
+        assert!(
+            s["sigma1"].as_f64() <= s["sigma2"].as_f64()
+                && s["sigma2"].as_f64() <= s["sigma3"].as_f64()
+        );
         let a = e["availability"].as_f64().unwrap();
         assert!((0.0..=1.0).contains(&a));
     }
@@ -75,8 +124,13 @@ fn check_edited(name: &str, edit: impl Fn(&str) -> String) -> String {
 
 #[test]
 fn world_with_a_typo_names_file_line_and_key() {
-    let e = check_edited("typo", |t| t.replace("elevation_mask_deg = 10.0", "elevation_mask_dg = 10.0"));
-    assert!(e.contains(&format!("w.toml:{}:1", line_of("elevation_mask_deg"))), "{e}");
+    let e = check_edited("typo", |t| {
+        t.replace("elevation_mask_deg = 10.0", "elevation_mask_dg = 10.0")
+    });
+    assert!(
+        e.contains(&format!("w.toml:{}:1", line_of("elevation_mask_deg"))),
+        "{e}"
+    );
     assert!(e.contains("unknown field `elevation_mask_dg`"), "{e}");
     assert!(e.contains("expected one of"), "{e}");
 }
@@ -84,22 +138,44 @@ fn world_with_a_typo_names_file_line_and_key() {
 #[test]
 fn world_with_a_wrong_type_says_what_was_expected() {
     let e = check_edited("type", |t| t.replace("rate_hz = 1.0", "rate_hz = \"fast\""));
-    assert!(e.contains(&format!("w.toml:{}:11", line_of("rate_hz"))), "{e}");
-    assert!(e.contains("invalid type: string \"fast\", expected f64"), "{e}");
+    assert!(
+        e.contains(&format!("w.toml:{}:11", line_of("rate_hz"))),
+        "{e}"
+    );
+    assert!(
+        e.contains("invalid type: string \"fast\", expected f64"),
+        "{e}"
+    );
 }
 
 #[test]
 fn world_with_an_impossible_value_names_the_key() {
-    let e = check_edited("neg", |t| t.replace("speed_mps = 10.0", "speed_mps = -10.0"));
-    assert!(e.contains(&format!("w.toml:{}:", line_of("speed_mps"))), "{e}");
+    let e = check_edited("neg", |t| {
+        t.replace("speed_mps = 10.0", "speed_mps = -10.0")
+    });
+    assert!(
+        e.contains(&format!("w.toml:{}:", line_of("speed_mps"))),
+        "{e}"
+    );
     assert!(e.contains("platform.trajectory.speed_mps"), "{e}");
     assert!(e.contains("positive speed"), "{e}");
     let e = check_edited("lat", |t| t.replace("lat_deg = 40.0040", "lat_deg = 140.0"));
-    assert!(e.contains("world.origin.lat_deg") && e.contains("−90..90"), "{e}");
+    assert!(
+        e.contains("world.origin.lat_deg") && e.contains("−90..90"),
+        "{e}"
+    );
     let e = check_edited("sat", |t| t.replace("keep_highest = 2", "keep = [\"G99\"]"));
-    assert!(e.contains("shielding[1].keep[0]") && e.contains("G99"), "{e}");
-    let e = check_edited("src", |t| t.replace("systems = [\"gps\", \"bds\"]", "systems = [\"gps\"]"));
-    assert!(e.contains("estimator[2].sources[1]") && e.contains("does not simulate"), "{e}");
+    assert!(
+        e.contains("shielding[1].keep[0]") && e.contains("G99"),
+        "{e}"
+    );
+    let e = check_edited("src", |t| {
+        t.replace("systems = [\"gps\", \"bds\"]", "systems = [\"gps\"]")
+    });
+    assert!(
+        e.contains("estimator[2].sources[1]") && e.contains("does not simulate"),
+        "{e}"
+    );
     let e = check_edited("dup", |t| t.replace("name = \"GPS+BDS\"", "name = \"GPS\""));
     assert!(e.contains("used twice"), "{e}");
 }
@@ -108,15 +184,27 @@ fn world_with_an_impossible_value_names_the_key() {
 fn missing_world_and_missing_ephemeris_are_clear() {
     let o = hybridnav(&["check", "worlds/does-not-exist.toml"]);
     assert_eq!(o.status.code(), Some(2));
-    assert!(stderr(&o).contains("worlds/does-not-exist.toml") && stderr(&o).contains("cannot read"), "{}", stderr(&o));
-    let e = check_edited("eph", |t| t.replace("builtin:nominal-gps-bds", "nowhere.rnx"));
-    assert!(e.contains("world.ephemeris") && e.contains("does not exist"), "{e}");
+    assert!(
+        stderr(&o).contains("worlds/does-not-exist.toml") && stderr(&o).contains("cannot read"),
+        "{}",
+        stderr(&o)
+    );
+    let e = check_edited("eph", |t| {
+        t.replace("builtin:nominal-gps-bds", "nowhere.rnx")
+    });
+    assert!(
+        e.contains("world.ephemeris") && e.contains("does not exist"),
+        "{e}"
+    );
 }
 
 #[test]
 fn malformed_toml_gives_line_and_column() {
     let e = check_edited("syntax", |t| t.replace("[sensors.gnss]", "[sensors.gnss"));
-    assert!(e.contains(&format!("w.toml:{}:", line_of("[sensors.gnss]"))), "{e}");
+    assert!(
+        e.contains(&format!("w.toml:{}:", line_of("[sensors.gnss]"))),
+        "{e}"
+    );
 }
 
 #[test]
@@ -139,23 +227,55 @@ fn truncated_rinex_names_the_line() {
     let text = std::fs::read_to_string(g.join("brdc1820.10n")).unwrap();
     // Cut the file in the middle of the fourth record.
     let lines: Vec<&str> = text.lines().collect();
-    let header_end = lines.iter().position(|l| l.contains("END OF HEADER")).unwrap();
+    let header_end = lines
+        .iter()
+        .position(|l| l.contains("END OF HEADER"))
+        .unwrap();
     let cut = header_end + 1 + 8 * 3 + 5;
     let d = tmp_dir("trunc");
     let p = write(&d, "cut.10n", &(lines[..cut].join("\n") + "\n"));
-    let o = hybridnav(&["ephemeris", "positions", "--nav", p.to_str().unwrap(), "--start", "2010-07-01T00:00:00", "--end", "2010-07-01T00:10:00", "--step", "60"]);
+    let o = hybridnav(&[
+        "ephemeris",
+        "positions",
+        "--nav",
+        p.to_str().unwrap(),
+        "--start",
+        "2010-07-01T00:00:00",
+        "--end",
+        "2010-07-01T00:10:00",
+        "--step",
+        "60",
+    ]);
     assert_eq!(o.status.code(), Some(2));
     let e = stderr(&o);
     assert!(e.contains("cut.10n"), "{e}");
-    assert!(e.contains(&format!("{}", cut + 1)) || e.contains(&format!("{cut}")), "{e}");
+    assert!(
+        e.contains(&format!("{}", cut + 1)) || e.contains(&format!("{cut}")),
+        "{e}"
+    );
 }
 
 #[test]
 fn bad_run_arguments_are_refused() {
     let o = hybridnav(&["run", "--trials", "0", "--quiet"]);
     assert_eq!(o.status.code(), Some(2));
-    assert!(stderr(&o).contains("--trials must be at least 1"), "{}", stderr(&o));
-    let o = hybridnav(&["ephemeris", "positions", "--nav", "x", "--start", "2020-13-01T00:00:00", "--end", "2020-01-01T00:00:00", "--step", "1"]);
+    assert!(
+        stderr(&o).contains("--trials must be at least 1"),
+        "{}",
+        stderr(&o)
+    );
+    let o = hybridnav(&[
+        "ephemeris",
+        "positions",
+        "--nav",
+        "x",
+        "--start",
+        "2020-13-01T00:00:00",
+        "--end",
+        "2020-01-01T00:00:00",
+        "--step",
+        "1",
+    ]);
     assert_eq!(o.status.code(), Some(2));
 }
 
@@ -163,17 +283,37 @@ fn bad_run_arguments_are_refused() {
 fn positions_csv_matches_precise_orbit() {
     let Some(g) = shared_gnss() else { return };
     let nav = g.join("brdc1820.10n");
-    let o = hybridnav(&["ephemeris", "positions", "--nav", nav.to_str().unwrap(), "--start", "2010-07-01T00:00:00", "--end", "2010-07-01T00:30:00", "--step", "900", "--sats", "G05"]);
+    let o = hybridnav(&[
+        "ephemeris",
+        "positions",
+        "--nav",
+        nav.to_str().unwrap(),
+        "--start",
+        "2010-07-01T00:00:00",
+        "--end",
+        "2010-07-01T00:30:00",
+        "--step",
+        "900",
+        "--sats",
+        "G05",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
     let mut lines = out.lines();
-    assert_eq!(lines.next(), Some("sat,gpst_week,gpst_tow_s,x_m,y_m,z_m,clock_s"));
+    assert_eq!(
+        lines.next(),
+        Some("sat,gpst_week,gpst_tow_s,x_m,y_m,z_m,clock_s")
+    );
     let first: Vec<&str> = lines.next().unwrap().split(',').collect();
     assert_eq!(&first[..3], &["G05", "1590", "345600.000"]);
     // igs15904.sp3, epoch 2010-07-01 00:00:00, PG05 (km), read independently here.
     let sp3 = std::fs::read_to_string(g.join("igs15904.sp3")).unwrap();
     let line = sp3.lines().find(|l| l.starts_with("PG05")).unwrap();
-    let v: Vec<f64> = line[4..].split_whitespace().take(3).map(|x| x.parse::<f64>().unwrap() * 1000.0).collect();
+    let v: Vec<f64> = line[4..]
+        .split_whitespace()
+        .take(3)
+        .map(|x| x.parse::<f64>().unwrap() * 1000.0)
+        .collect();
     let p: Vec<f64> = first[3..6].iter().map(|x| x.parse().unwrap()).collect();
     let err = ((p[0] - v[0]).powi(2) + (p[1] - v[1]).powi(2) + (p[2] - v[2]).powi(2)).sqrt();
     assert!(err < 5.0, "broadcast vs precise G05: {err} m");
@@ -184,25 +324,70 @@ fn positions_csv_matches_precise_orbit() {
 fn synth_reproduces_the_embedded_ephemeris_and_reads_back() {
     let d = tmp_dir("synth");
     let out = d.join("nominal.rnx");
-    let o = hybridnav(&["ephemeris", "synth", "--start", "2018-06-01T00:00:00", "--hours", "48", "--out", out.to_str().unwrap()]);
+    let o = hybridnav(&[
+        "ephemeris",
+        "synth",
+        "--start",
+        "2018-06-01T00:00:00",
+        "--hours",
+        "48",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let written = std::fs::read(&out).unwrap();
     let embedded = std::fs::read(repo().join("ephemeris/nominal-gps-bds.rnx")).unwrap();
-    assert!(written == embedded, "ephemeris synth no longer reproduces ephemeris/nominal-gps-bds.rnx");
+    assert!(
+        written == embedded,
+        "ephemeris synth no longer reproduces ephemeris/nominal-gps-bds.rnx"
+    );
     // The file reads back through the CLI: the BeiDou GEO C01 stays over its longitude.
-    let o = hybridnav(&["ephemeris", "positions", "--nav", out.to_str().unwrap(), "--start", "2018-06-01T00:00:00", "--end", "2018-06-01T12:00:00", "--step", "3600", "--sats", "G01,C01"]);
+    let o = hybridnav(&[
+        "ephemeris",
+        "positions",
+        "--nav",
+        out.to_str().unwrap(),
+        "--start",
+        "2018-06-01T00:00:00",
+        "--end",
+        "2018-06-01T12:00:00",
+        "--step",
+        "3600",
+        "--sats",
+        "G01,C01",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let csv = String::from_utf8_lossy(&o.stdout);
-    let rows: Vec<Vec<String>> = csv.lines().skip(1).map(|l| l.split(',').map(String::from).collect()).collect();
+    let rows: Vec<Vec<String>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(String::from).collect())
+        .collect();
     assert_eq!(rows.len(), 2 * 13);
     for r in rows.iter().filter(|r| r[0] == "C01") {
-        let (x, y, z): (f64, f64, f64) = (r[3].parse().unwrap(), r[4].parse().unwrap(), r[5].parse().unwrap());
+        let (x, y, z): (f64, f64, f64) = (
+            r[3].parse().unwrap(),
+            r[4].parse().unwrap(),
+            r[5].parse().unwrap(),
+        );
         let lon = y.atan2(x).to_degrees();
         let radius = (x * x + y * y + z * z).sqrt();
         assert!((lon - 140.0).abs() < 0.5, "C01 longitude {lon}");
-        assert!((radius - 42_164_000.0).abs() < 20_000.0, "C01 radius {radius}");
+        assert!(
+            (radius - 42_164_000.0).abs() < 20_000.0,
+            "C01 radius {radius}"
+        );
     }
-    let o = hybridnav(&["ephemeris", "synth", "--start", "2018-06-01T00:00:00", "--hours", "0", "--out", out.to_str().unwrap()]);
+    let o = hybridnav(&[
+        "ephemeris",
+        "synth",
+        "--start",
+        "2018-06-01T00:00:00",
+        "--hours",
+        "0",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("--hours"), "{}", stderr(&o));
 }

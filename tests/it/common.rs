@@ -14,7 +14,10 @@ pub fn shared_gnss() -> Option<PathBuf> {
     if p.join("brdc1820.10n").exists() {
         Some(p)
     } else {
-        eprintln!("skipped: {} not found (the real GNSS files live in ../shared, which CI provides)", p.display());
+        eprintln!(
+            "skipped: {} not found (the real GNSS files live in ../shared, which CI provides)",
+            p.display()
+        );
         None
     }
 }
@@ -29,7 +32,11 @@ pub fn tmp_dir(name: &str) -> PathBuf {
 
 /// Runs the `hybridnav` binary.
 pub fn hybridnav(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hybridnav")).args(args).current_dir(repo()).output().expect("run hybridnav")
+    Command::new(env!("CARGO_BIN_EXE_hybridnav"))
+        .args(args)
+        .current_dir(repo())
+        .output()
+        .expect("run hybridnav")
 }
 
 /// Writes `text` to `dir/name` and returns the path.

@@ -17,18 +17,37 @@ fn shielding_removes_the_snapshot_fix_and_degrades_the_ekf() {
     for ep in &wls.epochs {
         if inside(ep.t_s) {
             // With three GPS satellites or fewer a snapshot fix cannot exist.
-            assert!(ep.err_3d_m.is_none(), "fix at {} s inside a shielded window", ep.t_s);
+            assert!(
+                ep.err_3d_m.is_none(),
+                "fix at {} s inside a shielded window",
+                ep.t_s
+            );
         } else if ep.t_s > 1.0 && !inside(ep.t_s) {
             assert!(ep.err_3d_m.is_some(), "no fix at {} s in open sky", ep.t_s);
         }
     }
     // The EKF always has an estimate once initialised; its error in open sky is that of a
     // converged GNSS filter, and it grows while it coasts on two satellites.
-    let open: Vec<f64> = ekf.epochs.iter().filter(|e| e.t_s > 10.0 && e.t_s < 40.0).filter_map(|e| e.err_3d_m).collect();
-    let late_shield: Vec<f64> = ekf.epochs.iter().filter(|e| e.t_s > 140.0 && e.t_s < 150.0).filter_map(|e| e.err_3d_m).collect();
+    let open: Vec<f64> = ekf
+        .epochs
+        .iter()
+        .filter(|e| e.t_s > 10.0 && e.t_s < 40.0)
+        .filter_map(|e| e.err_3d_m)
+        .collect();
+    let late_shield: Vec<f64> = ekf
+        .epochs
+        .iter()
+        .filter(|e| e.t_s > 140.0 && e.t_s < 150.0)
+        .filter_map(|e| e.err_3d_m)
+        .collect();
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
     assert!(mean(&open) < 10.0, "open-sky EKF error {}", mean(&open));
-    assert!(mean(&late_shield) > mean(&open), "{} vs {}", mean(&late_shield), mean(&open));
+    assert!(
+        mean(&late_shield) > mean(&open),
+        "{} vs {}",
+        mean(&late_shield),
+        mean(&open)
+    );
 }
 
 #[test]
@@ -55,7 +74,10 @@ fn open_sky_white_world() -> String {
         "points_enu_m = [[0, 0], [850, 0], [850, 12], [0, 12]], speed_mps = 10.0, accel_mps2 = 1.5, lateral_accel_mps2 = 2.0,",
         "points_enu_m = [[0, 0], [1500, 900]], speed_mps = 10.0,",
     );
-    let s = s.replace("filter = \"ekf11\"\n", "filter = \"ekf11\"\nekf = { accel_psd_m2ps5 = [0.01, 0.01, 0.01] }\n");
+    let s = s.replace(
+        "filter = \"ekf11\"\n",
+        "filter = \"ekf11\"\nekf = { accel_psd_m2ps5 = [0.01, 0.01, 0.01] }\n",
+    );
     s.replace(
         "elevation_mask_deg = 10.0",
         "elevation_mask_deg = 10.0\n\n[sensors.gnss.errors]\nure_tau_s = 0.001\niono_residual = 0.0\niono_residual_per_sat = 0.0\ntropo_residual = 0.0\n",
@@ -71,7 +93,10 @@ fn full_chain_nees_is_within_its_chi2_band_in_open_sky() {
     let results: Vec<_> = (0..runs).map(|i| run_trial(&w, 21, i).unwrap()).collect();
     // Two-sided 95 % band of the run-averaged NEES: N·ε̄ ~ χ²(3N).
     let dof = 3.0 * runs as f64;
-    let (lo, hi) = (chi2::quantile(0.025, dof) / runs as f64, chi2::quantile(0.975, dof) / runs as f64);
+    let (lo, hi) = (
+        chi2::quantile(0.025, dof) / runs as f64,
+        chi2::quantile(0.975, dof) / runs as f64,
+    );
     for k in [1usize, 2] {
         let n_epochs = results[0].estimators[k].epochs.len();
         let mut inside = 0;
@@ -81,14 +106,26 @@ fn full_chain_nees_is_within_its_chi2_band_in_open_sky() {
             if results[0].estimators[k].epochs[e].t_s < 20.0 {
                 continue; // Let the filter converge from its least-squares start.
             }
-            let mean = results.iter().map(|r| r.estimators[k].epochs[e].nees_pos.unwrap()).sum::<f64>() / runs as f64;
+            let mean = results
+                .iter()
+                .map(|r| r.estimators[k].epochs[e].nees_pos.unwrap())
+                .sum::<f64>()
+                / runs as f64;
             grand += mean;
             counted += 1;
             inside += usize::from((lo..=hi).contains(&mean));
         }
         let share = inside as f64 / counted as f64;
         let name = &results[0].estimators[k].name;
-        eprintln!("{name}: mean NEES {:.3}, {:.1} % of epochs inside [{lo:.3}, {hi:.3}]", grand / counted as f64, 100.0 * share);
-        assert!(share >= 0.9, "{name}: only {:.1} % of epochs inside the 95 % band", 100.0 * share);
+        eprintln!(
+            "{name}: mean NEES {:.3}, {:.1} % of epochs inside [{lo:.3}, {hi:.3}]",
+            grand / counted as f64,
+            100.0 * share
+        );
+        assert!(
+            share >= 0.9,
+            "{name}: only {:.1} % of epochs inside the 95 % band",
+            100.0 * share
+        );
     }
 }
