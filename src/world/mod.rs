@@ -84,20 +84,59 @@ struct Ctx<'a> {
 }
 
 impl Ctx<'_> {
-    fn err(&self, path: &[PathSeg], message: impl Into<String>) -> WorldError {
-        let (line, column) = locate(self.text, path);
+    /// An error at the key path `at`, written as a user reads it: `sensors.gnss.systems[1]`.
+    fn err(&self, at: &str, message: impl Into<String>) -> WorldError {
+        let segs = parse_path(at);
+        let (line, column) = locate(self.text, &segs);
         WorldError {
             file: self.path.to_path_buf(),
             line,
             column,
-            key: path_to_string(path),
+            key: path_to_string(&segs),
             message: message.into(),
         }
     }
+
+    /// Checks that `v` is finite and inside `range`, naming `what` it should be otherwise.
+    fn in_range(
+        &self,
+        at: &str,
+        v: f64,
+        range: impl std::ops::RangeBounds<f64> + std::fmt::Debug,
+        what: &str,
+    ) -> Result<(), WorldError> {
+        if v.is_finite() && range.contains(&v) {
+            Ok(())
+        } else {
+            Err(self.err(at, format!("expected {what} within {range:?}, got {v}")))
+        }
+    }
+
+    /// Prefixes a module's [`ConfigIssue`] key with the table that holds it.
+    fn issue(&self, table: &str, issue: crate::motion::ConfigIssue) -> WorldError {
+        self.err(&format!("{table}.{}", issue.key), issue.message)
+    }
 }
 
-fn key(k: &str) -> PathSeg {
-    PathSeg::Key(k.to_string())
+/// Splits `a.b[2].c` into key-path segments.
+fn parse_path(at: &str) -> Vec<PathSeg> {
+    let mut segs = Vec::new();
+    for part in at.split('.').filter(|p| !p.is_empty()) {
+        let mut rest = part;
+        if let Some(i) = rest.find('[') {
+            segs.push(PathSeg::Key(rest[..i].to_string()));
+            rest = &rest[i..];
+            while let Some(close) = rest.find(']') {
+                if let Ok(n) = rest[1..close].parse() {
+                    segs.push(PathSeg::Index(n));
+                }
+                rest = &rest[close + 1..];
+            }
+        } else {
+            segs.push(PathSeg::Key(rest.to_string()));
+        }
+    }
+    segs
 }
 
 fn fnv_hex(bytes: &[u8]) -> String {
@@ -127,6 +166,9 @@ pub fn load_world(path: &Path) -> Result<World, WorldError> {
 
 /// Validates world text as if read from `path` (relative paths inside it are resolved
 /// against `path`'s directory).
+///
+/// # Errors
+/// As [`load_world`].
 pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
     let ctx = Ctx { path, text };
     let file: WorldFile = toml::from_str(text).map_err(|e| {
@@ -141,248 +183,51 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
     })?;
 
     let w = &file.world;
-    let origin_path = [key("world"), key("origin")];
     let o = &w.origin;
-    if !(o.lat_deg.is_finite() && (-90.0..=90.0).contains(&o.lat_deg)) {
-        return Err(ctx.err(
-            &[key("world"), key("origin"), key("lat_deg")],
-            format!(
-                "expected a latitude in degrees within −90..90, got {}",
-                o.lat_deg
-            ),
-        ));
-    }
-    if !(o.lon_deg.is_finite() && (-180.0..=360.0).contains(&o.lon_deg)) {
-        return Err(ctx.err(
-            &[key("world"), key("origin"), key("lon_deg")],
-            format!(
-                "expected a longitude in degrees within −180..360, got {}",
-                o.lon_deg
-            ),
-        ));
-    }
-    if !(o.h_m.is_finite() && (-500.0..=10_000.0).contains(&o.h_m)) {
-        return Err(ctx.err(
-            &origin_path,
-            format!(
-                "expected an ellipsoidal height within −500..10000 m, got {}",
-                o.h_m
-            ),
-        ));
-    }
-    let start =
-        GpsTime::parse_iso(&w.start).map_err(|m| ctx.err(&[key("world"), key("start")], m))?;
-
-    let traj_path = [key("platform"), key("trajectory")];
-    file.platform.trajectory.validate().map_err(|issue| {
-        let mut p = traj_path.to_vec();
-        p.push(key(&issue.key));
-        ctx.err(&p, issue.message)
-    })?;
-
+    ctx.in_range(
+        "world.origin.lat_deg",
+        o.lat_deg,
+        -90.0..=90.0,
+        "a latitude in degrees",
+    )?;
+    ctx.in_range(
+        "world.origin.lon_deg",
+        o.lon_deg,
+        -180.0..=360.0,
+        "a longitude in degrees",
+    )?;
+    ctx.in_range(
+        "world.origin.h_m",
+        o.h_m,
+        -500.0..=10_000.0,
+        "an ellipsoidal height in m",
+    )?;
+    let start = GpsTime::parse_iso(&w.start).map_err(|m| ctx.err("world.start", m))?;
     if let Some(d) = w.duration_s {
-        if !(d.is_finite() && d > 0.0 && d <= 10.0 * 86_400.0) {
-            return Err(ctx.err(
-                &[key("world"), key("duration_s")],
-                format!("expected a duration in seconds within (0, 864000], got {d}"),
-            ));
-        }
+        ctx.in_range(
+            "world.duration_s",
+            d,
+            1e-3..=864_000.0,
+            "a duration in seconds",
+        )?;
     }
+    let trajectory = &file.platform.trajectory;
+    trajectory
+        .validate()
+        .map_err(|i| ctx.issue("platform.trajectory", i))?;
 
-    // Navigation data: a file relative to the world file, or the embedded default.
-    let (nav, nav_source) = match w.ephemeris.as_deref() {
-        None | Some(BUILTIN_EPHEMERIS_NAME) => {
-            let nav = parse_nav(BUILTIN_EPHEMERIS, BUILTIN_EPHEMERIS_NAME).map_err(|e| {
-                ctx.err(
-                    &[key("world"), key("ephemeris")],
-                    format!("the embedded ephemeris does not parse: {e}"),
-                )
-            })?;
-            (nav, BUILTIN_EPHEMERIS_NAME.to_string())
-        }
-        Some(rel) => {
-            let base = path.parent().unwrap_or(Path::new("."));
-            let p = base.join(rel);
-            if !p.exists() {
-                return Err(ctx.err(&[key("world"), key("ephemeris")], format!("navigation file {} does not exist (paths are relative to the world file; use \"{BUILTIN_EPHEMERIS_NAME}\" for the embedded one)", p.display())));
-            }
-            let nav = read_nav_file(&p).map_err(|e| {
-                ctx.err(
-                    &[key("world"), key("ephemeris")],
-                    format!("cannot use navigation file: {e}"),
-                )
-            })?;
-            (nav, p.display().to_string())
-        }
-    };
-
-    // GNSS sensor checks.
+    let (nav, nav_source) = load_nav(&ctx, w.ephemeris.as_deref())?;
     if let Some(g) = &file.sensors.gnss {
-        let gp = [key("sensors"), key("gnss")];
-        if !(g.rate_hz.is_finite() && g.rate_hz > 0.0 && g.rate_hz <= 100.0) {
-            let mut p = gp.to_vec();
-            p.push(key("rate_hz"));
-            return Err(ctx.err(
-                &p,
-                format!("expected a rate in Hz within (0, 100], got {}", g.rate_hz),
-            ));
-        }
-        if !(g.elevation_mask_deg.is_finite() && (-5.0..90.0).contains(&g.elevation_mask_deg)) {
-            let mut p = gp.to_vec();
-            p.push(key("elevation_mask_deg"));
-            return Err(ctx.err(
-                &p,
-                format!(
-                    "expected an elevation mask in degrees within −5..90, got {}",
-                    g.elevation_mask_deg
-                ),
-            ));
-        }
-        if g.systems.is_empty() || g.systems.iter().any(|s| !s.is_gnss()) {
-            let mut p = gp.to_vec();
-            p.push(key("systems"));
-            return Err(ctx.err(
-                &p,
-                "expected a non-empty list of satellite systems from \"gps\", \"bds\"",
-            ));
-        }
-        for (i, s) in g.systems.iter().enumerate() {
-            if !nav.ephemerides.iter().any(|e| e.sat.system == *s) {
-                let mut p = gp.to_vec();
-                p.push(key("systems"));
-                p.push(PathSeg::Index(i));
-                return Err(ctx.err(
-                    &p,
-                    format!(
-                        "the navigation data ({nav_source}) has no {} ephemerides",
-                        s.name()
-                    ),
-                ));
-            }
-        }
-        g.tracking.validate().map_err(|issue| {
-            let mut p = gp.to_vec();
-            p.push(key("tracking"));
-            p.push(key(&issue.key));
-            ctx.err(&p, issue.message)
-        })?;
-        let e = &g.errors;
-        for (name, v) in [
-            ("ure_gps_m", e.ure_gps_m),
-            ("ure_bds_m", e.ure_bds_m),
-            ("iono_residual", e.iono_residual),
-            ("iono_residual_per_sat", e.iono_residual_per_sat),
-            ("tropo_residual", e.tropo_residual),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(ctx.err(
-                    &[key("sensors"), key("gnss"), key("errors"), key(name)],
-                    format!("expected a non-negative number, got {v}"),
-                ));
-            }
-        }
-        if !(e.ure_tau_s.is_finite() && e.ure_tau_s > 0.0) {
-            return Err(ctx.err(
-                &[key("sensors"), key("gnss"), key("errors"), key("ure_tau_s")],
-                format!(
-                    "expected a positive correlation time in s, got {}",
-                    e.ure_tau_s
-                ),
-            ));
-        }
-        if !(e.humidity.is_finite() && (0.0..=1.0).contains(&e.humidity)) {
-            return Err(ctx.err(
-                &[key("sensors"), key("gnss"), key("errors"), key("humidity")],
-                format!(
-                    "expected a relative humidity within 0..1, got {}",
-                    e.humidity
-                ),
-            ));
-        }
+        check_gnss(&ctx, g, &nav, &nav_source, start)?;
     }
-    // An empty sky: no satellite of the tracked systems has an ephemeris valid at the start.
-    if let Some(g) = &file.sensors.gnss {
-        let usable = nav
-            .satellites()
-            .into_iter()
-            .filter(|s| g.systems.contains(&s.system))
-            .any(|s| nav.select(s, start).is_some());
-        if !usable {
-            let span = match (
-                nav.ephemerides.iter().map(|e| e.toe).min(),
-                nav.ephemerides.iter().map(|e| e.toe).max(),
-            ) {
-                (Some(a), Some(b)) => {
-                    format!("its ephemerides have reference times from {a} to {b}")
-                }
-                _ => "it holds no GPS or BeiDou ephemeris".to_string(),
-            };
-            return Err(ctx.err(
-                &[key("world"), key("start")],
-                format!("empty sky: no satellite in {nav_source} has an ephemeris valid at the start {start}; {span}"),
-            ));
-        }
-    }
-    file.receiver.clock.validate().map_err(|issue| {
-        ctx.err(
-            &[key("receiver"), key("clock"), key(&issue.key)],
-            issue.message,
-        )
-    })?;
+    let clock = &file.receiver.clock;
+    clock
+        .validate()
+        .map_err(|i| ctx.issue("receiver.clock", i))?;
+    let shielding = check_shielding(&ctx, &file.shielding, &nav, &nav_source)?;
 
-    // Shielding windows.
-    let mut shielding = Vec::with_capacity(file.shielding.len());
-    for (i, s) in file.shielding.iter().enumerate() {
-        let sp = |k: &str| vec![key("shielding"), PathSeg::Index(i), key(k)];
-        if !(s.from_s.is_finite() && s.to_s.is_finite() && s.from_s >= 0.0 && s.to_s > s.from_s) {
-            return Err(ctx.err(
-                &sp("to_s"),
-                format!(
-                    "expected 0 ≤ from_s < to_s, got from_s = {}, to_s = {}",
-                    s.from_s, s.to_s
-                ),
-            ));
-        }
-        let rules = usize::from(s.keep_highest.is_some())
-            + usize::from(s.keep.is_some())
-            + usize::from(s.block.is_some());
-        if rules != 1 {
-            return Err(ctx.err(&[key("shielding"), PathSeg::Index(i)], "expected exactly one of keep_highest = N, keep = [\"G05\", …] or block = [\"G05\", …]"));
-        }
-        let parse_list = |k: &str, list: &[String]| -> Result<Vec<EmitterId>, WorldError> {
-            list.iter()
-                .enumerate()
-                .map(|(j, s)| {
-                    let mut p = sp(k);
-                    p.push(PathSeg::Index(j));
-                    let id: EmitterId = s.parse().map_err(|m: String| ctx.err(&p, m))?;
-                    if !nav.ephemerides.iter().any(|e| e.sat == id) {
-                        return Err(ctx.err(
-                            &p,
-                            format!("satellite {id} is not in the navigation data ({nav_source})"),
-                        ));
-                    }
-                    Ok(id)
-                })
-                .collect()
-        };
-        let rule = if let Some(n) = s.keep_highest {
-            ShieldingRule::KeepHighest(n)
-        } else if let Some(l) = &s.keep {
-            ShieldingRule::Keep(parse_list("keep", l)?)
-        } else {
-            ShieldingRule::Block(parse_list("block", s.block.as_deref().unwrap_or(&[]))?)
-        };
-        shielding.push(Shielding {
-            from_s: s.from_s,
-            to_s: s.to_s,
-            rule,
-        });
-    }
-
-    // Estimators.
     if file.estimators.is_empty() {
-        return Err(ctx.err(&[], "expected at least one [[estimator]] table"));
+        return Err(ctx.err("", "expected at least one [[estimator]] table"));
     }
     let gnss_systems: Vec<System> = file
         .sensors
@@ -394,7 +239,7 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
         check_estimator(&ctx, i, e, &gnss_systems)?;
         if file.estimators[..i].iter().any(|o| o.name == e.name) {
             return Err(ctx.err(
-                &[key("estimator"), PathSeg::Index(i), key("name")],
+                &format!("estimator[{i}].name"),
                 format!(
                     "estimator name '{}' is used twice; names must be unique",
                     e.name
@@ -402,25 +247,15 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
             ));
         }
     }
-
-    let mc = &file.montecarlo;
-    if mc.trials == 0 {
-        return Err(ctx.err(
-            &[key("montecarlo"), key("trials")],
-            "expected at least 1 trial",
-        ));
+    if file.montecarlo.trials == 0 {
+        return Err(ctx.err("montecarlo.trials", "expected at least 1 trial"));
     }
 
-    // The scenario length: the world's, or the trajectory's.
-    let probe = file
-        .platform
-        .trajectory
+    // The scenario length is the world's, or the trajectory's. Building the trajectory
+    // once here also proves that every trial can build it.
+    let probe = trajectory
         .build(&mut TrialRng::new(0, 0).stream("motion/probe"))
-        .map_err(|issue| {
-            let mut p = traj_path.to_vec();
-            p.push(key(&issue.key));
-            ctx.err(&p, issue.message)
-        })?;
+        .map_err(|i| ctx.issue("platform.trajectory", i))?;
     let duration_s = w.duration_s.unwrap_or_else(|| probe.duration_s());
 
     Ok(World {
@@ -436,37 +271,211 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
     })
 }
 
+/// Navigation data: a file relative to the world file, or the embedded default.
+fn load_nav(ctx: &Ctx<'_>, ephemeris: Option<&str>) -> Result<(NavData, String), WorldError> {
+    match ephemeris {
+        None | Some(BUILTIN_EPHEMERIS_NAME) => {
+            let nav = parse_nav(BUILTIN_EPHEMERIS, BUILTIN_EPHEMERIS_NAME).map_err(|e| {
+                ctx.err(
+                    "world.ephemeris",
+                    format!("the embedded ephemeris does not parse: {e}"),
+                )
+            })?;
+            Ok((nav, BUILTIN_EPHEMERIS_NAME.to_string()))
+        }
+        Some(rel) => {
+            let p = ctx.path.parent().unwrap_or(Path::new(".")).join(rel);
+            if !p.exists() {
+                return Err(ctx.err(
+                    "world.ephemeris",
+                    format!(
+                        "navigation file {} does not exist (paths are relative to the world \
+                         file; use \"{BUILTIN_EPHEMERIS_NAME}\" for the embedded one)",
+                        p.display()
+                    ),
+                ));
+            }
+            let nav = read_nav_file(&p).map_err(|e| {
+                ctx.err(
+                    "world.ephemeris",
+                    format!("cannot use navigation file: {e}"),
+                )
+            })?;
+            Ok((nav, p.display().to_string()))
+        }
+    }
+}
+
+fn check_gnss(
+    ctx: &Ctx<'_>,
+    g: &crate::gnss::measurement::GnssConfig,
+    nav: &NavData,
+    nav_source: &str,
+    start: GpsTime,
+) -> Result<(), WorldError> {
+    let at = |k: &str| format!("sensors.gnss.{k}");
+    ctx.in_range(&at("rate_hz"), g.rate_hz, 1e-3..=100.0, "a rate in Hz")?;
+    ctx.in_range(
+        &at("elevation_mask_deg"),
+        g.elevation_mask_deg,
+        -5.0..90.0,
+        "an elevation mask in degrees",
+    )?;
+    if g.systems.is_empty() || g.systems.iter().any(|s| !s.is_gnss()) {
+        return Err(ctx.err(
+            &at("systems"),
+            "expected a non-empty list of satellite systems from \"gps\", \"bds\"",
+        ));
+    }
+    for (i, s) in g.systems.iter().enumerate() {
+        if !nav.ephemerides.iter().any(|e| e.sat.system == *s) {
+            return Err(ctx.err(
+                &at(&format!("systems[{i}]")),
+                format!(
+                    "the navigation data ({nav_source}) has no {} ephemerides",
+                    s.name()
+                ),
+            ));
+        }
+    }
+    g.tracking
+        .validate()
+        .map_err(|i| ctx.issue(&at("tracking"), i))?;
+    let e = &g.errors;
+    let err_at = |k: &str| at(&format!("errors.{k}"));
+    for (name, v) in [
+        ("ure_gps_m", e.ure_gps_m),
+        ("ure_bds_m", e.ure_bds_m),
+        ("iono_residual", e.iono_residual),
+        ("iono_residual_per_sat", e.iono_residual_per_sat),
+        ("tropo_residual", e.tropo_residual),
+    ] {
+        ctx.in_range(&err_at(name), v, 0.0..1e6, "a non-negative number")?;
+    }
+    ctx.in_range(
+        &err_at("ure_tau_s"),
+        e.ure_tau_s,
+        1e-6..1e9,
+        "a correlation time in s",
+    )?;
+    ctx.in_range(
+        &err_at("humidity"),
+        e.humidity,
+        0.0..=1.0,
+        "a relative humidity",
+    )?;
+
+    // An empty sky: no satellite of the tracked systems has an ephemeris valid at the start.
+    let usable = nav
+        .satellites()
+        .into_iter()
+        .filter(|s| g.systems.contains(&s.system))
+        .any(|s| nav.select(s, start).is_some());
+    if !usable {
+        let toes = nav.ephemerides.iter().map(|e| e.toe);
+        let span = match (toes.clone().min(), toes.max()) {
+            (Some(a), Some(b)) => format!("its ephemerides have reference times from {a} to {b}"),
+            _ => "it holds no GPS or BeiDou ephemeris".to_string(),
+        };
+        return Err(ctx.err(
+            "world.start",
+            format!(
+                "empty sky: no satellite in {nav_source} has an ephemeris valid at the start \
+                 {start}; {span}"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+fn check_shielding(
+    ctx: &Ctx<'_>,
+    specs: &[schema::ShieldingSpec],
+    nav: &NavData,
+    nav_source: &str,
+) -> Result<Vec<Shielding>, WorldError> {
+    let mut shielding = Vec::with_capacity(specs.len());
+    for (i, s) in specs.iter().enumerate() {
+        let at = |k: &str| format!("shielding[{i}].{k}");
+        if !(s.from_s.is_finite() && s.to_s.is_finite() && s.from_s >= 0.0 && s.to_s > s.from_s) {
+            return Err(ctx.err(
+                &at("to_s"),
+                format!(
+                    "expected 0 ≤ from_s < to_s, got from_s = {}, to_s = {}",
+                    s.from_s, s.to_s
+                ),
+            ));
+        }
+        let parse_list = |k: &str, list: &[String]| -> Result<Vec<EmitterId>, WorldError> {
+            list.iter()
+                .enumerate()
+                .map(|(j, text)| {
+                    let here = at(&format!("{k}[{j}]"));
+                    let id: EmitterId = text.parse().map_err(|m: String| ctx.err(&here, m))?;
+                    if !nav.ephemerides.iter().any(|e| e.sat == id) {
+                        return Err(ctx.err(
+                            &here,
+                            format!("satellite {id} is not in the navigation data ({nav_source})"),
+                        ));
+                    }
+                    Ok(id)
+                })
+                .collect()
+        };
+        let rule = match (s.keep_highest, &s.keep, &s.block) {
+            (Some(n), None, None) => ShieldingRule::KeepHighest(n),
+            (None, Some(l), None) => ShieldingRule::Keep(parse_list("keep", l)?),
+            (None, None, Some(l)) => ShieldingRule::Block(parse_list("block", l)?),
+            _ => {
+                return Err(ctx.err(
+                    &format!("shielding[{i}]"),
+                    "expected exactly one of keep_highest = N, keep = [\"G05\", …] or \
+                     block = [\"G05\", …]",
+                ))
+            }
+        };
+        shielding.push(Shielding {
+            from_s: s.from_s,
+            to_s: s.to_s,
+            rule,
+        });
+    }
+    Ok(shielding)
+}
+
 fn check_estimator(
     ctx: &Ctx<'_>,
     i: usize,
     e: &EstimatorSpec,
     gnss_systems: &[System],
 ) -> Result<(), WorldError> {
-    let ep = |k: &str| vec![key("estimator"), PathSeg::Index(i), key(k)];
+    let at = |k: &str| format!("estimator[{i}].{k}");
     if e.name.trim().is_empty() {
-        return Err(ctx.err(&ep("name"), "expected a non-empty name"));
+        return Err(ctx.err(&at("name"), "expected a non-empty name"));
     }
     if e.sources.is_empty() {
         return Err(ctx.err(
-            &ep("sources"),
+            &at("sources"),
             "expected a non-empty list of systems, e.g. [\"gps\"]",
         ));
     }
     for (j, s) in e.sources.iter().enumerate() {
         if !gnss_systems.contains(s) {
-            let mut p = ep("sources");
-            p.push(PathSeg::Index(j));
-            return Err(ctx.err(&p, format!("the estimator uses '{}', which this world does not simulate (add it to [sensors.gnss] systems)", s.name())));
+            return Err(ctx.err(
+                &at(&format!("sources[{j}]")),
+                format!(
+                    "the estimator uses '{}', which this world does not simulate (add it to \
+                     [sensors.gnss] systems)",
+                    s.name()
+                ),
+            ));
         }
     }
     if let (FilterKind::Ekf11, Some(cfg)) = (e.filter, &e.ekf) {
         cfg.validate()
-            .map_err(|m| ctx.err(&ep("ekf"), m.to_string()))?;
+            .map_err(|m| ctx.err(&at("ekf"), m.to_string()))?;
     }
-    if let Err(m) = e.build() {
-        return Err(ctx.err(&ep("filter"), m));
-    }
-    Ok(())
+    e.build().map(|_| ()).map_err(|m| ctx.err(&at("filter"), m))
 }
 
 impl World {

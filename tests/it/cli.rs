@@ -161,7 +161,7 @@ fn world_with_an_impossible_value_names_the_key() {
     assert!(e.contains("positive speed"), "{e}");
     let e = check_edited("lat", |t| t.replace("lat_deg = 40.0040", "lat_deg = 140.0"));
     assert!(
-        e.contains("world.origin.lat_deg") && e.contains("−90..90"),
+        e.contains("world.origin.lat_deg") && e.contains("-90.0..=90.0") && e.contains("got 140"),
         "{e}"
     );
     let e = check_edited("sat", |t| t.replace("keep_highest = 2", "keep = [\"G99\"]"));
