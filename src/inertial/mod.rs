@@ -43,13 +43,13 @@
 //! * [`magnetometer`]: a constant Earth field and a noisy three-axis magnetometer.
 //! * [`pdr`]: step detection, Weinberg step length and an AHRS heading.
 
-// PENDING pub mod allan;
-// PENDING pub mod attitude;
+pub mod allan;
+pub mod attitude;
 pub mod imu;
-// PENDING pub mod ins_ekf;
-// PENDING pub mod magnetometer;
-// PENDING pub mod pdr;
-// PENDING pub mod strapdown;
+pub mod ins_ekf;
+pub mod magnetometer;
+pub mod pdr;
+pub mod strapdown;
 
 use nalgebra::Vector3;
 

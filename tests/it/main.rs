@@ -5,5 +5,6 @@ mod cli;
 mod common;
 mod fusion_filters;
 mod gnss_orbits;
+mod inertial;
 mod motion_models;
 mod skeleton;
