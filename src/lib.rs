@@ -13,4 +13,5 @@ pub mod io;
 pub mod metrics;
 pub mod montecarlo;
 pub mod motion;
+pub mod propagation;
 pub mod world;

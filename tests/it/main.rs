@@ -7,4 +7,5 @@ mod fusion_filters;
 mod gnss_orbits;
 mod inertial;
 mod motion_models;
+mod propagation;
 mod skeleton;
