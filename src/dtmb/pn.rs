@@ -202,7 +202,9 @@ impl PnMode {
         self.check_phase(phase)?;
         let seq = self.m_sequence();
         let p = seq.len();
-        Ok((0..self.header_len()).map(|n| seq[(n + phase) % p]).collect())
+        Ok((0..self.header_len())
+            .map(|n| seq[(n + phase) % p])
+            .collect())
     }
 
     /// Writes the complex baseband header at `phase` into `out` (length `header_len`),
@@ -311,11 +313,23 @@ mod tests {
 
     #[test]
     fn pn420_header_seeds_follow_the_schedule() {
-        let expect = [(0, 0xB0u8), (1, 0x61), (2, 0xD8), (111, 0x9A), (112, 0x83), (113, 0x9A), (224, 0xB0)];
+        let expect = [
+            (0, 0xB0u8),
+            (1, 0x61),
+            (2, 0xD8),
+            (111, 0x9A),
+            (112, 0x83),
+            (113, 0x9A),
+            (224, 0xB0),
+        ];
         for (frame, byte) in expect {
             let p = PnMode::Pn420.phase_of_frame(frame);
             let chips = PnMode::Pn420.header_chips(p).unwrap();
-            assert_eq!(chips_to_hex(&chips[..8]), format!("{byte:02X}"), "frame {frame}");
+            assert_eq!(
+                chips_to_hex(&chips[..8]),
+                format!("{byte:02X}"),
+                "frame {frame}"
+            );
         }
     }
 
@@ -337,7 +351,11 @@ mod tests {
                 let h = mode.header_chips(p).unwrap();
                 let (pre, c) = (mode.preamble_len(), mode.core_len());
                 assert_eq!(&h[..pre], &h[c..c + pre], "{mode} preamble = core tail");
-                assert_eq!(&h[pre + c..], &h[pre..pre + mode.postamble_len()], "{mode} postamble = core head");
+                assert_eq!(
+                    &h[pre + c..],
+                    &h[pre..pre + mode.postamble_len()],
+                    "{mode} postamble = core head"
+                );
             }
         }
     }
@@ -357,7 +375,13 @@ mod tests {
         assert_eq!("pn945".parse::<PnMode>().unwrap(), PnMode::Pn945);
         assert_eq!("420".parse::<PnMode>().unwrap(), PnMode::Pn420);
         let e = "PN500".parse::<PnMode>().unwrap_err().to_string();
-        assert!(e.contains("PN500") && e.contains("PN420") && e.contains("PN595") && e.contains("PN945"), "{e}");
+        assert!(
+            e.contains("PN500")
+                && e.contains("PN420")
+                && e.contains("PN595")
+                && e.contains("PN945"),
+            "{e}"
+        );
         assert!(PnMode::Pn595.header_chips(1).is_err());
         assert!(PnMode::Pn420.header_chips(255).is_err());
     }

@@ -3,6 +3,7 @@
 
 mod cli;
 mod common;
+mod dtmb_signal;
 mod fusion_filters;
 mod gnss_orbits;
 mod inertial;
