@@ -5,6 +5,9 @@
 
 pub mod ekf11;
 pub mod estimator;
+pub mod kalman;
 pub mod linear_kf;
 pub mod measurement;
+pub mod models;
+pub mod particle;
 pub mod wls;

@@ -1,0 +1,198 @@
+//! Benchmarks of the filter family (`fusion::{models, kalman, particle}`) against the
+//! Python baselines in `benches/python/`:
+//!
+//! * one 11-state EKF epoch, predict + 12 pseudoranges + 12 range rates: seed 000's
+//!   hand-optimised `Ekf11` (sequential scalar updates) and the generic `Ekf<12>` on
+//!   `Pva11Clock` + `PseudorangesAndRates<12, 24>` (one 24-row vector update, as filterpy
+//!   computes it); baseline `benches/python/ekf_epoch_bench.py`;
+//! * the SIR particle filter with 6 pseudoranges at 100, 500 and 10 000 particles: the
+//!   likelihood alone and a whole epoch (predict, weight, N_eff-threshold resampling), in
+//!   particle·measurement likelihood terms per second; baseline
+//!   `benches/python/pf_bench.py`.
+//!
+//! Run: `cargo bench --bench filters -- --warm-up-time 1 --measurement-time 3`.
+
+use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
+use hybridnav::core::{EmitterId, EnuFrame, Geodetic, System, TrialRng};
+use hybridnav::fusion::ekf11::{Ekf11, Ekf11Config, N_STATES};
+use hybridnav::fusion::kalman::Ekf;
+use hybridnav::fusion::measurement::RangeMeasurement;
+use hybridnav::fusion::models::{
+    MeasurementModel, ProcessModel, Pseudoranges, PseudorangesAndRates, Pva11Clock, RangeRow,
+    StateLayout,
+};
+use hybridnav::fusion::particle::{
+    ParticleBuffer, ParticleFilter, PseudorangeLikelihood, Resampling, SoaLikelihood,
+};
+use hybridnav::fusion::wls;
+use nalgebra::{SMatrix, SVector, Vector3};
+
+/// Twelve emitters (8 GPS, 4 BDS) over a Beijing receiver at rest with zero clock; the
+/// scene of `benches/fusion.rs` and `benches/python/ekf_epoch_bench.py`.
+fn scene() -> (Vector3<f64>, Vec<RangeMeasurement>) {
+    let frame = EnuFrame::new(Geodetic::from_deg(39.98, 116.35, 60.0));
+    let r = frame.origin_ecef();
+    let ms = (0..12)
+        .map(|i| {
+            let az = (i as f64 * 30.0 + 7.0).to_radians();
+            let el = (15.0 + (i * 37 % 70) as f64).to_radians();
+            let u = Vector3::new(el.cos() * az.sin(), el.cos() * az.cos(), el.sin());
+            let p = frame.ecef_of_enu(&(u * 20_200e3));
+            let v = frame.ecef_vector_of_enu(&Vector3::new(-u.y, u.x, 0.0).normalize()) * 3_874.0;
+            let los = (p - r).normalize();
+            let system = if i < 8 { System::Gps } else { System::Bds };
+            RangeMeasurement {
+                emitter: EmitterId::new(system, i as u16 + 1),
+                emitter_pos_ecef_m: p,
+                emitter_vel_ecef_mps: v,
+                pseudorange_m: (p - r).norm(),
+                sigma_m: 3.0,
+                range_rate_mps: Some(los.dot(&v)),
+                sigma_rate_mps: 0.05,
+                cn0_dbhz: 45.0,
+                elevation_rad: el,
+            }
+        })
+        .collect();
+    (r, ms)
+}
+
+fn bench_ekf(c: &mut Criterion) {
+    let (r, ms) = scene();
+    let mut ekf = Ekf11::new(Ekf11Config::default()).expect("default configuration is valid");
+    ekf.initialise(r + Vector3::new(5.0, -3.0, 2.0), 0.0, 10.0, 100.0)
+        .expect("finite initial state");
+    for _ in 0..20 {
+        ekf.predict(1.0).expect("valid interval");
+        for m in &ms {
+            ekf.update_range(m);
+        }
+    }
+    c.bench_function(
+        "ekf11 epoch: predict + 12 pr + 12 rates (sequential scalar)",
+        |b| {
+            b.iter(|| {
+                let mut f = ekf.clone();
+                f.predict(black_box(1.0)).expect("valid interval");
+                for m in &ms {
+                    black_box(f.update_range(black_box(m)));
+                }
+                f
+            })
+        },
+    );
+
+    // The generic EKF on the same model, one vector update of 24 rows.
+    let model = Pva11Clock::new(Ekf11Config::default()).expect("valid");
+    let rows: Vec<RangeRow> = ms.iter().map(RangeRow::from).collect();
+    let meas =
+        PseudorangesAndRates::<N_STATES, 24>::new(StateLayout::ekf11(), &rows).expect("valid");
+    let z = SVector::<f64, 24>::from_fn(|j, _| {
+        if j < 12 {
+            ms[j].pseudorange_m
+        } else {
+            ms[j - 12].range_rate_mps.unwrap_or(0.0)
+        }
+    });
+    let mut gen = Ekf::new(*ekf.state(), *ekf.covariance()).expect("valid prior");
+    for _ in 0..5 {
+        gen.predict(&model, 1.0).expect("valid");
+        gen.update(&meas, &z);
+    }
+    c.bench_function(
+        "generic Ekf<12> epoch: predict + 24-row vector update",
+        |b| {
+            b.iter(|| {
+                let mut f = gen.clone();
+                f.predict(&model, black_box(1.0)).expect("valid");
+                black_box(f.update(&meas, black_box(&z)));
+                f
+            })
+        },
+    );
+}
+
+/// A random walk on `[x, y, z, b]` with 1 m (position) and 0.5 m (clock) per step, the
+/// prediction of `benches/python/pf_bench.py`.
+struct RandomWalk;
+
+impl ProcessModel<4> for RandomWalk {
+    fn f(&self, x: &SVector<f64, 4>, _dt_s: f64) -> SVector<f64, 4> {
+        *x
+    }
+    fn jacobian(&self, _x: &SVector<f64, 4>, _dt_s: f64) -> SMatrix<f64, 4, 4> {
+        SMatrix::identity()
+    }
+    fn q(&self, _x: &SVector<f64, 4>, dt_s: f64) -> SMatrix<f64, 4, 4> {
+        SMatrix::from_diagonal(&SVector::<f64, 4>::new(1.0, 1.0, 1.0, 0.25)) * dt_s
+    }
+}
+
+fn bench_pf(c: &mut Criterion) {
+    let emitters = [
+        [15_600e3, 7_540e3, 20_140e3],
+        [18_760e3, 2_750e3, 18_610e3],
+        [17_610e3, 14_630e3, 13_480e3],
+        [19_170e3, 610e3, 18_390e3],
+        [-2_000e3, 12_000e3, 21_000e3],
+        [5_000e3, -14_000e3, 20_000e3],
+    ];
+    let truth = SVector::<f64, 4>::new(-2_177e3, 4_389e3, 4_070e3, 30.0);
+    let layout = StateLayout {
+        pos: [Some(0), Some(1), Some(2)],
+        vel: [None; 3],
+        clock: [Some(3); wls::MAX_CLOCKS],
+        isb: [None; wls::MAX_CLOCKS],
+        drift: None,
+    };
+    let rows = emitters.map(|e| RangeRow {
+        emitter_pos_m: Vector3::from(e),
+        emitter_vel_mps: Vector3::zeros(),
+        system: System::Gps,
+        sigma_m: 3.0,
+        sigma_rate_mps: 1.0,
+    });
+    let model = Pseudoranges::<4, 6>::new(layout, rows).expect("valid");
+    let z = model.h(&truth) + SVector::<f64, 6>::new(1.0, -2.0, 0.5, 3.0, -1.5, 2.0);
+    let mut lik = PseudorangeLikelihood::with_capacity(6);
+    lik.set(&model, &z);
+    let mut group = c.benchmark_group("pf 6 pseudoranges");
+    for n in [100usize, 500, 10_000] {
+        let mut rng = TrialRng::new(1, 0).stream("bench/pf");
+        let mut pf = ParticleFilter::new(
+            ParticleBuffer::<4>::new(n).expect("n > 0"),
+            Resampling::Systematic,
+            0.5,
+        )
+        .expect("valid threshold");
+        pf.init_gaussian(
+            &truth,
+            &(SMatrix::<f64, 4, 4>::identity() * 100.0),
+            &mut rng,
+        )
+        .expect("valid prior");
+        group.throughput(Throughput::Elements((n * 6) as u64));
+        let mut out = vec![0.0; n];
+        group.bench_function(format!("likelihood N={n}"), |b| {
+            b.iter(|| {
+                out.fill(0.0);
+                SoaLikelihood::<4>::add_log_likelihood(
+                    &lik,
+                    black_box(pf.particles().columns()),
+                    &mut out,
+                );
+                black_box(out[0])
+            })
+        });
+        group.bench_function(format!("epoch N={n}"), |b| {
+            b.iter(|| {
+                pf.predict(&RandomWalk, 1.0, &mut rng).expect("valid");
+                black_box(pf.update_soa(&lik, &mut rng))
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_ekf, bench_pf);
+criterion_main!(benches);

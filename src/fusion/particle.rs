@@ -1,0 +1,674 @@
+//! The sampling-importance-resampling (SIR) particle filter of seed 001 (GPS + DTMB,
+//! §3, steps 1–6) on the models of [`crate::fusion::models`], after Gordon, Salmond &
+//! Smith, "Novel approach to nonlinear/non-Gaussian Bayesian state estimation", *IEE
+//! Proc. F* 140(2), 1993, and Arulampalam et al., "A tutorial on particle filters", *IEEE
+//! Trans. SP* 50(2), 2002 (Algorithm 4):
+//!
+//! ```text
+//! predict:    x_i ← f(x_i, T) + G w_i,   w_i ~ N(0, I),   G Gᵀ = Q
+//! weight:     w_i ← w_i · p(z | x_i),    normalised so that Σ w_i = 1
+//! N_eff = 1 / Σ w_i²;   resample when N_eff < θ·N, then w_i = 1/N   (seed 001 step 4–5)
+//! estimate:   x̂ = Σ w_i x_i                                          (seed 001 eq. 10)
+//! ```
+//!
+//! # Layout and speed
+//!
+//! The particles live in a [`ParticleBuffer`] the caller builds once (and can take back
+//! with [`ParticleFilter::into_buffer`]): one contiguous `f64` column per state component
+//! (structure of arrays), plus the weight, log-likelihood and resampling buffers. Nothing
+//! is allocated after construction.
+//!
+//! The weights are formed in the log domain: each measurement adds its
+//! `−½ (z_j − h_j(x_i))² / σ_j²` to a per-particle sum, and a single `exp` per particle
+//! (after subtracting the largest sum, so that it cannot underflow to all zeros) turns the
+//! sum into a weight factor. [`PseudorangeLikelihood`] evaluates the pseudorange terms
+//! over the columns in blocks that stay in the L1 cache, measurement by measurement, with
+//! `−½/σ²` precomputed; the inner loop is branch-free over contiguous arrays so the
+//! compiler vectorises it.
+//!
+//! # Failure handling
+//!
+//! When every particle gets weight zero (all log-likelihoods `−∞` or NaN, e.g. from a
+//! measurement far outside the cloud), the update cannot be normalised. The filter keeps
+//! its particles, resets the weights to uniform and reports `degenerate = true` in the
+//! [`PfUpdate`], so the caller sees the failure instead of a NaN estimate.
+
+use crate::fusion::models::{MeasurementModel, ProcessModel, Pseudoranges};
+use crate::fusion::wls;
+use nalgebra::{SMatrix, SVector};
+use rand::Rng;
+use rand_distr::StandardNormal;
+
+/// Errors of the particle filter.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ParticleError {
+    /// A parameter is unusable (zero particles, a threshold outside [0, 1], …).
+    #[error("invalid particle-filter parameter: {0}")]
+    InvalidParameter(String),
+    /// A mean, covariance, interval or model output is not finite.
+    #[error("non-finite value in the input or result; the particles are unchanged")]
+    NonFinite,
+    /// A covariance has a negative eigenvalue.
+    #[error("a covariance is not positive semi-definite")]
+    NotPositiveSemiDefinite,
+}
+
+/// How the resampling step draws its `N` ordered uniforms.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Resampling {
+    /// One uniform `u ~ U[0, 1/N)`, then `u + i/N` (Kitagawa 1996; Carpenter, Clifford &
+    /// Fearnhead 1999). Lowest variance, O(N).
+    Systematic,
+    /// `u_i ~ U[i/N, (i+1)/N)` independently (Kitagawa 1996). O(N).
+    Stratified,
+}
+
+/// The storage of `n` particles of dimension `N`, allocated once.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParticleBuffer<const N: usize> {
+    n: usize,
+    /// Column `k` (state component `k` of every particle) is `cols[k·n .. (k+1)·n]`.
+    cols: Vec<f64>,
+    weights: Vec<f64>,
+    log_lik: Vec<f64>,
+    /// The cumulative weights, then the copy of a column during resampling.
+    scratch: Vec<f64>,
+    idx: Vec<usize>,
+}
+
+impl<const N: usize> ParticleBuffer<N> {
+    /// Storage for `n` particles.
+    ///
+    /// # Errors
+    /// When `n` is 0.
+    pub fn new(n: usize) -> Result<Self, ParticleError> {
+        if n == 0 || N == 0 {
+            return Err(ParticleError::InvalidParameter(
+                "a particle filter needs at least one particle of dimension ≥ 1".into(),
+            ));
+        }
+        Ok(Self {
+            n,
+            cols: vec![0.0; N * n],
+            weights: vec![1.0 / n as f64; n],
+            log_lik: vec![0.0; n],
+            scratch: vec![0.0; n],
+            idx: vec![0; n],
+        })
+    }
+
+    /// The number of particles.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// Always false: a buffer holds at least one particle.
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// State component `k` of every particle.
+    pub fn column(&self, k: usize) -> &[f64] {
+        &self.cols[k * self.n..(k + 1) * self.n]
+    }
+
+    /// State component `k` of every particle, writable (to seed particles directly).
+    pub fn column_mut(&mut self, k: usize) -> &mut [f64] {
+        &mut self.cols[k * self.n..(k + 1) * self.n]
+    }
+
+    /// All columns, component-major.
+    pub fn columns(&self) -> &[f64] {
+        &self.cols
+    }
+
+    /// The normalised weights.
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    fn get(&self, i: usize) -> SVector<f64, N> {
+        SVector::<f64, N>::from_fn(|k, _| self.cols[k * self.n + i])
+    }
+
+    fn set(&mut self, i: usize, x: &SVector<f64, N>) {
+        for k in 0..N {
+            self.cols[k * self.n + i] = x[k];
+        }
+    }
+}
+
+/// A measurement whose log-likelihood can be evaluated over the particle columns at once.
+pub trait SoaLikelihood<const N: usize> {
+    /// Adds `log p(z | x_i)` (up to a constant common to all particles) to `out[i]` for
+    /// the `n = out.len()` particles whose component `k` is `cols[k·n + i]`.
+    fn add_log_likelihood(&self, cols: &[f64], out: &mut [f64]);
+}
+
+/// What one weight update did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PfUpdate {
+    /// The effective sample size after weighting, before any resampling.
+    pub n_eff: f64,
+    /// True when the update resampled.
+    pub resampled: bool,
+    /// True when no particle had a usable weight; the weights were reset to uniform.
+    pub degenerate: bool,
+}
+
+/// The SIR particle filter (see the module documentation).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParticleFilter<const N: usize> {
+    buf: ParticleBuffer<N>,
+    resampling: Resampling,
+    neff_threshold: f64,
+}
+
+impl<const N: usize> ParticleFilter<N> {
+    /// A filter over the particles of `buf`, resampling with `resampling` when `N_eff`
+    /// falls below `neff_threshold · N` (seed 001 resamples below a fixed count; ⅔ or ½
+    /// of `N` is common; 1 resamples every step, 0 never).
+    ///
+    /// # Errors
+    /// When the threshold is outside [0, 1].
+    pub fn new(
+        buf: ParticleBuffer<N>,
+        resampling: Resampling,
+        neff_threshold: f64,
+    ) -> Result<Self, ParticleError> {
+        if !(0.0..=1.0).contains(&neff_threshold) {
+            return Err(ParticleError::InvalidParameter(format!(
+                "N_eff threshold {neff_threshold}: expected a fraction in [0, 1]"
+            )));
+        }
+        Ok(Self {
+            buf,
+            resampling,
+            neff_threshold,
+        })
+    }
+
+    /// Gives the particle storage back.
+    pub fn into_buffer(self) -> ParticleBuffer<N> {
+        self.buf
+    }
+
+    /// The particles.
+    pub fn particles(&self) -> &ParticleBuffer<N> {
+        &self.buf
+    }
+
+    /// The particles, writable.
+    pub fn particles_mut(&mut self) -> &mut ParticleBuffer<N> {
+        &mut self.buf
+    }
+
+    /// Draws every particle from `N(mean, cov)` with uniform weights.
+    ///
+    /// # Errors
+    /// A non-finite input or a covariance with a negative eigenvalue; the particles are
+    /// then unchanged.
+    pub fn init_gaussian<R: Rng + ?Sized>(
+        &mut self,
+        mean: &SVector<f64, N>,
+        cov: &SMatrix<f64, N, N>,
+        rng: &mut R,
+    ) -> Result<(), ParticleError> {
+        if !mean.iter().all(|v| v.is_finite()) {
+            return Err(ParticleError::NonFinite);
+        }
+        let g = psd_factor(cov)?;
+        for i in 0..self.buf.n {
+            let w = SVector::<f64, N>::from_fn(|_, _| rng.sample(StandardNormal));
+            self.buf.set(i, &(mean + g * w));
+        }
+        self.buf.weights.fill(1.0 / self.buf.n as f64);
+        Ok(())
+    }
+
+    /// Moves every particle through `model` over `dt_s` seconds and adds process noise.
+    ///
+    /// # Errors
+    /// An invalid interval, a `Q` with a negative eigenvalue or a non-finite particle;
+    /// particles already moved keep their new values only when no error is returned (on
+    /// error the whole cloud is restored from the scratch copy is *not* attempted: the
+    /// error means the model is unusable and the caller must reinitialise).
+    pub fn predict<P: ProcessModel<N>, R: Rng + ?Sized>(
+        &mut self,
+        model: &P,
+        dt_s: f64,
+        rng: &mut R,
+    ) -> Result<(), ParticleError> {
+        if !(dt_s.is_finite() && dt_s >= 0.0) {
+            return Err(ParticleError::NonFinite);
+        }
+        // Q is evaluated at the weighted mean: the models here have state-independent
+        // noise, and a per-particle factorisation would cost N³ per particle.
+        let g = psd_factor(&model.q(&self.mean(), dt_s))?;
+        let noisy = g.iter().any(|v| *v != 0.0);
+        for i in 0..self.buf.n {
+            let mut x = model.f(&self.buf.get(i), dt_s);
+            if noisy {
+                let w = SVector::<f64, N>::from_fn(|_, _| rng.sample(StandardNormal));
+                x += g * w;
+            }
+            if !x.iter().all(|v| v.is_finite()) {
+                return Err(ParticleError::NonFinite);
+            }
+            self.buf.set(i, &x);
+        }
+        Ok(())
+    }
+
+    /// Weights the particles by measurement `z` of any `model` (a gather per particle),
+    /// then resamples if `N_eff` is below the threshold.
+    pub fn update<H: MeasurementModel<N, M>, const M: usize, R: Rng + ?Sized>(
+        &mut self,
+        model: &H,
+        z: &SVector<f64, M>,
+        rng: &mut R,
+    ) -> PfUpdate {
+        for i in 0..self.buf.n {
+            let x = self.buf.get(i);
+            self.buf.log_lik[i] = model.log_likelihood(&x, z);
+        }
+        self.finish_update(rng)
+    }
+
+    /// Weights the particles by a column-wise likelihood (the fast path), then resamples
+    /// if `N_eff` is below the threshold.
+    pub fn update_soa<L: SoaLikelihood<N>, R: Rng + ?Sized>(
+        &mut self,
+        lik: &L,
+        rng: &mut R,
+    ) -> PfUpdate {
+        self.buf.log_lik.fill(0.0);
+        lik.add_log_likelihood(&self.buf.cols, &mut self.buf.log_lik);
+        self.finish_update(rng)
+    }
+
+    fn finish_update<R: Rng + ?Sized>(&mut self, rng: &mut R) -> PfUpdate {
+        let b = &mut self.buf;
+        let max = b
+            .log_lik
+            .iter()
+            .zip(&b.weights)
+            .filter(|(l, w)| **w > 0.0 && !l.is_nan())
+            .map(|(l, _)| *l)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let mut sum = 0.0;
+        if max.is_finite() {
+            for (w, l) in b.weights.iter_mut().zip(&b.log_lik) {
+                // A NaN log-likelihood is an unusable particle: weight zero.
+                let f = if l.is_nan() { 0.0 } else { (l - max).exp() };
+                *w *= f;
+                sum += *w;
+            }
+        }
+        if !(sum > 0.0 && sum.is_finite()) {
+            b.weights.fill(1.0 / b.n as f64);
+            return PfUpdate {
+                n_eff: 0.0,
+                resampled: false,
+                degenerate: true,
+            };
+        }
+        let inv = 1.0 / sum;
+        let mut sq = 0.0;
+        for w in &mut b.weights {
+            *w *= inv;
+            sq += *w * *w;
+        }
+        let n_eff = 1.0 / sq;
+        let resampled = n_eff < self.neff_threshold * b.n as f64;
+        if resampled {
+            self.resample(rng);
+        }
+        PfUpdate {
+            n_eff,
+            resampled,
+            degenerate: false,
+        }
+    }
+
+    /// The effective sample size `1 / Σ w_i²` of the current weights.
+    pub fn n_eff(&self) -> f64 {
+        1.0 / self.buf.weights.iter().map(|w| w * w).sum::<f64>()
+    }
+
+    /// Resamples now with the configured scheme; the weights become `1/N`.
+    pub fn resample<R: Rng + ?Sized>(&mut self, rng: &mut R) {
+        let b = &mut self.buf;
+        let n = b.n;
+        let inv_n = 1.0 / n as f64;
+        let mut c = 0.0;
+        for (s, w) in b.scratch.iter_mut().zip(&b.weights) {
+            c += w;
+            *s = c;
+        }
+        // Rounding can leave the last cumulative weight a hair below 1; the last
+        // particle must catch every uniform up to 1.
+        b.scratch[n - 1] = f64::INFINITY;
+        let u0: f64 = rng.random::<f64>();
+        let mut j = 0;
+        for i in 0..n {
+            let u = match self.resampling {
+                Resampling::Systematic => (i as f64 + u0) * inv_n,
+                Resampling::Stratified => (i as f64 + rng.random::<f64>()) * inv_n,
+            };
+            while b.scratch[j] < u {
+                j += 1;
+            }
+            b.idx[i] = j;
+        }
+        for k in 0..N {
+            let col = &mut b.cols[k * n..(k + 1) * n];
+            b.scratch.copy_from_slice(col);
+            for (dst, &src) in col.iter_mut().zip(&b.idx) {
+                *dst = b.scratch[src];
+            }
+        }
+        b.weights.fill(inv_n);
+    }
+
+    /// The weighted mean `Σ w_i x_i` (seed 001 eq. 10).
+    pub fn mean(&self) -> SVector<f64, N> {
+        let b = &self.buf;
+        SVector::<f64, N>::from_fn(|k, _| {
+            b.column(k).iter().zip(&b.weights).map(|(x, w)| x * w).sum()
+        })
+    }
+
+    /// The weighted covariance `Σ w_i (x_i − x̂)(x_i − x̂)ᵀ`.
+    pub fn covariance(&self) -> SMatrix<f64, N, N> {
+        let m = self.mean();
+        let mut p = SMatrix::<f64, N, N>::zeros();
+        for i in 0..self.buf.n {
+            let d = self.buf.get(i) - m;
+            p += d * d.transpose() * self.buf.weights[i];
+        }
+        p
+    }
+}
+
+/// A factor `G` with `G Gᵀ = Q` for a positive semi-definite `Q`: Cholesky when it
+/// exists, else the symmetric eigen-decomposition `V √D` (a model such as seed 001's,
+/// noise-free in x, has a singular `Q`).
+fn psd_factor<const N: usize>(q: &SMatrix<f64, N, N>) -> Result<SMatrix<f64, N, N>, ParticleError> {
+    if !q.iter().all(|v| v.is_finite()) {
+        return Err(ParticleError::NonFinite);
+    }
+    if q.iter().all(|v| *v == 0.0) {
+        return Ok(SMatrix::<f64, N, N>::zeros());
+    }
+    if let Some(c) = q.cholesky() {
+        return Ok(c.l());
+    }
+    // Cholesky–Banachiewicz that tolerates zero pivots: for a semi-definite matrix a
+    // pivot at the rounding level means the column is a combination of the previous
+    // ones, so its part of the factor is zero.
+    let tol = 1e-12 * q.amax();
+    let mut g = SMatrix::<f64, N, N>::zeros();
+    for j in 0..N {
+        let mut d = q[(j, j)];
+        for k in 0..j {
+            d -= g[(j, k)] * g[(j, k)];
+        }
+        if d < -tol {
+            return Err(ParticleError::NotPositiveSemiDefinite);
+        }
+        if d <= tol {
+            continue;
+        }
+        let l = d.sqrt();
+        g[(j, j)] = l;
+        for i in j + 1..N {
+            let mut s = q[(i, j)];
+            for k in 0..j {
+                s -= g[(i, k)] * g[(j, k)];
+            }
+            g[(i, j)] = s / l;
+        }
+    }
+    Ok(g)
+}
+
+/// The pseudorange likelihood over particle columns:
+/// `log p(z | x_i) = Σ_j −½ (ρ_j − ‖r_j − r_i‖ − b_i)² / σ_j²`, with the clock and
+/// inter-system-bias columns of each system as in [`Pseudoranges`].
+///
+/// Its buffers are sized by [`PseudorangeLikelihood::with_capacity`] and refilled each
+/// epoch by [`PseudorangeLikelihood::set`] without allocating.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PseudorangeLikelihood {
+    pos_col: [Option<usize>; 3],
+    rows: Vec<LikRow>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct LikRow {
+    e: [f64; 3],
+    z_m: f64,
+    /// `−½ / σ²` (1/m²).
+    neg_half_inv_var: f64,
+    clock_col: Option<usize>,
+    isb_col: Option<usize>,
+}
+
+/// The block of particles processed measurement by measurement: 512 particles × (4
+/// columns + the sum) × 8 bytes = 20 KiB, inside a 32 KiB L1 data cache.
+const BLOCK: usize = 512;
+
+impl PseudorangeLikelihood {
+    /// An empty likelihood with room for `m` ranges.
+    pub fn with_capacity(m: usize) -> Self {
+        Self {
+            pos_col: [None; 3],
+            rows: Vec::with_capacity(m),
+        }
+    }
+
+    /// Loads the model's ranges and the measured pseudoranges `z`.
+    pub fn set<const N: usize, const M: usize>(
+        &mut self,
+        model: &Pseudoranges<N, M>,
+        z: &SVector<f64, M>,
+    ) {
+        let layout = model.layout();
+        self.pos_col = layout.pos;
+        self.rows.clear();
+        for (row, zj) in model.rows().iter().zip(z.iter()) {
+            let s = wls::system_index(row.system);
+            self.rows.push(LikRow {
+                e: [
+                    row.emitter_pos_m.x,
+                    row.emitter_pos_m.y,
+                    row.emitter_pos_m.z,
+                ],
+                z_m: *zj,
+                neg_half_inv_var: -0.5 / (row.sigma_m * row.sigma_m),
+                clock_col: layout.clock[s],
+                isb_col: layout.isb[s],
+            });
+        }
+    }
+
+    /// The number of ranges loaded.
+    pub fn len(&self) -> usize {
+        self.rows.len()
+    }
+
+    /// True when no range is loaded.
+    pub fn is_empty(&self) -> bool {
+        self.rows.is_empty()
+    }
+}
+
+/// One range's terms over a block: the loop the compiler vectorises.
+#[inline(always)]
+fn range_terms(
+    out: &mut [f64],
+    px: &[f64],
+    py: &[f64],
+    pz: &[f64],
+    bias: Option<&[f64]>,
+    bias2: Option<&[f64]>,
+    r: &LikRow,
+) {
+    let [ex, ey, ez] = r.e;
+    let (z, c) = (r.z_m, r.neg_half_inv_var);
+    let n = out.len();
+    let (px, py, pz) = (&px[..n], &py[..n], &pz[..n]);
+    match (bias, bias2) {
+        (Some(b), Some(b2)) => {
+            let (b, b2) = (&b[..n], &b2[..n]);
+            for i in 0..n {
+                let (dx, dy, dz) = (ex - px[i], ey - py[i], ez - pz[i]);
+                let d = (dx * dx + dy * dy + dz * dz).sqrt() + b[i] + b2[i] - z;
+                out[i] += c * d * d;
+            }
+        }
+        (Some(b), None) | (None, Some(b)) => {
+            let b = &b[..n];
+            for i in 0..n {
+                let (dx, dy, dz) = (ex - px[i], ey - py[i], ez - pz[i]);
+                let d = (dx * dx + dy * dy + dz * dz).sqrt() + b[i] - z;
+                out[i] += c * d * d;
+            }
+        }
+        (None, None) => {
+            for i in 0..n {
+                let (dx, dy, dz) = (ex - px[i], ey - py[i], ez - pz[i]);
+                let d = (dx * dx + dy * dy + dz * dz).sqrt() - z;
+                out[i] += c * d * d;
+            }
+        }
+    }
+}
+
+impl<const N: usize> SoaLikelihood<N> for PseudorangeLikelihood {
+    fn add_log_likelihood(&self, cols: &[f64], out: &mut [f64]) {
+        let n = out.len();
+        if cols.len() < N * n {
+            // A mismatched buffer is a programming error in the caller; every particle
+            // gets an unusable likelihood rather than a panic.
+            out.fill(f64::NAN);
+            return;
+        }
+        let col = |k: Option<usize>| k.filter(|&k| k < N).map(|k| &cols[k * n..(k + 1) * n]);
+        let zeros = [0.0; BLOCK];
+        let mut start = 0;
+        while start < n {
+            let end = (start + BLOCK).min(n);
+            let len = end - start;
+            let block = |k: Option<usize>| col(k).map(|c| &c[start..end]);
+            let p = |a: usize| block(self.pos_col[a]).unwrap_or(&zeros[..len]);
+            let (px, py, pz) = (p(0), p(1), p(2));
+            for r in &self.rows {
+                range_terms(
+                    &mut out[start..end],
+                    px,
+                    py,
+                    pz,
+                    block(r.clock_col),
+                    block(r.isb_col),
+                    r,
+                );
+            }
+            start = end;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::{System, TrialRng};
+    use crate::fusion::models::{RangeRow, StateLayout};
+    use nalgebra::Vector3;
+
+    fn model() -> Pseudoranges<4, 3> {
+        let layout = StateLayout {
+            pos: [Some(0), Some(1), Some(2)],
+            vel: [None; 3],
+            clock: [Some(3); wls::MAX_CLOCKS],
+            isb: [None; wls::MAX_CLOCKS],
+            drift: None,
+        };
+        let row = |x: f64, y: f64| RangeRow {
+            emitter_pos_m: Vector3::new(x, y, 500.0),
+            emitter_vel_mps: Vector3::zeros(),
+            system: System::Dtmb,
+            sigma_m: 2.0,
+            sigma_rate_mps: 1.0,
+        };
+        Pseudoranges::new(
+            layout,
+            [row(1000.0, 0.0), row(0.0, 1000.0), row(-700.0, -700.0)],
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn soa_likelihood_equals_the_generic_one() {
+        let m = model();
+        let z = SVector::<f64, 3>::new(1100.0, 1050.0, 1000.0);
+        let mut pf = ParticleFilter::new(
+            ParticleBuffer::<4>::new(1500).unwrap(),
+            Resampling::Systematic,
+            0.0,
+        )
+        .unwrap();
+        let mut rng = TrialRng::new(1, 0).stream("test/pf");
+        pf.init_gaussian(
+            &SVector::<f64, 4>::new(0.0, 0.0, 0.0, 10.0),
+            &(SMatrix::<f64, 4, 4>::identity() * 400.0),
+            &mut rng,
+        )
+        .unwrap();
+        let mut lik = PseudorangeLikelihood::with_capacity(3);
+        lik.set(&m, &z);
+        let mut out = vec![0.0; 1500];
+        SoaLikelihood::<4>::add_log_likelihood(&lik, pf.particles().columns(), &mut out);
+        for (i, o) in out.iter().enumerate() {
+            let x = pf.particles().get(i);
+            let g = m.log_likelihood(&x, &z);
+            assert!((o - g).abs() <= 1e-9 * g.abs().max(1.0), "{i}: {o} vs {g}");
+        }
+    }
+
+    #[test]
+    fn resampling_keeps_heavy_particles_and_degeneracy_is_reported() {
+        let mut rng = TrialRng::new(2, 0).stream("test/pf");
+        for scheme in [Resampling::Systematic, Resampling::Stratified] {
+            let mut pf =
+                ParticleFilter::new(ParticleBuffer::<1>::new(4).unwrap(), scheme, 1.0).unwrap();
+            pf.particles_mut()
+                .column_mut(0)
+                .copy_from_slice(&[1.0, 2.0, 3.0, 4.0]);
+            pf.particles_mut()
+                .weights
+                .copy_from_slice(&[0.0, 1.0, 0.0, 0.0]);
+            pf.resample(&mut rng);
+            assert_eq!(pf.particles().column(0), &[2.0; 4]);
+            assert_eq!(pf.particles().weights(), &[0.25; 4]);
+        }
+        let mut pf = ParticleFilter::new(
+            ParticleBuffer::<4>::new(10).unwrap(),
+            Resampling::Systematic,
+            0.5,
+        )
+        .unwrap();
+        let z = SVector::<f64, 3>::new(f64::NAN, 0.0, 0.0);
+        let up = pf.update(&model(), &z, &mut rng);
+        assert!(up.degenerate);
+        assert!(pf.mean().iter().all(|v| v.is_finite()));
+        assert!(ParticleBuffer::<4>::new(0).is_err());
+        assert!(ParticleFilter::new(
+            ParticleBuffer::<4>::new(3).unwrap(),
+            Resampling::Systematic,
+            1.5
+        )
+        .is_err());
+    }
+}
