@@ -4,6 +4,7 @@
 pub mod geodesy;
 pub mod ids;
 pub mod rng;
+pub mod stats;
 pub mod time;
 
 pub use geodesy::{azimuth_elevation, EnuFrame, Geodetic, C_MPS};
