@@ -29,6 +29,41 @@ pub enum Command {
     /// Broadcast ephemeris tools.
     #[command(subcommand)]
     Ephemeris(EphemerisCommand),
+    /// DTMB signal tools.
+    #[command(subcommand)]
+    Dtmb(DtmbCommand),
+}
+
+#[derive(Debug, Subcommand)]
+pub enum DtmbCommand {
+    /// Write DTMB baseband frames through white noise as a SigMF recording
+    /// (BASE.sigmf-data and BASE.sigmf-meta, with an annotation per frame).
+    Iq {
+        /// Frame header: pn420, pn595 or pn945.
+        #[arg(long, default_value = "pn945")]
+        mode: String,
+        /// Number of signal frames.
+        #[arg(long)]
+        frames: usize,
+        /// Signal-to-noise ratio over the 7.56 MHz band (dB).
+        #[arg(long, allow_hyphen_values = true)]
+        snr_db: f64,
+        /// Sample format: cf32 (32-bit float I/Q) or ci8 (8-bit integer I/Q).
+        #[arg(long, default_value = "cf32")]
+        format: String,
+        /// Integer oversampling of the 7.56 Msps symbol rate (SRRC shaping when > 1).
+        #[arg(long, default_value_t = 1)]
+        oversampling: usize,
+        /// UHF channel number (China: DS-13 … DS-48), for the recorded centre frequency.
+        #[arg(long, default_value_t = 14)]
+        channel: u32,
+        /// Seed of the payload and noise streams.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Output base path (without the .sigmf-data / .sigmf-meta suffix).
+        #[arg(long)]
+        out: PathBuf,
+    },
 }
 
 #[derive(Debug, Args)]
@@ -117,6 +152,25 @@ pub fn run(cli: Cli) -> Result<()> {
             step,
             sats,
         }) => cmd_positions(&nav, &start, &end, step, &sats),
+        Command::Dtmb(DtmbCommand::Iq {
+            mode,
+            frames,
+            snr_db,
+            format,
+            oversampling,
+            channel,
+            seed,
+            out,
+        }) => cmd_dtmb_iq(
+            &mode,
+            frames,
+            snr_db,
+            &format,
+            oversampling,
+            channel,
+            seed,
+            &out,
+        ),
         Command::Ephemeris(EphemerisCommand::Synth { start, hours, out }) => {
             cmd_synth(&start, hours, &out)
         }
@@ -231,5 +285,46 @@ fn cmd_synth(start: &str, hours: f64, out: &Path) -> Result<()> {
     crate::gnss::synth::write_rinex3_nav(&ephs, Some(&klob), t0.gpst_minus_utc_s() as i32, out)
         .with_context(|| format!("cannot write {}", out.display()))?;
     eprintln!("wrote {} ephemerides to {}", ephs.len(), out.display());
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn cmd_dtmb_iq(
+    mode: &str,
+    frames: usize,
+    snr_db: f64,
+    format: &str,
+    oversampling: usize,
+    channel: u32,
+    seed: u64,
+    out: &Path,
+) -> Result<()> {
+    use crate::dtmb::pn::{PnMode, SAMPLE_RATE_HZ};
+    use crate::dtmb::sigmf::{generate_iq, write_sigmf, SampleFormat};
+    let mode: PnMode = mode.parse()?;
+    let format = match format.to_ascii_lowercase().as_str() {
+        "cf32" | "cf32_le" => SampleFormat::Cf32,
+        "ci8" => SampleFormat::Ci8,
+        other => bail!("--format: unknown sample format '{other}'; expected cf32 or ci8"),
+    };
+    if !snr_db.is_finite() {
+        bail!("--snr-db must be a finite number of dB, got {snr_db}");
+    }
+    let center_hz = crate::dtmb::uhf_channel_center_hz(channel)?;
+    let (samples, annotations) = generate_iq(mode, frames, snr_db, oversampling, seed)?;
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create output directory {}", dir.display()))?;
+    }
+    let rate_hz = SAMPLE_RATE_HZ * oversampling as f64;
+    write_sigmf(out, &samples, format, rate_hz, center_hz, &annotations)?;
+    eprintln!(
+        "wrote {} samples ({} frames at {:.2} Msps, {:.0} MHz) to {}.sigmf-data and .sigmf-meta",
+        samples.len(),
+        frames,
+        rate_hz * 1e-6,
+        center_hz * 1e-6,
+        out.display()
+    );
     Ok(())
 }

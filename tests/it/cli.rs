@@ -391,3 +391,106 @@ fn synth_reproduces_the_embedded_ephemeris_and_reads_back() {
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("--hours"), "{}", stderr(&o));
 }
+
+/// `dtmb iq` output as the `sigmf` Python package (the SigMF reference implementation)
+/// reads it: the metadata validates against the SigMF schema and the samples match.
+#[test]
+fn dtmb_iq_is_read_back_by_the_sigmf_package() {
+    let probe = std::process::Command::new("python3")
+        .args(["-c", "import sigmf"])
+        .output();
+    if !matches!(probe, Ok(ref o) if o.status.success()) {
+        eprintln!("skipped: the sigmf Python package is not installed (CI installs it)");
+        return;
+    }
+    let d = tmp_dir("sigmf");
+    let base = d.join("pn945");
+    let o = hybridnav(&[
+        "dtmb",
+        "iq",
+        "--mode",
+        "pn945",
+        "--frames",
+        "3",
+        "--snr-db",
+        "12",
+        "--out",
+        base.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let script = r#"
+import sys, numpy as np, sigmf
+from sigmf import sigmffile
+f = sigmffile.fromfile(sys.argv[1])
+f.validate()
+x = f.read_samples()
+g = f.get_global_info()
+ann = f.get_annotations()
+cap = f.get_captures()
+print(len(x), g["core:datatype"], g["core:sample_rate"], cap[0]["core:frequency"], len(ann), ann[1]["core:sample_start"], ann[1]["core:label"])
+print(repr(float(np.sum(np.abs(x[:500]) ** 2))))
+"#;
+    let py = std::process::Command::new("python3")
+        .args(["-c", script, base.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(
+        py.status.success(),
+        "python sigmf failed: {}",
+        String::from_utf8_lossy(&py.stderr)
+    );
+    let out = String::from_utf8_lossy(&py.stdout);
+    let mut lines = out.lines();
+    let fields: Vec<&str> = lines.next().unwrap().split_whitespace().collect();
+    assert_eq!(
+        fields[..7],
+        [
+            "14175",
+            "cf32_le",
+            "7560000.0",
+            "482000000.0",
+            "3",
+            "4725",
+            "frame"
+        ]
+    );
+    let energy_py: f64 = lines.next().unwrap().parse().unwrap();
+    let rec = hybridnav::dtmb::sigmf::read_sigmf(&base).unwrap();
+    let energy_rs: f64 = rec.samples[..500]
+        .iter()
+        .map(|s| f64::from(s.norm_sqr()))
+        .sum();
+    assert!(
+        (energy_py - energy_rs).abs() <= 1e-6 * energy_rs,
+        "{energy_py} vs {energy_rs}"
+    );
+}
+
+#[test]
+fn dtmb_iq_bad_input_is_refused() {
+    let d = tmp_dir("iqbad");
+    let base = d.join("x");
+    let b = base.to_str().unwrap();
+    for (args, needle) in [
+        (
+            vec!["--mode", "pn999", "--frames", "2", "--snr-db", "3"],
+            "valid names are PN420, PN595, PN945",
+        ),
+        (vec!["--frames", "0", "--snr-db", "3"], "frames"),
+        (vec!["--frames", "2", "--snr-db", "NaN"], "finite"),
+        (
+            vec!["--frames", "2", "--snr-db", "3", "--channel", "99"],
+            "DS-99",
+        ),
+        (
+            vec!["--frames", "2", "--snr-db", "3", "--format", "ci16"],
+            "cf32 or ci8",
+        ),
+    ] {
+        let mut a = vec!["dtmb", "iq", "--out", b];
+        a.extend(args);
+        let o = hybridnav(&a);
+        assert_eq!(o.status.code(), Some(2), "{a:?}");
+        assert!(stderr(&o).contains(needle), "{a:?}: {}", stderr(&o));
+    }
+}
