@@ -171,6 +171,27 @@ fn usable<const N: usize>(x: &SVector<f64, N>, p: &SMatrix<f64, N, N>) -> bool {
     finite(x.iter()) && finite(p.iter()) && (0..N).all(|i| p[(i, i)] >= 0.0)
 }
 
+/// The extended-Kalman prediction shared by the EKF and the RE-KF:
+/// `x⁻ = f(x, Δt)`, `P⁻ = F P Fᵀ + Q` with `F = ∂f/∂x` at `x`. The state is left unchanged
+/// when the interval is invalid or the result not finite.
+fn linearised_predict<P: ProcessModel<N>, const N: usize>(
+    x: &mut SVector<f64, N>,
+    p: &mut SMatrix<f64, N, N>,
+    model: &P,
+    dt_s: f64,
+) -> Result<(), FilterError> {
+    check_dt(dt_s)?;
+    let f = model.jacobian(x, dt_s);
+    let x_new = model.f(x, dt_s);
+    let p_new = symmetrise(&(f * *p * f.transpose() + model.q(x, dt_s)));
+    if !usable(&x_new, &p_new) {
+        return Err(FilterError::NonFinite);
+    }
+    *x = x_new;
+    *p = p_new;
+    Ok(())
+}
+
 fn symmetrise<const N: usize>(p: &SMatrix<f64, N, N>) -> SMatrix<f64, N, N> {
     (p + p.transpose()) * 0.5
 }
@@ -330,16 +351,7 @@ impl<const N: usize> Ekf<N> {
     /// # Errors
     /// An invalid interval or a non-finite result; the filter is then unchanged.
     pub fn predict<P: ProcessModel<N>>(&mut self, model: &P, dt_s: f64) -> Result<(), FilterError> {
-        check_dt(dt_s)?;
-        let f = model.jacobian(&self.x, dt_s);
-        let x = model.f(&self.x, dt_s);
-        let p = symmetrise(&(f * self.p * f.transpose() + model.q(&self.x, dt_s)));
-        if !usable(&x, &p) {
-            return Err(FilterError::NonFinite);
-        }
-        self.x = x;
-        self.p = p;
-        Ok(())
+        linearised_predict(&mut self.x, &mut self.p, model, dt_s)
     }
 
     /// Updates with measurement `z` of `model`.
@@ -915,16 +927,7 @@ impl<const N: usize> RelativeEntropyKf<N> {
     /// # Errors
     /// An invalid interval or a non-finite result; the filter is then unchanged.
     pub fn predict<P: ProcessModel<N>>(&mut self, model: &P, dt_s: f64) -> Result<(), FilterError> {
-        check_dt(dt_s)?;
-        let f = model.jacobian(&self.x, dt_s);
-        let x = model.f(&self.x, dt_s);
-        let p = symmetrise(&(f * self.p * f.transpose() + model.q(&self.x, dt_s)));
-        if !usable(&x, &p) {
-            return Err(FilterError::NonFinite);
-        }
-        self.x = x;
-        self.p = p;
-        Ok(())
+        linearised_predict(&mut self.x, &mut self.p, model, dt_s)
     }
 
     /// Updates with measurement `z` of `model` (eqs. 22–24, 34–41). Returns the report and
