@@ -14,4 +14,5 @@ pub mod metrics;
 pub mod montecarlo;
 pub mod motion;
 pub mod propagation;
+pub mod tcofdm;
 pub mod world;

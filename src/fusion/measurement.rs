@@ -54,11 +54,56 @@ pub struct PositionFix {
     pub cov_m2: Matrix3<f64>,
 }
 
+/// One step detected by pedestrian dead reckoning (seed 002 §4.2): its length and the
+/// heading it was walked in.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepEvent {
+    /// Step length (m), e.g. from the Weinberg model.
+    pub length_m: f64,
+    /// 1-σ of the step length (m).
+    pub sigma_length_m: f64,
+    /// Heading of the step: azimuth in the world's ENU frame, clockwise from north (rad).
+    pub heading_rad: f64,
+    /// 1-σ of the heading (rad).
+    pub sigma_heading_rad: f64,
+}
+
+/// One inertial sample in the body frame (forward, left, up), as an IMU outputs it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ImuSample {
+    /// Specific force f_b (m/s²): acceleration minus gravity, so a level IMU at rest reads
+    /// about +9.8 m/s² up.
+    pub specific_force_mps2: Vector3<f64>,
+    /// Angular rate ω_ib (rad/s) relative to inertial space (Earth rotation included).
+    pub angular_rate_radps: Vector3<f64>,
+    /// Sampling interval (s).
+    pub dt_s: f64,
+}
+
+/// A range difference to one emitter accumulated since a reference epoch (seed 002 §3.2:
+/// the integral of the Doppler velocity measured from carrier-frequency offsets):
+/// `Δr = ‖r_e − r(t)‖ − ‖r_e − r(t₀)‖ + ε`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RangeDifference {
+    pub emitter: EmitterId,
+    /// Emitter position (ECEF, m).
+    pub emitter_pos_ecef_m: Vector3<f64>,
+    /// Reference time t₀ of the accumulation.
+    pub t0: GpsTime,
+    /// Accumulated range difference (m).
+    pub delta_range_m: f64,
+    /// 1-σ noise (m).
+    pub sigma_m: f64,
+}
+
 /// One measurement of any kind.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Measurement {
     Range(RangeMeasurement),
     Position(PositionFix),
+    Step(StepEvent),
+    Imu(ImuSample),
+    RangeDifference(RangeDifference),
 }
 
 /// All measurements one source produced at one instant.

@@ -1,0 +1,1 @@
+//! TC-OFDM base stations (seed 004): ranging signals from time-synchronised base stations.
