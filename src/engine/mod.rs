@@ -44,4 +44,13 @@ pub trait Source: Send {
     /// Produces the measurements at `ctx.truth.sim` into `out` (which arrives cleared) and
     /// returns when to sample next, or `None` when the source is finished.
     fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime>;
+    /// Whether a sample that produced no measurement is still an epoch the estimators see.
+    ///
+    /// For a receiver (GNSS, DTMB) it is: an epoch with every satellite blocked is an
+    /// outage the estimators must predict through and the metrics must count. For a source
+    /// that samples often and reports rarely (a step detector running at the IMU rate) it
+    /// is not, and the default skips such samples.
+    fn empty_batches_are_epochs(&self) -> bool {
+        false
+    }
 }

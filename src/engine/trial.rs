@@ -122,6 +122,9 @@ pub fn simulate(frame: &EnuFrame, start: GpsTime, setup: &mut TrialSetup) -> Vec
         if let Some(next) = source.sample(&ctx, &mut batch) {
             queue.schedule(next, EventKind::Sample(source_idx));
         }
+        if batch.items.is_empty() && !source.empty_batches_are_epochs() {
+            continue;
+        }
         let source_name = source.name();
         for (k, est) in setup.estimators.iter_mut().enumerate() {
             if !est.consumes(source_name) {

@@ -68,18 +68,6 @@ pub struct StepEvent {
     pub sigma_heading_rad: f64,
 }
 
-/// One inertial sample in the body frame (forward, left, up), as an IMU outputs it.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ImuSample {
-    /// Specific force f_b (m/s²): acceleration minus gravity, so a level IMU at rest reads
-    /// about +9.8 m/s² up.
-    pub specific_force_mps2: Vector3<f64>,
-    /// Angular rate ω_ib (rad/s) relative to inertial space (Earth rotation included).
-    pub angular_rate_radps: Vector3<f64>,
-    /// Sampling interval (s).
-    pub dt_s: f64,
-}
-
 /// A range difference to one emitter accumulated since a reference epoch (seed 002 §3.2:
 /// the integral of the Doppler velocity measured from carrier-frequency offsets):
 /// `Δr = ‖r_e − r(t)‖ − ‖r_e − r(t₀)‖ + ε`.
@@ -102,7 +90,8 @@ pub enum Measurement {
     Range(RangeMeasurement),
     Position(PositionFix),
     Step(StepEvent),
-    Imu(ImuSample),
+    /// One IMU output sample ([`crate::inertial::imu::ImuSample`]).
+    Imu(crate::inertial::imu::ImuSample),
     RangeDifference(RangeDifference),
 }
 

@@ -31,7 +31,7 @@ use crate::fusion::measurement::{Measurement, MeasurementBatch, RangeMeasurement
 use crate::gnss::atmosphere::{saastamoinen_m, Klobuchar};
 use crate::gnss::ephemeris::sagnac_rotate;
 use crate::gnss::link::TrackingConfig;
-use crate::gnss::receiver_clock::ReceiverClock;
+use crate::gnss::receiver_clock::ClockTrack;
 use crate::gnss::rinex_nav::NavData;
 use nalgebra::Vector3;
 use rand::Rng;
@@ -171,8 +171,7 @@ pub struct GnssSource {
     nav: Arc<NavData>,
     klobuchar: Option<Klobuchar>,
     shielding: Vec<Shielding>,
-    clock: ReceiverClock,
-    clock_rng: StreamRng,
+    clock: Arc<ClockTrack>,
     tropo_factor: f64,
     channels: Vec<Channel>,
     candidates: Vec<Candidate>,
@@ -182,13 +181,14 @@ pub struct GnssSource {
 }
 
 impl GnssSource {
-    /// Builds the receiver for one trial. `clock` is the receiver's clock (already drawn
+    /// Builds the receiver for one trial. `clock` is the receiver's clock track (shared
+    /// with the receiver's other sources; already drawn
     /// from its own stream).
     pub fn new(
         cfg: GnssConfig,
         nav: Arc<NavData>,
         shielding: Vec<Shielding>,
-        clock: ReceiverClock,
+        clock: Arc<ClockTrack>,
         rng: &TrialRng,
         end: SimTime,
     ) -> Self {
@@ -230,7 +230,6 @@ impl GnssSource {
             klobuchar,
             shielding,
             clock,
-            clock_rng: rng.stream("gnss/receiver_clock"),
             tropo_factor,
             step_ns,
             end,
@@ -321,15 +320,16 @@ impl Source for GnssSource {
         SimTime(0)
     }
 
+    fn empty_batches_are_epochs(&self) -> bool {
+        true
+    }
+
     fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
         let truth = ctx.truth;
         let dt_s = self
             .last_sim
             .map_or(0.0, |l| (truth.sim.0 - l.0) as f64 * 1e-9);
         self.last_sim = Some(truth.sim);
-        if dt_s > 0.0 {
-            self.clock.step(dt_s, &mut self.clock_rng);
-        }
         out.t = truth.t;
         out.source.clear();
         out.source.push_str("gnss");
@@ -362,8 +362,9 @@ impl Source for GnssSource {
         }
         self.apply_shielding(truth.sim.seconds());
 
-        let rx_bias_s = self.clock.bias_s();
-        let rx_drift = self.clock.drift_s_per_s();
+        let t_s = truth.sim.seconds();
+        let rx_bias_s = self.clock.bias_s(t_s);
+        let rx_drift = self.clock.drift_s_per_s(t_s);
         for k in 0..self.candidates.len() {
             let c = self.candidates[k];
             let sat = self.channels[c.channel].sat;
@@ -403,7 +404,7 @@ impl Source for GnssSource {
             let los = c.pos_rot - rx;
             let range = los.norm();
             let u = los / range;
-            let isb_s = self.clock.isb_s(sat.system);
+            let isb_s = self.clock.isb_s(sat.system, t_s);
             let pseudorange_m = range
                 + C_MPS * (rx_bias_s + isb_s)
                 + iono_model * ch.iono_factor

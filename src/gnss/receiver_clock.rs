@@ -355,6 +355,89 @@ impl ReceiverClock {
     }
 }
 
+/// The receiver clock of one trial, sampled once on a fixed grid so that every source of
+/// the receiver (GNSS, DTMB, TC-OFDM) reads the *same* clock without sharing mutable
+/// state: a source asks for the bias at its own sample time and gets the grid state
+/// propagated by its drift, `b(t) = b_k + d_k (t − t_k)` for `t_k ≤ t < t_{k+1}`.
+///
+/// The grid step (0.1 s by default) is far below the clock's correlation times, so the
+/// noise the interpolation leaves out (the diffusion within one step) is at the 1e-12 s
+/// level for a TCXO. The random draws depend only on the stream and the duration, never on
+/// which sources ask or when.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ClockTrack {
+    step_s: f64,
+    /// (bias s, drift s/s) at `k·step_s`.
+    states: Vec<(f64, f64)>,
+    /// Inter-system biases (s) at `k·step_s`, one row per grid point, in `systems` order.
+    systems: Vec<System>,
+    isb: Vec<f64>,
+}
+
+impl ClockTrack {
+    /// Runs `clock` forward over `[0, duration_s]` on a grid of `step_s`, drawing from `rng`.
+    pub fn record(
+        mut clock: ReceiverClock,
+        duration_s: f64,
+        step_s: f64,
+        rng: &mut impl Rng,
+    ) -> Self {
+        let step_s = if step_s.is_finite() && step_s > 0.0 {
+            step_s
+        } else {
+            0.1
+        };
+        let n = if duration_s.is_finite() && duration_s > 0.0 {
+            (duration_s / step_s).ceil() as usize + 2
+        } else {
+            2
+        };
+        let systems: Vec<System> = clock.isb.iter().map(|(s, _, _)| *s).collect();
+        let mut states = Vec::with_capacity(n);
+        let mut isb = Vec::with_capacity(n * systems.len());
+        for k in 0..n {
+            if k > 0 {
+                clock.step(step_s, rng);
+            }
+            states.push((clock.bias_s(), clock.drift_s_per_s()));
+            isb.extend(clock.isb.iter().map(|(_, b, _)| *b));
+        }
+        Self {
+            step_s,
+            states,
+            systems,
+            isb,
+        }
+    }
+
+    fn index(&self, t_s: f64) -> (usize, f64) {
+        let x = (t_s / self.step_s).max(0.0);
+        let k = (x.floor() as usize).min(self.states.len() - 1);
+        (k, t_s - k as f64 * self.step_s)
+    }
+
+    /// Clock bias (s) at `t_s` seconds into the trial: receiver time minus GPS time.
+    pub fn bias_s(&self, t_s: f64) -> f64 {
+        let (k, dt) = self.index(t_s);
+        let (b, d) = self.states[k];
+        b + d * dt
+    }
+
+    /// Clock drift (s/s) at `t_s`.
+    pub fn drift_s_per_s(&self, t_s: f64) -> f64 {
+        self.states[self.index(t_s).0].1
+    }
+
+    /// The inter-system bias of `sys` (s) at `t_s`: 0 for GPS and unconfigured systems.
+    pub fn isb_s(&self, sys: System, t_s: f64) -> f64 {
+        let Some(j) = self.systems.iter().position(|s| *s == sys) else {
+            return 0.0;
+        };
+        let (k, _) = self.index(t_s);
+        self.isb[k * self.systems.len() + j]
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

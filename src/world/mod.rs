@@ -9,7 +9,7 @@ pub mod schema;
 
 use crate::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng};
 use crate::gnss::measurement::{GnssSource, Shielding, ShieldingRule};
-use crate::gnss::receiver_clock::ReceiverClock;
+use crate::gnss::receiver_clock::{ClockTrack, ReceiverClock};
 use crate::gnss::rinex_nav::{parse_nav, read_nav_file, NavData};
 use crate::motion::Trajectory;
 use locate::{locate, path_to_string, PathSeg};
@@ -498,6 +498,12 @@ impl World {
                 &self.file.receiver.clock,
                 &mut rng.stream("receiver/clock/init"),
             );
+            let clock = Arc::new(ClockTrack::record(
+                clock,
+                self.duration_s,
+                0.1,
+                &mut rng.stream("receiver/clock"),
+            ));
             sources.push(Box::new(GnssSource::new(
                 g.clone(),
                 Arc::clone(&self.nav),

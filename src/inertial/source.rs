@@ -1,0 +1,543 @@
+//! The inertial sensors as event-engine sources: an IMU ([`ImuSource`], name `"imu"`) and a
+//! pedestrian dead-reckoning unit ([`PdrSource`], name `"pdr"`).
+//!
+//! # Consistency with the engine's truth
+//!
+//! The engine scores estimators against the world's trajectory (`ctx.truth`), but an IMU
+//! needs more than one truth state per sample: the attitude, its rate, and (for walkers)
+//! the gait. Both sources therefore own a [`PlatformTruth`] built on **the same
+//! trajectory** as the engine's: either a second build of the world's trajectory config
+//! from the same random stream (`"motion/trajectory"`, which is deterministic), or the
+//! engine's own trajectory shared through [`SharedTrajectory`]. At every event the IMU
+//! source compares its path with `ctx.truth` and records the largest difference
+//! ([`ImuSource::max_truth_mismatch_m`]); a wrong wiring shows up there (and in a debug
+//! assertion), never silently.
+//!
+//! For walkers the body moves on the path plus the gait overlay of
+//! [`crate::inertial::attitude`] (a few centimetres of bounce and surge), so the IMU
+//! integrates back to path + overlay, within `bounce/ω₀²` ≈ 3 cm of the scored truth.
+//!
+//! # Random streams
+//!
+//! * `"imu/gait"`: the gait's slow cadence and intensity wander. Both sources draw it from
+//!   the same stream, so an IMU and a PDR in one world see the same walker.
+//! * `"imu/sensor"`: the IMU source's error processes (turn-on bias, Gauss–Markov, white
+//!   noise, …).
+//! * `"imu/pdr/sensor"`, `"imu/pdr/mag"`: the PDR unit's own IMU and magnetometer (a
+//!   different device from the `"imu"` source: a phone, say, next to a car's IMU).
+//!
+//! # Batching
+//!
+//! At rates up to [`MAX_BATCH_RATE_HZ`] = 100 Hz the IMU source emits one batch per sample.
+//! Above that it groups `m = ⌈rate / 100⌉` consecutive samples per batch, so the engine sees
+//! at most 100 events per second from it; a batch is stamped with the time of its last
+//! sample, and every sample in it carries its own `t_s`. Sample k is at
+//! `round(k · 10⁹ / rate)` ns, so the sample clock never drifts.
+//!
+//! The PDR source runs its IMU, magnetometer, step detector and AHRS ahead of the engine
+//! (they depend only on the truth, not on any estimate) and schedules its next event at the
+//! instant the detector confirms the next step: one event per step, never an empty batch
+//! except a final one when no step is ever detected.
+
+use super::attitude::{ideal_imu, PlatformConfig, PlatformTruth};
+use super::imu::{Imu, ImuConfig};
+use super::magnetometer::{Magnetometer, MagnetometerConfig};
+use super::pdr::{Ahrs, Pdr, PdrConfig};
+use super::LocalEarth;
+use crate::core::{EnuFrame, SimTime, TrialRng};
+use crate::engine::{SampleContext, Source};
+use crate::fusion::measurement::{Measurement, MeasurementBatch, StepEvent};
+use crate::motion::{ConfigIssue, Trajectory, TruthState};
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+
+/// The highest rate at which the IMU source emits batches (Hz); above it, samples are grouped.
+pub const MAX_BATCH_RATE_HZ: f64 = 100.0;
+
+/// Stream of the gait wander, shared by the IMU and the PDR source.
+pub const GAIT_STREAM: &str = "imu/gait";
+/// Stream of the IMU source's error processes.
+pub const IMU_STREAM: &str = "imu/sensor";
+/// Stream of the PDR unit's IMU.
+pub const PDR_IMU_STREAM: &str = "imu/pdr/sensor";
+/// Stream of the PDR unit's magnetometer.
+pub const PDR_MAG_STREAM: &str = "imu/pdr/mag";
+
+/// A trajectory shared between the engine and a source (`Arc`), so both read one object.
+#[derive(Clone)]
+pub struct SharedTrajectory(pub Arc<dyn Trajectory>);
+
+impl Trajectory for SharedTrajectory {
+    fn state_at(&self, t_s: f64) -> TruthState {
+        self.0.state_at(t_s)
+    }
+    fn duration_s(&self) -> f64 {
+        self.0.duration_s()
+    }
+}
+
+/// The local Earth of a world frame: the Earth rate and normal gravity at its origin.
+pub fn local_earth_of(frame: &EnuFrame) -> LocalEarth {
+    let o = frame.origin();
+    LocalEarth::new(o.lat_rad, o.h_m)
+}
+
+/// The simulation time of sample `k` at `rate_hz`, rounded to the nanosecond.
+fn sample_time(k: u64, rate_hz: f64) -> SimTime {
+    SimTime((k as f64 * 1e9 / rate_hz).round() as i64)
+}
+
+/// Prefixes a component's key path to a configuration issue.
+fn under(prefix: &str, issue: ConfigIssue) -> ConfigIssue {
+    ConfigIssue::new(format!("{prefix}.{}", issue.key), issue.message)
+}
+
+/// The IMU as an engine source: specific force and angular rate along the truth (gravity
+/// and Earth rotation included, [`ideal_imu`]), through the error model of
+/// [`crate::inertial::imu`], emitted as [`Measurement::Imu`] items.
+pub struct ImuSource {
+    truth: PlatformTruth,
+    earth: LocalEarth,
+    imu: Imu,
+    rate_hz: f64,
+    samples_per_batch: u64,
+    /// Index of the next sample to produce.
+    next_k: u64,
+    end: SimTime,
+    max_mismatch_m: f64,
+}
+
+impl ImuSource {
+    /// An IMU carried as `platform` says along `trajectory` (the world's trajectory, see the
+    /// module documentation), in the world frame `frame`, sampling until `end`.
+    ///
+    /// # Errors
+    /// A [`ConfigIssue`] for a bad IMU (key as in `[sensors.imu]`, e.g. `rate_hz`) or a bad
+    /// platform (key prefixed `platform.`/`gait.`).
+    pub fn new(
+        imu: &ImuConfig,
+        platform: &PlatformConfig,
+        trajectory: Box<dyn Trajectory>,
+        frame: &EnuFrame,
+        rng: &TrialRng,
+        end: SimTime,
+    ) -> Result<Self, ConfigIssue> {
+        let spec = imu.resolve()?;
+        let truth = PlatformTruth::new(trajectory, platform, &mut rng.stream(GAIT_STREAM))
+            .map_err(|i| under("gait", i))?;
+        let samples_per_batch = (spec.rate_hz / MAX_BATCH_RATE_HZ).ceil().max(1.0) as u64;
+        Ok(Self {
+            truth,
+            earth: local_earth_of(frame),
+            imu: Imu::new(spec, rng.stream(IMU_STREAM)),
+            rate_hz: spec.rate_hz,
+            samples_per_batch,
+            next_k: 0,
+            end,
+            max_mismatch_m: 0.0,
+        })
+    }
+
+    /// Samples per emitted batch (1 at rates up to 100 Hz).
+    pub fn samples_per_batch(&self) -> u64 {
+        self.samples_per_batch
+    }
+
+    /// The truth with attitude the IMU is sampled along.
+    pub fn truth(&self) -> &PlatformTruth {
+        &self.truth
+    }
+
+    /// The largest distance seen so far between this source's path and the engine's truth
+    /// at the source's events (m); 0 when both come from the same trajectory.
+    pub fn max_truth_mismatch_m(&self) -> f64 {
+        self.max_mismatch_m
+    }
+
+    fn batch_time(&self, first_k: u64) -> SimTime {
+        sample_time(first_k + self.samples_per_batch - 1, self.rate_hz)
+    }
+}
+
+impl Source for ImuSource {
+    fn name(&self) -> &str {
+        "imu"
+    }
+
+    fn first_sample(&self) -> SimTime {
+        self.batch_time(0)
+    }
+
+    fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
+        out.t = ctx.truth.t;
+        out.source.clear();
+        out.source.push_str("imu");
+        let path = self.truth.trajectory().state_at(ctx.truth.sim.seconds());
+        let mismatch = (path.pos_enu_m - ctx.truth.enu.pos_enu_m).norm();
+        debug_assert!(
+            mismatch < 1e-3,
+            "the IMU source's trajectory is not the engine's ({mismatch} m apart)"
+        );
+        self.max_mismatch_m = self.max_mismatch_m.max(mismatch);
+        for _ in 0..self.samples_per_batch {
+            let t = sample_time(self.next_k, self.rate_hz);
+            if t > ctx.truth.sim {
+                break;
+            }
+            let t_s = t.seconds();
+            let body = self.truth.sample(t_s);
+            let (w, f) = ideal_imu(&body, &self.earth);
+            out.items
+                .push(Measurement::Imu(self.imu.measure(t_s, &w, &f)));
+            self.next_k += 1;
+        }
+        let next = self.batch_time(self.next_k);
+        (next < self.end).then_some(next)
+    }
+}
+
+fn d_sigma_length() -> f64 {
+    0.05
+}
+fn d_sigma_heading() -> f64 {
+    5.0
+}
+
+/// `[sensors.pdr]`: the PDR unit (a phone): its IMU, magnetometer, detector settings and
+/// the σ its step events declare.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PdrSensorConfig {
+    /// The unit's IMU; default a `low` (consumer MEMS) grade at 100 Hz.
+    #[serde(default)]
+    pub imu: ImuConfig,
+    /// The magnetometer and the local field; default 54 µT, I = 59°, D = −7°, σ 0.5 µT.
+    #[serde(default)]
+    pub magnetometer: MagnetometerConfig,
+    /// Step detection, Weinberg K and AHRS gains (`mag_gain = 0` for a gyro-only heading).
+    #[serde(default)]
+    pub detector: PdrConfig,
+    /// 1-σ of the step length the step events declare (m); default 0.05.
+    #[serde(default = "d_sigma_length")]
+    pub sigma_length_m: f64,
+    /// 1-σ of the step heading the step events declare (°); default 5.
+    #[serde(default = "d_sigma_heading")]
+    pub sigma_heading_deg: f64,
+}
+
+impl Default for PdrSensorConfig {
+    fn default() -> Self {
+        Self {
+            imu: ImuConfig::default(),
+            magnetometer: MagnetometerConfig::default(),
+            detector: PdrConfig::default(),
+            sigma_length_m: d_sigma_length(),
+            sigma_heading_deg: d_sigma_heading(),
+        }
+    }
+}
+
+impl PdrSensorConfig {
+    /// Checks every value.
+    ///
+    /// # Errors
+    /// A [`ConfigIssue`] whose key is the path inside `[sensors.pdr]` (`imu.rate_hz`,
+    /// `detector.lowpass_hz`, `sigma_length_m`, …).
+    pub fn validate(&self) -> Result<(), ConfigIssue> {
+        let spec = self.imu.resolve().map_err(|i| under("imu", i))?;
+        self.magnetometer
+            .validate()
+            .map_err(|i| under("magnetometer", i))?;
+        self.detector
+            .validate(spec.rate_hz)
+            .map_err(|i| under("detector", i))?;
+        if !(self.sigma_length_m.is_finite()
+            && self.sigma_length_m > 0.0
+            && self.sigma_length_m <= 5.0)
+        {
+            return Err(ConfigIssue::new(
+                "sigma_length_m",
+                format!(
+                    "expected a step-length σ in m within (0, 5], got {}",
+                    self.sigma_length_m
+                ),
+            ));
+        }
+        if !(self.sigma_heading_deg.is_finite()
+            && self.sigma_heading_deg > 0.0
+            && self.sigma_heading_deg <= 180.0)
+        {
+            return Err(ConfigIssue::new(
+                "sigma_heading_deg",
+                format!(
+                    "expected a heading σ in degrees within (0, 180], got {}",
+                    self.sigma_heading_deg
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A step confirmed by the detector, waiting for its event.
+#[derive(Clone, Copy, Debug)]
+struct PendingStep {
+    at: SimTime,
+    step: super::pdr::StepEvent,
+}
+
+/// Pedestrian dead reckoning as an engine source: a phone's IMU and magnetometer simulated
+/// along the truth, the step detector, Weinberg length and AHRS of [`crate::inertial::pdr`],
+/// and one [`Measurement::Step`] per detected step, emitted at the sample where the detector
+/// confirms it.
+///
+/// The AHRS is aligned on the first sample (TRIAD: up from the accelerometer, north from
+/// the magnetometer and the configured declination).
+pub struct PdrSource {
+    truth: PlatformTruth,
+    earth: LocalEarth,
+    imu: Imu,
+    mag: Magnetometer,
+    field_enu_ut: nalgebra::Vector3<f64>,
+    detector_cfg: PdrConfig,
+    pdr: Option<Pdr>,
+    rate_hz: f64,
+    next_k: u64,
+    end: SimTime,
+    pending: Option<PendingStep>,
+    sigma_length_m: f64,
+    sigma_heading_rad: f64,
+    emitted: Vec<f64>,
+    record: bool,
+}
+
+impl PdrSource {
+    /// A PDR unit carried as `platform` says (use `pedestrian` or `handheld`; a car takes no
+    /// steps) along `trajectory` (the world's, see the module documentation), until `end`.
+    ///
+    /// # Errors
+    /// The first [`ConfigIssue`] of [`PdrSensorConfig::validate`] or of the platform.
+    pub fn new(
+        cfg: &PdrSensorConfig,
+        platform: &PlatformConfig,
+        trajectory: Box<dyn Trajectory>,
+        frame: &EnuFrame,
+        rng: &TrialRng,
+        end: SimTime,
+    ) -> Result<Self, ConfigIssue> {
+        cfg.validate()?;
+        let spec = cfg.imu.resolve().map_err(|i| under("imu", i))?;
+        let truth = PlatformTruth::new(trajectory, platform, &mut rng.stream(GAIT_STREAM))
+            .map_err(|i| under("gait", i))?;
+        let mag = Magnetometer::new(&cfg.magnetometer, rng.stream(PDR_MAG_STREAM))
+            .map_err(|i| under("magnetometer", i))?;
+        let mut s = Self {
+            truth,
+            earth: local_earth_of(frame),
+            imu: Imu::new(spec, rng.stream(PDR_IMU_STREAM)),
+            mag,
+            field_enu_ut: cfg.magnetometer.field_enu_ut(),
+            detector_cfg: cfg.detector.clone(),
+            pdr: None,
+            rate_hz: spec.rate_hz,
+            next_k: 0,
+            end,
+            pending: None,
+            sigma_length_m: cfg.sigma_length_m,
+            sigma_heading_rad: cfg.sigma_heading_deg.to_radians(),
+            emitted: Vec::new(),
+            record: false,
+        };
+        s.pending = s.run_to_next_step()?;
+        Ok(s)
+    }
+
+    /// Records the detected step (peak) times for validation ([`PdrSource::step_times_s`]).
+    pub fn record_steps(&mut self) {
+        self.record = true;
+    }
+
+    /// The peak times of the steps emitted so far (s), when recording.
+    pub fn step_times_s(&self) -> &[f64] {
+        &self.emitted
+    }
+
+    /// The truth with attitude the unit is carried along.
+    pub fn truth(&self) -> &PlatformTruth {
+        &self.truth
+    }
+
+    /// Runs the unit sample by sample until the detector confirms a step (its confirmation
+    /// time and the step) or the end is reached (`None`).
+    fn run_to_next_step(&mut self) -> Result<Option<PendingStep>, ConfigIssue> {
+        loop {
+            let at = sample_time(self.next_k, self.rate_hz);
+            if at >= self.end {
+                return Ok(None);
+            }
+            let t_s = at.seconds();
+            let body = self.truth.sample(t_s);
+            let (w, f) = ideal_imu(&body, &self.earth);
+            let m = self.imu.measure(t_s, &w, &f);
+            let b = self.mag.measure(&body.q_nb);
+            self.next_k += 1;
+            let pdr = match &mut self.pdr {
+                Some(p) => p,
+                None => {
+                    let ahrs = Ahrs::align(
+                        &m.accel_mps2,
+                        &b,
+                        &self.field_enu_ut,
+                        self.earth,
+                        &self.detector_cfg,
+                    );
+                    self.pdr.insert(
+                        Pdr::new(
+                            &self.detector_cfg,
+                            self.rate_hz,
+                            ahrs,
+                            body.pos_enu_m.xy(),
+                        )
+                        .map_err(|i| under("detector", i))?,
+                    )
+                }
+            };
+            if let Some(step) = pdr.update(&m, Some(&b)) {
+                return Ok(Some(PendingStep { at, step }));
+            }
+        }
+    }
+}
+
+impl Source for PdrSource {
+    fn name(&self) -> &str {
+        "pdr"
+    }
+
+    fn first_sample(&self) -> SimTime {
+        self.pending.map_or(self.end, |p| p.at)
+    }
+
+    fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
+        out.t = ctx.truth.t;
+        out.source.clear();
+        out.source.push_str("pdr");
+        let p = self.pending.take()?;
+        out.items.push(Measurement::Step(StepEvent {
+            length_m: p.step.length_m,
+            sigma_length_m: self.sigma_length_m,
+            heading_rad: p.step.heading_rad,
+            sigma_heading_rad: self.sigma_heading_rad,
+        }));
+        if self.record {
+            self.emitted.push(p.step.t_s);
+        }
+        // The configuration was validated in `new`, so the detector cannot fail here.
+        self.pending = self.run_to_next_step().ok().flatten();
+        self.pending.map(|n| n.at)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::{Geodetic, GpsTime};
+    use crate::engine::Truth;
+    use crate::inertial::attitude::Platform;
+    use crate::inertial::imu::ImuGrade;
+    use crate::motion::TrajectoryConfig;
+
+    fn walk() -> TrajectoryConfig {
+        TrajectoryConfig::Waypoints {
+            points_enu_m: vec![vec![0.0, 0.0], vec![20.0, 0.0], vec![20.0, 10.0]],
+            speed_mps: 1.1,
+            accel_mps2: Some(0.5),
+            lateral_accel_mps2: Some(0.4),
+            dwell_s: None,
+            laps: None,
+            height_m: None,
+        }
+    }
+
+    fn truth_at(traj: &dyn Trajectory, frame: &EnuFrame, sim: SimTime) -> Truth {
+        crate::engine::trial::truth_at(frame, GpsTime::from_ns(0), traj, sim)
+    }
+
+    #[test]
+    fn batches_group_samples_above_100_hz_and_keep_the_clock() {
+        let frame = EnuFrame::new(Geodetic::from_deg(30.5, 114.3, 20.0));
+        let rng = TrialRng::new(3, 0);
+        let build = || walk().build(&mut rng.stream("motion/trajectory")).unwrap();
+        let mut cfg = ImuConfig::grade(ImuGrade::Mid);
+        cfg.rate_hz = 250.0;
+        let plat = PlatformConfig {
+            platform: Platform::Handheld,
+            ..Default::default()
+        };
+        let end = SimTime::from_seconds(2.0);
+        let mut src = ImuSource::new(&cfg, &plat, build(), &frame, &rng, end).unwrap();
+        assert_eq!(src.samples_per_batch(), 3);
+        let engine_traj = build();
+        let mut at = src.first_sample();
+        // Batch 0 ends with sample 2 at 8 ms.
+        assert_eq!(at, SimTime(8_000_000));
+        let mut batch = MeasurementBatch::default();
+        let mut times = Vec::new();
+        loop {
+            batch.items.clear();
+            let truth = truth_at(engine_traj.as_ref(), &frame, at);
+            let ctx = SampleContext {
+                truth: &truth,
+                estimates: &[],
+            };
+            let next = src.sample(&ctx, &mut batch);
+            assert_eq!(batch.source, "imu");
+            for m in &batch.items {
+                let Measurement::Imu(s) = m else {
+                    panic!("not an IMU sample")
+                };
+                assert!(s.t_s <= at.seconds() + 1e-12);
+                times.push(s.t_s);
+            }
+            match next {
+                Some(n) => at = n,
+                None => break,
+            }
+        }
+        // Every sample before the end, once, 4 ms apart.
+        assert_eq!(times.len(), 498, "{}", times.len());
+        for (k, t) in times.iter().enumerate() {
+            assert!((t - k as f64 * 0.004).abs() < 1e-9);
+        }
+        assert_eq!(src.max_truth_mismatch_m(), 0.0);
+    }
+
+    #[test]
+    fn bad_sensor_config_names_the_key() {
+        let frame = EnuFrame::new(Geodetic::from_deg(30.5, 114.3, 20.0));
+        let rng = TrialRng::new(3, 0);
+        let mut cfg = PdrSensorConfig::default();
+        cfg.imu.rate_hz = 0.0;
+        assert_eq!(cfg.validate().unwrap_err().key, "imu.rate_hz");
+        cfg.imu.rate_hz = 100.0;
+        cfg.detector.lowpass_hz = 80.0;
+        assert_eq!(cfg.validate().unwrap_err().key, "detector.lowpass_hz");
+        cfg.detector.lowpass_hz = 5.0;
+        cfg.sigma_heading_deg = -1.0;
+        assert_eq!(cfg.validate().unwrap_err().key, "sigma_heading_deg");
+        let traj = walk().build(&mut rng.stream("motion/trajectory")).unwrap();
+        let mut plat = PlatformConfig::default();
+        plat.gait.step_frequency_hz = 50.0;
+        let e = ImuSource::new(
+            &ImuConfig::default(),
+            &plat,
+            traj,
+            &frame,
+            &rng,
+            SimTime::from_seconds(1.0),
+        )
+        .err()
+        .unwrap();
+        assert_eq!(e.key, "gait.step_frequency_hz");
+    }
+}
