@@ -21,10 +21,17 @@ pub struct Cli {
 pub enum Command {
     /// Run the Monte Carlo trials of a world and write OUT/summary.json.
     Run(RunArgs),
-    /// Validate a world file and print a summary of it.
+    /// Validate a world file, print a summary of it and the link visibility along its
+    /// trajectory (share of links LOS / through foliage / NLOS / lost per system).
     Check {
         /// The world file.
         world: PathBuf,
+        /// Also draw the scene, transmitters and trajectory to this SVG file.
+        #[arg(long, value_name = "SVG")]
+        map: Option<PathBuf>,
+        /// Interval of the visibility survey along the trajectory (s).
+        #[arg(long, default_value_t = 1.0, value_name = "S")]
+        step: f64,
     },
     /// Broadcast ephemeris tools.
     #[command(subcommand)]
@@ -139,9 +146,20 @@ fn default_world() -> PathBuf {
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Run(a) => cmd_run(a),
-        Command::Check { world } => {
+        Command::Check { world, map, step } => {
             let w = load_world(&world)?;
             print!("{}", w.summary());
+            if !(step.is_finite() && step > 0.0) {
+                anyhow::bail!("--step must be a positive number of seconds, got {step}");
+            }
+            let epochs = crate::world::visibility::survey(&w, step).map_err(anyhow::Error::msg)?;
+            print!("{}", crate::world::visibility::table(&epochs));
+            if let Some(path) = map {
+                let svg = crate::world::map::svg(&w).map_err(anyhow::Error::msg)?;
+                write_atomic(&path, svg.as_bytes())
+                    .with_context(|| format!("cannot write the map {}", path.display()))?;
+                println!("map        {}", path.display());
+            }
             println!("ok");
             Ok(())
         }
@@ -203,9 +221,11 @@ fn cmd_run(a: RunArgs) -> Result<()> {
     json.push('\n');
     let out = a.out.join("summary.json");
     write_atomic(&out, json.as_bytes())?;
+    let epochs = a.out.join("epochs.csv");
+    write_atomic(&epochs, crate::montecarlo::epochs_csv(&results).as_bytes())?;
     if !a.quiet {
         print!("{}", summary.table());
-        println!("wrote {}", out.display());
+        println!("wrote {} and {}", out.display(), epochs.display());
     }
     Ok(())
 }

@@ -19,20 +19,30 @@
 //! process per satellite (σ_URE, τ_URE). ε_dll and ε_fll come from the C/N0 through the
 //! tracking-loop models of [`crate::gnss::link`].
 //!
+//! In a world with a scene, each satellite link goes through
+//! [`crate::gnss::visibility::scene_effect`]: the C/N0 drops by the walls and foliage in
+//! the way (and rises or falls with the multipath interference at the prompt correlator),
+//! a satellite whose C/N0 falls below the lock threshold is lost, and the pseudorange
+//! gains the DLL's multipath error `e_mp` (the whole excess path when only a reflection is
+//! tracked, the NLOS bias) and the range rate the Doppler difference of the tracked path:
+//! `ρ_corr += e_mp`, `ρ̇_corr += −v_r·(a_tracked − a_direct)`.
+//!
 //! The σ the receiver reports to estimators is its own error model, which knows the
 //! magnitudes but not the realisations:
 //! σ² = σ_dll² + σ_URE² + ((σ_iono² + σ_iono,sat²)^½·I_model)² + (σ_trop·T_model)².
 
 use crate::core::geodesy::{azimuth_elevation_with, ecef_to_enu_rotation};
 use crate::core::rng::{StreamRng, TrialRng};
-use crate::core::{EmitterId, Geodetic, SimTime, System, C_MPS};
+use crate::core::{EmitterId, EnuFrame, Geodetic, SimTime, System, C_MPS};
 use crate::engine::{SampleContext, Source};
 use crate::fusion::measurement::{Measurement, MeasurementBatch, RangeMeasurement};
 use crate::gnss::atmosphere::{saastamoinen_m, Klobuchar};
 use crate::gnss::ephemeris::sagnac_rotate;
-use crate::gnss::link::TrackingConfig;
+use crate::gnss::link::{Signal, TrackingConfig};
 use crate::gnss::receiver_clock::ClockTrack;
 use crate::gnss::rinex_nav::NavData;
+use crate::gnss::visibility::{scene_effect, LinkClass};
+use crate::propagation::{LinkPaths, Scene};
 use nalgebra::Vector3;
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -113,6 +123,10 @@ pub struct GnssConfig {
     /// Orbit, clock and atmosphere error budget.
     #[serde(default)]
     pub errors: GnssErrorConfig,
+    /// Whether the world's scene (buildings, foliage, reflections) acts on the satellite
+    /// links; default true. Off, the receiver sees an open sky whatever the scene.
+    #[serde(default = "default_true")]
+    pub scene: bool,
 }
 
 impl Default for GnssConfig {
@@ -124,6 +138,7 @@ impl Default for GnssConfig {
             range_rates: true,
             tracking: TrackingConfig::default(),
             errors: GnssErrorConfig::default(),
+            scene: true,
         }
     }
 }
@@ -165,12 +180,31 @@ struct Candidate {
     vel_rot: Vector3<f64>,
 }
 
+/// The scene a receiver's links pass through, with the world frame its geometry uses.
+pub struct SceneView {
+    pub scene: Arc<Scene>,
+    pub frame: EnuFrame,
+    /// The caller-owned path buffer of [`Scene::link`].
+    paths: LinkPaths,
+}
+
+impl SceneView {
+    pub fn new(scene: Arc<Scene>, frame: EnuFrame) -> Self {
+        Self {
+            scene,
+            frame,
+            paths: LinkPaths::new(),
+        }
+    }
+}
+
 /// The GNSS receiver source.
 pub struct GnssSource {
     cfg: GnssConfig,
     nav: Arc<NavData>,
     klobuchar: Option<Klobuchar>,
     shielding: Vec<Shielding>,
+    scene: Option<SceneView>,
     clock: Arc<ClockTrack>,
     tropo_factor: f64,
     channels: Vec<Channel>,
@@ -188,6 +222,7 @@ impl GnssSource {
         cfg: GnssConfig,
         nav: Arc<NavData>,
         shielding: Vec<Shielding>,
+        scene: Option<SceneView>,
         clock: Arc<ClockTrack>,
         rng: &TrialRng,
         end: SimTime,
@@ -222,12 +257,14 @@ impl GnssSource {
             .collect::<Vec<_>>();
         let step_ns = (1e9 / cfg.rate_hz).round() as i64;
         let klobuchar = nav.klobuchar;
+        let use_scene = cfg.scene;
         Self {
             candidates: Vec::with_capacity(channels.len()),
             channels,
             cfg,
             nav,
             klobuchar,
+            scene: scene.filter(|_| use_scene),
             shielding,
             clock,
             tropo_factor,
@@ -288,7 +325,7 @@ impl GnssSource {
 
 /// Position and velocity of a satellite at transmission time, rotated into the ECEF frame
 /// of the reception time, with the light time τ found by fixed-point iteration.
-fn transmit_geometry(
+pub fn transmit_geometry(
     eph: &crate::gnss::ephemeris::Ephemeris,
     t_rx: crate::core::GpsTime,
     rx: &Vector3<f64>,
@@ -368,7 +405,30 @@ impl Source for GnssSource {
         for k in 0..self.candidates.len() {
             let c = self.candidates[k];
             let sat = self.channels[c.channel].sat;
-            let cn0 = self.cfg.tracking.cn0_dbhz(sat.system, c.el_rad);
+            let mut cn0 = self.cfg.tracking.cn0_dbhz(sat.system, c.el_rad);
+            let (mut scene_code_m, mut scene_rate_mps) = (0.0, 0.0);
+            if let (Some(view), Some(signal)) = (self.scene.as_mut(), Signal::of_system(sat.system))
+            {
+                let u_enu = view.frame.enu_vector_of_ecef(&(c.pos_rot - rx)).normalize();
+                let effect = scene_effect(
+                    &view.scene,
+                    &self.cfg.tracking,
+                    signal,
+                    &truth.enu.pos_enu_m,
+                    &truth.enu.vel_enu_mps,
+                    &u_enu,
+                    cn0,
+                    &mut view.paths,
+                );
+                if let Some(e) = effect {
+                    if e.class == LinkClass::Lost {
+                        continue;
+                    }
+                    cn0 = e.cn0_dbhz;
+                    scene_code_m = e.code_error_m;
+                    scene_rate_mps = e.range_rate_error_mps;
+                }
+            }
             if !self.cfg.tracking.in_lock(cn0) {
                 continue;
             }
@@ -410,9 +470,12 @@ impl Source for GnssSource {
                 + iono_model * ch.iono_factor
                 + tropo_model * self.tropo_factor
                 + ch.ure_m
+                + scene_code_m
                 + sigma_dll * n_code;
-            let range_rate =
-                u.dot(&(c.vel_rot - truth.vel_ecef_mps)) + C_MPS * rx_drift + sigma_rate * n_rate;
+            let range_rate = u.dot(&(c.vel_rot - truth.vel_ecef_mps))
+                + C_MPS * rx_drift
+                + scene_rate_mps
+                + sigma_rate * n_rate;
             let sigma_m = (sigma_dll.powi(2)
                 + sigma_ure.powi(2)
                 + (self

@@ -198,3 +198,42 @@ impl Summary {
         s
     }
 }
+
+/// Every estimator's epochs of every trial as CSV (one row per trial, estimator and epoch;
+/// empty cells where an estimator had no estimate), for pandas and spreadsheets.
+///
+/// Columns: `trial, estimator, t_s, err_3d_m, err_h_m, nees_pos, used, rejected, gdop,
+/// numerical_failure`. Rows are in trial order, then the world's estimator order, then
+/// time, so the file is identical for any thread count.
+pub fn epochs_csv(results: &[TrialResult]) -> String {
+    use std::fmt::Write;
+    let mut s = String::from(
+        "trial,estimator,t_s,err_3d_m,err_h_m,nees_pos,used,rejected,gdop,numerical_failure\n",
+    );
+    let opt = |v: Option<f64>| v.map(|x| format!("{x:.6}")).unwrap_or_default();
+    let mut sorted: Vec<&TrialResult> = results.iter().collect();
+    sorted.sort_by_key(|r| r.trial);
+    for r in sorted {
+        for est in &r.estimators {
+            // Names are free text: quote them as CSV requires.
+            let name = format!("\"{}\"", est.name.replace('"', "\"\""));
+            for e in &est.epochs {
+                let _ = writeln!(
+                    s,
+                    "{},{},{:.3},{},{},{},{},{},{},{}",
+                    r.trial,
+                    name,
+                    e.t_s,
+                    opt(e.err_3d_m),
+                    opt(e.err_h_m),
+                    opt(e.nees_pos),
+                    e.used,
+                    e.rejected,
+                    opt(e.gdop),
+                    u8::from(e.numerical_failure)
+                );
+            }
+        }
+    }
+    s
+}

@@ -5,15 +5,20 @@
 //! [`locate`], which maps a key path back to the text.
 
 pub mod locate;
+pub mod map;
+pub mod scene;
 pub mod schema;
+pub mod visibility;
 
 use crate::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng};
-use crate::gnss::measurement::{GnssSource, Shielding, ShieldingRule};
+use crate::gnss::measurement::{GnssSource, SceneView, Shielding, ShieldingRule};
 use crate::gnss::receiver_clock::{ClockTrack, ReceiverClock};
 use crate::gnss::rinex_nav::{parse_nav, read_nav_file, NavData};
 use crate::motion::Trajectory;
+use crate::propagation::{Indoor, Scene};
 use locate::{locate, path_to_string, PathSeg};
-use schema::{EstimatorSpec, FilterKind, WorldFile};
+use scene::{Transmitter, TransmitterKind, TransmitterSpec};
+use schema::{EstimatorSpec, FilterKind, PlatformKind, WorldFile};
 use std::fmt;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -68,6 +73,10 @@ pub struct World {
     pub duration_s: f64,
     /// Shielding windows with their satellites parsed.
     pub shielding: Vec<Shielding>,
+    /// The physical scene, when the world has one.
+    pub scene: Option<Arc<Scene>>,
+    /// The transmitters, positions resolved.
+    pub transmitters: Vec<Transmitter>,
 }
 
 /// Everything a trial needs, freshly built from the world and the trial's random streams.
@@ -258,17 +267,124 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
         .map_err(|i| ctx.issue("platform.trajectory", i))?;
     let duration_s = w.duration_s.unwrap_or_else(|| probe.duration_s());
 
+    let frame = EnuFrame::new(Geodetic::from_deg(o.lat_deg, o.lon_deg, o.h_m));
+    let scene = match &file.scene {
+        None => None,
+        Some(section) => {
+            let resolved = section
+                .resolve(&frame)
+                .map_err(|(k, m)| ctx.err(&format!("scene.{k}"), m))?;
+            let scene = Scene::new(&resolved.config)
+                .map_err(|i| ctx.err(&format!("scene.{}", resolved.user_key(&i.key)), i.message))?;
+            if let Some(sh) = &section.shadowing {
+                sh.validate().map_err(|i| ctx.issue("scene.shadowing", i))?;
+            }
+            check_platform_in_scene(&ctx, &scene, file.platform.kind, probe.as_ref(), duration_s)?;
+            Some(Arc::new(scene))
+        }
+    };
+    let transmitters = check_transmitters(&ctx, &file.transmitters, &frame, scene.as_deref())?;
+
     Ok(World {
         path: path.to_path_buf(),
         hash: fnv_hex(text.as_bytes()),
         start,
-        frame: EnuFrame::new(Geodetic::from_deg(o.lat_deg, o.lon_deg, o.h_m)),
+        frame,
         nav: Arc::new(nav),
         nav_source,
         duration_s,
         shielding,
+        scene,
+        transmitters,
         file,
     })
+}
+
+/// A car or a target cannot drive through a building; a pedestrian may walk into one (an
+/// indoor section). The trajectory is checked every 0.5 s.
+fn check_platform_in_scene(
+    ctx: &Ctx<'_>,
+    scene: &Scene,
+    kind: PlatformKind,
+    trajectory: &dyn Trajectory,
+    duration_s: f64,
+) -> Result<(), WorldError> {
+    let n = (duration_s / 0.5).ceil() as usize;
+    for k in 0..=n {
+        let t_s = (k as f64 * 0.5).min(duration_s);
+        let p = trajectory.state_at(t_s).pos_enu_m;
+        let indoor = scene.check_receiver(&p).map_err(|i| {
+            ctx.err(
+                "platform.trajectory",
+                format!("at t = {t_s} s: {}", i.message),
+            )
+        })?;
+        if let (Some(Indoor::Building(b)), PlatformKind::Car | PlatformKind::Target) =
+            (indoor, kind)
+        {
+            return Err(ctx.err(
+                "platform.trajectory",
+                format!(
+                    "the {} enters building {b} (scene.buildings[{b}]) at t = {t_s} s, at \
+                     [{:.1}, {:.1}, {:.1}] m ENU; only pedestrians may go indoors",
+                    if kind == PlatformKind::Car {
+                        "car"
+                    } else {
+                        "target"
+                    },
+                    p.x,
+                    p.y,
+                    p.z
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+fn check_transmitters(
+    ctx: &Ctx<'_>,
+    specs: &[TransmitterSpec],
+    frame: &EnuFrame,
+    scene: Option<&Scene>,
+) -> Result<Vec<Transmitter>, WorldError> {
+    let mut out: Vec<Transmitter> = Vec::with_capacity(specs.len());
+    for (i, s) in specs.iter().enumerate() {
+        let at = |k: &str| format!("transmitter[{i}].{k}");
+        let t = s.resolve(frame).map_err(|(k, m)| ctx.err(&at(&k), m))?;
+        let system = match s.kind {
+            TransmitterKind::Dtmb => Some(System::Dtmb),
+            TransmitterKind::Tcofdm => Some(System::Tcofdm),
+            TransmitterKind::Fm => None,
+        };
+        if let Some(sys) = system {
+            let ok = s.id.parse::<EmitterId>().is_ok_and(|id| id.system == sys);
+            if !ok {
+                let prefix = if sys == System::Dtmb { "D" } else { "T" };
+                return Err(ctx.err(
+                    &at("id"),
+                    format!(
+                        "expected an id like \"{prefix}01\" for a {} transmitter, got \"{}\"",
+                        s.kind.label(),
+                        s.id
+                    ),
+                ));
+            }
+        }
+        if out.iter().any(|o| o.id == s.id) {
+            return Err(ctx.err(
+                &at("id"),
+                format!("transmitter id \"{}\" is used twice", s.id),
+            ));
+        }
+        if let Some(scene) = scene {
+            scene
+                .check_transmitter(&t.pos_enu_m)
+                .map_err(|i| ctx.err(&at("position"), i.message))?;
+        }
+        out.push(t);
+    }
+    Ok(out)
 }
 
 /// Navigation data: a file relative to the world file, or the embedded default.
@@ -504,10 +620,15 @@ impl World {
                 0.1,
                 &mut rng.stream("receiver/clock"),
             ));
+            let view = self
+                .scene
+                .as_ref()
+                .map(|s| SceneView::new(Arc::clone(s), self.frame.clone()));
             sources.push(Box::new(GnssSource::new(
                 g.clone(),
                 Arc::clone(&self.nav),
                 self.shielding.clone(),
+                view,
                 clock,
                 rng,
                 end,
@@ -586,6 +707,33 @@ impl World {
                 s,
                 "shielding  {:.0}–{:.0} s: {:?}",
                 w.from_s, w.to_s, w.rule
+            );
+        }
+        if let (Some(sec), Some(scene)) = (&f.scene, &self.scene) {
+            let _ = writeln!(
+                s,
+                "scene      {} buildings, {} forests, {} tree rows, {} indoor zones, {} surfaces",
+                scene.building_count(),
+                sec.forests.len(),
+                sec.tree_rows.len(),
+                sec.indoor_zones.len(),
+                sec.surfaces.len()
+            );
+        }
+        for t in &self.transmitters {
+            let p = &t.pos_enu_m;
+            let _ = writeln!(
+                s,
+                "transmitter {:<4} {:<7} {:>8.3} MHz {:>7.1} kW at [{:.0}, {:.0}, {:.0}] m ENU ({:.2} km){}",
+                t.id,
+                t.kind.label(),
+                t.freq_hz * 1e-6,
+                t.spec.erp_kw,
+                p.x,
+                p.y,
+                p.z,
+                p.xy().norm() / 1e3,
+                t.name.as_deref().map(|n| format!(" {n}")).unwrap_or_default()
             );
         }
         for e in &f.estimators {

@@ -7,6 +7,7 @@ use crate::fusion::estimator::{EkfEstimator, Estimator, WlsEstimator};
 use crate::gnss::measurement::GnssConfig;
 use crate::gnss::receiver_clock::ClockConfig;
 use crate::motion::TrajectoryConfig;
+use crate::world::scene::{SceneSection, TransmitterSpec};
 use serde::Deserialize;
 
 /// A whole world file.
@@ -19,6 +20,10 @@ pub struct WorldFile {
     pub receiver: ReceiverSection,
     #[serde(default)]
     pub sensors: SensorsSection,
+    #[serde(default)]
+    pub scene: Option<SceneSection>,
+    #[serde(default, rename = "transmitter")]
+    pub transmitters: Vec<TransmitterSpec>,
     #[serde(default)]
     pub shielding: Vec<ShieldingSpec>,
     #[serde(default, rename = "estimator")]

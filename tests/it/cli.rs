@@ -159,7 +159,9 @@ fn world_with_an_impossible_value_names_the_key() {
     );
     assert!(e.contains("platform.trajectory.speed_mps"), "{e}");
     assert!(e.contains("positive speed"), "{e}");
-    let e = check_edited("lat", |t| t.replace("lat_deg = 40.0040", "lat_deg = 140.0"));
+    let e = check_edited("lat", |t| {
+        t.replacen("lat_deg = 40.00470", "lat_deg = 140.0", 1)
+    });
     assert!(
         e.contains("world.origin.lat_deg") && e.contains("-90.0..=90.0") && e.contains("got 140"),
         "{e}"
