@@ -8,6 +8,7 @@ pub mod estimator;
 pub mod kalman;
 pub mod linear_kf;
 pub mod measurement;
+pub mod mode;
 pub mod models;
 pub mod particle;
 pub mod wls;
