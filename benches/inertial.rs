@@ -1,18 +1,29 @@
 //! Benchmarks of the inertial hot paths: the IMU error model alone (one sample of six
-//! sensors), truth + ideal IMU + error model for a walking phone, and one INS step
-//! (mechanisation + 15-state covariance prediction).
+//! sensors), truth + ideal IMU + error model for a walking phone, one INS step
+//! (mechanisation + 15-state covariance prediction), and per engine epoch: the IMU source
+//! (truth with attitude, increment IMU, error model, batch) for a car and a handheld phone,
+//! the INS estimator on a one-sample IMU batch, and the INS estimator on a GNSS batch of
+//! eight pseudoranges and rates (least-squares position and velocity, 6-D update).
 //!
 //! Run: `cargo bench --bench inertial -- --warm-up-time 1 --measurement-time 3`.
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
-use hybridnav::core::TrialRng;
+use hybridnav::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng};
+use hybridnav::engine::trial::truth_at;
+use hybridnav::engine::{SampleContext, Source};
+use hybridnav::fusion::estimator::Estimator;
+use hybridnav::fusion::measurement::{
+    Measurement, MeasurementBatch, PositionFix, RangeMeasurement,
+};
 use hybridnav::inertial::attitude::{ideal_imu, Platform, PlatformConfig, PlatformTruth};
+use hybridnav::inertial::estimators::{InsEstimator, InsFilterConfig};
 use hybridnav::inertial::imu::{Imu, ImuConfig, ImuGrade, ImuSample};
 use hybridnav::inertial::ins_ekf::{InsEkf, InsEkfConfig};
+use hybridnav::inertial::source::{local_earth_of, ImuSource};
 use hybridnav::inertial::strapdown::NavState;
 use hybridnav::inertial::LocalEarth;
 use hybridnav::motion::TrajectoryConfig;
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 fn bench(c: &mut Criterion) {
     let earth = LocalEarth::new(0.7, 50.0);
@@ -84,7 +95,194 @@ fn bench(c: &mut Criterion) {
             kf.propagate(black_box(&s));
         })
     });
+    engine_epochs(&mut g);
     g.finish();
+}
+
+fn car_config() -> TrajectoryConfig {
+    TrajectoryConfig::Waypoints {
+        points_enu_m: vec![
+            vec![0.0, 0.0, 0.0],
+            vec![400.0, 0.0, 5.0],
+            vec![400.0, 250.0, 5.0],
+            vec![0.0, 250.0, 0.0],
+        ],
+        speed_mps: 12.0,
+        accel_mps2: Some(1.5),
+        lateral_accel_mps2: Some(2.0),
+        dwell_s: None,
+        laps: Some(20),
+        height_m: None,
+    }
+}
+
+fn walk_config() -> TrajectoryConfig {
+    TrajectoryConfig::Waypoints {
+        points_enu_m: vec![
+            vec![0.0, 0.0],
+            vec![38.0, 0.0],
+            vec![38.0, 20.0],
+            vec![0.0, 20.0],
+        ],
+        speed_mps: 1.1,
+        accel_mps2: Some(0.5),
+        lateral_accel_mps2: Some(0.4),
+        dwell_s: None,
+        laps: Some(20),
+        height_m: None,
+    }
+}
+
+/// Per-event costs of the inertial parts inside the engine.
+fn engine_epochs(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>) {
+    let frame = EnuFrame::new(Geodetic::from_deg(30.558, 114.268, 25.0));
+    let start = GpsTime::from_week_tow(2300, 0.0);
+    let imu_cfg = ImuConfig::grade(ImuGrade::Mid);
+    let rng = TrialRng::new(1, 0);
+
+    for (label, traj_cfg, platform) in [
+        ("imu_source_event_car_100hz", car_config(), Platform::Car),
+        (
+            "imu_source_event_handheld_100hz",
+            walk_config(),
+            Platform::Handheld,
+        ),
+    ] {
+        let build = || {
+            traj_cfg
+                .build(&mut rng.stream("motion/trajectory"))
+                .unwrap()
+        };
+        let engine_traj = build();
+        let end = SimTime::from_seconds(engine_traj.duration_s());
+        let plat = PlatformConfig {
+            platform,
+            ..Default::default()
+        };
+        let make = || ImuSource::new(&imu_cfg, &plat, build(), &frame, &rng, end).unwrap();
+        let mut src = make();
+        let mut at = src.first_sample();
+        let mut batch = MeasurementBatch::default();
+        g.bench_function(label, |b| {
+            b.iter(|| {
+                // What the engine does per IMU event: the truth, then the source.
+                let truth = truth_at(&frame, start, engine_traj.as_ref(), at);
+                batch.items.clear();
+                let ctx = SampleContext {
+                    truth: &truth,
+                    estimates: &[],
+                };
+                match src.sample(&ctx, &mut batch) {
+                    Some(n) => at = n,
+                    None => {
+                        src = make();
+                        at = src.first_sample();
+                    }
+                }
+                black_box(batch.items.len())
+            })
+        });
+    }
+
+    // An INS estimator initialised from position fixes on a level body gliding east.
+    let cfg = InsFilterConfig {
+        fix_sources: vec!["fix".into(), "gnss".into()],
+        ..Default::default()
+    };
+    let mut ins = InsEstimator::new("INS", &cfg, &imu_cfg, &[System::Gps], &frame, start).unwrap();
+    let gravity = local_earth_of(&frame).gravity_mps2(0.0);
+    let mut imu_batch = MeasurementBatch {
+        unscored: false,
+        t: start,
+        source: "imu".into(),
+        items: vec![Measurement::Imu(ImuSample {
+            t_s: 0.0,
+            gyro_rps: Vector3::zeros(),
+            accel_mps2: Vector3::new(0.0, 0.0, gravity),
+        })],
+    };
+    let mut k = 0u64;
+    let feed = |ins: &mut InsEstimator, batch: &mut MeasurementBatch, k: &mut u64| {
+        let t = *k as f64 * 0.01;
+        batch.t = start.add_seconds(t);
+        if let Measurement::Imu(s) = &mut batch.items[0] {
+            s.t_s = t;
+        }
+        *k += 1;
+        ins.process(batch)
+    };
+    let mut fix = MeasurementBatch {
+        unscored: false,
+        t: start,
+        source: "fix".into(),
+        items: vec![Measurement::Position(PositionFix {
+            pos_ecef_m: frame.origin_ecef(),
+            cov_m2: Matrix3::identity() * 0.01,
+        })],
+    };
+    // A position fix at the time of the last IMU sample (the body glides east at 2 m/s).
+    let mut fix_now = |ins: &mut InsEstimator, k: u64| {
+        let t = (k - 1) as f64 * 0.01;
+        fix.t = start.add_seconds(t);
+        if let Measurement::Position(p) = &mut fix.items[0] {
+            p.pos_ecef_m = frame.ecef_of_enu(&Vector3::new(2.0 * t, 0.0, 0.0));
+        }
+        ins.process(&fix)
+    };
+    while ins.filter().is_none() && k < 5000 {
+        for _ in 0..100 {
+            feed(&mut ins, &mut imu_batch, &mut k);
+        }
+        fix_now(&mut ins, k);
+    }
+    assert!(ins.filter().is_some(), "the INS did not initialise");
+    // One IMU epoch, with a position fix after every hundredth (1 Hz fixes at 100 Hz, as in
+    // a world; the fix's share is about 1 % of the iterations).
+    g.bench_function("ins_estimator_imu_epoch", |b| {
+        b.iter(|| {
+            let out = feed(&mut ins, &mut imu_batch, &mut k);
+            if k % 100 == 0 {
+                fix_now(&mut ins, k);
+            }
+            black_box(out)
+        })
+    });
+    assert!(ins.filter().is_some(), "the INS reset during the benchmark");
+
+    // A GNSS epoch of eight satellites around the INS position, at the INS time.
+    let t_ins = ins.filter().unwrap().state().t_s;
+    let rx = frame.ecef_of_enu(&ins.filter().unwrap().state().pos_enu_m);
+    let ranges: Vec<Measurement> = (0..8)
+        .map(|i| {
+            let az = i as f64 * 0.785 + 0.2;
+            let el: f64 = if i == 7 { 1.4 } else { 0.25 + 0.12 * i as f64 };
+            let d = Vector3::new(el.cos() * az.sin(), el.cos() * az.cos(), el.sin());
+            let e = frame.ecef_of_enu(&(d * 2.0e7));
+            Measurement::Range(RangeMeasurement {
+                emitter: EmitterId {
+                    system: System::Gps,
+                    number: i + 1,
+                },
+                emitter_pos_ecef_m: e,
+                emitter_vel_ecef_mps: Vector3::zeros(),
+                pseudorange_m: (rx - e).norm() + 50.0,
+                sigma_m: 3.0,
+                range_rate_mps: Some(0.1),
+                sigma_rate_mps: 0.1,
+                cn0_dbhz: 45.0,
+                elevation_rad: el,
+            })
+        })
+        .collect();
+    let gnss = MeasurementBatch {
+        unscored: false,
+        t: start.add_seconds(t_ins),
+        source: "gnss".into(),
+        items: ranges,
+    };
+    g.bench_function("ins_estimator_gnss_epoch_8_sats", |b| {
+        b.iter(|| black_box(ins.process(black_box(&gnss))))
+    });
 }
 
 criterion_group!(benches, bench);

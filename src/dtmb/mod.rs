@@ -7,18 +7,31 @@
 //! frame (SI, QAM, interleaver, IDFT) ─► transmitter (FrameSchedule, generate) ─► channel
 //!     (paths, CFO/SFO, noise) ─► receiver (FFT correlation, first path, CFO) ─► pseudorange
 //! sigmf: samples + frame annotations to BASE.sigmf-data / BASE.sigmf-meta
+//! measurement: the calibrated timing-error model (level = "measurement")
+//! source: DtmbSource, the "dtmb" engine source at either level; tps: seed 002's
+//!     TPS-CFO range differences; noise: the vectorised AWGN generator
 //! ```
+//!
+//! The channel runs in the frequency domain (`fd_channel`, private) and is tested against
+//! its time-domain reference [`Channel::process_exact`].
 //!
 //! Signal conventions: complex baseband `Complex<f32>` at 7.56 Msps; the frame body has
 //! unit mean power and the header `ρ` (2 for PN420/PN945, 1 for PN595). SNR is the
 //! nominal received frame power over the noise power in the 7.56 MHz band (one complex
-//! sample's variance). This module is self-contained: it depends only on `core` and `io`.
+//! sample's variance). The signal chain depends only on `core` and `io`; the measurement
+//! source (`source`) also uses `engine`, `fusion::measurement`, `gnss::receiver_clock` and
+//! `propagation`, as the GNSS source does.
 
 pub mod channel;
+mod fd_channel;
 pub mod frame;
+pub mod measurement;
+pub mod noise;
 pub mod pn;
 pub mod receiver;
 pub mod sigmf;
+pub mod source;
+pub mod tps;
 pub mod transmitter;
 
 pub use channel::{link_snr_db, Channel, ChannelConfig, Path};
@@ -26,6 +39,7 @@ pub use frame::{BodyModulator, CarrierMode, Qam};
 pub use pn::{PnMode, SAMPLE_RATE_HZ};
 pub use receiver::{pseudorange_m, FirstPathConfig, Receiver, Search, SyncConfig, SyncResult};
 pub use sigmf::{generate_iq, read_sigmf, write_sigmf, Annotation, SampleFormat, SigmfRecording};
+pub use source::{DtmbLevel, DtmbSensorConfig, DtmbSource, TowerSpec};
 pub use transmitter::{FrameSchedule, SampleSource, SrrcInterpolator, Transmitter, TxConfig};
 
 use thiserror::Error;

@@ -176,6 +176,53 @@ pub struct Receiver {
     acc: Vec<f32>,
     sort: Vec<f32>,
     fine_buf: Vec<Vec<Complex32>>,
+    /// Aided (windowed) correlation: FFT size, plans and per-phase replica spectra, built
+    /// on the first aided sync of a given window size.
+    window: Option<WindowCorr>,
+}
+
+/// The plans and replica spectra of the windowed correlation used by aided syncs.
+struct WindowCorr {
+    m: usize,
+    fwd: Arc<dyn Fft<f32>>,
+    inv: Arc<dyn Fft<f32>>,
+    /// Conjugate replica spectra, index as `Receiver::phases`.
+    spec: Vec<Vec<Complex32>>,
+    buf: Vec<Complex32>,
+    scratch: Vec<Complex32>,
+}
+
+impl WindowCorr {
+    fn new(m: usize, phases: &[usize], headers: &[Vec<Complex32>]) -> Self {
+        let mut planner = FftPlanner::<f32>::new();
+        let fwd = planner.plan_fft_forward(m);
+        let inv = planner.plan_fft_inverse(m);
+        let mut scratch = vec![
+            Complex32::default();
+            fwd.get_inplace_scratch_len()
+                .max(inv.get_inplace_scratch_len())
+        ];
+        let inv_m = 1.0 / m as f32;
+        let spec = phases
+            .iter()
+            .map(|&p| {
+                let mut s = vec![Complex32::default(); m];
+                s[..headers[p].len()].copy_from_slice(&headers[p]);
+                fwd.process_with_scratch(&mut s, &mut scratch);
+                // The 1/M of the inverse transform is folded into the replica.
+                s.iter_mut().for_each(|x| *x = x.conj() * inv_m);
+                s
+            })
+            .collect();
+        Self {
+            m,
+            fwd,
+            inv,
+            spec,
+            buf: vec![Complex32::default(); m],
+            scratch,
+        }
+    }
 }
 
 impl std::fmt::Debug for Receiver {
@@ -287,6 +334,7 @@ impl Receiver {
             acc: vec![0.0; nfft],
             sort: vec![0.0; nfft],
             fine_buf: vec![vec![Complex32::default(); fine_len]; MAX_FRAMES],
+            window: None,
         })
     }
 
@@ -324,6 +372,50 @@ impl Receiver {
             .sum()
     }
 
+    /// Accumulates `acc[ℓ] = Σ_k |R_{p_k}[ℓ + kN]|²` for `ℓ` in `lo ..= hi` only, by one
+    /// FFT correlation per frame over a window of `hi − lo + H` samples (the aided search:
+    /// the cost follows the window, not the block). The scale differs from the full-block
+    /// correlation's (its inverse FFT is unnormalised), which does not matter: every
+    /// threshold is relative to the peak or the median of the same search.
+    fn window_acc(
+        &mut self,
+        rx: &[Complex32],
+        lo: usize,
+        hi: usize,
+        frame0: usize,
+        k_frames: usize,
+    ) {
+        let mode = self.mode;
+        let (h, n) = (mode.header_len(), mode.frame_len());
+        let m_needed = (hi - lo + h).next_power_of_two().max(64);
+        if self.window.as_ref().is_none_or(|w| w.m != m_needed) {
+            self.window = Some(WindowCorr::new(m_needed, &self.phases, &self.headers));
+        }
+        let Some(w) = self.window.as_mut() else {
+            return;
+        };
+        let m = w.m;
+        self.acc[lo..=hi].iter_mut().for_each(|a| *a = 0.0);
+        for k in 0..k_frames {
+            let p = mode.phase_of_frame(frame0 + k);
+            let idx = self.phases.iter().position(|&q| q == p).unwrap_or(0);
+            let start = lo + k * n;
+            let avail = rx.len().saturating_sub(start).min(m);
+            w.buf[..avail].copy_from_slice(&rx[start..start + avail]);
+            w.buf[avail..]
+                .iter_mut()
+                .for_each(|x| *x = Complex32::default());
+            w.fwd.process_with_scratch(&mut w.buf, &mut w.scratch);
+            for (b, s) in w.buf.iter_mut().zip(&w.spec[idx]) {
+                *b *= s;
+            }
+            w.inv.process_with_scratch(&mut w.buf, &mut w.scratch);
+            for (a, c) in self.acc[lo..=hi].iter_mut().zip(&w.buf) {
+                *a += c.norm_sqr();
+            }
+        }
+    }
+
     /// Synchronises to the block `rx` (samples at 7.56 Msps).
     ///
     /// # Errors
@@ -358,12 +450,15 @@ impl Receiver {
         }
         // Lags at which all K headers fit in the block.
         let last_lag = rx.len() - needed;
-        self.xspec[..rx.len()].copy_from_slice(rx);
-        self.xspec[rx.len()..]
-            .iter_mut()
-            .for_each(|x| *x = Complex32::default());
-        self.fwd
-            .process_with_scratch(&mut self.xspec, &mut self.scratch);
+        let aided = matches!(cfg.search, Search::Aided { .. });
+        if !aided {
+            self.xspec[..rx.len()].copy_from_slice(rx);
+            self.xspec[rx.len()..]
+                .iter_mut()
+                .for_each(|x| *x = Complex32::default());
+            self.fwd
+                .process_with_scratch(&mut self.xspec, &mut self.scratch);
+        }
 
         let (lo, hi) = match cfg.search {
             Search::Full { .. } => (0usize, last_lag),
@@ -426,17 +521,24 @@ impl Receiver {
             }
         };
 
-        // Non-coherent accumulation over K frames.
-        self.acc[..=last_lag].iter_mut().for_each(|a| *a = 0.0);
-        for k in 0..k_frames {
-            let p = mode.phase_of_frame(frame0 + k);
-            self.correlate_phase(p);
-            let off = k * n;
-            for (a, w) in self.acc[..=last_lag]
-                .iter_mut()
-                .zip(&self.work[off..off + last_lag + 1])
-            {
-                *a += w.norm_sqr();
+        // Non-coherent accumulation over K frames: over the window only when aided (one
+        // lag either side for the first path's local-maximum test), else every lag.
+        if aided {
+            let lo_acc = lo.saturating_sub(1);
+            let hi_acc = (hi + 1).min(last_lag);
+            self.window_acc(rx, lo_acc, hi_acc, frame0, k_frames);
+        } else {
+            self.acc[..=last_lag].iter_mut().for_each(|a| *a = 0.0);
+            for k in 0..k_frames {
+                let p = mode.phase_of_frame(frame0 + k);
+                self.correlate_phase(p);
+                let off = k * n;
+                for (a, w) in self.acc[..=last_lag]
+                    .iter_mut()
+                    .zip(&self.work[off..off + last_lag + 1])
+                {
+                    *a += w.norm_sqr();
+                }
             }
         }
         let (mut lmax, mut amax) = (lo, f32::MIN);
@@ -665,39 +767,63 @@ impl Receiver {
 }
 
 /// `S(τ) = Σ_b Y[b] e^{j2π b τ/M}` over signed bins, and its first two derivatives.
+///
+/// The phasors `e^{j w0 b τ}` advance by recurrence; four independent chains (bins `b`,
+/// `b + 1`, `b + 2`, `b + 3` stepping by four) keep the loop from waiting on one
+/// multiplication's latency. Each chain runs at most `M/4` steps from an exactly computed
+/// start, so the f64 rounding stays near 1e-14.
 fn spectrum_eval(y: &[Complex32], tau: f64) -> (Complex64, Complex64, Complex64) {
     let m = y.len();
     let half = m.div_ceil(2); // bins 0..half are non-negative, the rest negative
     let w0 = 2.0 * PI / m as f64;
-    let step = Complex64::from_polar(1.0, w0 * tau);
-    let (mut s0, mut s1, mut s2) = (
+    let mut acc = [(
         Complex64::default(),
         Complex64::default(),
         Complex64::default(),
-    );
-    // Non-negative bins 0, 1, …, half − 1.
-    let mut z = Complex64::new(1.0, 0.0);
-    for (b, v) in y[..half].iter().enumerate() {
-        let t = Complex64::new(v.re as f64, v.im as f64) * z;
-        let wb = w0 * b as f64;
-        s0 += t;
-        s1 += t * Complex64::new(0.0, wb);
-        s2 -= t * (wb * wb);
-        z *= step;
-    }
-    // Negative bins −1, −2, …, −(m − half).
-    let back = step.conj();
-    let mut z = back;
-    for (i, v) in y[half..].iter().rev().enumerate() {
-        let b = -((i + 1) as f64);
-        let t = Complex64::new(v.re as f64, v.im as f64) * z;
-        let wb = w0 * b;
-        s0 += t;
-        s1 += t * Complex64::new(0.0, wb);
-        s2 -= t * (wb * wb);
-        z *= back;
-    }
-    (s0, s1, s2)
+    ); 4];
+    // Bins b = first + 4i + lane for lane 0..4, over a signed range [first, first + len).
+    let mut run = |first: i64, vals: &[Complex32]| {
+        let step4 = Complex64::from_polar(1.0, w0 * tau * 4.0);
+        let mut z = [Complex64::default(); 4];
+        for (lane, zl) in z.iter_mut().enumerate() {
+            *zl = Complex64::from_polar(1.0, w0 * tau * (first + lane as i64) as f64);
+        }
+        let mut chunks = vals.chunks_exact(4);
+        let mut b0 = first;
+        for c in &mut chunks {
+            for lane in 0..4 {
+                let v = c[lane];
+                let t = Complex64::new(v.re as f64, v.im as f64) * z[lane];
+                let wb = w0 * (b0 + lane as i64) as f64;
+                let (s0, s1, s2) = &mut acc[lane];
+                *s0 += t;
+                *s1 += t * Complex64::new(0.0, wb);
+                *s2 -= t * (wb * wb);
+                z[lane] *= step4;
+            }
+            b0 += 4;
+        }
+        for (lane, v) in chunks.remainder().iter().enumerate() {
+            let t = Complex64::new(v.re as f64, v.im as f64) * z[lane];
+            let wb = w0 * (b0 + lane as i64) as f64;
+            let (s0, s1, s2) = &mut acc[lane];
+            *s0 += t;
+            *s1 += t * Complex64::new(0.0, wb);
+            *s2 -= t * (wb * wb);
+        }
+    };
+    // Non-negative bins 0 .. half − 1, then the negative bins −(m − half) .. −1, which
+    // are stored at indices half .. m − 1 in increasing order.
+    run(0, &y[..half]);
+    run(half as i64 - m as i64, &y[half..]);
+    acc.iter().fold(
+        (
+            Complex64::default(),
+            Complex64::default(),
+            Complex64::default(),
+        ),
+        |(a, b, c), (x, y, z)| (a + x, b + y, c + z),
+    )
 }
 
 #[cfg(test)]

@@ -24,6 +24,14 @@ pub struct EpochRecord {
     pub rejected: u32,
     pub gdop: Option<f64>,
     pub numerical_failure: bool,
+    /// √trace of the position covariance (m): the estimator's own 3-D σ.
+    pub pos_sigma_m: Option<f64>,
+    /// Mean NIS of the updates used this epoch.
+    pub mean_nis: Option<f64>,
+    /// Measurements an innovation gate rejected as outliers.
+    pub rejected_gate: u32,
+    /// The integration mode chosen this epoch (mode-selecting estimators only).
+    pub mode: Option<&'static str>,
 }
 
 /// Everything one estimator did in one trial.
@@ -114,6 +122,7 @@ pub fn simulate(frame: &EnuFrame, start: GpsTime, setup: &mut TrialSetup) -> Vec
         };
         let truth = truth_at(frame, start, setup.trajectory.as_ref(), ev.t);
         batch.items.clear();
+        batch.unscored = false;
         let ctx = SampleContext {
             truth: &truth,
             estimates: &latest,
@@ -132,6 +141,9 @@ pub fn simulate(frame: &EnuFrame, start: GpsTime, setup: &mut TrialSetup) -> Vec
             }
             let out = est.process(&batch);
             latest[k] = est.latest();
+            if batch.unscored {
+                continue;
+            }
             let (err_3d_m, err_h_m, nees_pos) = match &out.estimate {
                 Some(e) => {
                     let (e3, eh, n) = errors(frame, &truth, e);
@@ -148,6 +160,13 @@ pub fn simulate(frame: &EnuFrame, start: GpsTime, setup: &mut TrialSetup) -> Vec
                 rejected: out.rejected,
                 gdop: out.gdop,
                 numerical_failure: out.numerical_failure,
+                pos_sigma_m: out
+                    .estimate
+                    .map(|e| e.cov_pos_m2.trace().max(0.0).sqrt())
+                    .filter(|v| v.is_finite()),
+                mean_nis: (out.nis_count > 0).then(|| out.nis_sum / f64::from(out.nis_count)),
+                rejected_gate: out.rejected_gate,
+                mode: out.mode,
             });
         }
     }

@@ -27,6 +27,15 @@ pub struct EpochOutcome {
     pub gdop: Option<f64>,
     /// True when the estimator detected a numerical failure and reset or refused the epoch.
     pub numerical_failure: bool,
+    /// Sum of the normalised innovations squared νᵀS⁻¹ν of the updates used this epoch
+    /// (with `nis_count`, their mean: about the measurement dimension when consistent).
+    pub nis_sum: f64,
+    pub nis_count: u32,
+    /// Of `rejected`, how many an innovation gate refused as outliers (the rest were
+    /// refused for invalid input or a numerical failure).
+    pub rejected_gate: u32,
+    /// The integration mode chosen this epoch, for estimators that select one.
+    pub mode: Option<&'static str>,
 }
 
 /// An estimator the engine drives: it consumes batches from the sources it names and
@@ -43,7 +52,7 @@ pub trait Estimator: Send {
 }
 
 use crate::core::System;
-use crate::fusion::ekf11::{Ekf11, Ekf11Config, IsbConfig, UpdateOutcome};
+use crate::fusion::ekf11::{Ekf11, Ekf11Config, IsbConfig, RejectReason, UpdateOutcome};
 use crate::fusion::measurement::RangeMeasurement;
 use crate::fusion::wls::{self, WlsOptions};
 
@@ -144,8 +153,15 @@ impl Estimator for EkfEstimator {
         &self.name
     }
 
+    /// GNSS batches, and DTMB or TC-OFDM batches when the estimator uses those systems:
+    /// their ranges share the receiver clock (seed 000), so one filter takes them all.
     fn consumes(&self, source: &str) -> bool {
-        source == "gnss"
+        match source {
+            "gnss" => true,
+            "dtmb" => self.systems.contains(&System::Dtmb),
+            "tcofdm" => self.systems.contains(&System::Tcofdm),
+            _ => false,
+        }
     }
 
     fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
@@ -191,8 +207,19 @@ impl Estimator for EkfEstimator {
             let r = self.ekf.update_range(m);
             for o in std::iter::once(r.range).chain(r.rate) {
                 match o {
-                    UpdateOutcome::Accepted { .. } => out.used += 1,
-                    UpdateOutcome::Rejected { .. } => out.rejected += 1,
+                    UpdateOutcome::Accepted { nis } => {
+                        out.used += 1;
+                        if nis.is_finite() {
+                            out.nis_sum += nis;
+                            out.nis_count += 1;
+                        }
+                    }
+                    UpdateOutcome::Rejected { reason, .. } => {
+                        out.rejected += 1;
+                        if reason == RejectReason::Gate {
+                            out.rejected_gate += 1;
+                        }
+                    }
                 }
             }
         }

@@ -103,6 +103,10 @@ pub struct MeasurementBatch {
     /// Name of the source that produced the batch (e.g. `"gnss"`).
     pub source: String,
     pub items: Vec<Measurement>,
+    /// True for a batch the estimators process but the metrics do not score (all but the
+    /// first of each second's IMU propagation batches), so that a fast source neither
+    /// outweighs the 1 Hz sources in the statistics nor floods the per-epoch output.
+    pub unscored: bool,
 }
 
 impl MeasurementBatch {

@@ -430,6 +430,11 @@ impl PlatformTruth {
         }
     }
 
+    /// The body attitude alone at `t_s` (cheaper than [`PlatformTruth::sample`]).
+    pub fn attitude_at(&self, t_s: f64) -> UnitQuaternion<f64> {
+        self.attitude(t_s)
+    }
+
     /// The full truth at `t_s` (clamped to the trajectory's span like the trajectory).
     pub fn sample(&self, t_s: f64) -> BodyTruth {
         let base = self.trajectory.state_at(t_s);

@@ -42,13 +42,17 @@
 //!   14–19), closed loop.
 //! * [`magnetometer`]: a constant Earth field and a noisy three-axis magnetometer.
 //! * [`pdr`]: step detection, Weinberg step length and an AHRS heading.
+//! * [`source`]: the IMU (`"imu"`) and the PDR unit (`"pdr"`) as event-engine sources.
+//! * [`estimators`]: the loosely coupled INS and PDR dead reckoning as engine estimators.
 
 pub mod allan;
 pub mod attitude;
+pub mod estimators;
 pub mod imu;
 pub mod ins_ekf;
 pub mod magnetometer;
 pub mod pdr;
+pub mod source;
 pub mod strapdown;
 
 use nalgebra::Vector3;

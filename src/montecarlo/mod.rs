@@ -202,13 +202,13 @@ impl Summary {
 /// Every estimator's epochs of every trial as CSV (one row per trial, estimator and epoch;
 /// empty cells where an estimator had no estimate), for pandas and spreadsheets.
 ///
-/// Columns: `trial, estimator, t_s, err_3d_m, err_h_m, nees_pos, used, rejected, gdop,
-/// numerical_failure`. Rows are in trial order, then the world's estimator order, then
+/// Columns: `trial, estimator, t_s, err_3d_m, err_h_m, nees_pos, pos_sigma_m, used,
+/// rejected, rejected_gate, mean_nis, gdop, mode, numerical_failure`. Rows are in trial order, then the world's estimator order, then
 /// time, so the file is identical for any thread count.
 pub fn epochs_csv(results: &[TrialResult]) -> String {
     use std::fmt::Write;
     let mut s = String::from(
-        "trial,estimator,t_s,err_3d_m,err_h_m,nees_pos,used,rejected,gdop,numerical_failure\n",
+        "trial,estimator,t_s,err_3d_m,err_h_m,nees_pos,pos_sigma_m,used,rejected,rejected_gate,mean_nis,gdop,mode,numerical_failure\n",
     );
     let opt = |v: Option<f64>| v.map(|x| format!("{x:.6}")).unwrap_or_default();
     let mut sorted: Vec<&TrialResult> = results.iter().collect();
@@ -220,16 +220,20 @@ pub fn epochs_csv(results: &[TrialResult]) -> String {
             for e in &est.epochs {
                 let _ = writeln!(
                     s,
-                    "{},{},{:.3},{},{},{},{},{},{},{}",
+                    "{},{},{:.3},{},{},{},{},{},{},{},{},{},{},{}",
                     r.trial,
                     name,
                     e.t_s,
                     opt(e.err_3d_m),
                     opt(e.err_h_m),
                     opt(e.nees_pos),
+                    opt(e.pos_sigma_m),
                     e.used,
                     e.rejected,
+                    e.rejected_gate,
+                    opt(e.mean_nis),
                     opt(e.gdop),
+                    e.mode.unwrap_or(""),
                     u8::from(e.numerical_failure)
                 );
             }

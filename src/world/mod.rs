@@ -11,14 +11,17 @@ pub mod schema;
 pub mod visibility;
 
 use crate::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng};
+use crate::dtmb::{DtmbSource, TowerSpec};
 use crate::gnss::measurement::{GnssSource, SceneView, Shielding, ShieldingRule};
 use crate::gnss::receiver_clock::{ClockTrack, ReceiverClock};
 use crate::gnss::rinex_nav::{parse_nav, read_nav_file, NavData};
+use crate::inertial::source::{ImuSource, PdrSource};
 use crate::motion::Trajectory;
 use crate::propagation::{Indoor, Scene};
+use crate::tcofdm::{BaseStationSpec, TcofdmSource};
 use locate::{locate, path_to_string, PathSeg};
 use scene::{Transmitter, TransmitterKind, TransmitterSpec};
-use schema::{EstimatorSpec, FilterKind, PlatformKind, WorldFile};
+use schema::{BuildContext, EstimatorSpec, FilterKind, PlatformKind, WorldFile};
 use std::fmt;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -235,27 +238,6 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
         .map_err(|i| ctx.issue("receiver.clock", i))?;
     let shielding = check_shielding(&ctx, &file.shielding, &nav, &nav_source)?;
 
-    if file.estimators.is_empty() {
-        return Err(ctx.err("", "expected at least one [[estimator]] table"));
-    }
-    let gnss_systems: Vec<System> = file
-        .sensors
-        .gnss
-        .as_ref()
-        .map(|g| g.systems.clone())
-        .unwrap_or_default();
-    for (i, e) in file.estimators.iter().enumerate() {
-        check_estimator(&ctx, i, e, &gnss_systems)?;
-        if file.estimators[..i].iter().any(|o| o.name == e.name) {
-            return Err(ctx.err(
-                &format!("estimator[{i}].name"),
-                format!(
-                    "estimator name '{}' is used twice; names must be unique",
-                    e.name
-                ),
-            ));
-        }
-    }
     if file.montecarlo.trials == 0 {
         return Err(ctx.err("montecarlo.trials", "expected at least 1 trial"));
     }
@@ -284,6 +266,29 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
         }
     };
     let transmitters = check_transmitters(&ctx, &file.transmitters, &frame, scene.as_deref())?;
+    let simulated = check_terrestrial_and_inertial(&ctx, &file, &transmitters)?;
+
+    if file.estimators.is_empty() {
+        return Err(ctx.err("", "expected at least one [[estimator]] table"));
+    }
+    let build_ctx = BuildContext {
+        frame: &frame,
+        start,
+        imu: file.sensors.imu.as_ref(),
+        start_enu_m: probe.state_at(0.0).pos_enu_m,
+    };
+    for (i, e) in file.estimators.iter().enumerate() {
+        check_estimator(&ctx, i, e, &simulated, &file, &build_ctx)?;
+        if file.estimators[..i].iter().any(|o| o.name == e.name) {
+            return Err(ctx.err(
+                &format!("estimator[{i}].name"),
+                format!(
+                    "estimator name '{}' is used twice; names must be unique",
+                    e.name
+                ),
+            ));
+        }
+    }
 
     Ok(World {
         path: path.to_path_buf(),
@@ -559,39 +564,109 @@ fn check_shielding(
     Ok(shielding)
 }
 
+/// Validates the DTMB, TC-OFDM, IMU and PDR sensor tables and returns the systems the
+/// world simulates (its GNSS systems, plus DTMB and TC-OFDM when a receiver and at least
+/// one transmitter of the kind exist).
+fn check_terrestrial_and_inertial(
+    ctx: &Ctx<'_>,
+    file: &WorldFile,
+    transmitters: &[Transmitter],
+) -> Result<Vec<System>, WorldError> {
+    let mut systems: Vec<System> = file
+        .sensors
+        .gnss
+        .as_ref()
+        .map(|g| g.systems.clone())
+        .unwrap_or_default();
+    let count = |k: TransmitterKind| transmitters.iter().filter(|t| t.kind == k).count();
+    if let Some(d) = &file.sensors.dtmb {
+        d.validate().map_err(|i| ctx.issue("sensors.dtmb", i))?;
+        if count(TransmitterKind::Dtmb) == 0 {
+            return Err(ctx.err(
+                "sensors.dtmb",
+                "a DTMB receiver needs at least one [[transmitter]] with kind = \"dtmb\"",
+            ));
+        }
+        systems.push(System::Dtmb);
+    }
+    if let Some(t) = &file.sensors.tcofdm {
+        t.validate().map_err(|i| ctx.issue("sensors.tcofdm", i))?;
+        if count(TransmitterKind::Tcofdm) == 0 {
+            return Err(ctx.err(
+                "sensors.tcofdm",
+                "a TC-OFDM receiver needs at least one [[transmitter]] with kind = \"tcofdm\"",
+            ));
+        }
+        systems.push(System::Tcofdm);
+    }
+    if let Some(imu) = &file.sensors.imu {
+        imu.validate().map_err(|i| ctx.issue("sensors.imu", i))?;
+    }
+    if let Some(pdr) = &file.sensors.pdr {
+        pdr.validate().map_err(|i| ctx.issue("sensors.pdr", i))?;
+    }
+    if file.sensors.imu.is_some() || file.sensors.pdr.is_some() {
+        file.platform
+            .attitude()
+            .validate()
+            .map_err(|i| ctx.issue("platform.attitude", i))?;
+    }
+    Ok(systems)
+}
+
 fn check_estimator(
     ctx: &Ctx<'_>,
     i: usize,
     e: &EstimatorSpec,
-    gnss_systems: &[System],
+    simulated: &[System],
+    file: &WorldFile,
+    build_ctx: &BuildContext<'_>,
 ) -> Result<(), WorldError> {
     let at = |k: &str| format!("estimator[{i}].{k}");
     if e.name.trim().is_empty() {
         return Err(ctx.err(&at("name"), "expected a non-empty name"));
     }
-    if e.sources.is_empty() {
+    if e.sources.is_empty() && e.filter != FilterKind::Pdr {
         return Err(ctx.err(
             &at("sources"),
             "expected a non-empty list of systems, e.g. [\"gps\"]",
         ));
     }
     for (j, s) in e.sources.iter().enumerate() {
-        if !gnss_systems.contains(s) {
+        if !simulated.contains(s) {
+            let fix = match s {
+                System::Dtmb => "add [sensors.dtmb] and a DTMB [[transmitter]]",
+                System::Tcofdm => "add [sensors.tcofdm] and a TC-OFDM [[transmitter]]",
+                _ => "add it to [sensors.gnss] systems",
+            };
             return Err(ctx.err(
                 &at(&format!("sources[{j}]")),
                 format!(
-                    "the estimator uses '{}', which this world does not simulate (add it to \
-                     [sensors.gnss] systems)",
+                    "the estimator uses '{}', which this world does not simulate ({fix})",
                     s.name()
                 ),
             ));
         }
     }
+    let needs = |ok: bool, what: &str| {
+        if ok {
+            Ok(())
+        } else {
+            Err(ctx.err(&at("filter"), format!("this filter needs {what}")))
+        }
+    };
+    match e.filter {
+        FilterKind::Ins => needs(file.sensors.imu.is_some(), "an IMU: add [sensors.imu]")?,
+        FilterKind::Pdr => needs(file.sensors.pdr.is_some(), "step events: add [sensors.pdr]")?,
+        FilterKind::Ekf11 | FilterKind::Wls => {}
+    }
     if let (FilterKind::Ekf11, Some(cfg)) = (e.filter, &e.ekf) {
         cfg.validate()
             .map_err(|m| ctx.err(&at("ekf"), m.to_string()))?;
     }
-    e.build().map(|_| ()).map_err(|m| ctx.err(&at("filter"), m))
+    e.build(build_ctx)
+        .map(|_| ())
+        .map_err(|m| ctx.err(&at("filter"), m))
 }
 
 impl World {
@@ -608,18 +683,20 @@ impl World {
             .trajectory
             .build(&mut rng.stream("motion/trajectory"))
             .map_err(|issue| format!("platform.trajectory.{}: {}", issue.key, issue.message))?;
+        let sensors = &self.file.sensors;
         let mut sources: Vec<Box<dyn crate::engine::Source>> = Vec::new();
-        if let Some(g) = &self.file.sensors.gnss {
-            let clock = ReceiverClock::new(
+        // One receiver clock for every radio source of the trial.
+        let clock = Arc::new(ClockTrack::record(
+            ReceiverClock::new(
                 &self.file.receiver.clock,
                 &mut rng.stream("receiver/clock/init"),
-            );
-            let clock = Arc::new(ClockTrack::record(
-                clock,
-                self.duration_s,
-                0.1,
-                &mut rng.stream("receiver/clock"),
-            ));
+            ),
+            self.duration_s,
+            0.1,
+            &mut rng.stream("receiver/clock"),
+        ));
+        let err = |t: &str, i: crate::motion::ConfigIssue| format!("{t}.{}: {}", i.key, i.message);
+        if let Some(g) = &sensors.gnss {
             let view = self
                 .scene
                 .as_ref()
@@ -629,16 +706,111 @@ impl World {
                 Arc::clone(&self.nav),
                 self.shielding.clone(),
                 view,
-                clock,
+                Arc::clone(&clock),
                 rng,
                 end,
             )));
         }
+        // A terrestrial receiver aided in closed loop centres its search on the first
+        // estimator that uses its system.
+        let aid = |sys: System| {
+            self.file
+                .estimators
+                .iter()
+                .position(|e| e.sources.contains(&sys))
+        };
+        if let Some(d) = &sensors.dtmb {
+            let towers = self
+                .transmitters
+                .iter()
+                .filter(|t| t.kind == TransmitterKind::Dtmb)
+                .map(|t| TowerSpec {
+                    id: t.id.parse().unwrap_or(EmitterId::new(System::Dtmb, 1)),
+                    pos_enu_m: t.pos_enu_m,
+                    pos_ecef_m: t.pos_ecef_m,
+                    channel: t.spec.channel.unwrap_or(0).min(255) as u8,
+                    freq_hz: t.freq_hz,
+                    erp_dbw: t.erp_dbw,
+                    pn_mode: t.pn_mode(),
+                    clock_offset_s: t.spec.clock_offset_ns * 1e-9,
+                    clock_drift_s_per_s: t.spec.clock_drift_ppb * 1e-9,
+                })
+                .collect();
+            sources.push(Box::new(
+                DtmbSource::new(
+                    d.clone(),
+                    towers,
+                    self.scene.clone(),
+                    self.frame.clone(),
+                    Arc::clone(&clock),
+                    aid(System::Dtmb).filter(|_| d.aided),
+                    rng,
+                    end,
+                )
+                .map_err(|i| err("sensors.dtmb", i))?,
+            ));
+        }
+        if let Some(tc) = &sensors.tcofdm {
+            let stations = self
+                .transmitters
+                .iter()
+                .filter(|t| t.kind == TransmitterKind::Tcofdm)
+                .map(|t| BaseStationSpec {
+                    id: t.id.parse().unwrap_or(EmitterId::new(System::Tcofdm, 1)),
+                    pos_enu_m: t.pos_enu_m,
+                    pos_ecef_m: t.pos_ecef_m,
+                    freq_hz: t.freq_hz,
+                    erp_dbw: t.erp_dbw,
+                    pn_mode: t.pn_mode(),
+                    clock_offset_s: t.spec.clock_offset_ns * 1e-9,
+                    clock_drift_s_per_s: t.spec.clock_drift_ppb * 1e-9,
+                })
+                .collect();
+            sources.push(Box::new(
+                TcofdmSource::new(
+                    tc.clone(),
+                    stations,
+                    self.scene.clone(),
+                    self.frame.clone(),
+                    Arc::clone(&clock),
+                    aid(System::Tcofdm).filter(|_| tc.aided),
+                    rng,
+                    end,
+                )
+                .map_err(|i| err("sensors.tcofdm", i))?,
+            ));
+        }
+        let attitude = self.file.platform.attitude();
+        let rebuild = || {
+            self.file
+                .platform
+                .trajectory
+                .build(&mut rng.stream("motion/trajectory"))
+                .map_err(|i| err("platform.trajectory", i))
+        };
+        if let Some(imu) = &sensors.imu {
+            sources.push(Box::new(
+                ImuSource::new(imu, &attitude, rebuild()?, &self.frame, rng, end)
+                    .map_err(|i| err("sensors.imu", i))?,
+            ));
+        }
+        if let Some(pdr) = &sensors.pdr {
+            sources.push(Box::new(
+                PdrSource::new(pdr, &attitude, rebuild()?, &self.frame, rng, end)
+                    .map_err(|i| err("sensors.pdr", i))?,
+            ));
+        }
+        let ctx = BuildContext {
+            frame: &self.frame,
+            start: self.start,
+            imu: sensors.imu.as_ref(),
+            start_enu_m: trajectory.state_at(0.0).pos_enu_m,
+        };
         let estimators = self
             .file
             .estimators
             .iter()
-            .map(|e| e.build())
+            .map(|e| e.build(&ctx))
             .collect::<Result<Vec<_>, _>>()?;
         Ok(TrialSetup {
             trajectory,

@@ -359,6 +359,17 @@ pub struct Transmitter {
     pub spec: TransmitterSpec,
 }
 
+impl Transmitter {
+    /// The DTMB/TC-OFDM frame-header mode (validated at load; PN945 by default).
+    pub fn pn_mode(&self) -> crate::dtmb::PnMode {
+        self.spec
+            .pn_mode
+            .as_deref()
+            .and_then(|m| m.parse().ok())
+            .unwrap_or(crate::dtmb::PnMode::Pn945)
+    }
+}
+
 impl TransmitterSpec {
     /// Resolves position and frequency.
     ///

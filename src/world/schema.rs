@@ -2,11 +2,17 @@
 //! error that names the key and its line, never a silently ignored setting.
 
 use crate::core::System;
+use crate::dtmb::DtmbSensorConfig;
 use crate::fusion::ekf11::Ekf11Config;
 use crate::fusion::estimator::{EkfEstimator, Estimator, WlsEstimator};
 use crate::gnss::measurement::GnssConfig;
 use crate::gnss::receiver_clock::ClockConfig;
+use crate::inertial::attitude::{Platform, PlatformConfig};
+use crate::inertial::estimators::{InsEstimator, InsFilterConfig, PdrEstimator, PdrFilterConfig};
+use crate::inertial::imu::ImuConfig;
+use crate::inertial::source::PdrSensorConfig;
 use crate::motion::TrajectoryConfig;
+use crate::tcofdm::TcofdmSensorConfig;
 use crate::world::scene::{SceneSection, TransmitterSpec};
 use serde::Deserialize;
 
@@ -77,6 +83,23 @@ pub enum PlatformKind {
 pub struct PlatformSection {
     pub kind: PlatformKind,
     pub trajectory: TrajectoryConfig,
+    /// Attitude and gait for inertial sensors; default from `kind` (a car; a pedestrian
+    /// holding a phone).
+    #[serde(default)]
+    pub attitude: Option<PlatformConfig>,
+}
+
+impl PlatformSection {
+    /// The attitude model the inertial sensors use.
+    pub fn attitude(&self) -> PlatformConfig {
+        self.attitude.clone().unwrap_or_else(|| PlatformConfig {
+            platform: match self.kind {
+                PlatformKind::Pedestrian => Platform::Handheld,
+                PlatformKind::Car | PlatformKind::Target => Platform::Car,
+            },
+            ..PlatformConfig::default()
+        })
+    }
 }
 
 /// `[receiver]`.
@@ -93,6 +116,18 @@ pub struct ReceiverSection {
 pub struct SensorsSection {
     #[serde(default)]
     pub gnss: Option<GnssConfig>,
+    /// A DTMB receiver ranging on the world's DTMB transmitters.
+    #[serde(default)]
+    pub dtmb: Option<DtmbSensorConfig>,
+    /// A TC-OFDM receiver ranging on the world's TC-OFDM base stations.
+    #[serde(default)]
+    pub tcofdm: Option<TcofdmSensorConfig>,
+    /// An IMU (source `"imu"`).
+    #[serde(default)]
+    pub imu: Option<ImuConfig>,
+    /// Pedestrian dead reckoning: step events (source `"pdr"`).
+    #[serde(default)]
+    pub pdr: Option<PdrSensorConfig>,
 }
 
 /// One `[[shielding]]` window: exactly one of `keep_highest`, `keep`, `block`.
@@ -119,6 +154,10 @@ pub enum FilterKind {
     Ekf11,
     /// Epoch-by-epoch weighted least squares.
     Wls,
+    /// Strapdown INS with seed 004's 15-state loosely coupled filter.
+    Ins,
+    /// Pedestrian dead reckoning from step events, optionally corrected by fixes.
+    Pdr,
 }
 
 /// One `[[estimator]]`.
@@ -133,6 +172,21 @@ pub struct EstimatorSpec {
     /// EKF tuning (filter = "ekf11").
     #[serde(default)]
     pub ekf: Option<Ekf11Config>,
+    /// INS filter settings (filter = "ins").
+    #[serde(default)]
+    pub ins: Option<InsFilterConfig>,
+    /// PDR filter settings (filter = "pdr").
+    #[serde(default)]
+    pub pdr: Option<PdrFilterConfig>,
+}
+
+/// What an estimator needs from its world beyond its own table.
+pub struct BuildContext<'a> {
+    pub frame: &'a crate::core::EnuFrame,
+    pub start: crate::core::GpsTime,
+    pub imu: Option<&'a ImuConfig>,
+    /// The platform's true start position (ENU), standing in for a surveyed start point.
+    pub start_enu_m: nalgebra::Vector3<f64>,
 }
 
 fn one() -> u64 {
@@ -160,10 +214,38 @@ impl EstimatorSpec {
     ///
     /// # Errors
     /// When its configuration is unusable.
-    pub fn build(&self) -> Result<Box<dyn Estimator>, String> {
+    pub fn build(&self, ctx: &BuildContext<'_>) -> Result<Box<dyn Estimator>, String> {
+        let issue =
+            |t: &str, i: crate::motion::ConfigIssue| format!("{t}.{}: {}", i.key, i.message);
         Ok(match self.filter {
             FilterKind::Ekf11 => Box::new(EkfEstimator::new(&self.name, &self.sources, self.ekf)?),
             FilterKind::Wls => Box::new(WlsEstimator::new(&self.name, &self.sources)),
+            FilterKind::Ins => {
+                let imu = ctx
+                    .imu
+                    .ok_or("filter \"ins\" needs an IMU: add a [sensors.imu] table")?;
+                Box::new(
+                    InsEstimator::new(
+                        &self.name,
+                        &self.ins.clone().unwrap_or_default(),
+                        imu,
+                        &self.sources,
+                        ctx.frame,
+                        ctx.start,
+                    )
+                    .map_err(|i| issue("ins", i))?,
+                )
+            }
+            FilterKind::Pdr => Box::new(
+                PdrEstimator::new(
+                    &self.name,
+                    &self.pdr.clone().unwrap_or_default(),
+                    &self.sources,
+                    ctx.frame,
+                    Some(ctx.start_enu_m),
+                )
+                .map_err(|i| issue("pdr", i))?,
+            ),
         })
     }
 }

@@ -496,3 +496,29 @@ fn dtmb_iq_bad_input_is_refused() {
         assert!(stderr(&o).contains(needle), "{a:?}: {}", stderr(&o));
     }
 }
+
+#[test]
+fn dtmb_iq_rejects_negative_counts_and_infinite_snr() {
+    let d = tmp_dir("iqbad2");
+    let base = d.join("x");
+    let b = base.to_str().unwrap();
+    for (args, needle) in [
+        (vec!["--frames", "-3", "--snr-db", "3"], "--frames"),
+        (vec!["--frames", "2", "--snr-db", "inf"], "finite"),
+        (vec!["--frames", "2", "--snr-db", "-inf"], "finite"),
+        (
+            vec!["--mode", "PN9450", "--frames", "2", "--snr-db", "3"],
+            "PN945",
+        ),
+        (
+            vec!["--frames", "2", "--snr-db", "3", "--channel", "12"],
+            "DS-12",
+        ),
+    ] {
+        let mut a = vec!["dtmb", "iq", "--out", b];
+        a.extend(args);
+        let o = hybridnav(&a);
+        assert_eq!(o.status.code(), Some(2), "{a:?}");
+        assert!(stderr(&o).contains(needle), "{a:?}: {}", stderr(&o));
+    }
+}

@@ -12,3 +12,4 @@ mod inertial;
 mod motion_models;
 mod propagation;
 mod skeleton;
+mod tcofdm;

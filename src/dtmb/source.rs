@@ -1,0 +1,976 @@
+//! DTMB towers as a measurement source (`"dtmb"`): pseudoranges to towers used as
+//! pseudo-satellites, at signal or measurement level, and optionally seed 002's TPS-CFO
+//! range differences.
+//!
+//! Per sample and tower, with the receiver truth `r` and the tower at `r_t`:
+//!
+//! ```text
+//! γ_ref = ERP + G_rx − L_Hata(d) − S(r) − (kTB + NF)      (SNR of a free-space-LoS path)
+//! taps  = scene.link(r, r_t): (excess delay, amplitude·e^{jφ}) per path, or the direct path
+//! e     = timing error of the aided sync (signal chain, or the calibrated model)
+//! ρ     = ‖r_t − r‖ + c (δt_rx(t) + ISB_DTMB(t) − δt_tower(t)) + e · c/f_s
+//! σ     = calibrated thermal σ at the correlation peak's SNR;  C/N0 = γ + 10 log10(7.56 MHz)
+//! ```
+//!
+//! `L_Hata` is Extended Hata (ITU-R SM.2028, 30–3000 MHz; its validity is noted once per
+//! model in [`DtmbSource::warnings`]), `S` the spatially consistent shadowing field keyed by
+//! the master seed and the tower, `δt_tower(t) = clock_offset_s + clock_drift_s_per_s · t`.
+//! The tower clock is broadcast-unknown: the pseudorange carries it, as for a real SFN
+//! tower without monitoring. The aided search window is centred on the delay predicted
+//! from the aiding estimator's position (the receiver clock is assumed tracked, since an
+//! [`crate::fusion::estimator::Estimate`] carries no clock state); when the true arrival is
+//! outside the window the sync locks onto noise. The Earth's rotation during the ≤ 0.3 ms
+//! of flight (< 0.1 m) is neglected.
+//!
+//! Random streams (all per tower `Dnn`): `dtmb/Dnn/timing` (model draws), `dtmb/Dnn/tx`,
+//! `dtmb/Dnn/noise` (signal level), `dtmb/Dnn/tps`; shadowing `dtmb/shadowing/Dnn` from the
+//! master seed (the same city in every trial).
+
+use super::channel::{link_snr_db, Channel, ChannelConfig, Path};
+use super::frame::{CarrierMode, Qam};
+use super::measurement::{
+    crb_samples, draw_timing_error_samples, multipath_estimate, thermal_stats, Tap,
+    METRES_PER_SAMPLE,
+};
+use super::pn::{PnMode, SAMPLE_RATE_HZ};
+use super::receiver::{FirstPathConfig, Receiver, Search, SyncConfig, MAX_FRAMES};
+use super::tps::tps_cfo_sigma_hz;
+use super::transmitter::{FrameSchedule, Transmitter, TxConfig};
+use crate::core::geodesy::{azimuth_elevation_with, ecef_to_enu_rotation};
+use crate::core::rng::StreamRng;
+use crate::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng, C_MPS};
+use crate::engine::{SampleContext, Source};
+use crate::fusion::measurement::{
+    Measurement, MeasurementBatch, RangeDifference, RangeMeasurement,
+};
+use crate::gnss::receiver_clock::ClockTrack;
+use crate::motion::ConfigIssue;
+use crate::propagation::pathloss::{extended_hata_db, HataEnvironment, Model, ValidityLog};
+use crate::propagation::{
+    Emitter, LinkParams, LinkPaths, Polarisation, Scene, ShadowingConfig, ShadowingField,
+};
+use nalgebra::Vector3;
+use num_complex::{Complex32, Complex64};
+use rand::Rng;
+use rand_distr::StandardNormal;
+use serde::Deserialize;
+use std::sync::Arc;
+
+/// DTMB signal bandwidth used for the noise power (Hz).
+pub const BANDWIDTH_HZ: f64 = 7.56e6;
+
+/// Which level of the DTMB model a world runs.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum DtmbLevel {
+    /// Transmitter → channel → receiver for every measurement.
+    Signal,
+    /// The calibrated error model ([`super::measurement`]).
+    #[default]
+    Measurement,
+}
+
+/// The Hata environment class, as written in a world file.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Environment {
+    /// Urban, small or medium city (default).
+    #[default]
+    Urban,
+    /// Urban, large city.
+    UrbanLarge,
+    /// Suburban.
+    Suburban,
+    /// Open (rural).
+    Open,
+}
+
+impl Environment {
+    fn hata(self) -> HataEnvironment {
+        match self {
+            Environment::Urban => HataEnvironment::UrbanSmallMedium,
+            Environment::UrbanLarge => HataEnvironment::UrbanLarge,
+            Environment::Suburban => HataEnvironment::Suburban,
+            Environment::Open => HataEnvironment::Open,
+        }
+    }
+}
+
+fn one() -> f64 {
+    1.0
+}
+fn one_u32() -> u32 {
+    1
+}
+fn default_window_m() -> f64 {
+    1500.0
+}
+fn default_nf() -> f64 {
+    5.0
+}
+fn default_rx_height() -> f64 {
+    1.5
+}
+
+/// `[sensors.dtmb]` in a world file.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct DtmbSensorConfig {
+    /// `"signal"` or `"measurement"` (default).
+    #[serde(default)]
+    pub level: DtmbLevel,
+    /// Measurement rate (Hz), default 1.
+    #[serde(default = "one")]
+    pub rate_hz: f64,
+    /// Centre the search window on the aiding estimator's predicted delay (default false:
+    /// full search over a frame).
+    #[serde(default)]
+    pub aided: bool,
+    /// Half-width of the aided search window (m), default 1500.
+    #[serde(default = "default_window_m")]
+    pub search_window_m: f64,
+    /// Receiver noise figure (dB), default 5.
+    #[serde(default = "default_nf")]
+    pub noise_figure_db: f64,
+    /// Receive antenna gain (dBi), default 0.
+    #[serde(default)]
+    pub antenna_gain_dbi: f64,
+    /// Frames accumulated non-coherently per measurement (1–16), default 1.
+    #[serde(default = "one_u32")]
+    pub accumulation_frames: u32,
+    /// Also output seed 002's TPS-CFO range differences (default false).
+    #[serde(default)]
+    pub range_differences: bool,
+    /// Hata environment class, default `"urban"`.
+    #[serde(default)]
+    pub environment: Environment,
+    /// Receive antenna height above ground for the Hata model (m), default 1.5.
+    #[serde(default = "default_rx_height")]
+    pub rx_antenna_height_m: f64,
+    /// Log-normal shadowing (σ 0 disables it), default σ 4 dB, 37 m.
+    #[serde(default)]
+    pub shadowing: ShadowingConfig,
+    /// Receiver oscillator error (ppm) giving the CFO and SFO of the signal level and the
+    /// static CFO of the TPS ranging, default 0.
+    #[serde(default)]
+    pub rx_oscillator_ppm: f64,
+}
+
+impl Default for DtmbSensorConfig {
+    fn default() -> Self {
+        Self {
+            level: DtmbLevel::default(),
+            rate_hz: 1.0,
+            aided: false,
+            search_window_m: default_window_m(),
+            noise_figure_db: default_nf(),
+            antenna_gain_dbi: 0.0,
+            accumulation_frames: 1,
+            range_differences: false,
+            environment: Environment::default(),
+            rx_antenna_height_m: default_rx_height(),
+            shadowing: ShadowingConfig::default(),
+            rx_oscillator_ppm: 0.0,
+        }
+    }
+}
+
+fn check(key: &str, ok: bool, msg: impl FnOnce() -> String) -> Result<(), ConfigIssue> {
+    if ok {
+        Ok(())
+    } else {
+        Err(ConfigIssue::new(key, msg()))
+    }
+}
+
+impl DtmbSensorConfig {
+    /// Checks every value; the key is the field name.
+    pub fn validate(&self) -> Result<(), ConfigIssue> {
+        check(
+            "rate_hz",
+            self.rate_hz.is_finite() && self.rate_hz > 0.0 && self.rate_hz <= 100.0,
+            || format!("expected a rate in (0, 100] Hz, got {}", self.rate_hz),
+        )?;
+        check(
+            "search_window_m",
+            self.search_window_m.is_finite()
+                && self.search_window_m > 0.0
+                && self.search_window_m <= 100_000.0,
+            || {
+                format!(
+                    "expected a search half-window in (0, 100000] m, got {}",
+                    self.search_window_m
+                )
+            },
+        )?;
+        check(
+            "noise_figure_db",
+            self.noise_figure_db.is_finite() && (0.0..=30.0).contains(&self.noise_figure_db),
+            || {
+                format!(
+                    "expected a noise figure in [0, 30] dB, got {}",
+                    self.noise_figure_db
+                )
+            },
+        )?;
+        check(
+            "antenna_gain_dbi",
+            self.antenna_gain_dbi.is_finite() && self.antenna_gain_dbi.abs() <= 40.0,
+            || {
+                format!(
+                    "expected an antenna gain in [−40, 40] dBi, got {}",
+                    self.antenna_gain_dbi
+                )
+            },
+        )?;
+        check(
+            "accumulation_frames",
+            (1..=MAX_FRAMES as u32).contains(&self.accumulation_frames),
+            || {
+                format!(
+                    "expected 1 to {MAX_FRAMES} frames, got {}",
+                    self.accumulation_frames
+                )
+            },
+        )?;
+        check(
+            "rx_antenna_height_m",
+            self.rx_antenna_height_m.is_finite()
+                && self.rx_antenna_height_m > 0.0
+                && self.rx_antenna_height_m <= 1000.0,
+            || {
+                format!(
+                    "expected an antenna height in (0, 1000] m, got {}",
+                    self.rx_antenna_height_m
+                )
+            },
+        )?;
+        check(
+            "rx_oscillator_ppm",
+            self.rx_oscillator_ppm.is_finite() && self.rx_oscillator_ppm.abs() <= 100.0,
+            || {
+                format!(
+                    "expected an oscillator error within ±100 ppm, got {}",
+                    self.rx_oscillator_ppm
+                )
+            },
+        )?;
+        self.shadowing
+            .validate()
+            .map_err(|e| ConfigIssue::new(format!("shadowing.{}", e.key), e.message))
+    }
+}
+
+/// One DTMB tower.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TowerSpec {
+    /// Its id (system [`System::Dtmb`]).
+    pub id: EmitterId,
+    /// Antenna position in the world's ENU frame (m); `z` is the height above ground.
+    pub pos_enu_m: Vector3<f64>,
+    /// The same in ECEF (m).
+    pub pos_ecef_m: Vector3<f64>,
+    /// UHF channel DS-n.
+    pub channel: u8,
+    /// Carrier frequency (Hz).
+    pub freq_hz: f64,
+    /// Effective radiated power (dBW).
+    pub erp_dbw: f64,
+    /// Frame header mode.
+    pub pn_mode: PnMode,
+    /// Tower clock offset from GPS time at the trial start (s).
+    pub clock_offset_s: f64,
+    /// Tower clock drift (s/s).
+    pub clock_drift_s_per_s: f64,
+}
+
+impl TowerSpec {
+    fn validate(&self, i: usize, system: System) -> Result<(), ConfigIssue> {
+        let key = format!("towers[{i}]");
+        check(&key, self.id.system == system, || {
+            format!("emitter {} is not of system {system:?}", self.id)
+        })?;
+        check(
+            &key,
+            self.pos_enu_m
+                .iter()
+                .chain(self.pos_ecef_m.iter())
+                .all(|x| x.is_finite()),
+            || "tower position must be finite".into(),
+        )?;
+        check(
+            &key,
+            self.freq_hz.is_finite() && self.freq_hz > 30e6 && self.freq_hz < 3e9,
+            || {
+                format!(
+                    "carrier must lie in (30 MHz, 3 GHz), got {} Hz",
+                    self.freq_hz
+                )
+            },
+        )?;
+        check(
+            &key,
+            self.erp_dbw.is_finite()
+                && self.clock_offset_s.is_finite()
+                && self.clock_offset_s.abs() < 1.0
+                && self.clock_drift_s_per_s.is_finite()
+                && self.clock_drift_s_per_s.abs() < 1e-3,
+            || "ERP, clock offset (|·| < 1 s) and drift (|·| < 1e-3) must be finite".into(),
+        )
+    }
+}
+
+/// Per-tower state.
+struct TowerState {
+    spec: TowerSpec,
+    timing: StreamRng,
+    noise: StreamRng,
+    tps: StreamRng,
+    shadow: Option<ShadowingField>,
+    /// Signal level only.
+    tx: Option<Transmitter>,
+    channel: Option<Channel>,
+    receiver: Option<Receiver>,
+    /// TPS ranging: true range at the reference epoch and the accumulated error (m).
+    tps_ref: Option<(GpsTime, f64)>,
+    tps_err_m: f64,
+    last_t_s: Option<f64>,
+}
+
+/// The DTMB receiver as a measurement source.
+pub struct DtmbSource {
+    /// The system of the emitters (DTMB, or TC-OFDM reusing this receiver).
+    system: System,
+    /// Source name and stream prefix: `"dtmb"` or `"tcofdm"`.
+    name: &'static str,
+    cfg: DtmbSensorConfig,
+    towers: Vec<TowerState>,
+    scene: Option<Arc<Scene>>,
+    frame: EnuFrame,
+    clock: Arc<ClockTrack>,
+    aid_estimator: Option<usize>,
+    end: SimTime,
+    period_ns: i64,
+    link: LinkPaths,
+    taps: Vec<Tap>,
+    block: Vec<Complex32>,
+    validity: ValidityLog,
+    warnings: Vec<String>,
+}
+
+impl std::fmt::Debug for DtmbSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DtmbSource")
+            .field("cfg", &self.cfg)
+            .field("towers", &self.towers.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl DtmbSource {
+    /// Builds the source; `rng` is the trial's stream factory.
+    ///
+    /// # Errors
+    /// A [`ConfigIssue`] for an invalid configuration or tower.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        cfg: DtmbSensorConfig,
+        towers: Vec<TowerSpec>,
+        scene: Option<Arc<Scene>>,
+        frame: EnuFrame,
+        clock: Arc<ClockTrack>,
+        aid_estimator: Option<usize>,
+        rng: &TrialRng,
+        end: SimTime,
+    ) -> Result<Self, ConfigIssue> {
+        Self::with_system(
+            System::Dtmb,
+            "dtmb",
+            cfg,
+            towers,
+            scene,
+            frame,
+            clock,
+            aid_estimator,
+            rng,
+            end,
+        )
+    }
+
+    /// As [`DtmbSource::new`] for emitters of `system` under source name `name` (also the
+    /// prefix of the random streams): the TC-OFDM source reuses this receiver.
+    ///
+    /// # Errors
+    /// As [`DtmbSource::new`].
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn with_system(
+        system: System,
+        name: &'static str,
+        cfg: DtmbSensorConfig,
+        towers: Vec<TowerSpec>,
+        scene: Option<Arc<Scene>>,
+        frame: EnuFrame,
+        clock: Arc<ClockTrack>,
+        aid_estimator: Option<usize>,
+        rng: &TrialRng,
+        end: SimTime,
+    ) -> Result<Self, ConfigIssue> {
+        cfg.validate()?;
+        for (i, t) in towers.iter().enumerate() {
+            t.validate(i, system)?;
+        }
+        let src_name = name;
+        let k = cfg.accumulation_frames as usize;
+        let mut states = Vec::with_capacity(towers.len());
+        for spec in towers {
+            let name = format!("{src_name}/{}", spec.id);
+            let shadow = if cfg.shadowing.sigma_db > 0.0 {
+                Some(ShadowingField::from_key(
+                    &cfg.shadowing,
+                    rng.master_seed(),
+                    &format!("{src_name}/shadowing/{}", spec.id),
+                )?)
+            } else {
+                None
+            };
+            let (tx, receiver) = if cfg.level == DtmbLevel::Signal {
+                let tx_cfg = TxConfig {
+                    schedule: FrameSchedule {
+                        mode: spec.pn_mode,
+                        t0: GpsTime::from_ns(0),
+                        tower_clock_offset_s: 0.0,
+                    },
+                    carrier: CarrierMode::Multi3780,
+                    qam: Qam::Qam64,
+                    si_vector: 0,
+                };
+                let tx = Transmitter::new(tx_cfg, &mut rng.stream(&format!("{name}/tx")));
+                let len = signal_block_len(spec.pn_mode, k, window_samples(&cfg));
+                let rx = Receiver::new(spec.pn_mode, len)
+                    .map_err(|e| ConfigIssue::new("accumulation_frames", e.to_string()))?;
+                (Some(tx), Some(rx))
+            } else {
+                (None, None)
+            };
+            states.push(TowerState {
+                timing: rng.stream(&format!("{name}/timing")),
+                noise: rng.stream(&format!("{name}/noise")),
+                tps: rng.stream(&format!("{name}/tps")),
+                spec,
+                shadow,
+                tx,
+                channel: None,
+                receiver,
+                tps_ref: None,
+                tps_err_m: 0.0,
+                last_t_s: None,
+            });
+        }
+        let max_len = states
+            .iter()
+            .map(|s| signal_block_len(s.spec.pn_mode, k, window_samples(&cfg)))
+            .max()
+            .unwrap_or(0);
+        let period_ns = ((1e9 / cfg.rate_hz).round() as i64).max(1);
+        Ok(Self {
+            system,
+            name,
+            block: if cfg.level == DtmbLevel::Signal {
+                vec![Complex32::default(); max_len]
+            } else {
+                Vec::new()
+            },
+            cfg,
+            towers: states,
+            scene,
+            frame,
+            clock,
+            aid_estimator,
+            end,
+            period_ns,
+            link: LinkPaths::new(),
+            taps: Vec::with_capacity(crate::propagation::MAX_PATHS),
+            validity: ValidityLog::default(),
+            warnings: Vec::new(),
+        })
+    }
+
+    /// Warnings noted so far (path-loss models used out of range, failed link queries),
+    /// each once.
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &DtmbSensorConfig {
+        &self.cfg
+    }
+
+    /// The world's ENU frame the tower positions are given in.
+    pub fn frame(&self) -> &EnuFrame {
+        &self.frame
+    }
+}
+
+/// Half-width of the aided window in samples.
+fn window_samples(cfg: &DtmbSensorConfig) -> usize {
+    (cfg.search_window_m / METRES_PER_SAMPLE).ceil().max(1.0) as usize
+}
+
+/// Block length of the signal-level sync: K frames plus a header, plus room for the
+/// search (the aided window either side, or one frame for a full search).
+fn signal_block_len(mode: PnMode, k: usize, half_window: usize) -> usize {
+    let n = mode.frame_len();
+    (k - 1) * n + mode.header_len() + (2 * half_window + 2).max(n) + 64
+}
+
+impl Source for DtmbSource {
+    fn name(&self) -> &str {
+        self.name
+    }
+
+    fn first_sample(&self) -> SimTime {
+        SimTime(0)
+    }
+
+    fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
+        let truth = ctx.truth;
+        out.t = truth.t;
+        out.source.clear();
+        out.source.push_str(self.name);
+        let t_s = truth.sim.seconds();
+        let rx_enu = truth.enu.pos_enu_m;
+        let rx_ecef = truth.pos_ecef_m;
+        let g = Geodetic::from_ecef(&rx_ecef);
+        let rot = ecef_to_enu_rotation(g.lat_rad, g.lon_rad);
+        let rx_bias_s = self.clock.bias_s(t_s) + self.clock.isb_s(self.system, t_s);
+        let k_frames = self.cfg.accumulation_frames as usize;
+        let aid_pos = if self.cfg.aided {
+            self.aid_estimator
+                .and_then(|i| ctx.estimates.get(i).copied().flatten())
+                .map(|e| e.pos_ecef_m)
+        } else {
+            None
+        };
+        let w_samples = window_samples(&self.cfg);
+        for ti in 0..self.towers.len() {
+            let spec = self.towers[ti].spec.clone();
+            let mode = spec.pn_mode;
+            let range_m = (spec.pos_ecef_m - rx_ecef).norm();
+            // Path loss: Extended Hata over the 3-D distance, tower height above ground.
+            let (pl_db, validity) = extended_hata_db(
+                self.cfg.environment.hata(),
+                spec.freq_hz * 1e-6,
+                spec.pos_enu_m.z.max(1.0),
+                self.cfg.rx_antenna_height_m,
+                (range_m * 1e-3).max(1e-3),
+            );
+            if let Some(w) = self.validity.note(Model::ExtendedHata, validity) {
+                self.warnings
+                    .push(format!("{} {}: {w}", self.name, spec.id));
+            }
+            let shadow_db = self.towers[ti]
+                .shadow
+                .as_ref()
+                .map_or(0.0, |f| f.value_db(rx_enu.x, rx_enu.y));
+            let snr_ref_db = link_snr_db(
+                spec.erp_dbw + self.cfg.antenna_gain_dbi,
+                pl_db + shadow_db,
+                self.cfg.noise_figure_db,
+                BANDWIDTH_HZ,
+            );
+            // Multipath taps from the scene, or the direct path alone.
+            self.taps.clear();
+            let mut dopplers = [0.0f64; crate::propagation::MAX_PATHS];
+            match self.scene.as_ref() {
+                Some(scene) => {
+                    let params = LinkParams {
+                        freq_hz: spec.freq_hz,
+                        polarisation: Polarisation::Horizontal,
+                        rx_vel_enu_mps: truth.enu.vel_enu_mps,
+                    };
+                    match scene.link(
+                        &rx_enu,
+                        &Emitter::Point(spec.pos_enu_m),
+                        &params,
+                        &mut self.link,
+                    ) {
+                        Ok(()) => {
+                            for (p, path) in self.link.paths().iter().enumerate() {
+                                self.taps.push(Tap {
+                                    delay_samples: path.excess_delay_s * SAMPLE_RATE_HZ,
+                                    gain: Complex64::from_polar(path.amplitude, path.phase_rad),
+                                });
+                                dopplers[p] = path.doppler_hz;
+                            }
+                        }
+                        Err(e) => {
+                            if self.warnings.len() < 64 {
+                                self.warnings
+                                    .push(format!("{} {}: link: {e}", self.name, spec.id));
+                            }
+                        }
+                    }
+                }
+                None => self.taps.push(Tap {
+                    delay_samples: 0.0,
+                    gain: Complex64::new(1.0, 0.0),
+                }),
+            }
+            if self.taps.iter().all(|t| t.gain.norm_sqr() == 0.0) {
+                continue;
+            }
+            // The correlation peak's SNR and whether the receiver can hold the signal.
+            let mp = multipath_estimate(mode, &self.taps, snr_ref_db, &FirstPathConfig::default());
+            let snr_peak_db = snr_ref_db + 10.0 * mp.peak_power.max(1e-30).log10();
+            let stats = thermal_stats(mode, snr_peak_db, k_frames);
+            if stats.outlier_prob > 0.5 {
+                continue;
+            }
+            // Where the aided window is centred, relative to the true arrival (samples).
+            let centre_off = match aid_pos {
+                Some(p) => ((spec.pos_ecef_m - p).norm() - range_m) / METRES_PER_SAMPLE,
+                None => 0.0,
+            };
+            let aided = aid_pos.is_some();
+            let err_samples = match self.cfg.level {
+                DtmbLevel::Measurement => {
+                    let st = &mut self.towers[ti];
+                    if aided && centre_off.abs() > w_samples as f64 {
+                        // The true peak is outside the window: a noise peak wins.
+                        centre_off + (2.0 * st.timing.random::<f64>() - 1.0) * w_samples as f64
+                    } else {
+                        let w = if aided {
+                            w_samples as f64
+                        } else {
+                            mode.frame_len() as f64 / 2.0
+                        };
+                        draw_timing_error_samples(
+                            mode,
+                            snr_ref_db,
+                            k_frames,
+                            &self.taps,
+                            w,
+                            &mut st.timing,
+                        )
+                    }
+                }
+                DtmbLevel::Signal => {
+                    let frame_no = (t_s / mode.frame_duration_s()).floor() as i64 + 8;
+                    match self.signal_error(
+                        ti,
+                        frame_no,
+                        snr_ref_db,
+                        range_m,
+                        &dopplers,
+                        aided.then_some(centre_off),
+                    ) {
+                        Some(e) => e,
+                        None => continue,
+                    }
+                }
+            };
+            let tower_clock_s = spec.clock_offset_s + spec.clock_drift_s_per_s * t_s;
+            let pseudorange_m =
+                range_m + C_MPS * (rx_bias_s - tower_clock_s) + err_samples * METRES_PER_SAMPLE;
+            let sigma_m = (stats.sigma_samples * METRES_PER_SAMPLE).max(0.01);
+            let (_, el) = azimuth_elevation_with(&rot, &rx_ecef, &spec.pos_ecef_m);
+            out.items.push(Measurement::Range(RangeMeasurement {
+                emitter: spec.id,
+                emitter_pos_ecef_m: spec.pos_ecef_m,
+                emitter_vel_ecef_mps: Vector3::zeros(),
+                pseudorange_m,
+                sigma_m,
+                range_rate_mps: None,
+                sigma_rate_mps: 0.0,
+                cn0_dbhz: snr_peak_db + 10.0 * BANDWIDTH_HZ.log10(),
+                elevation_rad: el,
+            }));
+            if self.cfg.range_differences {
+                let rd = self.range_difference(ti, truth.t, t_s, range_m, snr_peak_db);
+                out.items.push(Measurement::RangeDifference(rd));
+            }
+        }
+        let next = truth.sim.0 + self.period_ns;
+        (next <= self.end.0).then_some(SimTime(next))
+    }
+}
+
+impl DtmbSource {
+    /// Seed 002's accumulated range difference at measurement level: the true range change
+    /// since the first epoch plus the accumulated TPS-CFO error. Frame-pair CFO errors
+    /// telescope (each frame's TPS phase noise enters two consecutive pairs with opposite
+    /// signs), so the accumulated phase error stays that of the two end frames,
+    /// `√2 σ_φ` with `σ_φ = 2π T_frame σ_f`, i.e. `λ √2 σ_φ / 2π` metres, a fresh draw per
+    /// epoch; the reported σ is that value.
+    fn range_difference(
+        &mut self,
+        ti: usize,
+        t: GpsTime,
+        t_s: f64,
+        range_m: f64,
+        snr_db: f64,
+    ) -> RangeDifference {
+        let st = &mut self.towers[ti];
+        let mode = st.spec.pn_mode;
+        let lambda = C_MPS / st.spec.freq_hz;
+        let sigma_phi =
+            2.0 * std::f64::consts::PI * mode.frame_duration_s() * tps_cfo_sigma_hz(mode, snr_db);
+        let sigma_m = lambda * std::f64::consts::SQRT_2 * sigma_phi / (2.0 * std::f64::consts::PI);
+        let (t0, r0) = *st.tps_ref.get_or_insert((t, range_m));
+        let n: f64 = st.tps.sample(StandardNormal);
+        st.tps_err_m = n * sigma_m;
+        st.last_t_s = Some(t_s);
+        RangeDifference {
+            emitter: st.spec.id,
+            emitter_pos_ecef_m: st.spec.pos_ecef_m,
+            t0,
+            delta_range_m: range_m - r0 + st.tps_err_m,
+            sigma_m: sigma_m.max(1e-3),
+        }
+    }
+
+    /// Runs the signal chain for one measurement of tower `ti`: frames from the tower's
+    /// transmitter through the link's paths (delays, gains, Dopplers, the oscillator's CFO
+    /// and SFO) at the link SNR, then the aided (window centred `centre_off` samples from
+    /// the truth) or full sync. Returns the timing error in samples.
+    fn signal_error(
+        &mut self,
+        ti: usize,
+        frame_no: i64,
+        snr_ref_db: f64,
+        range_m: f64,
+        dopplers: &[f64],
+        centre_off: Option<f64>,
+    ) -> Option<f64> {
+        let w = window_samples(&self.cfg);
+        let k = self.cfg.accumulation_frames as usize;
+        let st = &mut self.towers[ti];
+        let mode = st.spec.pn_mode;
+        let n = mode.frame_len();
+        let len = signal_block_len(mode, k, w);
+        // The header of frame `frame_no` arrives at `offset` samples into the block: the
+        // fraction is the true range's, so every fractional delay occurs.
+        let margin = if centre_off.is_some() { w + 16 } else { n / 2 };
+        let offset = margin as f64 + (range_m / METRES_PER_SAMPLE).fract();
+        let total_power: f64 = self.taps.iter().map(|t| t.gain.norm_sqr()).sum();
+        let mut paths = Vec::with_capacity(self.taps.len());
+        for (p, t) in self.taps.iter().enumerate() {
+            paths.push(Path {
+                delay_s: (offset + t.delay_samples) / SAMPLE_RATE_HZ,
+                gain: t.gain,
+                doppler_hz: dopplers.get(p).copied().unwrap_or(0.0),
+            });
+        }
+        let cfg = ChannelConfig::from_oscillators(
+            paths,
+            0.0,
+            self.cfg.rx_oscillator_ppm,
+            st.spec.freq_hz,
+            Some(snr_ref_db + 10.0 * total_power.max(1e-30).log10()),
+        );
+        let reuse = match st.channel.as_mut() {
+            Some(ch) => ch.set_paths(cfg.paths.clone(), mode).is_ok(),
+            None => false,
+        };
+        if !reuse {
+            st.channel = Channel::new(cfg, mode, self.block.len()).ok();
+        }
+        let (ch, tx, rx) = (st.channel.as_mut()?, st.tx.as_mut()?, st.receiver.as_mut()?);
+        let block = &mut self.block[..len];
+        ch.process(tx, frame_no * n as i64, block, &mut st.noise)
+            .ok()?;
+        let f = mode.frames_per_superframe() as i64;
+        let frame_in_superframe = frame_no.rem_euclid(f) as usize;
+        let search = match centre_off {
+            Some(c) => Search::Aided {
+                frame_in_superframe,
+                predicted_start_samples: offset + c,
+                half_window_samples: w,
+            },
+            None => Search::Full {
+                frame_in_superframe: Some(frame_in_superframe),
+            },
+        };
+        let s = rx
+            .sync(
+                block,
+                &SyncConfig {
+                    search,
+                    frames: k,
+                    first_path: Some(FirstPathConfig::default()),
+                },
+            )
+            .ok()?;
+        // A full search over a frame may lock on the next or previous frame's header only
+        // if the phase is misidentified; the error is taken modulo nothing, as a receiver
+        // would report it.
+        Some(s.toa_samples - offset)
+    }
+}
+
+/// The CRB-based σ (m) the source reports at `snr_db` for `mode` and `frames` (exposed
+/// for documentation and tests).
+pub fn reported_sigma_m(mode: PnMode, snr_db: f64, frames: usize) -> f64 {
+    let st = thermal_stats(mode, snr_db, frames);
+    let _ = crb_samples(mode, snr_db, frames);
+    st.sigma_samples * METRES_PER_SAMPLE
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::Truth;
+    use crate::gnss::receiver_clock::{ClockConfig, ReceiverClock};
+    use crate::motion::TruthState;
+
+    fn frame() -> EnuFrame {
+        EnuFrame::new(Geodetic::from_deg(39.9, 116.4, 50.0))
+    }
+
+    fn towers(f: &EnuFrame) -> Vec<TowerSpec> {
+        [
+            (Vector3::new(3000.0, 1000.0, 150.0), 1.0e-6),
+            (Vector3::new(-2000.0, 2500.0, 120.0), -0.5e-6),
+        ]
+        .iter()
+        .enumerate()
+        .map(|(i, (p, off))| TowerSpec {
+            id: EmitterId::new(System::Dtmb, i as u16 + 1),
+            pos_enu_m: *p,
+            pos_ecef_m: f.ecef_of_enu(p),
+            channel: 14,
+            freq_hz: 482e6,
+            erp_dbw: 40.0,
+            pn_mode: PnMode::Pn945,
+            clock_offset_s: *off,
+            clock_drift_s_per_s: 1e-9,
+        })
+        .collect()
+    }
+
+    fn truth(f: &EnuFrame, sim: SimTime, pos: Vector3<f64>) -> Truth {
+        Truth {
+            sim,
+            t: GpsTime::from_week_tow(2300, 1000.0).add_ns(sim.0),
+            enu: TruthState {
+                t_s: sim.seconds(),
+                pos_enu_m: pos,
+                vel_enu_mps: Vector3::zeros(),
+                acc_enu_mps2: Vector3::zeros(),
+                heading_rad: 0.0,
+            },
+            pos_ecef_m: f.ecef_of_enu(&pos),
+            vel_ecef_mps: Vector3::zeros(),
+        }
+    }
+
+    fn clock(rng: &TrialRng) -> Arc<ClockTrack> {
+        let cfg = ClockConfig::default();
+        let c = ReceiverClock::new(&cfg, &mut rng.stream("gnss/receiver_clock"));
+        Arc::new(ClockTrack::record(
+            c,
+            20.0,
+            0.1,
+            &mut rng.stream("clock/track"),
+        ))
+    }
+
+    fn run(level: DtmbLevel, seed: u64) -> Vec<(f64, f64, f64)> {
+        let f = frame();
+        let rng = TrialRng::new(seed, 0);
+        let ck = clock(&rng);
+        let cfg = DtmbSensorConfig {
+            level,
+            shadowing: ShadowingConfig {
+                sigma_db: 0.0,
+                ..ShadowingConfig::default()
+            },
+            range_differences: true,
+            ..DtmbSensorConfig::default()
+        };
+        let tw = towers(&f);
+        let mut src = DtmbSource::new(
+            cfg,
+            tw.clone(),
+            None,
+            f.clone(),
+            Arc::clone(&ck),
+            None,
+            &rng,
+            SimTime::from_seconds(5.0),
+        )
+        .unwrap();
+        let mut res = Vec::new();
+        let mut t = Some(src.first_sample());
+        let mut batch = MeasurementBatch::default();
+        while let Some(sim) = t {
+            let pos = Vector3::new(10.0 * sim.seconds(), 5.0, 1.5);
+            let tr = truth(&f, sim, pos);
+            batch.items.clear();
+            t = src.sample(
+                &SampleContext {
+                    truth: &tr,
+                    estimates: &[],
+                },
+                &mut batch,
+            );
+            for m in &batch.items {
+                if let Measurement::Range(r) = m {
+                    let spec = &tw[r.emitter.number as usize - 1];
+                    let ts = sim.seconds();
+                    let geom = (spec.pos_ecef_m - tr.pos_ecef_m).norm();
+                    let clk = C_MPS
+                        * (ck.bias_s(ts) + ck.isb_s(System::Dtmb, ts)
+                            - spec.clock_offset_s
+                            - spec.clock_drift_s_per_s * ts);
+                    res.push((r.pseudorange_m - geom - clk, r.sigma_m, r.cn0_dbhz));
+                }
+            }
+        }
+        res
+    }
+
+    #[test]
+    fn pseudoranges_follow_geometry_and_clocks_at_both_levels() {
+        for level in [DtmbLevel::Measurement, DtmbLevel::Signal] {
+            let res = run(level, 3);
+            assert_eq!(res.len(), 12, "{level:?}: 6 epochs × 2 towers");
+            for (err, sigma, cn0) in &res {
+                // At these C/N0 (≥ 100 dB-Hz) the ranging error is centimetres; 5σ + 0.1 m.
+                assert!(*cn0 > 90.0, "{level:?}: C/N0 {cn0}");
+                assert!(
+                    err.abs() < 5.0 * sigma + 0.1,
+                    "{level:?}: error {err} σ {sigma}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn same_seed_same_numbers_and_bad_config() {
+        assert_eq!(
+            run(DtmbLevel::Measurement, 9),
+            run(DtmbLevel::Measurement, 9)
+        );
+        assert_ne!(
+            run(DtmbLevel::Measurement, 9),
+            run(DtmbLevel::Measurement, 10)
+        );
+        let bad = DtmbSensorConfig {
+            accumulation_frames: 0,
+            ..DtmbSensorConfig::default()
+        };
+        assert_eq!(bad.validate().unwrap_err().key, "accumulation_frames");
+        let bad = DtmbSensorConfig {
+            rate_hz: f64::NAN,
+            ..DtmbSensorConfig::default()
+        };
+        assert_eq!(bad.validate().unwrap_err().key, "rate_hz");
+        let cfg: DtmbSensorConfig =
+            toml::from_str("level = \"signal\"\naided = true\nsearch_window_m = 300").unwrap();
+        assert_eq!(cfg.level, DtmbLevel::Signal);
+        assert!(toml::from_str::<DtmbSensorConfig>("levle = \"signal\"").is_err());
+        assert!(toml::from_str::<DtmbSensorConfig>("level = \"fast\"").is_err());
+    }
+}

@@ -1,0 +1,1266 @@
+//! The inertial estimators the engine drives: the loosely coupled INS ([`InsEstimator`],
+//! seed 004 §2.1–2.3) and pedestrian dead reckoning from step events ([`PdrEstimator`],
+//! seed 002 §4.2, PDR-only row, optionally reset by position fixes).
+//!
+//! Both work in the world's ENU frame (`EnuFrame`) and report ECEF estimates. Neither ever
+//! panics on its input: a measurement it cannot use is counted as rejected, and a state
+//! that stops being finite is reported as `numerical_failure` and reset (the INS
+//! re-initialises from the next fixes; the PDR keeps its last finite position).
+
+use super::imu::{ImuConfig, ImuSample};
+use super::ins_ekf::{InsEkf, InsEkfConfig};
+use super::source::local_earth_of;
+use super::strapdown::NavState;
+use super::LocalEarth;
+use crate::core::{EnuFrame, GpsTime, System};
+use crate::fusion::estimator::{EpochOutcome, Estimate, Estimator};
+use crate::fusion::measurement::{Measurement, MeasurementBatch, RangeMeasurement, StepEvent};
+use crate::fusion::wls::{self, WlsOptions};
+use crate::motion::ConfigIssue;
+use nalgebra::{Matrix2, Matrix3, Matrix4, Rotation3, UnitQuaternion, Vector2, Vector3, Vector4};
+use serde::{Deserialize, Serialize};
+
+fn d_fix_sources() -> Vec<String> {
+    vec!["gnss".to_string()]
+}
+fn d_true() -> bool {
+    true
+}
+fn d_min_speed() -> f64 {
+    0.5
+}
+fn d_max_heading_sigma() -> f64 {
+    10.0
+}
+fn d_tilt_sigma() -> f64 {
+    2.0
+}
+fn d_noise_scale() -> f64 {
+    1.0
+}
+fn d_max_lag() -> f64 {
+    1.0
+}
+fn d_window() -> f64 {
+    5.0
+}
+
+/// Fixes kept for the position-only initialisation.
+const INIT_RING: usize = 16;
+
+/// Weighted least-squares fit of p(τ) = p₀ + v τ + ½ a τ² to positions at times τ ≤ 0
+/// relative to now (each with its variance), spanning at least `min_span_s`: returns
+/// (v, a, var v, var a) at τ = 0, the same variances on every axis. Does not allocate.
+fn quadratic_fit(
+    pts: impl Iterator<Item = (f64, Vector3<f64>, f64)>,
+    min_span_s: f64,
+) -> Option<(Vector3<f64>, Vector3<f64>, f64, f64)> {
+    let mut n = Matrix3::<f64>::zeros();
+    let mut rhs = Matrix3::<f64>::zeros();
+    let (mut count, mut earliest) = (0, 0.0f64);
+    for (tau, p, var) in pts {
+        if !(var.is_finite() && var > 0.0 && tau.is_finite()) {
+            continue;
+        }
+        let h = Vector3::new(1.0, tau, 0.5 * tau * tau);
+        n += h * h.transpose() / var;
+        rhs += h * p.transpose() / var;
+        count += 1;
+        earliest = earliest.min(tau);
+    }
+    if count < 3 || -earliest < min_span_s {
+        return None;
+    }
+    let chol = n.cholesky()?;
+    let x = chol.solve(&rhs);
+    let inv = chol.inverse();
+    let v = x.row(1).transpose();
+    let a = x.row(2).transpose();
+    (inv[(1, 1)] > 0.0 && inv[(2, 2)] > 0.0 && v.iter().chain(a.iter()).all(|e| e.is_finite()))
+        .then_some((v, a, inv[(1, 1)], inv[(2, 2)]))
+}
+
+/// `[estimator.ins]`: how the loosely coupled INS takes its fixes and initialises.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InsFilterConfig {
+    /// Sources whose batches give fixes; default `["gnss"]`. A `"gnss"` batch gives one
+    /// position fix by weighted least squares on its pseudoranges (the systems the
+    /// estimator lists) and, with `use_gnss_velocity`, a velocity fix from the range rates;
+    /// any other source gives its [`Measurement::Position`] items (e.g. `"tcofdm"`).
+    #[serde(default = "d_fix_sources")]
+    pub fix_sources: Vec<String>,
+    /// Also use the velocity solved from GNSS range rates (eqs. 16–19 in full); default true.
+    #[serde(default = "d_true")]
+    pub use_gnss_velocity: bool,
+    /// Initialisation waits for a horizontal speed of at least this (m/s); default 0.5.
+    #[serde(default = "d_min_speed")]
+    pub init_min_speed_mps: f64,
+    /// ... and for a heading from the velocity with a 1-σ of at most this (°); default 10.
+    #[serde(default = "d_max_heading_sigma")]
+    pub init_max_heading_sigma_deg: f64,
+    /// 1-σ of the initial roll and pitch from accelerometer levelling (°); default 2.
+    #[serde(default = "d_tilt_sigma")]
+    pub init_tilt_sigma_deg: f64,
+    /// Multiplies the IMU noise densities and bias σ the filter assumes; default 1.
+    #[serde(default = "d_noise_scale")]
+    pub process_noise_scale: f64,
+    /// Reject fixes whose NIS exceeds this (χ², 3 or 6 degrees of freedom); default none.
+    #[serde(default)]
+    pub nis_gate: Option<f64>,
+    /// A fix more than this away from the INS time is rejected (s); default 1.
+    #[serde(default = "d_max_lag")]
+    pub max_fix_lag_s: f64,
+    /// Position-only initialisation: the fixes of the last `init_window_s` seconds (at most
+    /// 16) give the initial velocity and acceleration by a quadratic fit (s); default 5.
+    #[serde(default = "d_window")]
+    pub init_window_s: f64,
+}
+
+impl Default for InsFilterConfig {
+    fn default() -> Self {
+        Self {
+            fix_sources: d_fix_sources(),
+            use_gnss_velocity: true,
+            init_min_speed_mps: d_min_speed(),
+            init_max_heading_sigma_deg: d_max_heading_sigma(),
+            init_tilt_sigma_deg: d_tilt_sigma(),
+            process_noise_scale: d_noise_scale(),
+            nis_gate: None,
+            max_fix_lag_s: d_max_lag(),
+            init_window_s: d_window(),
+        }
+    }
+}
+
+fn positive(key: &str, v: f64, hi: f64, what: &str) -> Result<(), ConfigIssue> {
+    if v.is_finite() && v > 0.0 && v <= hi {
+        Ok(())
+    } else {
+        Err(ConfigIssue::new(
+            key,
+            format!("expected {what} within (0, {hi}], got {v}"),
+        ))
+    }
+}
+
+impl InsFilterConfig {
+    /// Checks every value.
+    ///
+    /// # Errors
+    /// A [`ConfigIssue`] naming the first bad field.
+    pub fn validate(&self) -> Result<(), ConfigIssue> {
+        if self.fix_sources.iter().any(|s| s.is_empty() || s == "imu") {
+            return Err(ConfigIssue::new(
+                "fix_sources",
+                format!(
+                    "expected names of fix sources such as \"gnss\" or \"tcofdm\" (not \"imu\" or empty), got {:?}",
+                    self.fix_sources
+                ),
+            ));
+        }
+        if !(self.init_min_speed_mps.is_finite()
+            && self.init_min_speed_mps >= 0.0
+            && self.init_min_speed_mps <= 100.0)
+        {
+            return Err(ConfigIssue::new(
+                "init_min_speed_mps",
+                format!(
+                    "expected a speed in m/s within [0, 100], got {}",
+                    self.init_min_speed_mps
+                ),
+            ));
+        }
+        positive(
+            "init_max_heading_sigma_deg",
+            self.init_max_heading_sigma_deg,
+            45.0,
+            "a heading σ in degrees",
+        )?;
+        positive(
+            "init_tilt_sigma_deg",
+            self.init_tilt_sigma_deg,
+            45.0,
+            "a tilt σ in degrees",
+        )?;
+        positive(
+            "process_noise_scale",
+            self.process_noise_scale,
+            1.0e3,
+            "a noise scale",
+        )?;
+        if let Some(g) = self.nis_gate {
+            positive("nis_gate", g, 1.0e6, "a χ² gate")?;
+        }
+        positive("max_fix_lag_s", self.max_fix_lag_s, 60.0, "a time lag in s")?;
+        positive(
+            "init_window_s",
+            self.init_window_s,
+            60.0,
+            "a time window in s",
+        )
+    }
+}
+
+/// A velocity from pseudorange rates at a known receiver position, by weighted least
+/// squares on the model of seed 000 eq. 16, `ρ̇ᵢ = uᵢ · (v − vᵢ) + ḃ`, with
+/// `uᵢ = (r − rᵢ)/‖r − rᵢ‖` and one clock drift ḃ shared by all systems (one oscillator).
+/// Rows are `[uᵢᵀ 1]`, observations `ρ̇ᵢ + uᵢ · vᵢ`, weights `1/σᵢ²`.
+///
+/// Returns (velocity ECEF m/s, its covariance (m/s)², rates used), or `None` with fewer
+/// than four usable rates or a singular geometry. Does not allocate.
+pub fn velocity_from_rates(
+    ranges: &[RangeMeasurement],
+    rx_ecef_m: &Vector3<f64>,
+) -> Option<(Vector3<f64>, Matrix3<f64>, usize)> {
+    let mut n = Matrix4::<f64>::zeros();
+    let mut rhs = Vector4::<f64>::zeros();
+    let mut used = 0;
+    for m in ranges {
+        let Some(rate) = m.range_rate_mps else {
+            continue;
+        };
+        let s = m.sigma_rate_mps;
+        let los = rx_ecef_m - m.emitter_pos_ecef_m;
+        let d = los.norm();
+        if !(rate.is_finite() && s.is_finite() && s > 0.0 && d > 1e-3 && d.is_finite()) {
+            continue;
+        }
+        let u = los / d;
+        let h = Vector4::new(u.x, u.y, u.z, 1.0);
+        let w = 1.0 / (s * s);
+        n += h * h.transpose() * w;
+        rhs += h * (w * (rate + u.dot(&m.emitter_vel_ecef_mps)));
+        used += 1;
+    }
+    if used < 4 {
+        return None;
+    }
+    let chol = n.cholesky()?;
+    let x = chol.solve(&rhs);
+    let cov = chol.inverse();
+    let v = Vector3::new(x[0], x[1], x[2]);
+    let c: Matrix3<f64> = cov.fixed_view::<3, 3>(0, 0).into_owned();
+    (v.iter().chain(c.iter()).all(|e| e.is_finite()) && c[(0, 0)] > 0.0).then_some((v, c, used))
+}
+
+/// One fix in the world frame.
+#[derive(Clone, Copy, Debug)]
+struct Fix {
+    t_s: f64,
+    pos_enu_m: Vector3<f64>,
+    pos_cov_m2: Matrix3<f64>,
+    vel: Option<(Vector3<f64>, Matrix3<f64>)>,
+    /// Measurements behind the fix.
+    n: u32,
+}
+
+/// ENU covariance of an ECEF covariance: C P Cᵀ with C the ECEF → ENU rotation.
+fn enu_cov(frame: &EnuFrame, cov_ecef: &Matrix3<f64>) -> Matrix3<f64> {
+    let c = frame.rotation();
+    c * cov_ecef * c.transpose()
+}
+
+/// ECEF covariance of an ENU covariance.
+fn ecef_cov(frame: &EnuFrame, cov_enu: &Matrix3<f64>) -> Matrix3<f64> {
+    let c = frame.rotation();
+    c.transpose() * cov_enu * c
+}
+
+/// Collects the batch's fixes: one from the pseudoranges of a `"gnss"` batch (the
+/// estimator's systems), plus every [`Measurement::Position`] item. Ranges that give no
+/// fix are counted in `rejected`.
+#[allow(clippy::too_many_arguments)]
+fn fixes_of_batch(
+    batch: &MeasurementBatch,
+    t_s: f64,
+    frame: &EnuFrame,
+    systems: &[System],
+    with_velocity: bool,
+    near_ecef_m: Option<Vector3<f64>>,
+    scratch: &mut Vec<RangeMeasurement>,
+    fixes: &mut Vec<Fix>,
+    rejected: &mut u32,
+    gdop: &mut Option<f64>,
+) {
+    fixes.clear();
+    if batch.source == "gnss" {
+        scratch.clear();
+        scratch.extend(
+            batch
+                .ranges()
+                .filter(|m| systems.is_empty() || systems.contains(&m.system()))
+                .copied(),
+        );
+        if !scratch.is_empty() {
+            let opts = WlsOptions {
+                initial_pos_ecef_m: near_ecef_m,
+                ..WlsOptions::default()
+            };
+            match wls::solve(scratch.iter(), &opts) {
+                Ok(fix) => {
+                    let vel = if with_velocity {
+                        velocity_from_rates(scratch, &fix.pos_ecef_m)
+                            .map(|(v, c, _)| (frame.enu_vector_of_ecef(&v), enu_cov(frame, &c)))
+                    } else {
+                        None
+                    };
+                    *gdop = Some(fix.dop.gdop);
+                    fixes.push(Fix {
+                        t_s,
+                        pos_enu_m: frame.enu_of_ecef(&fix.pos_ecef_m),
+                        pos_cov_m2: enu_cov(frame, &fix.cov_pos_ecef_m2),
+                        vel,
+                        n: fix.n_measurements as u32,
+                    });
+                }
+                Err(_) => *rejected += scratch.len() as u32,
+            }
+        }
+    }
+    for m in &batch.items {
+        if let Measurement::Position(p) = m {
+            if p.pos_ecef_m
+                .iter()
+                .chain(p.cov_m2.iter())
+                .all(|v| v.is_finite())
+            {
+                fixes.push(Fix {
+                    t_s,
+                    pos_enu_m: frame.enu_of_ecef(&p.pos_ecef_m),
+                    pos_cov_m2: enu_cov(frame, &p.cov_m2),
+                    vel: None,
+                    n: 1,
+                });
+            } else {
+                *rejected += 1;
+            }
+        }
+    }
+}
+
+/// The attitude C_b^n that maps the body vectors (f^b, x^b) onto the navigation vectors
+/// (f^n, v^n) by TRIAD (Shuster & Oh 1981): the specific force is matched exactly, and the
+/// body forward axis is put in the vertical plane of the velocity. `None` when either pair
+/// is (nearly) parallel.
+fn triad(
+    f_b: &Vector3<f64>,
+    f_n: &Vector3<f64>,
+    v_n: &Vector3<f64>,
+) -> Option<UnitQuaternion<f64>> {
+    let x_b = Vector3::x();
+    let t1b = f_b.try_normalize(1e-9)?;
+    let t2b = f_b.cross(&x_b).try_normalize(1e-6 * f_b.norm())?;
+    let t1n = f_n.try_normalize(1e-9)?;
+    let t2n = f_n
+        .cross(v_n)
+        .try_normalize(1e-6 * f_n.norm() * v_n.norm())?;
+    let mb = Matrix3::from_columns(&[t1b, t2b, t1b.cross(&t2b)]);
+    let mn = Matrix3::from_columns(&[t1n, t2n, t1n.cross(&t2n)]);
+    let c = mn * mb.transpose();
+    c.iter()
+        .all(|v| v.is_finite())
+        .then(|| UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(c)))
+}
+
+/// The loosely coupled INS of seed 004: strapdown mechanisation and the 15-state
+/// error-state filter ([`InsEkf`]) propagated with every `"imu"` sample and corrected with
+/// position (and velocity) fixes, closed loop.
+///
+/// # Initialisation
+///
+/// The filter starts at the first fix at which the platform moves fast enough for a heading
+/// (horizontal speed ≥ `init_min_speed_mps` and heading σ = atan(σ_v⊥ / |v_h|) ≤
+/// `init_max_heading_sigma_deg`):
+///
+/// * position: the fix, moved to the last IMU sample time with the fix velocity;
+/// * velocity: the GNSS velocity from range rates, or (position-only sources) a weighted
+///   quadratic fit to the fixes of the last `init_window_s` (at least 3, spanning ≥ 20 % of
+///   the window);
+/// * attitude: TRIAD on the mean specific force f̄^b since the previous fix against
+///   f^n = a^n − g^n + 2 ω_ie × v (a^n from the change of two consecutive GNSS velocities,
+///   or from the quadratic fit), with the
+///   body forward axis in the vertical plane of the velocity (heading along the track:
+///   right for a car and for a phone pointing where its user walks).
+/// * covariance: the fix covariances, a tilt σ of `init_tilt_sigma_deg` ⊕ σ(a^n)/g, the
+///   heading σ above (at least 1°), and the IMU's bias σ ([`InsEkfConfig::from_imu`]).
+///
+/// Until then it has no estimate. The IMU noise model is the configured IMU's
+/// (`process_noise_scale` × its densities).
+///
+/// # Fixes
+///
+/// A fix at time t_f is compared with the INS at its last sample time t_i, moved by the
+/// INS velocity: r_fix + v̂ (t_i − t_f) (|t_i − t_f| ≤ `max_fix_lag_s`, else rejected);
+/// with a GNSS velocity it is a joint position–velocity update (eqs. 16–19), otherwise a
+/// position update.
+pub struct InsEstimator {
+    name: String,
+    cfg: InsFilterConfig,
+    frame: EnuFrame,
+    earth: LocalEarth,
+    start: GpsTime,
+    systems: Vec<System>,
+    ekf_cfg: InsEkfConfig,
+    kf: Option<InsEkf>,
+    f_sum_mps2: Vector3<f64>,
+    f_count: u32,
+    last_imu_t_s: Option<f64>,
+    last_fix: Option<Fix>,
+    /// Recent position fixes (t s, ENU m, horizontal variance m²) for the position-only
+    /// initialisation.
+    ring: [Option<(f64, Vector3<f64>, f64)>; INIT_RING],
+    ring_next: usize,
+    scratch: Vec<RangeMeasurement>,
+    fixes: Vec<Fix>,
+    latest: Option<Estimate>,
+    resets: u32,
+}
+
+impl InsEstimator {
+    /// An INS whose IMU is `imu` (the world's `[sensors.imu]`), in the world frame, with
+    /// fixes from the sources `cfg.fix_sources` names; from GNSS batches it uses the
+    /// `systems` (all when empty). `start` is the world's start time (sample times are
+    /// seconds since it).
+    ///
+    /// # Errors
+    /// A [`ConfigIssue`] for a bad IMU (key `imu.…`) or filter setting.
+    pub fn new(
+        name: &str,
+        cfg: &InsFilterConfig,
+        imu: &ImuConfig,
+        systems: &[System],
+        frame: &EnuFrame,
+        start: GpsTime,
+    ) -> Result<Self, ConfigIssue> {
+        cfg.validate()?;
+        let spec = imu
+            .resolve()
+            .map_err(|i| ConfigIssue::new(format!("imu.{}", i.key), i.message))?;
+        let mut ekf_cfg = InsEkfConfig::from_imu(&spec);
+        let k = cfg.process_noise_scale;
+        ekf_cfg.accel_vrw_mps_per_sqrt_s *= k;
+        ekf_cfg.gyro_arw_rad_per_sqrt_s *= k;
+        ekf_cfg.accel_bias_sigma_mps2 *= k;
+        ekf_cfg.gyro_bias_sigma_rps *= k;
+        ekf_cfg.accel_bias_rw *= k;
+        ekf_cfg.gyro_bias_rw *= k;
+        ekf_cfg.nis_gate = cfg.nis_gate;
+        Ok(Self {
+            name: name.to_string(),
+            cfg: cfg.clone(),
+            frame: frame.clone(),
+            earth: local_earth_of(frame),
+            start,
+            systems: systems.to_vec(),
+            ekf_cfg,
+            kf: None,
+            f_sum_mps2: Vector3::zeros(),
+            f_count: 0,
+            last_imu_t_s: None,
+            last_fix: None,
+            ring: [None; INIT_RING],
+            ring_next: 0,
+            scratch: Vec::with_capacity(64),
+            fixes: Vec::with_capacity(4),
+            latest: None,
+            resets: 0,
+        })
+    }
+
+    /// The filter, once initialised.
+    pub fn filter(&self) -> Option<&InsEkf> {
+        self.kf.as_ref()
+    }
+
+    /// How many times a numerical failure reset the filter.
+    pub fn resets(&self) -> u32 {
+        self.resets
+    }
+
+    fn estimate(&self, t: GpsTime) -> Option<Estimate> {
+        let kf = self.kf.as_ref()?;
+        let st = kf.state();
+        let p = kf.covariance();
+        let cov_enu: Matrix3<f64> = p.fixed_view::<3, 3>(0, 0).into_owned();
+        Some(Estimate {
+            t,
+            pos_ecef_m: self.frame.ecef_of_enu(&st.pos_enu_m),
+            vel_ecef_mps: Some(self.frame.ecef_vector_of_enu(&st.vel_enu_mps)),
+            cov_pos_m2: ecef_cov(&self.frame, &cov_enu),
+        })
+    }
+
+    fn healthy(kf: &InsEkf) -> bool {
+        let st = kf.state();
+        let p = kf.covariance();
+        st.pos_enu_m.iter().all(|v| v.is_finite())
+            && st.vel_enu_mps.iter().all(|v| v.is_finite())
+            && st.q_nb.coords.iter().all(|v| v.is_finite())
+            && (0..15).all(|i| p[(i, i)].is_finite() && p[(i, i)] >= 0.0 && p[(i, i)] < 1e15)
+    }
+
+    /// Drops the filter after a numerical failure; the next fixes re-initialise it.
+    fn reset(&mut self, out: &mut EpochOutcome) {
+        self.kf = None;
+        self.last_fix = None;
+        self.ring = [None; INIT_RING];
+        self.f_sum_mps2 = Vector3::zeros();
+        self.f_count = 0;
+        self.latest = None;
+        self.resets += 1;
+        out.numerical_failure = true;
+    }
+
+    fn imu_sample(&mut self, s: &ImuSample, out: &mut EpochOutcome) {
+        if !(s.t_s.is_finite()
+            && s.gyro_rps.iter().all(|v| v.is_finite())
+            && s.accel_mps2.iter().all(|v| v.is_finite()))
+        {
+            out.rejected += 1;
+            return;
+        }
+        if self.last_imu_t_s.is_some_and(|t| s.t_s <= t) {
+            out.rejected += 1;
+            return;
+        }
+        self.last_imu_t_s = Some(s.t_s);
+        match &mut self.kf {
+            Some(kf) => {
+                kf.propagate(s);
+                out.used += 1;
+            }
+            None => {
+                self.f_sum_mps2 += s.accel_mps2;
+                self.f_count += 1;
+            }
+        }
+    }
+
+    fn apply_fix(&mut self, fix: &Fix, out: &mut EpochOutcome) {
+        let Some(kf) = &mut self.kf else {
+            self.try_initialise(fix);
+            return;
+        };
+        let st = *kf.state();
+        let lag = st.t_s - fix.t_s;
+        if lag.abs() > self.cfg.max_fix_lag_s {
+            out.rejected += fix.n;
+            return;
+        }
+        let pos = fix.pos_enu_m + st.vel_enu_mps * lag;
+        let r = match &fix.vel {
+            Some((v, vc)) => kf.update_position_velocity(&pos, &fix.pos_cov_m2, v, vc),
+            None => kf.update_position(&pos, &fix.pos_cov_m2),
+        };
+        match r {
+            Ok(o) if o.accepted => out.used += fix.n,
+            _ => out.rejected += fix.n,
+        }
+    }
+
+    fn try_initialise(&mut self, fix: &Fix) {
+        let f_mean = (self.f_count > 0).then(|| self.f_sum_mps2 / f64::from(self.f_count));
+        self.f_sum_mps2 = Vector3::zeros();
+        self.f_count = 0;
+        let prev = self.last_fix.replace(*fix);
+        let horiz_var = 0.5 * (fix.pos_cov_m2[(0, 0)] + fix.pos_cov_m2[(1, 1)]);
+        self.ring[self.ring_next % INIT_RING] = Some((fix.t_s, fix.pos_enu_m, horiz_var));
+        self.ring_next += 1;
+        // Velocity, acceleration and the σ of the acceleration at the fix.
+        let (v, v_cov, a_n, sigma_a) = match (&fix.vel, &prev) {
+            (Some((v, vc)), Some(p)) => {
+                let dt = fix.t_s - p.t_s;
+                match p.vel {
+                    Some((pv, pc)) if dt > 0.0 && dt <= 2.0 => {
+                        let var = 0.5 * (vc[(0, 0)] + vc[(1, 1)] + pc[(0, 0)] + pc[(1, 1)]);
+                        (*v, *vc, (v - pv) / dt, var.max(0.0).sqrt() / dt)
+                    }
+                    _ => return,
+                }
+            }
+            (Some(_), None) => return,
+            (None, _) => {
+                let window = self.cfg.init_window_s;
+                let pts = self
+                    .ring
+                    .iter()
+                    .flatten()
+                    .filter(|(t, _, _)| fix.t_s - *t <= window && *t <= fix.t_s)
+                    .map(|(t, p, var)| (*t - fix.t_s, *p, *var));
+                let Some((v, a, var_v, var_a)) = quadratic_fit(pts, 0.2 * window) else {
+                    return;
+                };
+                (v, Matrix3::identity() * var_v, a, var_a.sqrt())
+            }
+        };
+        let speed = v.x.hypot(v.y);
+        let sigma_perp = (0.5 * (v_cov[(0, 0)] + v_cov[(1, 1)])).max(0.0).sqrt();
+        let heading_sigma = sigma_perp.atan2(speed);
+        if speed < self.cfg.init_min_speed_mps
+            || heading_sigma > self.cfg.init_max_heading_sigma_deg.to_radians()
+        {
+            return;
+        }
+        let (Some(f_b), Some(t_imu)) = (f_mean, self.last_imu_t_s) else {
+            return;
+        };
+        let w = self.earth.omega_ie_enu_rps;
+        let f_n = a_n - self.earth.gravity_enu_mps2(fix.pos_enu_m.z) + 2.0 * w.cross(&v);
+        let Some(q_nb) = triad(&f_b, &f_n, &v) else {
+            return;
+        };
+        let lag = t_imu - fix.t_s;
+        if lag.abs() > self.cfg.max_fix_lag_s {
+            return;
+        }
+        let mut c = self.ekf_cfg;
+        c.init_pos_sigma_m = (0..3)
+            .map(|i| fix.pos_cov_m2[(i, i)])
+            .fold(0.0f64, f64::max)
+            .sqrt()
+            .max(0.1);
+        c.init_vel_sigma_mps = (0..3)
+            .map(|i| v_cov[(i, i)])
+            .fold(0.0f64, f64::max)
+            .sqrt()
+            .max(0.01);
+        // Levelling error: the tilt σ plus the uncertainty of a^n seen against gravity.
+        c.init_tilt_sigma_rad = self
+            .cfg
+            .init_tilt_sigma_deg
+            .to_radians()
+            .hypot(sigma_a / self.earth.gravity_mps2(fix.pos_enu_m.z));
+        c.init_heading_sigma_rad = heading_sigma.max(1f64.to_radians());
+        let init = NavState {
+            t_s: t_imu,
+            pos_enu_m: fix.pos_enu_m + v * lag,
+            vel_enu_mps: v,
+            q_nb,
+        };
+        let kf = InsEkf::new(init, self.earth, &c);
+        if Self::healthy(&kf) {
+            self.kf = Some(kf);
+            self.ring = [None; INIT_RING];
+        }
+    }
+}
+
+impl Estimator for InsEstimator {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn consumes(&self, source: &str) -> bool {
+        source == "imu" || self.cfg.fix_sources.iter().any(|s| s == source)
+    }
+
+    fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
+        let mut out = EpochOutcome::default();
+        if batch.source == "imu" {
+            for m in &batch.items {
+                if let Measurement::Imu(s) = m {
+                    self.imu_sample(s, &mut out);
+                }
+            }
+        } else if self.cfg.fix_sources.contains(&batch.source) {
+            let t_s = batch.t.seconds_since(self.start);
+            let near = self.latest.map(|e| e.pos_ecef_m);
+            let mut fixes = std::mem::take(&mut self.fixes);
+            fixes_of_batch(
+                batch,
+                t_s,
+                &self.frame,
+                &self.systems,
+                self.cfg.use_gnss_velocity,
+                near,
+                &mut self.scratch,
+                &mut fixes,
+                &mut out.rejected,
+                &mut out.gdop,
+            );
+            for f in &fixes {
+                self.apply_fix(f, &mut out);
+            }
+            self.fixes = fixes;
+        }
+        if self.kf.as_ref().is_some_and(|kf| !Self::healthy(kf)) {
+            self.reset(&mut out);
+            return out;
+        }
+        self.latest = self.estimate(batch.t);
+        out.estimate = self.latest;
+        out
+    }
+
+    fn latest(&self) -> Option<Estimate> {
+        self.latest
+    }
+}
+
+fn d_start_sigma() -> f64 {
+    0.5
+}
+
+/// `[estimator.pdr]`: where dead reckoning starts and which fixes (if any) reset it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PdrFilterConfig {
+    /// Start position (ENU m, up optional as 0); default the world's known start point (the
+    /// constructor's `known_start_enu_m`), else the first fix.
+    #[serde(default)]
+    pub start_enu_m: Option<Vec<f64>>,
+    /// 1-σ of the start position per axis (m); default 0.5.
+    #[serde(default = "d_start_sigma")]
+    pub start_sigma_m: f64,
+    /// Sources whose fixes update the position (`"gnss"` by least squares, others by their
+    /// position items); default none (PDR only, seed 002's "PDR" row).
+    #[serde(default)]
+    pub fix_sources: Vec<String>,
+    /// Reject fixes whose NIS exceeds this (χ², 2 degrees of freedom); default none.
+    #[serde(default)]
+    pub nis_gate: Option<f64>,
+}
+
+impl Default for PdrFilterConfig {
+    fn default() -> Self {
+        Self {
+            start_enu_m: None,
+            start_sigma_m: d_start_sigma(),
+            fix_sources: Vec::new(),
+            nis_gate: None,
+        }
+    }
+}
+
+impl PdrFilterConfig {
+    /// Checks every value.
+    ///
+    /// # Errors
+    /// A [`ConfigIssue`] naming the first bad field.
+    pub fn validate(&self) -> Result<(), ConfigIssue> {
+        if let Some(s) = &self.start_enu_m {
+            if !(s.len() == 2 || s.len() == 3) || s.iter().any(|v| !v.is_finite()) {
+                return Err(ConfigIssue::new(
+                    "start_enu_m",
+                    format!("expected [east, north] or [east, north, up] in m, got {s:?}"),
+                ));
+            }
+        }
+        positive("start_sigma_m", self.start_sigma_m, 1.0e4, "a start σ in m")?;
+        if self.fix_sources.iter().any(|s| s.is_empty() || s == "pdr") {
+            return Err(ConfigIssue::new(
+                "fix_sources",
+                format!(
+                    "expected names of fix sources such as \"gnss\" (not \"pdr\" or empty), got {:?}",
+                    self.fix_sources
+                ),
+            ));
+        }
+        if let Some(g) = self.nis_gate {
+            positive("nis_gate", g, 1.0e6, "a χ² gate")?;
+        }
+        Ok(())
+    }
+}
+
+/// Dead reckoning from [`StepEvent`]s (seed 002 §4.2's PDR), a 2-state filter on the
+/// horizontal position [x_east, y_north] with covariance P:
+///
+/// ```text
+/// x ← x + L sin ψ,   y ← y + L cos ψ                        (ψ from north, clockwise)
+/// P ← P + J diag(σ_L², σ_ψ²) Jᵀ,   J = [[sin ψ,  L cos ψ], [cos ψ, −L sin ψ]]
+/// ```
+///
+/// (seed 002's x_t = x_{t−1} + v Δt cos θ with θ = π/2 − ψ and v Δt = L), and, when fixes
+/// come, the Kalman update with H = I₂ and the horizontal block of the fix covariance. The
+/// up coordinate stays at the start's. The step covariance treats heading errors as
+/// independent from step to step, so it understates the drift of a biased heading; the
+/// 5-state EKF of seed 002 that estimates θ̇ and v is the fusion module's.
+pub struct PdrEstimator {
+    name: String,
+    cfg: PdrFilterConfig,
+    frame: EnuFrame,
+    systems: Vec<System>,
+    start_sigma_m: f64,
+    pos_en_m: Option<Vector2<f64>>,
+    up_m: f64,
+    p: Matrix2<f64>,
+    scratch: Vec<RangeMeasurement>,
+    fixes: Vec<Fix>,
+    latest: Option<Estimate>,
+}
+
+impl PdrEstimator {
+    /// Dead reckoning in the world frame from `cfg.start_enu_m`, else `known_start_enu_m`
+    /// (the world's surveyed start, e.g. its trajectory's first point), else the first fix.
+    /// From GNSS batches it uses the `systems` (all when empty).
+    ///
+    /// # Errors
+    /// A [`ConfigIssue`] for a bad setting.
+    pub fn new(
+        name: &str,
+        cfg: &PdrFilterConfig,
+        systems: &[System],
+        frame: &EnuFrame,
+        known_start_enu_m: Option<Vector3<f64>>,
+    ) -> Result<Self, ConfigIssue> {
+        cfg.validate()?;
+        let start = cfg
+            .start_enu_m
+            .as_ref()
+            .map(|s| Vector3::new(s[0], s[1], s.get(2).copied().unwrap_or(0.0)))
+            .or(known_start_enu_m.filter(|s| s.iter().all(|v| v.is_finite())));
+        let start_sigma_m = cfg.start_sigma_m;
+        Ok(Self {
+            name: name.to_string(),
+            cfg: cfg.clone(),
+            frame: frame.clone(),
+            systems: systems.to_vec(),
+            start_sigma_m,
+            pos_en_m: start.map(|s| s.xy()),
+            up_m: start.map_or(0.0, |s| s.z),
+            p: Matrix2::identity() * start_sigma_m * start_sigma_m,
+            scratch: Vec::with_capacity(64),
+            fixes: Vec::with_capacity(4),
+            latest: None,
+        })
+    }
+
+    /// The dead-reckoned position (east, north m), once started.
+    pub fn position_en_m(&self) -> Option<Vector2<f64>> {
+        self.pos_en_m
+    }
+
+    /// The horizontal covariance (m²).
+    pub fn covariance_m2(&self) -> Matrix2<f64> {
+        self.p
+    }
+
+    fn estimate(&self, t: GpsTime) -> Option<Estimate> {
+        let pos = self.pos_en_m?;
+        let mut cov = Matrix3::zeros();
+        cov.fixed_view_mut::<2, 2>(0, 0).copy_from(&self.p);
+        cov[(2, 2)] = self.start_sigma_m * self.start_sigma_m;
+        Some(Estimate {
+            t,
+            pos_ecef_m: self
+                .frame
+                .ecef_of_enu(&Vector3::new(pos.x, pos.y, self.up_m)),
+            vel_ecef_mps: None,
+            cov_pos_m2: ecef_cov(&self.frame, &cov),
+        })
+    }
+
+    /// One step; false when it cannot be used (non-finite, negative length, no start yet).
+    fn step(&mut self, s: &StepEvent) -> bool {
+        let Some(pos) = self.pos_en_m else {
+            return false;
+        };
+        let ok = [
+            s.length_m,
+            s.sigma_length_m,
+            s.heading_rad,
+            s.sigma_heading_rad,
+        ]
+        .iter()
+        .all(|v| v.is_finite())
+            && s.length_m >= 0.0
+            && s.length_m < 10.0;
+        if !ok {
+            return false;
+        }
+        let (sn, cs) = s.heading_rad.sin_cos();
+        let l = s.length_m;
+        let new_pos = pos + Vector2::new(sn, cs) * l;
+        let j = Matrix2::new(sn, l * cs, cs, -l * sn);
+        let q = Matrix2::new(
+            s.sigma_length_m * s.sigma_length_m,
+            0.0,
+            0.0,
+            s.sigma_heading_rad * s.sigma_heading_rad,
+        );
+        let new_p = self.p + j * q * j.transpose();
+        if new_pos.iter().chain(new_p.iter()).all(|v| v.is_finite()) {
+            self.pos_en_m = Some(new_pos);
+            self.p = new_p;
+            true
+        } else {
+            false
+        }
+    }
+
+    /// A horizontal position fix: initialises, or updates with H = I₂. Returns (used,
+    /// numerical failure).
+    fn fix(&mut self, f: &Fix) -> (bool, bool) {
+        let z = f.pos_enu_m.xy();
+        let r: Matrix2<f64> = f.pos_cov_m2.fixed_view::<2, 2>(0, 0).into_owned();
+        let Some(pos) = self.pos_en_m else {
+            if r.cholesky().is_none() {
+                return (false, false);
+            }
+            self.pos_en_m = Some(z);
+            self.up_m = f.pos_enu_m.z;
+            self.p = r;
+            return (true, false);
+        };
+        let s = self.p + r;
+        let Some(chol) = s.cholesky() else {
+            return (false, false);
+        };
+        let innov = z - pos;
+        if let Some(g) = self.cfg.nis_gate {
+            if innov.dot(&chol.solve(&innov)) > g {
+                return (false, false);
+            }
+        }
+        // K = P S⁻¹ = (S⁻¹ P)ᵀ, Joseph form.
+        let k = chol.solve(&self.p).transpose();
+        let ikh = Matrix2::identity() - k;
+        let new_p = ikh * self.p * ikh.transpose() + k * r * k.transpose();
+        let new_pos = pos + k * innov;
+        if new_pos.iter().chain(new_p.iter()).all(|v| v.is_finite()) {
+            self.pos_en_m = Some(new_pos);
+            self.p = 0.5 * (new_p + new_p.transpose());
+            (true, false)
+        } else {
+            (false, true)
+        }
+    }
+}
+
+impl Estimator for PdrEstimator {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn consumes(&self, source: &str) -> bool {
+        source == "pdr" || self.cfg.fix_sources.iter().any(|s| s == source)
+    }
+
+    fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
+        let mut out = EpochOutcome::default();
+        if batch.source == "pdr" {
+            for m in &batch.items {
+                if let Measurement::Step(s) = m {
+                    if self.step(s) {
+                        out.used += 1;
+                    } else {
+                        out.rejected += 1;
+                    }
+                }
+            }
+        } else if self.cfg.fix_sources.contains(&batch.source) {
+            let near = self.latest.map(|e| e.pos_ecef_m);
+            let mut fixes = std::mem::take(&mut self.fixes);
+            fixes_of_batch(
+                batch,
+                0.0,
+                &self.frame,
+                &self.systems,
+                false,
+                near,
+                &mut self.scratch,
+                &mut fixes,
+                &mut out.rejected,
+                &mut out.gdop,
+            );
+            for f in &fixes {
+                let (used, failed) = self.fix(f);
+                if used {
+                    out.used += f.n;
+                } else {
+                    out.rejected += f.n;
+                }
+                out.numerical_failure |= failed;
+            }
+            self.fixes = fixes;
+        }
+        self.latest = self.estimate(batch.t);
+        out.estimate = self.latest;
+        out
+    }
+
+    fn latest(&self) -> Option<Estimate> {
+        self.latest
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::{EmitterId, Geodetic};
+    use crate::fusion::measurement::PositionFix;
+
+    fn frame() -> EnuFrame {
+        EnuFrame::new(Geodetic::from_deg(30.55, 114.27, 25.0))
+    }
+
+    #[test]
+    fn velocity_from_exact_rates_is_exact() {
+        // Six emitters around and above the receiver with arbitrary velocities; rates from
+        // the model with a drift of 3 m/s recover the velocity to rounding.
+        let f = frame();
+        let rx = f.ecef_of_enu(&Vector3::new(10.0, 20.0, 5.0));
+        let v = Vector3::new(3.0, -7.0, 0.5);
+        let drift = 3.0;
+        let dirs: [(f64, f64); 6] = [
+            (0.3, 1.2),
+            (1.5, 0.4),
+            (2.8, 0.9),
+            (4.0, 0.2),
+            (5.2, 1.0),
+            (0.0, 1.5),
+        ];
+        let ranges: Vec<RangeMeasurement> = dirs
+            .iter()
+            .enumerate()
+            .map(|(i, &(az, el))| {
+                let d_enu = Vector3::new(el.cos() * az.sin(), el.cos() * az.cos(), el.sin());
+                let e = rx + f.ecef_vector_of_enu(&(d_enu * 2.0e7));
+                let ve = Vector3::new(1000.0 * i as f64, -2000.0, 500.0);
+                let u = (rx - e).normalize();
+                RangeMeasurement {
+                    emitter: EmitterId {
+                        system: System::Gps,
+                        number: i as u16 + 1,
+                    },
+                    emitter_pos_ecef_m: e,
+                    emitter_vel_ecef_mps: ve,
+                    pseudorange_m: (rx - e).norm(),
+                    sigma_m: 3.0,
+                    range_rate_mps: Some(u.dot(&(v - ve)) + drift),
+                    sigma_rate_mps: 0.1,
+                    cn0_dbhz: 45.0,
+                    elevation_rad: el,
+                }
+            })
+            .collect();
+        let (est, cov, n) = velocity_from_rates(&ranges, &rx).unwrap();
+        assert_eq!(n, 6);
+        assert!((est - v).norm() < 1e-6, "{est}");
+        assert!(cov[(0, 0)] > 0.0 && cov[(0, 0)].sqrt() < 1.0);
+        assert!(velocity_from_rates(&ranges[..3], &rx).is_none());
+    }
+
+    /// A batch of IMU samples from `k0` (100 Hz) with a constant specific force.
+    fn imu_batch(start: GpsTime, k0: u64, n: u64, accel: Vector3<f64>) -> MeasurementBatch {
+        let t = |k: u64| k as f64 * 0.01;
+        MeasurementBatch {
+            unscored: false,
+            t: start.add_seconds(t(k0 + n - 1)),
+            source: "imu".into(),
+            items: (k0..k0 + n)
+                .map(|k| {
+                    Measurement::Imu(ImuSample {
+                        t_s: t(k),
+                        gyro_rps: Vector3::zeros(),
+                        accel_mps2: accel,
+                    })
+                })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn ins_initialises_from_fixes_and_resets_on_a_numerical_failure() {
+        // A level body gliding east at 2 m/s (specific force = gravity), position fixes
+        // every second: the INS initialises from the quadratic fit, heading east. Then a
+        // sample with an absurd (finite) specific force overflows the state: the epoch
+        // reports a numerical failure and no estimate, never NaN, and later fixes
+        // re-initialise the filter.
+        let f = frame();
+        let start = GpsTime::from_week_tow(2300, 0.0);
+        let cfg = InsFilterConfig {
+            fix_sources: vec!["fix".into()],
+            ..Default::default()
+        };
+        let mut ins =
+            InsEstimator::new("INS", &cfg, &ImuConfig::default(), &[], &f, start).unwrap();
+        let g = local_earth_of(&f).gravity_mps2(0.0);
+        let level = Vector3::new(0.0, 0.0, g);
+        // A fix at the time of IMU sample `k`.
+        let fix_at = |k: u64| MeasurementBatch {
+            unscored: false,
+            t: start.add_seconds(k as f64 * 0.01),
+            source: "fix".into(),
+            items: vec![Measurement::Position(PositionFix {
+                pos_ecef_m: f.ecef_of_enu(&Vector3::new(0.02 * k as f64, 0.0, 0.0)),
+                cov_m2: Matrix3::identity() * 0.01,
+            })],
+        };
+        let mut k = 0;
+        let mut sec = 0;
+        while ins.filter().is_none() && sec < 20 {
+            ins.process(&imu_batch(start, k, 100, level));
+            k += 100;
+            let o = ins.process(&fix_at(k - 1));
+            assert!(!o.numerical_failure);
+            sec += 1;
+        }
+        assert!(ins.filter().is_some(), "not initialised after {sec} s");
+        let h = crate::inertial::heading_of_attitude(&ins.filter().unwrap().state().q_nb);
+        assert!(
+            (h - std::f64::consts::FRAC_PI_2).abs() < 0.01,
+            "heading {h}"
+        );
+        let o = ins.process(&imu_batch(start, k, 1, Vector3::new(1e300, 0.0, 0.0)));
+        k += 1;
+        assert!(o.numerical_failure && o.estimate.is_none() && ins.latest().is_none());
+        assert_eq!(ins.resets(), 1);
+        // NaN samples are rejected, not failures.
+        let mut nan = imu_batch(start, k, 1, level);
+        if let Measurement::Imu(s) = &mut nan.items[0] {
+            s.accel_mps2.x = f64::NAN;
+        }
+        let o = ins.process(&nan);
+        assert!(!o.numerical_failure && o.rejected == 1);
+        k += 1;
+        let restart = sec;
+        while ins.filter().is_none() && sec < restart + 20 {
+            ins.process(&imu_batch(start, k, 100, level));
+            k += 100;
+            ins.process(&fix_at(k - 1));
+            sec += 1;
+        }
+        assert!(ins.filter().is_some());
+        let e = ins.latest().unwrap();
+        assert!(e.pos_ecef_m.iter().all(|v| v.is_finite()));
+    }
+
+    #[test]
+    fn quadratic_fit_is_exact_on_a_parabola() {
+        // p(τ) = p₀ + v τ + ½ a τ² sampled at τ = −4 … 0 s: the fit returns v and a; its
+        // variances are those of the unweighted LS with σ² = 2 (closed form for 5 equispaced
+        // points: var(v) = σ² · 31/35 · … checked against the normal-matrix inverse).
+        let v = Vector3::new(3.0, -1.0, 0.2);
+        let a = Vector3::new(0.5, 1.5, 0.0);
+        let p0 = Vector3::new(10.0, 20.0, 1.0);
+        let pts = (0..5).map(|i| {
+            let tau = -(i as f64);
+            (tau, p0 + v * tau + a * (0.5 * tau * tau), 2.0)
+        });
+        let (ve, ae, var_v, var_a) = quadratic_fit(pts, 1.0).unwrap();
+        assert!((ve - v).norm() < 1e-9 && (ae - a).norm() < 1e-9);
+        // Independent: invert HᵀH for H rows [1, τ, τ²/2] by hand-built 3×3 and compare.
+        let mut hth = Matrix3::zeros();
+        for i in 0..5 {
+            let tau = -(i as f64);
+            let h = Vector3::new(1.0, tau, 0.5 * tau * tau);
+            hth += h * h.transpose();
+        }
+        let inv = hth.try_inverse().unwrap() * 2.0;
+        assert!((var_v - inv[(1, 1)]).abs() < 1e-9 && (var_a - inv[(2, 2)]).abs() < 1e-9);
+        // Too short a span or too few points: no fit.
+        let few = (0..2).map(|i| (-(i as f64), p0, 1.0));
+        assert!(quadratic_fit(few, 1.0).is_none());
+    }
+
+    #[test]
+    fn triad_recovers_an_attitude() {
+        use crate::inertial::attitude::attitude_from_euler;
+        // A phone pitched 30° up and rolled 5°, heading 70°, walking along its heading.
+        let q = attitude_from_euler(70f64.to_radians(), 30f64.to_radians(), 0.0);
+        let f_n = Vector3::new(0.3, -0.2, 9.8);
+        let f_b = q.inverse() * f_n;
+        let v = Vector3::new(70f64.to_radians().sin(), 70f64.to_radians().cos(), 0.0) * 1.2;
+        let est = triad(&f_b, &f_n, &v).unwrap();
+        // Specific force matched exactly; forward axis in the vertical plane of v.
+        assert!((est * f_b - f_n).norm() < 1e-9);
+        let fwd = est * Vector3::x();
+        assert!((fwd.x.atan2(fwd.y) - 70f64.to_radians()).abs() < 0.05);
+        assert!(triad(&Vector3::x(), &f_n, &v).is_none());
+    }
+
+    #[test]
+    fn pdr_steps_a_square_and_a_fix_pulls_it() {
+        let f = frame();
+        let cfg = PdrFilterConfig {
+            fix_sources: vec!["fm".into()],
+            ..Default::default()
+        };
+        let mut est =
+            PdrEstimator::new("PDR", &cfg, &[], &f, Some(Vector3::new(1.0, 2.0, 0.0))).unwrap();
+        let mut batch = MeasurementBatch {
+            unscored: false,
+            source: "pdr".into(),
+            ..Default::default()
+        };
+        // Four sides of 10 steps of 0.5 m: back to the start.
+        for side in 0..4 {
+            for _ in 0..10 {
+                batch.items = vec![Measurement::Step(StepEvent {
+                    length_m: 0.5,
+                    sigma_length_m: 0.05,
+                    heading_rad: side as f64 * std::f64::consts::FRAC_PI_2,
+                    sigma_heading_rad: 0.05,
+                })];
+                let o = est.process(&batch);
+                assert_eq!(o.used, 1);
+            }
+        }
+        let p = est.position_en_m().unwrap();
+        assert!((p - Vector2::new(1.0, 2.0)).norm() < 1e-9, "{p}");
+        // Covariance: start 0.25 m² per axis + Σ over steps of σ_L² along and (L σ_ψ)²
+        // across the step: each axis gets 20 along-track and 20 cross-track terms.
+        let expect = 0.25 + 20.0 * 0.05f64.powi(2) + 20.0 * (0.5f64 * 0.05).powi(2);
+        assert!((est.covariance_m2()[(0, 0)] - expect).abs() < 1e-12);
+        // A fix 4 m east with σ² equal to P: the estimate moves halfway.
+        let fix_enu = Vector3::new(5.0, 2.0, 0.0);
+        let pe = est.covariance_m2()[(0, 0)];
+        let mut cov = Matrix3::identity() * pe;
+        cov[(2, 2)] = 1.0;
+        let b = MeasurementBatch {
+            unscored: false,
+            source: "fm".into(),
+            items: vec![Measurement::Position(PositionFix {
+                pos_ecef_m: f.ecef_of_enu(&fix_enu),
+                cov_m2: ecef_cov(&f, &cov),
+            })],
+            ..Default::default()
+        };
+        let o = est.process(&b);
+        assert_eq!((o.used, o.rejected), (1, 0));
+        let p = est.position_en_m().unwrap();
+        assert!((p - Vector2::new(3.0, 2.0)).norm() < 1e-6, "{p}");
+        // Bad steps are rejected, never NaN.
+        batch.items = vec![Measurement::Step(StepEvent {
+            length_m: f64::NAN,
+            sigma_length_m: 0.05,
+            heading_rad: 0.0,
+            sigma_heading_rad: 0.05,
+        })];
+        let o = est.process(&batch);
+        assert_eq!(o.rejected, 1);
+        assert!(o.estimate.unwrap().pos_ecef_m.iter().all(|v| v.is_finite()));
+    }
+
+    #[test]
+    fn bad_filter_configs_are_named() {
+        let e = toml::from_str::<InsFilterConfig>("fix_source = [\"gnss\"]")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("fix_source"), "{e}");
+        let c: InsFilterConfig = toml::from_str("process_noise_scale = -1").unwrap();
+        assert_eq!(c.validate().unwrap_err().key, "process_noise_scale");
+        let c: InsFilterConfig = toml::from_str("fix_sources = [\"imu\"]").unwrap();
+        assert_eq!(c.validate().unwrap_err().key, "fix_sources");
+        let c: PdrFilterConfig = toml::from_str("start_enu_m = [1.0]").unwrap();
+        assert_eq!(c.validate().unwrap_err().key, "start_enu_m");
+        let imu = ImuConfig {
+            rate_hz: 0.0,
+            ..ImuConfig::default()
+        };
+        let e = InsEstimator::new(
+            "INS",
+            &InsFilterConfig::default(),
+            &imu,
+            &[],
+            &frame(),
+            GpsTime::from_ns(0),
+        )
+        .err()
+        .unwrap();
+        assert_eq!(e.key, "imu.rate_hz");
+    }
+}
