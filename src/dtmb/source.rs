@@ -154,6 +154,16 @@ pub struct DtmbSensorConfig {
     /// static CFO of the TPS ranging, default 0.
     #[serde(default)]
     pub rx_oscillator_ppm: f64,
+    /// A floor under the σ the receiver reports (m), default 3: the receiver's error
+    /// model knows its thermal timing noise but not the multipath and NLOS biases of an
+    /// urban link, and a filter told 2 cm for a range that can be tens of metres off
+    /// trusts it blindly. Reported σ = √(σ_thermal² + σ_floor²).
+    #[serde(default = "default_sigma_floor")]
+    pub sigma_floor_m: f64,
+}
+
+fn default_sigma_floor() -> f64 {
+    3.0
 }
 
 impl Default for DtmbSensorConfig {
@@ -171,6 +181,7 @@ impl Default for DtmbSensorConfig {
             rx_antenna_height_m: default_rx_height(),
             shadowing: ShadowingConfig::default(),
             rx_oscillator_ppm: 0.0,
+            sigma_floor_m: default_sigma_floor(),
         }
     }
 }
@@ -186,6 +197,16 @@ fn check(key: &str, ok: bool, msg: impl FnOnce() -> String) -> Result<(), Config
 impl DtmbSensorConfig {
     /// Checks every value; the key is the field name.
     pub fn validate(&self) -> Result<(), ConfigIssue> {
+        check(
+            "sigma_floor_m",
+            self.sigma_floor_m.is_finite() && (0.0..=10_000.0).contains(&self.sigma_floor_m),
+            || {
+                format!(
+                    "expected a σ floor in [0, 10000] m, got {}",
+                    self.sigma_floor_m
+                )
+            },
+        )?;
         check(
             "rate_hz",
             self.rate_hz.is_finite() && self.rate_hz > 0.0 && self.rate_hz <= 100.0,
@@ -673,7 +694,9 @@ impl Source for DtmbSource {
             let tower_clock_s = spec.clock_offset_s + spec.clock_drift_s_per_s * t_s;
             let pseudorange_m =
                 range_m + C_MPS * (rx_bias_s - tower_clock_s) + err_samples * METRES_PER_SAMPLE;
-            let sigma_m = (stats.sigma_samples * METRES_PER_SAMPLE).max(0.01);
+            let sigma_m = (stats.sigma_samples * METRES_PER_SAMPLE)
+                .hypot(self.cfg.sigma_floor_m)
+                .max(0.01);
             let (_, el) = azimuth_elevation_with(&rot, &rx_ecef, &spec.pos_ecef_m);
             out.items.push(Measurement::Range(RangeMeasurement {
                 emitter: spec.id,

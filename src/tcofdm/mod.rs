@@ -51,6 +51,10 @@ fn default_nf() -> f64 {
 fn default_rx_height() -> f64 {
     1.5
 }
+fn default_sigma_floor_m() -> f64 {
+    1.0
+}
+
 fn default_sync_ns() -> f64 {
     3.0
 }
@@ -95,6 +99,10 @@ pub struct TcofdmSensorConfig {
     /// Receiver oscillator error (ppm), default 0.
     #[serde(default)]
     pub rx_oscillator_ppm: f64,
+    /// Floor under the reported σ (m), default 1 (see `DtmbSensorConfig::sigma_floor_m`;
+    /// smaller than DTMB's because the base stations are near and mostly in view).
+    #[serde(default = "default_sigma_floor_m")]
+    pub sigma_floor_m: f64,
     /// 1-σ synchronisation error between base stations (ns), default 3 (seed 004).
     #[serde(default = "default_sync_ns")]
     pub sync_sigma_ns: f64,
@@ -117,6 +125,7 @@ impl Default for TcofdmSensorConfig {
             rx_antenna_height_m: default_rx_height(),
             shadowing: ShadowingConfig::default(),
             rx_oscillator_ppm: 0.0,
+            sigma_floor_m: default_sigma_floor_m(),
             sync_sigma_ns: default_sync_ns(),
             nav_power_db: default_nav_db(),
         }
@@ -138,6 +147,7 @@ impl TcofdmSensorConfig {
             rx_antenna_height_m: self.rx_antenna_height_m,
             shadowing: self.shadowing.clone(),
             rx_oscillator_ppm: self.rx_oscillator_ppm,
+            sigma_floor_m: self.sigma_floor_m,
         }
     }
 
