@@ -223,6 +223,9 @@ fn cmd_run(a: RunArgs) -> Result<()> {
     write_atomic(&out, json.as_bytes())?;
     let epochs = a.out.join("epochs.csv");
     write_atomic(&epochs, crate::montecarlo::epochs_csv(&results).as_bytes())?;
+    for w in &summary.warnings {
+        eprintln!("warning: {w}");
+    }
     if !a.quiet {
         print!("{}", summary.table());
         println!("wrote {} and {}", out.display(), epochs.display());

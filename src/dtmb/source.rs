@@ -546,6 +546,10 @@ fn signal_block_len(mode: PnMode, k: usize, half_window: usize) -> usize {
 }
 
 impl Source for DtmbSource {
+    fn warnings(&self) -> Vec<String> {
+        self.warnings.clone()
+    }
+
     fn name(&self) -> &str {
         self.name
     }

@@ -53,4 +53,9 @@ pub trait Source: Send {
     fn empty_batches_are_epochs(&self) -> bool {
         false
     }
+    /// Warnings the source collected (a propagation model used outside its validity range,
+    /// reported once per model): gathered after the trial and shown to the user.
+    fn warnings(&self) -> Vec<String> {
+        Vec::new()
+    }
 }

@@ -46,6 +46,8 @@ pub struct EstimatorTrace {
 pub struct TrialResult {
     pub trial: u64,
     pub estimators: Vec<EstimatorTrace>,
+    /// The sources' warnings (see [`crate::engine::Source::warnings`]).
+    pub warnings: Vec<String>,
 }
 
 /// Truth at a simulation time.
@@ -91,7 +93,12 @@ pub fn run_trial(world: &World, seed: u64, trial: u64) -> Result<TrialResult, St
     let rng = TrialRng::new(seed, trial);
     let mut setup = world.build_trial(&rng)?;
     let estimators = simulate(&world.frame, world.start, &mut setup);
-    Ok(TrialResult { trial, estimators })
+    let warnings = setup.sources.iter().flat_map(|s| s.warnings()).collect();
+    Ok(TrialResult {
+        trial,
+        estimators,
+        warnings,
+    })
 }
 
 /// The event loop of one trial: samples every source when it asks, hands each batch to

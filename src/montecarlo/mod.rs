@@ -52,6 +52,9 @@ pub struct Summary {
     pub trials: u64,
     pub duration_s: f64,
     pub estimators: Vec<EstimatorSummary>,
+    /// Distinct warnings of every trial's sources, sorted (a model used outside its
+    /// validity range, …).
+    pub warnings: Vec<String>,
 }
 
 /// Runs the trials and returns them in trial order.
@@ -145,6 +148,12 @@ pub fn summarise(world: &World, opts: &RunOptions, trials: &[TrialResult]) -> Su
         trials: opts.trials,
         duration_s: world.duration_s,
         estimators,
+        warnings: {
+            let mut w: Vec<String> = trials.iter().flat_map(|t| t.warnings.clone()).collect();
+            w.sort();
+            w.dedup();
+            w
+        },
     }
 }
 

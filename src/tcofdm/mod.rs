@@ -280,6 +280,10 @@ impl TcofdmSource {
 }
 
 impl Source for TcofdmSource {
+    fn warnings(&self) -> Vec<String> {
+        self.inner.warnings().to_vec()
+    }
+
     fn name(&self) -> &str {
         "tcofdm"
     }
