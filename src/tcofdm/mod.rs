@@ -197,6 +197,22 @@ pub struct BaseStationSpec {
     pub clock_drift_s_per_s: f64,
 }
 
+impl From<TowerSpec> for BaseStationSpec {
+    /// A base station from a tower description (the UHF channel number does not apply).
+    fn from(t: TowerSpec) -> Self {
+        Self {
+            id: t.id,
+            pos_enu_m: t.pos_enu_m,
+            pos_ecef_m: t.pos_ecef_m,
+            freq_hz: t.freq_hz,
+            erp_dbw: t.erp_dbw,
+            pn_mode: t.pn_mode,
+            clock_offset_s: t.clock_offset_s,
+            clock_drift_s_per_s: t.clock_drift_s_per_s,
+        }
+    }
+}
+
 /// TC-OFDM base stations as a measurement source (`"tcofdm"`).
 pub struct TcofdmSource {
     inner: DtmbSource,

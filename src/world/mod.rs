@@ -719,13 +719,13 @@ impl World {
                 .iter()
                 .position(|e| e.sources.contains(&sys))
         };
-        if let Some(d) = &sensors.dtmb {
-            let towers = self
-                .transmitters
+        // The towers or base stations of one kind, in the form the receivers take.
+        let towers_of = |kind: TransmitterKind, sys: System| -> Vec<TowerSpec> {
+            self.transmitters
                 .iter()
-                .filter(|t| t.kind == TransmitterKind::Dtmb)
+                .filter(|t| t.kind == kind)
                 .map(|t| TowerSpec {
-                    id: t.id.parse().unwrap_or(EmitterId::new(System::Dtmb, 1)),
+                    id: t.id.parse().unwrap_or(EmitterId::new(sys, 1)),
                     pos_enu_m: t.pos_enu_m,
                     pos_ecef_m: t.pos_ecef_m,
                     channel: t.spec.channel.unwrap_or(0).min(255) as u8,
@@ -735,11 +735,13 @@ impl World {
                     clock_offset_s: t.spec.clock_offset_ns * 1e-9,
                     clock_drift_s_per_s: t.spec.clock_drift_ppb * 1e-9,
                 })
-                .collect();
+                .collect()
+        };
+        if let Some(d) = &sensors.dtmb {
             sources.push(Box::new(
                 DtmbSource::new(
                     d.clone(),
-                    towers,
+                    towers_of(TransmitterKind::Dtmb, System::Dtmb),
                     self.scene.clone(),
                     self.frame.clone(),
                     Arc::clone(&clock),
@@ -751,20 +753,9 @@ impl World {
             ));
         }
         if let Some(tc) = &sensors.tcofdm {
-            let stations = self
-                .transmitters
-                .iter()
-                .filter(|t| t.kind == TransmitterKind::Tcofdm)
-                .map(|t| BaseStationSpec {
-                    id: t.id.parse().unwrap_or(EmitterId::new(System::Tcofdm, 1)),
-                    pos_enu_m: t.pos_enu_m,
-                    pos_ecef_m: t.pos_ecef_m,
-                    freq_hz: t.freq_hz,
-                    erp_dbw: t.erp_dbw,
-                    pn_mode: t.pn_mode(),
-                    clock_offset_s: t.spec.clock_offset_ns * 1e-9,
-                    clock_drift_s_per_s: t.spec.clock_drift_ppb * 1e-9,
-                })
+            let stations = towers_of(TransmitterKind::Tcofdm, System::Tcofdm)
+                .into_iter()
+                .map(BaseStationSpec::from)
                 .collect();
             sources.push(Box::new(
                 TcofdmSource::new(
