@@ -323,6 +323,23 @@ impl GnssSource {
     }
 }
 
+/// A healthy satellite with a usable ephemeris above the elevation mask `mask_rad`, seen
+/// from `rx` (ECEF, with `rot` its ECEF→ENU rotation) at `t`: its transmit-time position and
+/// velocity in the reception-time frame ([`transmit_geometry`]), azimuth and elevation.
+pub fn satellite_in_view(
+    nav: &NavData,
+    sat: EmitterId,
+    t: crate::core::GpsTime,
+    rx: &Vector3<f64>,
+    rot: &nalgebra::Matrix3<f64>,
+    mask_rad: f64,
+) -> Option<(Vector3<f64>, Vector3<f64>, f64, f64)> {
+    let eph = nav.select(sat, t).filter(|e| e.is_healthy())?;
+    let (pos, vel) = transmit_geometry(eph, t, rx);
+    let (az, el) = azimuth_elevation_with(rot, rx, &pos);
+    (el >= mask_rad).then_some((pos, vel, az, el))
+}
+
 /// Position and velocity of a satellite at transmission time, rotated into the ECEF frame
 /// of the reception time, with the light time τ found by fixed-point iteration.
 pub fn transmit_geometry(
@@ -378,17 +395,11 @@ impl Source for GnssSource {
 
         self.candidates.clear();
         for (i, ch) in self.channels.iter().enumerate() {
-            let Some(eph) = self.nav.select(ch.sat, truth.t) else {
+            let Some((pos_rot, vel_rot, az, el)) =
+                satellite_in_view(&self.nav, ch.sat, truth.t, &rx, &rot, mask)
+            else {
                 continue;
             };
-            if !eph.is_healthy() {
-                continue;
-            }
-            let (pos_rot, vel_rot) = transmit_geometry(eph, truth.t, &rx);
-            let (az, el) = azimuth_elevation_with(&rot, &rx, &pos_rot);
-            if el < mask {
-                continue;
-            }
             self.candidates.push(Candidate {
                 channel: i,
                 el_rad: el,

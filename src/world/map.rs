@@ -50,13 +50,7 @@ fn polygon(svg: &mut String, v: &View, pts: &[[f64; 2]], style: &str) {
 /// # Errors
 /// When the trajectory cannot be built.
 pub fn svg(world: &World) -> Result<String, String> {
-    let rng = TrialRng::new(world.file.montecarlo.seed, 0);
-    let trajectory = world
-        .file
-        .platform
-        .trajectory
-        .build(&mut rng.stream("motion/trajectory"))
-        .map_err(|i| format!("platform.trajectory.{}: {}", i.key, i.message))?;
+    let trajectory = world.build_trajectory(&TrialRng::new(world.file.montecarlo.seed, 0))?;
     let n = ((world.duration_s / 0.5).ceil() as usize).clamp(2, 20_000);
     let track: Vec<[f64; 2]> = (0..=n)
         .map(|k| {

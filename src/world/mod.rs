@@ -670,6 +670,19 @@ fn check_estimator(
 }
 
 impl World {
+    /// The platform trajectory of the trial whose streams `rng` gives (from the
+    /// `motion/trajectory` stream, so every caller of one trial gets the same path).
+    ///
+    /// # Errors
+    /// When a stochastic trajectory fails for this trial's draws.
+    pub fn build_trajectory(&self, rng: &TrialRng) -> Result<Box<dyn Trajectory>, String> {
+        self.file
+            .platform
+            .trajectory
+            .build(&mut rng.stream("motion/trajectory"))
+            .map_err(|i| format!("platform.trajectory.{}: {}", i.key, i.message))
+    }
+
     /// Builds the trajectory, sources and estimators of one trial.
     ///
     /// # Errors
@@ -677,12 +690,7 @@ impl World {
     /// stochastic trajectory that fails for this trial's draws).
     pub fn build_trial(&self, rng: &TrialRng) -> Result<TrialSetup, String> {
         let end = SimTime::from_seconds(self.duration_s);
-        let trajectory = self
-            .file
-            .platform
-            .trajectory
-            .build(&mut rng.stream("motion/trajectory"))
-            .map_err(|issue| format!("platform.trajectory.{}: {}", issue.key, issue.message))?;
+        let trajectory = self.build_trajectory(rng)?;
         let sensors = &self.file.sensors;
         let mut sources: Vec<Box<dyn crate::engine::Source>> = Vec::new();
         // One receiver clock for every radio source of the trial.
@@ -772,13 +780,8 @@ impl World {
             ));
         }
         let attitude = self.file.platform.attitude();
-        let rebuild = || {
-            self.file
-                .platform
-                .trajectory
-                .build(&mut rng.stream("motion/trajectory"))
-                .map_err(|i| err("platform.trajectory", i))
-        };
+        // The inertial sources own a copy of the same (deterministic) trajectory.
+        let rebuild = || self.build_trajectory(rng);
         if let Some(imu) = &sensors.imu {
             sources.push(Box::new(
                 ImuSource::new(imu, &attitude, rebuild()?, &self.frame, rng, end)

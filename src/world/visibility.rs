@@ -13,7 +13,7 @@
 use crate::core::{Geodetic, SimTime, System, TrialRng};
 use crate::engine::trial::truth_at;
 use crate::gnss::link::Signal;
-use crate::gnss::measurement::transmit_geometry;
+use crate::gnss::measurement::satellite_in_view;
 use crate::gnss::visibility::{scene_effect, LinkClass};
 use crate::propagation::{Emitter, LinkParams, LinkPaths, LosState, Polarisation};
 use crate::world::scene::TransmitterKind;
@@ -52,19 +52,14 @@ impl EpochVisibility {
     }
 }
 
-/// Visibility every `step_s` along the trajectory of trial 0 (seed 0: a deterministic
-/// trajectory is the same in every trial; a stochastic one is shown for one draw).
+/// Visibility every `step_s` along the trajectory of trial 0 of the world's seed (a
+/// deterministic trajectory is the same in every trial; a stochastic one is shown for one
+/// draw).
 ///
 /// # Errors
 /// When the trajectory cannot be built.
 pub fn survey(world: &World, step_s: f64) -> Result<Vec<EpochVisibility>, String> {
-    let rng = TrialRng::new(world.file.montecarlo.seed, 0);
-    let trajectory = world
-        .file
-        .platform
-        .trajectory
-        .build(&mut rng.stream("motion/trajectory"))
-        .map_err(|i| format!("platform.trajectory.{}: {}", i.key, i.message))?;
+    let trajectory = world.build_trajectory(&TrialRng::new(world.file.montecarlo.seed, 0))?;
     let step_s = if step_s.is_finite() && step_s > 0.0 {
         step_s
     } else {
@@ -93,18 +88,11 @@ pub fn survey(world: &World, step_s: f64) -> Result<Vec<EpochVisibility>, String
                 if !g.systems.contains(&sat.system) {
                     continue;
                 }
-                let Some(eph) = world.nav.select(sat, truth.t) else {
+                let Some((pos, _, _, el)) =
+                    satellite_in_view(&world.nav, sat, truth.t, &truth.pos_ecef_m, &rot, mask)
+                else {
                     continue;
                 };
-                if !eph.is_healthy() {
-                    continue;
-                }
-                let (pos, _) = transmit_geometry(eph, truth.t, &truth.pos_ecef_m);
-                let (_, el) =
-                    crate::core::geodesy::azimuth_elevation_with(&rot, &truth.pos_ecef_m, &pos);
-                if el < mask {
-                    continue;
-                }
                 let open_cn0 = g.tracking.cn0_dbhz(sat.system, el);
                 let class = match (&world.scene, Signal::of_system(sat.system)) {
                     (Some(scene), Some(signal)) if g.scene => {
