@@ -335,7 +335,7 @@ pub struct TransmitterSpec {
     pub freq_mhz: Option<f64>,
     /// Effective radiated power (kW).
     pub erp_kw: f64,
-    /// DTMB frame header: `"pn420"`, `"pn595"` or `"pn945"`; default pn945.
+    /// DTMB or TC-OFDM frame header: `"pn420"`, `"pn595"` or `"pn945"`; default pn945.
     #[serde(default)]
     pub pn_mode: Option<String>,
     /// Transmitter clock offset from GPS time (ns).
@@ -433,17 +433,14 @@ impl TransmitterSpec {
             }
         };
         if let Some(m) = &self.pn_mode {
-            if self.kind != TransmitterKind::Dtmb {
+            if self.kind == TransmitterKind::Fm {
                 return err(
                     "pn_mode",
-                    "pn_mode applies to DTMB transmitters only".into(),
+                    "pn_mode applies to DTMB and TC-OFDM transmitters only".into(),
                 );
             }
-            if !["pn420", "pn595", "pn945"].contains(&m.as_str()) {
-                return err(
-                    "pn_mode",
-                    format!("expected \"pn420\", \"pn595\" or \"pn945\", got \"{m}\""),
-                );
+            if let Err(e) = m.parse::<crate::dtmb::PnMode>() {
+                return err("pn_mode", e.to_string());
             }
         }
         for (k, v) in [

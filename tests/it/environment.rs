@@ -414,3 +414,28 @@ fn terrestrial_and_inertial_sources_are_deterministic_across_threads() {
         }
     }
 }
+
+/// `pn_mode` is accepted on TC-OFDM base stations (their ranging code uses the DTMB
+/// headers) and refused on FM stations.
+#[test]
+fn pn_mode_applies_to_dtmb_and_tcofdm_only() {
+    let base = std::fs::read_to_string(repo().join("worlds/seed004-bupt.toml")).unwrap();
+    let dir = tmp_dir("pn-mode");
+    let from = "id = \"T01\"\nkind = \"tcofdm\"\n";
+    assert!(base.contains(from));
+    let p = write(
+        &dir,
+        "ok.toml",
+        &base.replacen(from, &format!("{from}pn_mode = \"pn595\"\n"), 1),
+    );
+    let w = load_world(&p).unwrap();
+    assert_eq!(w.transmitters[0].pn_mode(), hybridnav::dtmb::PnMode::Pn595);
+    let fm = "[[transmitter]]\nid = \"F01\"\nkind = \"fm\"\nposition_enu_m = [0, -50, 30]\nfreq_mhz = 97.4\nerp_kw = 1.0\npn_mode = \"pn945\"\n\n";
+    let p = write(
+        &dir,
+        "bad.toml",
+        &base.replacen("[[transmitter]]\n", &format!("{fm}[[transmitter]]\n"), 1),
+    );
+    let err = load_world(&p).expect_err("pn_mode on FM").to_string();
+    assert!(err.contains("transmitter[0].pn_mode"), "{err}");
+}
