@@ -303,13 +303,7 @@ impl Channel {
         out: &mut [Complex32],
         rng: &mut R,
     ) -> Result<(), DtmbError> {
-        if out.len() > self.max_block {
-            return Err(DtmbError::BufferLength {
-                what: "channel output",
-                expected: self.max_block,
-                got: out.len(),
-            });
-        }
+        self.check_block(out.len())?;
         match self.fd.as_mut() {
             Some(fd) => {
                 fd.process(&self.cfg, src, rx_start, out);
@@ -320,6 +314,17 @@ impl Channel {
         }
     }
 
+    fn check_block(&self, len: usize) -> Result<(), DtmbError> {
+        if len > self.max_block {
+            return Err(DtmbError::BufferLength {
+                what: "channel output",
+                expected: self.max_block,
+                got: len,
+            });
+        }
+        Ok(())
+    }
+
     /// Whether [`Channel::process`] uses the frequency-domain engine for this
     /// configuration.
     pub fn is_frequency_domain(&self) -> bool {
@@ -328,9 +333,9 @@ impl Channel {
 
     /// The reference time-domain implementation of [`Channel::process`]: a 32-tap
     /// windowed-sinc FIR per path and sub-block, the carrier rotation per sample, and
-    /// Gaussian noise from `rand_distr`'s ziggurat. About 20× slower than the
-    /// frequency-domain path; kept as the second implementation the fast path is tested
-    /// against.
+    /// Gaussian noise from `rand_distr`'s ziggurat. Several times slower than the
+    /// frequency-domain path (2.8× per 6-path frame in `docs/performance.md`); kept as the
+    /// second implementation the fast path is tested against.
     ///
     /// # Errors
     /// [`DtmbError::BufferLength`] when `out` is longer than the channel's `max_block`.
@@ -341,13 +346,7 @@ impl Channel {
         out: &mut [Complex32],
         rng: &mut R,
     ) -> Result<(), DtmbError> {
-        if out.len() > self.max_block {
-            return Err(DtmbError::BufferLength {
-                what: "channel output",
-                expected: self.max_block,
-                got: out.len(),
-            });
-        }
+        self.check_block(out.len())?;
         let k = KERNEL_HALF_WIDTH as i64;
         let r = 1.0 / (1.0 + self.cfg.sfo_ppm * 1e-6);
         let (dmin, dmax) = self
