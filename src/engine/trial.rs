@@ -218,6 +218,7 @@ mod tests {
             out.items.push(Measurement::Position(PositionFix {
                 pos_ecef_m: ctx.truth.pos_ecef_m,
                 cov_m2: Matrix3::identity(),
+                support: 0,
             }));
             Some(SimTime(ctx.truth.sim.0 + self.period))
         }

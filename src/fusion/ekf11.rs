@@ -1175,6 +1175,7 @@ mod tests {
         let fix = PositionFix {
             pos_ecef_m: r + Vector3::new(10.0, 0.0, 0.0),
             cov_m2: Matrix3::identity() * 100.0,
+            support: 0,
         };
         let before = f.position_covariance();
         let out = f.update_position(&fix);

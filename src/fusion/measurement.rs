@@ -52,6 +52,10 @@ impl RangeMeasurement {
 pub struct PositionFix {
     pub pos_ecef_m: Vector3<f64>,
     pub cov_m2: Matrix3<f64>,
+    /// How many reference points (FM: the RPs inside the constraint circle) or matched
+    /// landmark samples support the fix; 0 when the method has no such count. Mode
+    /// selection reads it (seed 000 §3.3: the number of RPs is one of the fuzzy inputs).
+    pub support: u32,
 }
 
 /// One step detected by pedestrian dead reckoning (seed 002 §4.2): its length and the

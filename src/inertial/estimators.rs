@@ -1087,6 +1087,7 @@ mod tests {
             items: vec![Measurement::Position(PositionFix {
                 pos_ecef_m: f.ecef_of_enu(&Vector3::new(0.02 * k as f64, 0.0, 0.0)),
                 cov_m2: Matrix3::identity() * 0.01,
+                support: 0,
             })],
         };
         let mut k = 0;
@@ -1216,6 +1217,7 @@ mod tests {
             items: vec![Measurement::Position(PositionFix {
                 pos_ecef_m: f.ecef_of_enu(&fix_enu),
                 cov_m2: ecef_cov(&f, &cov),
+                support: 0,
             })],
             ..Default::default()
         };

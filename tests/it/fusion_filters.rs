@@ -284,6 +284,7 @@ fn ekf_equals_linear_kf_on_position_fixes() {
         let out = ekf.update_position(&PositionFix {
             pos_ecef_m: z,
             cov_m2: cov,
+            support: 0,
         });
         let nis = kf
             .update(
@@ -382,7 +383,8 @@ fn ekf_vs_relinearised_kf(cfg: Ekf11Config, n: usize, seed: u64) -> (f64, f64) {
             assert!(ekf
                 .update_position(&PositionFix {
                     pos_ecef_m: z,
-                    cov_m2: cov
+                    cov_m2: cov,
+                    support: 0,
                 })
                 .is_accepted());
             let mut hf = DMatrix::zeros(3, n);
@@ -836,6 +838,7 @@ fn non_finite_and_invalid_input_is_rejected_and_the_state_stays_finite() {
     let bad_fix = PositionFix {
         pos_ecef_m: Vector3::new(f64::NAN, 0.0, 0.0),
         cov_m2: Matrix3::identity(),
+        support: 0,
     };
     assert_eq!(
         ekf.update_position(&bad_fix).reject_reason(),
@@ -844,6 +847,7 @@ fn non_finite_and_invalid_input_is_rejected_and_the_state_stays_finite() {
     let bad_cov = PositionFix {
         pos_ecef_m: r,
         cov_m2: Matrix3::new(1.0, 2.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 1.0),
+        support: 0,
     };
     assert_eq!(
         ekf.update_position(&bad_cov).reject_reason(),

@@ -1334,6 +1334,7 @@ impl Source for FakePositionFixes {
             hybridnav::fusion::measurement::PositionFix {
                 pos_ecef_m: ctx.truth.pos_ecef_m + c.transpose() * n * self.sigma_m,
                 cov_m2: Matrix3::identity() * self.sigma_m * self.sigma_m,
+                support: 0,
             },
         ));
         let next = SimTime(ctx.truth.sim.0 + 1_000_000_000);
