@@ -218,6 +218,7 @@ fn engine_epochs(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::W
         items: vec![Measurement::Position(PositionFix {
             pos_ecef_m: frame.origin_ecef(),
             cov_m2: Matrix3::identity() * 0.01,
+            support: 0,
         })],
     };
     // A position fix at the time of the last IMU sample (the body glides east at 2 m/s).
