@@ -53,7 +53,8 @@ pub trait Estimator: Send {
 
 use crate::core::System;
 use crate::fusion::ekf11::{Ekf11, Ekf11Config, IsbConfig, RejectReason, UpdateOutcome};
-use crate::fusion::measurement::RangeMeasurement;
+use crate::fusion::measurement::{Measurement, RangeMeasurement};
+use crate::fusion::selection::{Admission, ModeSelection, ModeSelector};
 use crate::fusion::wls::{self, WlsOptions};
 
 /// Seed 000's EKF driven epoch by epoch: initialised from a weighted-least-squares fix,
@@ -67,6 +68,10 @@ pub struct EkfEstimator {
     scratch: Vec<RangeMeasurement>,
     /// Emitter geometry of the current batch for the GDOP (reused buffer).
     geometry: Vec<(Vector3<f64>, usize)>,
+    /// Sources whose position fixes it takes (`"fm"`).
+    fixes: Vec<String>,
+    /// The mode-selection scheme, if any.
+    selector: Option<ModeSelector>,
 }
 
 impl EkfEstimator {
@@ -93,7 +98,24 @@ impl EkfEstimator {
             last_t: None,
             scratch: Vec::with_capacity(64),
             geometry: Vec::with_capacity(64),
+            fixes: Vec::new(),
+            selector: None,
         })
+    }
+
+    /// The same estimator also taking the position fixes of the sources named in `fixes`
+    /// and selecting what it uses by `selection`.
+    ///
+    /// # Errors
+    /// When the selection's configuration is invalid.
+    pub fn with_fixes_and_selection(
+        mut self,
+        fixes: &[String],
+        selection: Option<&ModeSelection>,
+    ) -> Result<Self, String> {
+        self.fixes = fixes.to_vec();
+        self.selector = selection.map(ModeSelector::new).transpose()?;
+        Ok(self)
     }
 
     fn estimate(&self, t: GpsTime) -> Option<Estimate> {
@@ -103,6 +125,25 @@ impl EkfEstimator {
             vel_ecef_mps: Some(self.ekf.velocity_ecef()),
             cov_pos_m2: self.ekf.position_covariance(),
         })
+    }
+}
+
+/// Adds one scalar or vector update's outcome to the epoch's counts.
+fn tally_outcome(out: &mut EpochOutcome, o: UpdateOutcome) {
+    match o {
+        UpdateOutcome::Accepted { nis } => {
+            out.used += 1;
+            if nis.is_finite() {
+                out.nis_sum += nis;
+                out.nis_count += 1;
+            }
+        }
+        UpdateOutcome::Rejected { reason, .. } => {
+            out.rejected += 1;
+            if reason == RejectReason::Gate {
+                out.rejected_gate += 1;
+            }
+        }
     }
 }
 
@@ -122,7 +163,7 @@ fn select_ranges(
 }
 
 /// GDOP of the ranges in `ranges` seen from `rx`, one clock per system present.
-fn gdop_of(
+pub(crate) fn gdop_of(
     rx: &Vector3<f64>,
     ranges: &[RangeMeasurement],
     geometry: &mut Vec<(Vector3<f64>, usize)>,
@@ -160,13 +201,23 @@ impl Estimator for EkfEstimator {
             "gnss" => true,
             "dtmb" => self.systems.contains(&System::Dtmb),
             "tcofdm" => self.systems.contains(&System::Tcofdm),
-            _ => false,
+            other => self.fixes.iter().any(|f| f == other),
         }
     }
 
     fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
-        select_ranges(batch, &self.systems, &mut self.scratch);
         let mut out = EpochOutcome::default();
+        let rx = self.ekf.is_initialised().then(|| self.ekf.position_ecef());
+        let admitted = match self.selector.as_mut() {
+            Some(s) => {
+                let d = s.decide(batch, rx.as_ref());
+                out.mode = Some(d.label);
+                d
+            }
+            None => Admission::all(),
+        };
+        select_ranges(batch, &self.systems, &mut self.scratch);
+        self.scratch.retain(|m| admitted.admits(m.system()));
         if !self.ekf.is_initialised() {
             // The first fix comes from least squares on this epoch alone; until one exists
             // the epoch counts as an epoch without a fix.
@@ -206,20 +257,14 @@ impl Estimator for EkfEstimator {
         for m in &self.scratch {
             let r = self.ekf.update_range(m);
             for o in std::iter::once(r.range).chain(r.rate) {
-                match o {
-                    UpdateOutcome::Accepted { nis } => {
-                        out.used += 1;
-                        if nis.is_finite() {
-                            out.nis_sum += nis;
-                            out.nis_count += 1;
-                        }
-                    }
-                    UpdateOutcome::Rejected { reason, .. } => {
-                        out.rejected += 1;
-                        if reason == RejectReason::Gate {
-                            out.rejected_gate += 1;
-                        }
-                    }
+                tally_outcome(&mut out, o);
+            }
+        }
+        if admitted.fixes && self.fixes.contains(&batch.source) {
+            for m in &batch.items {
+                if let Measurement::Position(p) = m {
+                    let o = self.ekf.update_position(p);
+                    tally_outcome(&mut out, o);
                 }
             }
         }

@@ -5,10 +5,12 @@
 
 pub mod ekf11;
 pub mod estimator;
+pub mod family;
 pub mod kalman;
 pub mod linear_kf;
 pub mod measurement;
 pub mod mode;
 pub mod models;
 pub mod particle;
+pub mod selection;
 pub mod wls;

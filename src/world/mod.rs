@@ -6,6 +6,7 @@
 
 pub mod locate;
 pub mod map;
+pub mod presets;
 pub mod scene;
 pub mod schema;
 pub mod visibility;
@@ -276,6 +277,7 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
         start,
         imu: file.sensors.imu.as_ref(),
         start_enu_m: probe.state_at(0.0).pos_enu_m,
+        rng: TrialRng::new(0, 0),
     };
     for (i, e) in file.estimators.iter().enumerate() {
         check_estimator(&ctx, i, e, &simulated, &file, &build_ctx)?;
@@ -614,6 +616,11 @@ fn check_terrestrial_and_inertial(
     Ok(systems)
 }
 
+/// The sources of position fixes the world simulates.
+fn fix_sources(_file: &WorldFile) -> Vec<&'static str> {
+    Vec::new()
+}
+
 fn check_estimator(
     ctx: &Ctx<'_>,
     i: usize,
@@ -658,7 +665,53 @@ fn check_estimator(
     match e.filter {
         FilterKind::Ins => needs(file.sensors.imu.is_some(), "an IMU: add [sensors.imu]")?,
         FilterKind::Pdr => needs(file.sensors.pdr.is_some(), "step events: add [sensors.pdr]")?,
-        FilterKind::Ekf11 | FilterKind::Wls => {}
+        _ => {}
+    }
+    let kalman = e.filter == FilterKind::Ekf11 || e.filter.family().is_some();
+    if !kalman {
+        let extra = [
+            ("options", e.options.is_some()),
+            ("fixes", !e.fixes.is_empty()),
+            ("selection", e.selection.is_some()),
+            ("fuzzy", e.fuzzy.is_some()),
+        ];
+        if let Some((k, _)) = extra.iter().find(|(_, set)| *set) {
+            return Err(ctx.err(
+                &at(k),
+                format!(
+                    "'{k}' applies to the filters ekf11, ekf, ukf, ckf, stf, rekf and pf, not to '{}'",
+                    format!("{:?}", e.filter).to_lowercase()
+                ),
+            ));
+        }
+    }
+    if e.options.is_some() && e.filter.family().is_none() {
+        return Err(ctx.err(
+            &at("options"),
+            "[estimator.options] tunes the filters ekf, ukf, ckf, stf, rekf and pf",
+        ));
+    }
+    if e.fuzzy.is_some() && e.selection != Some(crate::fusion::selection::SelectionKind::Fuzzy) {
+        return Err(ctx.err(
+            &at("fuzzy"),
+            "[estimator.fuzzy] needs selection = \"fuzzy\"",
+        ));
+    }
+    for (j, f) in e.fixes.iter().enumerate() {
+        let simulated_fix = fix_sources(file);
+        if !simulated_fix.contains(&f.as_str()) {
+            return Err(ctx.err(
+                &at(&format!("fixes[{j}]")),
+                format!(
+                    "'{f}' is not a position-fix source this world simulates (it has: {})",
+                    if simulated_fix.is_empty() {
+                        "none".to_string()
+                    } else {
+                        simulated_fix.join(", ")
+                    }
+                ),
+            ));
+        }
     }
     if let (FilterKind::Ekf11, Some(cfg)) = (e.filter, &e.ekf) {
         cfg.validate()
@@ -799,6 +852,7 @@ impl World {
             start: self.start,
             imu: sensors.imu.as_ref(),
             start_enu_m: trajectory.state_at(0.0).pos_enu_m,
+            rng: *rng,
         };
         let estimators = self
             .file

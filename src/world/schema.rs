@@ -5,6 +5,9 @@ use crate::core::System;
 use crate::dtmb::DtmbSensorConfig;
 use crate::fusion::ekf11::Ekf11Config;
 use crate::fusion::estimator::{EkfEstimator, Estimator, WlsEstimator};
+use crate::fusion::family::{FamilyConfig, FamilyEstimator, FamilyKind};
+use crate::fusion::mode::FuzzyConfig;
+use crate::fusion::selection::{ModeSelection, SelectionKind};
 use crate::gnss::measurement::GnssConfig;
 use crate::gnss::receiver_clock::ClockConfig;
 use crate::inertial::attitude::{Platform, PlatformConfig};
@@ -32,7 +35,11 @@ pub struct WorldFile {
     pub transmitters: Vec<TransmitterSpec>,
     #[serde(default)]
     pub shielding: Vec<ShieldingSpec>,
-    #[serde(default, rename = "estimator")]
+    #[serde(
+        default,
+        rename = "estimator",
+        deserialize_with = "estimators_with_presets"
+    )]
     pub estimators: Vec<EstimatorSpec>,
     #[serde(default)]
     pub montecarlo: MonteCarloSection,
@@ -146,6 +153,26 @@ pub struct ShieldingSpec {
     pub block: Option<Vec<String>>,
 }
 
+/// Reads the `[[estimator]]` tables, expanding each `preset = "…"` first
+/// ([`crate::world::presets`]).
+fn estimators_with_presets<'de, D>(d: D) -> Result<Vec<EstimatorSpec>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+{
+    use serde::de::Error;
+    let tables = Vec::<toml::Table>::deserialize(d)?;
+    tables
+        .into_iter()
+        .enumerate()
+        .map(|(i, t)| {
+            let t = crate::world::presets::expand(t)
+                .map_err(|m| D::Error::custom(format!("estimator[{i}].{m}")))?;
+            EstimatorSpec::deserialize(toml::Value::Table(t))
+                .map_err(|e| D::Error::custom(format!("estimator[{i}]: {}", e.message())))
+        })
+        .collect()
+}
+
 /// The filter an estimator runs.
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
@@ -158,6 +185,33 @@ pub enum FilterKind {
     Ins,
     /// Pedestrian dead reckoning from step events, optionally corrected by fixes.
     Pdr,
+    /// The generic EKF (Joseph form) on seed 000's model ([`crate::fusion::family`]).
+    Ekf,
+    /// The unscented Kalman filter on the same model.
+    Ukf,
+    /// The cubature Kalman filter.
+    Ckf,
+    /// The strong tracking filter.
+    Stf,
+    /// Seed 004's relative-entropy Kalman filter.
+    Rekf,
+    /// The SIR particle filter.
+    Pf,
+}
+
+impl FilterKind {
+    /// The member of the filter family, for the kinds [`FamilyEstimator`] runs.
+    pub fn family(self) -> Option<FamilyKind> {
+        Some(match self {
+            FilterKind::Ekf => FamilyKind::Ekf,
+            FilterKind::Ukf => FamilyKind::Ukf,
+            FilterKind::Ckf => FamilyKind::Ckf,
+            FilterKind::Stf => FamilyKind::Stf,
+            FilterKind::Rekf => FamilyKind::Rekf,
+            FilterKind::Pf => FamilyKind::Pf,
+            FilterKind::Ekf11 | FilterKind::Wls | FilterKind::Ins | FilterKind::Pdr => return None,
+        })
+    }
 }
 
 /// One `[[estimator]]`.
@@ -169,9 +223,23 @@ pub struct EstimatorSpec {
     /// Systems whose measurements it uses.
     pub sources: Vec<System>,
     pub filter: FilterKind,
-    /// EKF tuning (filter = "ekf11").
-    #[serde(default)]
+    /// Seed 000's model tuning (PSDs, initial sigmas, χ² gates) for `ekf11` and for the
+    /// filter family (`ekf`, `ukf`, `ckf`, `stf`, `rekf`, `pf`); `[estimator.model]` is
+    /// accepted as another name.
+    #[serde(default, alias = "model")]
     pub ekf: Option<Ekf11Config>,
+    /// Tuning of the family's filters (`[estimator.options]`).
+    #[serde(default)]
+    pub options: Option<FamilyConfig>,
+    /// Sources whose position fixes the estimator takes (`"fm"`).
+    #[serde(default)]
+    pub fixes: Vec<String>,
+    /// Mode selection: `"fuzzy"` (seed 000) or `"seamless"` (seed 003).
+    #[serde(default)]
+    pub selection: Option<SelectionKind>,
+    /// The fuzzy system's sets and rules (`selection = "fuzzy"`); default: seed 000's.
+    #[serde(default)]
+    pub fuzzy: Option<FuzzyConfig>,
     /// INS filter settings (filter = "ins").
     #[serde(default)]
     pub ins: Option<InsFilterConfig>,
@@ -187,6 +255,8 @@ pub struct BuildContext<'a> {
     pub imu: Option<&'a ImuConfig>,
     /// The platform's true start position (ENU), standing in for a surveyed start point.
     pub start_enu_m: nalgebra::Vector3<f64>,
+    /// The trial's random streams (the particle filter draws from its own).
+    pub rng: crate::core::TrialRng,
 }
 
 fn one() -> u64 {
@@ -217,8 +287,35 @@ impl EstimatorSpec {
     pub fn build(&self, ctx: &BuildContext<'_>) -> Result<Box<dyn Estimator>, String> {
         let issue =
             |t: &str, i: crate::motion::ConfigIssue| format!("{t}.{}: {}", i.key, i.message);
+        let selection = self.selection.map(|k| match k {
+            SelectionKind::Fuzzy => {
+                ModeSelection::Fuzzy(Box::new(self.fuzzy.clone().unwrap_or_default()))
+            }
+            SelectionKind::Seamless => ModeSelection::Seamless,
+        });
         Ok(match self.filter {
-            FilterKind::Ekf11 => Box::new(EkfEstimator::new(&self.name, &self.sources, self.ekf)?),
+            FilterKind::Ekf
+            | FilterKind::Ukf
+            | FilterKind::Ckf
+            | FilterKind::Stf
+            | FilterKind::Rekf
+            | FilterKind::Pf => {
+                let kind = self.filter.family().ok_or("not a filter-family kind")?;
+                Box::new(FamilyEstimator::new(
+                    &self.name,
+                    kind,
+                    &self.sources,
+                    &self.fixes,
+                    self.ekf,
+                    self.options,
+                    selection.as_ref(),
+                    &ctx.rng,
+                )?)
+            }
+            FilterKind::Ekf11 => Box::new(
+                EkfEstimator::new(&self.name, &self.sources, self.ekf)?
+                    .with_fixes_and_selection(&self.fixes, selection.as_ref())?,
+            ),
             FilterKind::Wls => Box::new(WlsEstimator::new(&self.name, &self.sources)),
             FilterKind::Ins => {
                 let imu = ctx

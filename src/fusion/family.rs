@@ -1,0 +1,823 @@
+//! The filter family behind one engine estimator: the same measurements, the same process
+//! model, a different filter.
+//!
+//! Seeds 001, 003 and 004 compare filters on one problem (PF against EKF; RE-KF against
+//! STF, CKF and EKF). [`FamilyEstimator`] makes that comparison a world-file choice: every
+//! filter of [`crate::fusion::kalman`] and [`crate::fusion::particle`] runs seed 000's
+//! position–velocity–acceleration + clock model ([`Pva11Clock`], eqs. 4–8) and takes
+//! pseudoranges, pseudorange rates and position fixes through the generic measurement
+//! models of [`crate::fusion::models`]:
+//!
+//! ```text
+//! ρ_j  = ‖r_j − r‖ + b (+ isb for BDS) + ε            (Pseudoranges, M = 1)
+//! ρ̇_j  = u_j·(v_j − v) + ḃ + ε                        (row 2 of PseudorangesAndRates)
+//! L    = r + ε,  ε ~ N(0, R_f)                          (PositionFixModel, M = 3)
+//! ```
+//!
+//! A range rate is a second scalar update linearised at the state the pseudorange left,
+//! as [`crate::fusion::ekf11::Ekf11`] does, so with `filter = "ekf"` the family reproduces
+//! the hand-optimised `ekf11` (a test checks it to 1e-6 m on a whole trial). The strong
+//! tracking filter keeps one fading-factor memory per scalar channel, so it takes every
+//! measurement as whitened scalar rows (`z' = L⁻¹z`, `h' = L⁻¹h` with `L Lᵀ = R`), which
+//! for a linearised update is the vector update done row by row.
+//!
+//! Divergence is detected, never passed on: a prediction or update that fails, a state that
+//! is not finite or a position σ beyond [`FamilyConfig::divergence_pos_sigma_m`] resets
+//! the filter, the epoch is reported with `numerical_failure`, and the next epoch
+//! re-initialises from least squares.
+
+use crate::core::rng::{StreamRng, TrialRng};
+use crate::core::{GpsTime, System};
+use crate::fusion::ekf11::{chi2, idx, Ekf11Config, IsbConfig, RejectReason, UpdateOutcome};
+use crate::fusion::estimator::{EpochOutcome, Estimate, Estimator};
+use crate::fusion::kalman::{
+    Ekf, Gating, RelativeEntropyKf, ResidualGate, SigmaPointKf, UpdateReport,
+    DEFAULT_ALEPH_THRESHOLD,
+};
+use crate::fusion::measurement::{Measurement, MeasurementBatch, PositionFix, RangeMeasurement};
+use crate::fusion::models::{
+    MeasurementModel, PositionFixModel, ProcessModel, Pseudoranges, PseudorangesAndRates,
+    Pva11Clock, RangeRow, StateLayout,
+};
+use crate::fusion::particle::{ParticleBuffer, ParticleFilter, Resampling};
+use crate::fusion::selection::{ModeSelection, ModeSelector};
+use crate::fusion::wls::{self, WlsOptions};
+use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+use serde::Deserialize;
+
+/// The state dimension: seed 000's eleven states plus the BeiDou inter-system bias.
+pub const N: usize = crate::fusion::ekf11::N_STATES;
+
+type State = SVector<f64, N>;
+type Cov = SMatrix<f64, N, N>;
+
+/// Which member of the family an estimator runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FamilyKind {
+    /// The generic EKF with the Joseph-form update.
+    Ekf,
+    /// The unscented Kalman filter (Merwe's scaled points).
+    Ukf,
+    /// The cubature Kalman filter.
+    Ckf,
+    /// The strong tracking filter.
+    Stf,
+    /// Seed 004's relative-entropy Kalman filter.
+    Rekf,
+    /// The SIR particle filter.
+    Pf,
+}
+
+impl FamilyKind {
+    /// The name a world file uses.
+    pub fn label(self) -> &'static str {
+        match self {
+            FamilyKind::Ekf => "ekf",
+            FamilyKind::Ukf => "ukf",
+            FamilyKind::Ckf => "ckf",
+            FamilyKind::Stf => "stf",
+            FamilyKind::Rekf => "rekf",
+            FamilyKind::Pf => "pf",
+        }
+    }
+}
+
+/// How the particle filter resamples (`[estimator.options] resampling`).
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ResamplingKind {
+    Systematic,
+    Stratified,
+}
+
+/// `[estimator.options]`: the tuning of the family's filters. The process model's tuning
+/// (PSDs, initial sigmas, χ² gates) is `[estimator.ekf]`, shared with `ekf11`.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct FamilyConfig {
+    /// UKF: Merwe's α, β, κ. Defaults α = 0.5, β = 2, κ = 0: with twelve states a small α
+    /// makes the centre weight hugely negative and the covariance indefinite in rounding.
+    pub ukf_alpha: f64,
+    pub ukf_beta: f64,
+    pub ukf_kappa: f64,
+    /// STF: forgetting factor ρ (0 < ρ ≤ 1) and weakening factor β ≥ 1 (Zhou & Frank).
+    pub stf_forgetting: f64,
+    pub stf_weakening: f64,
+    /// RE-KF: the coupling-degree threshold ℵ_threshold (seed 004 eq. 38; the paper gives
+    /// no value, default ½ ln 2).
+    pub rekf_aleph_threshold: f64,
+    /// Seed 004's data-layer residual gate `|d_j| ≤ C·√ε_jj` (eq. 24): `C`. Default none,
+    /// except for `rekf`, whose default is 3 (the paper uses 2 or 3).
+    pub residual_gate_c: Option<f64>,
+    /// PF: number of particles, resampling scheme and the N_eff fraction below which it
+    /// resamples.
+    pub particles: usize,
+    pub resampling: ResamplingKind,
+    pub neff_threshold: f64,
+    /// PF: also weight by the pseudorange rates. Default false: seeds 001 and 003 use
+    /// pseudoranges only, and a Doppler an order of magnitude more precise than the
+    /// process noise collapses a bootstrap filter's weights onto one particle.
+    pub pf_use_rates: bool,
+    /// A position 1-σ (m, from the trace of the position covariance) beyond which the
+    /// filter is declared diverged and reset. Default 100 km.
+    pub divergence_pos_sigma_m: f64,
+}
+
+impl Default for FamilyConfig {
+    fn default() -> Self {
+        Self {
+            ukf_alpha: 0.5,
+            ukf_beta: 2.0,
+            ukf_kappa: 0.0,
+            stf_forgetting: 0.95,
+            stf_weakening: 1.0,
+            rekf_aleph_threshold: DEFAULT_ALEPH_THRESHOLD,
+            residual_gate_c: None,
+            particles: 2000,
+            resampling: ResamplingKind::Systematic,
+            neff_threshold: 0.5,
+            pf_use_rates: false,
+            divergence_pos_sigma_m: 1e5,
+        }
+    }
+}
+
+impl FamilyConfig {
+    /// Checks the numbers a filter cannot use, naming the key.
+    ///
+    /// # Errors
+    /// `(key, message)`.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        let bad = |k: &str, m: String| Err((k.to_string(), m));
+        if !(self.ukf_alpha.is_finite() && self.ukf_alpha > 0.0) {
+            return bad("ukf_alpha", format!("{}: expected > 0", self.ukf_alpha));
+        }
+        if !(self.ukf_beta.is_finite() && self.ukf_kappa.is_finite()) {
+            return bad("ukf_beta", "expected finite ukf_beta and ukf_kappa".into());
+        }
+        if !(self.stf_forgetting > 0.0 && self.stf_forgetting <= 1.0) {
+            return bad(
+                "stf_forgetting",
+                format!("{}: expected 0 < ρ ≤ 1", self.stf_forgetting),
+            );
+        }
+        if !(self.stf_weakening.is_finite() && self.stf_weakening >= 1.0) {
+            return bad(
+                "stf_weakening",
+                format!("{}: expected β ≥ 1", self.stf_weakening),
+            );
+        }
+        if !(self.rekf_aleph_threshold.is_finite() && self.rekf_aleph_threshold > 0.0) {
+            return bad(
+                "rekf_aleph_threshold",
+                format!("{}: expected > 0", self.rekf_aleph_threshold),
+            );
+        }
+        if let Some(c) = self.residual_gate_c {
+            if !(c.is_finite() && c > 0.0) {
+                return bad("residual_gate_c", format!("{c}: expected > 0"));
+            }
+        }
+        if !(2..=1_000_000).contains(&self.particles) {
+            return bad(
+                "particles",
+                format!("{}: expected 2 to 1 000 000", self.particles),
+            );
+        }
+        if !(0.0..=1.0).contains(&self.neff_threshold) {
+            return bad(
+                "neff_threshold",
+                format!("{}: expected a fraction in [0, 1]", self.neff_threshold),
+            );
+        }
+        if !(self.divergence_pos_sigma_m.is_finite() && self.divergence_pos_sigma_m > 0.0) {
+            return bad(
+                "divergence_pos_sigma_m",
+                format!("{}: expected > 0", self.divergence_pos_sigma_m),
+            );
+        }
+        Ok(())
+    }
+}
+
+/// One scalar row of a whitened measurement: `h'(x) = (L⁻¹ h(x))_row`, `R' = 1`, with
+/// `L Lᵀ = R` (the rows of `L⁻¹ν` are independent with unit variance).
+struct WhitenedRow<'a, H, const M: usize> {
+    model: &'a H,
+    linv: SMatrix<f64, M, M>,
+    row: usize,
+}
+
+impl<'a, H, const NN: usize, const M: usize> MeasurementModel<NN, 1> for WhitenedRow<'a, H, M>
+where
+    H: MeasurementModel<NN, M>,
+{
+    fn h(&self, x: &SVector<f64, NN>) -> SVector<f64, 1> {
+        SVector::<f64, 1>::new((self.linv * self.model.h(x))[self.row])
+    }
+    fn jacobian(&self, x: &SVector<f64, NN>) -> SMatrix<f64, 1, NN> {
+        (self.linv * self.model.jacobian(x))
+            .fixed_rows::<1>(self.row)
+            .into_owned()
+    }
+    fn r(&self) -> SMatrix<f64, 1, 1> {
+        SMatrix::<f64, 1, 1>::identity()
+    }
+}
+
+/// Adds what one update did to the epoch's outcome.
+fn tally(out: &mut EpochOutcome, rep: &UpdateReport) {
+    out.used += rep.used;
+    out.rejected += rep.rejected;
+    match rep.outcome {
+        UpdateOutcome::Accepted { nis } if nis.is_finite() => {
+            out.nis_sum += nis;
+            out.nis_count += 1;
+        }
+        UpdateOutcome::Rejected {
+            reason: RejectReason::Gate,
+            ..
+        } => out.rejected_gate += rep.rejected,
+        _ => {}
+    }
+}
+
+/// The strong tracking prediction (Zhou & Frank 1996) on a stacked, whitened measurement
+/// of variable size: with `m` whitened pseudorange innovations `ν_j` and rows `h_j` at the
+/// predicted state,
+///
+/// ```text
+/// V_k = (ρ V_{k−1} + Σν_j²/m) / (1 + ρ)          (V_1 = Σν_j²/m)
+/// c_k = (V_k − Σ h_j Q h_jᵀ/m − β) / (Σ h_j F P Fᵀ h_jᵀ/m),   λ_k = max(1, c_k)
+/// P⁻ = λ_k F P Fᵀ + Q
+/// ```
+/// which is the trace form `tr N_k / tr M_k` of the vector filter divided through by the
+/// number of components, so that the memory stays meaningful when the number of
+/// satellites changes from epoch to epoch.
+#[allow(clippy::too_many_arguments)]
+fn stf_predict(
+    f: &mut Ekf<N>,
+    mem: &mut StfMemory,
+    model: &Pva11Clock,
+    dt_s: f64,
+    ranges: &[RangeMeasurement],
+    layout: &StateLayout,
+    cfg: &FamilyConfig,
+    gating: Gating,
+) -> bool {
+    let (x, p) = (*f.state(), *f.covariance());
+    let fj = model.jacobian(&x, dt_s);
+    let q = model.q(&x, dt_s);
+    let xp = model.f(&x, dt_s);
+    let fpf = fj * p * fj.transpose();
+    let (mut nu2, mut hqh, mut hfh, mut m) = (0.0, 0.0, 0.0, 0usize);
+    for r in ranges {
+        let Ok(pr) = Pseudoranges::<N, 1>::new(*layout, [RangeRow::from(r)]) else {
+            continue;
+        };
+        let h = pr.jacobian(&xp) / r.sigma_m;
+        let nu = (r.pseudorange_m - pr.h(&xp)[0]) / r.sigma_m;
+        nu2 += nu * nu;
+        hqh += (h * q * h.transpose())[(0, 0)];
+        hfh += (h * fpf * h.transpose())[(0, 0)];
+        m += 1;
+    }
+    let lambda = if m == 0 {
+        1.0
+    } else {
+        let k = m as f64;
+        let v = match mem.v {
+            None => nu2 / k,
+            Some(v0) => (cfg.stf_forgetting * v0 + nu2 / k) / (1.0 + cfg.stf_forgetting),
+        };
+        mem.v = Some(v);
+        let c = (v - hqh / k - cfg.stf_weakening) / (hfh / k);
+        if c.is_finite() {
+            c.max(1.0)
+        } else {
+            1.0
+        }
+    };
+    let pp = fpf * lambda + q;
+    let pp = (pp + pp.transpose()) * 0.5;
+    match Ekf::new(xp, pp).and_then(|e| e.with_gating(gating)) {
+        Ok(e) => {
+            *f = e;
+            true
+        }
+        Err(_) => false,
+    }
+}
+
+/// Resamples a particle filter whose effective sample size fell below `threshold · N`, then
+/// roughens it: the regularised particle filter of Musso, Oudjane & Le Gland (2001) with
+/// the Gaussian kernel's optimal bandwidth `h = (4 / (N (d + 2)))^{1/(d+4)}` on the
+/// weighted covariance `Σ̂` before resampling. `q` (one step's process noise) is added as
+/// a floor, so that a cloud that collapsed onto one particle spreads again.
+fn regularise(p: &mut PfCore, threshold: f64, q: &Cov) {
+    use rand_distr::{Distribution, StandardNormal};
+    let n = p.pf.particles().len();
+    if p.pf.n_eff() >= threshold * n as f64 {
+        return;
+    }
+    let d = N as f64;
+    let h = (4.0 / (n as f64 * (d + 2.0))).powf(1.0 / (d + 4.0));
+    let sigma = p.pf.covariance() * (h * h) + q;
+    let sigma = (sigma + sigma.transpose()) * 0.5;
+    p.pf.resample(&mut p.rng);
+    let Some(chol) = sigma.cholesky() else {
+        return;
+    };
+    let g = chol.l();
+    let b = p.pf.particles_mut();
+    for i in 0..n {
+        let w = State::from_fn(|_, _| StandardNormal.sample(&mut p.rng));
+        let jitter = g * w;
+        for k in 0..N {
+            b.column_mut(k)[i] += jitter[k];
+        }
+    }
+}
+
+/// A draw of velocity and clock drift `[v_x, v_y, v_z, ḃ]` for a receiver at `pos` from
+/// the weighted least-squares solution of the range rates, `ρ̇_j − u_j·v_j = −u_j·v + ḃ`,
+/// and its covariance `(AᵀWA)⁻¹`; `None` with fewer than four rates.
+fn velocity_and_drift(
+    pos: &Vector3<f64>,
+    ranges: &[RangeMeasurement],
+    rng: &mut StreamRng,
+) -> Option<nalgebra::Vector4<f64>> {
+    use rand_distr::{Distribution, StandardNormal};
+    let mut ata = nalgebra::Matrix4::<f64>::zeros();
+    let mut aty = nalgebra::Vector4::<f64>::zeros();
+    let mut n = 0;
+    for m in ranges {
+        let Some(rate) = m.range_rate_mps else {
+            continue;
+        };
+        let d = m.emitter_pos_ecef_m - pos;
+        let u = d / d.norm();
+        let a = nalgebra::Vector4::new(-u.x, -u.y, -u.z, 1.0);
+        let w = 1.0 / (m.sigma_rate_mps * m.sigma_rate_mps);
+        ata += a * a.transpose() * w;
+        aty += a * ((rate - u.dot(&m.emitter_vel_ecef_mps)) * w);
+        n += 1;
+    }
+    if n < 4 {
+        return None;
+    }
+    let chol = ata.cholesky()?;
+    let mean = chol.solve(&aty);
+    let cov = chol.inverse();
+    let g = cov.cholesky()?.l();
+    let w = nalgebra::Vector4::from_fn(|_, _| StandardNormal.sample(rng));
+    Some(mean + g * w)
+}
+
+/// The strong tracking filter's innovation memory `V` (per whitened component).
+struct StfMemory {
+    v: Option<f64>,
+}
+
+/// A particle filter with its own random stream.
+struct PfCore {
+    pf: ParticleFilter<N>,
+    rng: StreamRng,
+}
+
+/// The filter itself, once initialised.
+enum Core {
+    Ekf(Ekf<N>),
+    Sigma(SigmaPointKf<N>),
+    /// The strong tracking filter: an EKF whose prediction [`FamilyEstimator`] inflates.
+    Stf(Ekf<N>, StfMemory),
+    Rekf(RelativeEntropyKf<N>),
+    Pf(Box<PfCore>),
+}
+
+impl Core {
+    fn predict(&mut self, model: &Pva11Clock, dt_s: f64) -> bool {
+        match self {
+            Core::Ekf(f) => f.predict(model, dt_s).is_ok(),
+            Core::Sigma(f) => f.predict(model, dt_s).is_ok(),
+            // The strong tracking prediction needs the epoch's innovations; it is done
+            // by `FamilyEstimator::stf_predict` before the updates.
+            Core::Stf(..) => true,
+            Core::Rekf(f) => f.predict(model, dt_s).is_ok(),
+            Core::Pf(p) => p.pf.predict(model, dt_s, &mut p.rng).is_ok(),
+        }
+    }
+
+    /// Updates with `z` of `model` and adds what happened to `out`.
+    fn update<H: MeasurementModel<N, M>, const M: usize>(
+        &mut self,
+        model: &H,
+        z: &SVector<f64, M>,
+        out: &mut EpochOutcome,
+    ) {
+        let rep = match self {
+            Core::Ekf(f) => f.update(model, z),
+            Core::Sigma(f) => f.update(model, z),
+            Core::Rekf(f) => f.update(model, z).0,
+            Core::Stf(f, _) => f.update(model, z),
+            Core::Pf(p) => {
+                let u = p.pf.update(model, z, &mut p.rng);
+                if u.degenerate {
+                    UpdateReport {
+                        outcome: UpdateOutcome::Rejected {
+                            nis: f64::NAN,
+                            reason: RejectReason::NumericalFailure,
+                        },
+                        used: 0,
+                        rejected: M as u32,
+                    }
+                } else {
+                    // A particle filter has no innovation covariance, so no NIS.
+                    UpdateReport {
+                        outcome: UpdateOutcome::Accepted { nis: f64::NAN },
+                        used: M as u32,
+                        rejected: 0,
+                    }
+                }
+            }
+        };
+        tally(out, &rep);
+    }
+
+    fn moments(&self) -> (State, Cov) {
+        match self {
+            Core::Ekf(f) => (*f.state(), *f.covariance()),
+            Core::Sigma(f) => (*f.state(), *f.covariance()),
+            Core::Stf(f, _) => (*f.state(), *f.covariance()),
+            Core::Rekf(f) => (*f.state(), *f.covariance()),
+            Core::Pf(p) => (p.pf.mean(), p.pf.covariance()),
+        }
+    }
+}
+
+/// Any member of the filter family on seed 000's model, driven epoch by epoch like
+/// [`crate::fusion::estimator::EkfEstimator`]: initialised from a least-squares fix,
+/// predicted to each batch's time, updated with each range, range rate and position fix.
+pub struct FamilyEstimator {
+    name: String,
+    kind: FamilyKind,
+    systems: Vec<System>,
+    fixes: Vec<String>,
+    ekf_cfg: Ekf11Config,
+    cfg: FamilyConfig,
+    model: Pva11Clock,
+    layout: StateLayout,
+    gating: Gating,
+    rng: StreamRng,
+    core: Option<Core>,
+    /// The state and covariance after the last epoch (what `latest` reports).
+    moments: Option<(State, Cov)>,
+    last_t: Option<GpsTime>,
+    selector: Option<ModeSelector>,
+    scratch: Vec<RangeMeasurement>,
+    fix_scratch: Vec<PositionFix>,
+    geometry: Vec<(Vector3<f64>, usize)>,
+}
+
+impl FamilyEstimator {
+    /// An estimator named `name` running `kind` on the ranges of `systems` and the
+    /// position fixes of the sources named in `fixes`. `rng` gives the particle filter
+    /// its stream (`estimator/<name>/pf`).
+    ///
+    /// # Errors
+    /// When a configuration is invalid.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        name: &str,
+        kind: FamilyKind,
+        systems: &[System],
+        fixes: &[String],
+        ekf: Option<Ekf11Config>,
+        cfg: Option<FamilyConfig>,
+        selection: Option<&ModeSelection>,
+        rng: &TrialRng,
+    ) -> Result<Self, String> {
+        let mut ekf_cfg = ekf.unwrap_or_default();
+        if systems.contains(&System::Bds)
+            && systems.iter().any(|s| *s != System::Bds)
+            && ekf_cfg.isb_bds.is_none()
+        {
+            ekf_cfg.isb_bds = Some(IsbConfig::default());
+        }
+        let mut cfg = cfg.unwrap_or_default();
+        if kind == FamilyKind::Rekf && cfg.residual_gate_c.is_none() {
+            cfg.residual_gate_c = Some(3.0);
+        }
+        cfg.validate()
+            .map_err(|(k, m)| format!("options.{k}: {m}"))?;
+        let model = Pva11Clock::new(ekf_cfg).map_err(|e| format!("ekf: {e}"))?;
+        let mut layout = StateLayout::ekf11();
+        if ekf_cfg.isb_bds.is_none() {
+            // The inert ISB state is left out of the ranges; it keeps a unit variance so
+            // that the sigma-point filters can factor the covariance.
+            layout.isb = [None; wls::MAX_CLOCKS];
+        }
+        let gating = Gating {
+            chi2_prob: ekf_cfg.gate_chi2.map(|g| chi2::cdf(g, 1.0)),
+            residual: cfg.residual_gate_c.map(ResidualGate::sigmas),
+        };
+        let selector = selection.map(ModeSelector::new).transpose()?;
+        Ok(Self {
+            name: name.to_string(),
+            kind,
+            systems: systems.to_vec(),
+            fixes: fixes.to_vec(),
+            ekf_cfg,
+            cfg,
+            model,
+            layout,
+            gating,
+            rng: rng.stream(&format!("estimator/{name}/pf")),
+            core: None,
+            moments: None,
+            last_t: None,
+            selector,
+            scratch: Vec::with_capacity(64),
+            fix_scratch: Vec::with_capacity(4),
+            geometry: Vec::with_capacity(64),
+        })
+    }
+
+    /// The prior of a first fix, as [`crate::fusion::ekf11::Ekf11::initialise`] builds it.
+    fn prior(&self, pos: Vector3<f64>, clock_m: f64, pos_sigma_m: f64) -> (State, Cov) {
+        let c = &self.ekf_cfg;
+        let mut x = State::zeros();
+        let mut p = Cov::zeros();
+        for axis in 0..3 {
+            x[idx::POS[axis]] = pos[axis];
+            p[(idx::POS[axis], idx::POS[axis])] = pos_sigma_m * pos_sigma_m;
+            p[(idx::VEL[axis], idx::VEL[axis])] = c.init_vel_sigma_mps.powi(2);
+            p[(idx::ACC[axis], idx::ACC[axis])] = c.init_acc_sigma_mps2.powi(2);
+        }
+        x[idx::CLOCK_BIAS] = clock_m;
+        let clock_sigma_m = 10.0 * pos_sigma_m;
+        p[(idx::CLOCK_BIAS, idx::CLOCK_BIAS)] = clock_sigma_m * clock_sigma_m;
+        p[(idx::CLOCK_DRIFT, idx::CLOCK_DRIFT)] = c.init_clock_drift_sigma_mps.powi(2);
+        p[(idx::ISB_BDS, idx::ISB_BDS)] = c.isb_bds.map_or(1.0, |i| i.initial_sigma_m.powi(2));
+        (x, p)
+    }
+
+    fn build_core(&mut self, x0: State, p0: Cov) -> Result<Core, String> {
+        let cfg = &self.cfg;
+        let err = |e: crate::fusion::kalman::FilterError| e.to_string();
+        Ok(match self.kind {
+            FamilyKind::Ekf => Core::Ekf(
+                Ekf::new(x0, p0)
+                    .and_then(|f| f.with_gating(self.gating))
+                    .map_err(err)?,
+            ),
+            FamilyKind::Ukf => Core::Sigma(
+                SigmaPointKf::unscented(x0, p0, cfg.ukf_alpha, cfg.ukf_beta, cfg.ukf_kappa)
+                    .and_then(|f| f.with_gating(self.gating))
+                    .map_err(err)?,
+            ),
+            FamilyKind::Ckf => Core::Sigma(
+                SigmaPointKf::cubature(x0, p0)
+                    .and_then(|f| f.with_gating(self.gating))
+                    .map_err(err)?,
+            ),
+            FamilyKind::Stf => Core::Stf(
+                Ekf::new(x0, p0)
+                    .and_then(|f| f.with_gating(self.gating))
+                    .map_err(err)?,
+                StfMemory { v: None },
+            ),
+            FamilyKind::Rekf => Core::Rekf(
+                RelativeEntropyKf::new(x0, p0, cfg.rekf_aleph_threshold, self.gating.residual)
+                    .map_err(err)?,
+            ),
+            FamilyKind::Pf => {
+                let buf = ParticleBuffer::new(cfg.particles).map_err(|e| e.to_string())?;
+                let resampling = match cfg.resampling {
+                    ResamplingKind::Systematic => Resampling::Systematic,
+                    ResamplingKind::Stratified => Resampling::Stratified,
+                };
+                // The filter never resamples inside an update: the estimator resamples once
+                // per epoch, with regularisation (see `regularise`).
+                let mut pf =
+                    ParticleFilter::new(buf, resampling, 0.0).map_err(|e| e.to_string())?;
+                pf.init_gaussian(&x0, &p0, &mut self.rng)
+                    .map_err(|e| e.to_string())?;
+                // A least-squares position error and its clock error are strongly
+                // correlated (a common vertical-and-clock mode); drawing them independently
+                // would put almost every particle far from the likelihood. Each particle's
+                // clock is therefore re-solved for its own position from this epoch's
+                // ranges, which draws the pair from the joint prior.
+                let b = pf.particles_mut();
+                let n = b.len();
+                for i in 0..n {
+                    let pos = Vector3::new(
+                        b.column(idx::POS[0])[i],
+                        b.column(idx::POS[1])[i],
+                        b.column(idx::POS[2])[i],
+                    );
+                    let (mut sw, mut s) = (0.0, 0.0);
+                    for m in &self.scratch {
+                        let w = 1.0 / (m.sigma_m * m.sigma_m);
+                        s += w * (m.pseudorange_m - (m.emitter_pos_ecef_m - pos).norm());
+                        sw += w;
+                    }
+                    if sw > 0.0 {
+                        b.column_mut(idx::CLOCK_BIAS)[i] = s / sw;
+                    }
+                    // Velocity and clock drift the same way, from the range rates: a
+                    // prior of ±10 m/s and ±300 m/s drawn independently would leave a
+                    // handful of particles anywhere near the Doppler.
+                    if let Some(vd) = velocity_and_drift(&pos, &self.scratch, &mut self.rng) {
+                        for axis in 0..3 {
+                            b.column_mut(idx::VEL[axis])[i] = vd[axis];
+                        }
+                        b.column_mut(idx::CLOCK_DRIFT)[i] = vd[3];
+                    }
+                }
+                Core::Pf(Box::new(PfCore {
+                    pf,
+                    rng: self.rng.clone(),
+                }))
+            }
+        })
+    }
+
+    fn estimate(&self, t: GpsTime) -> Option<Estimate> {
+        let (x, p) = self.moments.as_ref()?;
+        let pos = Vector3::new(x[idx::POS[0]], x[idx::POS[1]], x[idx::POS[2]]);
+        let vel = Vector3::new(x[idx::VEL[0]], x[idx::VEL[1]], x[idx::VEL[2]]);
+        let cov = Matrix3::from_fn(|i, j| p[(idx::POS[i], idx::POS[j])]);
+        Some(Estimate {
+            t,
+            pos_ecef_m: pos,
+            vel_ecef_mps: Some(vel),
+            cov_pos_m2: cov,
+        })
+    }
+
+    /// Forgets the filter after a divergence; the next epoch re-initialises.
+    fn reset(&mut self, out: &mut EpochOutcome) {
+        self.core = None;
+        self.moments = None;
+        out.numerical_failure = true;
+        out.estimate = None;
+    }
+
+    fn usable(&self, x: &State, p: &Cov) -> bool {
+        let limit = self.cfg.divergence_pos_sigma_m.powi(2);
+        let pos_var: f64 = idx::POS.iter().map(|&k| p[(k, k)]).sum();
+        x.iter().all(|v| v.is_finite())
+            && p.iter().all(|v| v.is_finite())
+            && pos_var.is_finite()
+            && pos_var <= limit
+    }
+}
+
+impl Estimator for FamilyEstimator {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn consumes(&self, source: &str) -> bool {
+        match source {
+            "gnss" => true,
+            "dtmb" => self.systems.contains(&System::Dtmb),
+            "tcofdm" => self.systems.contains(&System::Tcofdm),
+            other => self.fixes.iter().any(|f| f == other),
+        }
+    }
+
+    fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
+        let mut out = EpochOutcome::default();
+        let rx = self
+            .moments
+            .as_ref()
+            .map(|(x, _)| Vector3::new(x[idx::POS[0]], x[idx::POS[1]], x[idx::POS[2]]));
+        let admitted = match self.selector.as_mut() {
+            Some(s) => {
+                let d = s.decide(batch, rx.as_ref());
+                out.mode = Some(d.label);
+                d
+            }
+            None => crate::fusion::selection::Admission::all(),
+        };
+        self.scratch.clear();
+        self.scratch.extend(
+            batch
+                .ranges()
+                .filter(|m| self.systems.contains(&m.system()) && admitted.admits(m.system()))
+                .copied(),
+        );
+        self.fix_scratch.clear();
+        if self.fixes.contains(&batch.source) && admitted.fixes {
+            self.fix_scratch
+                .extend(batch.items.iter().filter_map(|m| match m {
+                    Measurement::Position(p) => Some(*p),
+                    _ => None,
+                }));
+        }
+        if self.core.is_none() {
+            let Ok(fix) = wls::solve(self.scratch.iter(), &WlsOptions::default()) else {
+                return out;
+            };
+            let clock = self
+                .systems
+                .iter()
+                .find_map(|s| fix.clock_m(*s))
+                .unwrap_or(0.0);
+            let pos_sigma = fix.cov_pos_ecef_m2.trace().max(0.0).sqrt().max(1.0);
+            let (x0, p0) = self.prior(fix.pos_ecef_m, clock, pos_sigma);
+            match self.build_core(x0, p0) {
+                Ok(core) => self.core = Some(core),
+                Err(_) => {
+                    out.numerical_failure = true;
+                    return out;
+                }
+            }
+            self.moments = self.core.as_ref().map(Core::moments);
+            self.last_t = Some(batch.t);
+            out.used = fix.n_measurements as u32;
+            out.gdop = Some(fix.dop.gdop);
+            out.estimate = self.estimate(batch.t);
+            return out;
+        }
+        let dt = self
+            .last_t
+            .map_or(0.0, |l| batch.t.seconds_since(l))
+            .max(0.0);
+        self.last_t = Some(batch.t);
+        let Some(core) = self.core.as_mut() else {
+            return out;
+        };
+        let predicted = match &mut *core {
+            Core::Stf(f, mem) => stf_predict(
+                f,
+                mem,
+                &self.model,
+                dt,
+                &self.scratch,
+                &self.layout,
+                &self.cfg,
+                self.gating,
+            ),
+            c => c.predict(&self.model, dt),
+        };
+        if !predicted {
+            self.reset(&mut out);
+            return out;
+        }
+        for m in &self.scratch {
+            let row = RangeRow::from(m);
+            let Ok(pr) = Pseudoranges::<N, 1>::new(self.layout, [row]) else {
+                out.rejected += 1;
+                continue;
+            };
+            core.update(&pr, &SVector::<f64, 1>::new(m.pseudorange_m), &mut out);
+            let rate = m
+                .range_rate_mps
+                .filter(|_| self.kind != FamilyKind::Pf || self.cfg.pf_use_rates);
+            if let Some(rate) = rate {
+                let Ok(both) = PseudorangesAndRates::<N, 2>::new(self.layout, &[row]) else {
+                    out.rejected += 1;
+                    continue;
+                };
+                let linv = SMatrix::<f64, 2, 2>::from_diagonal(&nalgebra::Vector2::new(
+                    1.0 / m.sigma_m,
+                    1.0 / m.sigma_rate_mps,
+                ));
+                let rate_row = WhitenedRow {
+                    model: &both,
+                    linv,
+                    row: 1,
+                };
+                let z = SVector::<f64, 1>::new(rate / m.sigma_rate_mps);
+                core.update(&rate_row, &z, &mut out);
+            }
+        }
+        for f in &self.fix_scratch {
+            match PositionFixModel::<N, 3>::new(idx::POS, f.cov_m2) {
+                Ok(model) => core.update(&model, &f.pos_ecef_m, &mut out),
+                Err(_) => out.rejected += 1,
+            }
+        }
+        if let Core::Pf(p) = core {
+            let q = self.model.q(&p.pf.mean(), dt.max(1e-3));
+            regularise(p, self.cfg.neff_threshold, &q);
+        }
+        let (x, p) = core.moments();
+        if !self.usable(&x, &p) {
+            self.reset(&mut out);
+            return out;
+        }
+        let rx = Vector3::new(x[idx::POS[0]], x[idx::POS[1]], x[idx::POS[2]]);
+        self.moments = Some((x, p));
+        out.gdop = crate::fusion::estimator::gdop_of(&rx, &self.scratch, &mut self.geometry);
+        out.estimate = self.estimate(batch.t);
+        out
+    }
+
+    fn latest(&self) -> Option<Estimate> {
+        self.last_t.and_then(|t| self.estimate(t))
+    }
+}

@@ -1,0 +1,191 @@
+//! The papers' systems as named estimator presets.
+//!
+//! An `[[estimator]]` table may name `preset = "seed000-adaptive"`; the preset's keys are
+//! laid under the table's own, key by key and table by table (a table's `[estimator.ekf]`
+//! replaces only the keys it lists), so any part of a preset can be overridden and the
+//! rest stays the paper's. `hybridnav presets` lists them.
+
+use toml::{Table, Value};
+
+/// One preset: its name, what it is, and its keys (TOML).
+pub struct Preset {
+    pub name: &'static str,
+    pub about: &'static str,
+    pub toml: &'static str,
+}
+
+/// Every preset, in the papers' order.
+pub const PRESETS: &[Preset] = &[
+    Preset {
+        name: "seed000-gps",
+        about: "seed 000 row 'GPS': the 11-state EKF (eqs. 4-8) on GPS pseudoranges and rates",
+        toml: r#"name = "GPS"
+sources = ["gps"]
+filter = "ekf11""#,
+    },
+    Preset {
+        name: "seed000-gps-dtmb",
+        about: "seed 000 row 'GPS + DTMB': GPS and DTMB pseudoranges sharing one clock",
+        toml: r#"name = "GPS+DTMB"
+sources = ["gps", "dtmb"]
+filter = "ekf11""#,
+    },
+    Preset {
+        name: "seed000-adaptive",
+        about: "seed 000 row 'Proposed': GPS + DTMB + FM fixes, modes A/B/C chosen by the fuzzy system",
+        toml: r#"name = "Proposed"
+sources = ["gps", "dtmb"]
+fixes = ["fm"]
+filter = "ekf11"
+selection = "fuzzy""#,
+    },
+    Preset {
+        name: "seed001-pf",
+        about: "seed 001: SIR particle filter on GPS + DTMB pseudoranges, systematic resampling below N_eff = N/2",
+        toml: r#"name = "PF"
+sources = ["gps", "dtmb"]
+filter = "pf"
+[options]
+particles = 20
+resampling = "systematic"
+neff_threshold = 0.5"#,
+    },
+    Preset {
+        name: "seed002-pdr",
+        about: "seed 002 row 'PDR': dead reckoning from step length and heading only",
+        toml: r#"name = "PDR"
+sources = []
+filter = "pdr""#,
+    },
+    Preset {
+        name: "seed003-ekf",
+        about: "seed 003 'EKF': GPS/BDS/DTMB with one clock per system, seamless scheme (Table 1)",
+        toml: r#"name = "EKF"
+sources = ["gps", "bds", "dtmb"]
+filter = "ekf"
+selection = "seamless""#,
+    },
+    Preset {
+        name: "seed003-pf",
+        about: "seed 003 'PF': the same measurements and scheme, SIR particle filter (500 particles)",
+        toml: r#"name = "PF"
+sources = ["gps", "bds", "dtmb"]
+filter = "pf"
+selection = "seamless"
+[options]
+particles = 500"#,
+    },
+    Preset {
+        name: "seed004-rekf",
+        about: "seed 004: relative-entropy KF (eqs. 33-41) with the eq. 24 residual gate, C = 3, on GNSS + TC-OFDM ranges",
+        toml: r#"name = "RE-KF"
+sources = ["gps", "bds", "tcofdm"]
+filter = "rekf"
+[options]
+residual_gate_c = 3.0"#,
+    },
+    Preset {
+        name: "seed004-stf",
+        about: "seed 004's comparison: strong tracking filter on the same measurements",
+        toml: r#"name = "STF"
+sources = ["gps", "bds", "tcofdm"]
+filter = "stf""#,
+    },
+    Preset {
+        name: "seed004-ckf",
+        about: "seed 004's comparison: cubature Kalman filter on the same measurements",
+        toml: r#"name = "CKF"
+sources = ["gps", "bds", "tcofdm"]
+filter = "ckf""#,
+    },
+    Preset {
+        name: "seed004-ekf",
+        about: "seed 004's comparison: EKF (Joseph form) on the same measurements",
+        toml: r#"name = "EKF"
+sources = ["gps", "bds", "tcofdm"]
+filter = "ekf""#,
+    },
+];
+
+/// The preset named `name`.
+pub fn find(name: &str) -> Option<&'static Preset> {
+    PRESETS.iter().find(|p| p.name == name)
+}
+
+/// Lays `over` on `base`: keys of `over` win, tables merge key by key.
+fn overlay(base: &mut Table, over: Table) {
+    for (k, v) in over {
+        match (base.get_mut(&k), v) {
+            (Some(Value::Table(b)), Value::Table(o)) => overlay(b, o),
+            (_, v) => {
+                base.insert(k, v);
+            }
+        }
+    }
+}
+
+/// Expands `preset = "…"` in one estimator table.
+///
+/// # Errors
+/// An unknown preset (the message lists the known ones) or a preset that is not a string.
+pub fn expand(mut table: Table) -> Result<Table, String> {
+    let Some(p) = table.remove("preset") else {
+        return Ok(table);
+    };
+    let Value::String(name) = p else {
+        return Err("preset: expected a string, e.g. preset = \"seed000-gps\"".into());
+    };
+    let Some(preset) = find(&name) else {
+        let known: Vec<&str> = PRESETS.iter().map(|p| p.name).collect();
+        return Err(format!(
+            "preset: unknown preset '{name}'; expected one of {}",
+            known.join(", ")
+        ));
+    };
+    let mut base: Table = preset
+        .toml
+        .parse()
+        .unwrap_or_else(|e| unreachable!("preset {} does not parse: {e}", preset.name));
+    overlay(&mut base, table);
+    Ok(base)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_preset_parses_and_is_found_by_name() {
+        for p in PRESETS {
+            let t: Table = p.toml.parse().expect(p.name);
+            assert!(t.contains_key("filter"), "{}", p.name);
+            assert!(find(p.name).is_some());
+        }
+    }
+
+    #[test]
+    fn table_keys_override_and_nested_tables_merge() {
+        let user: Table = r#"preset = "seed003-pf"
+name = "PF 100"
+[options]
+neff_threshold = 0.3"#
+            .parse()
+            .unwrap();
+        let t = expand(user).unwrap();
+        assert_eq!(t["name"].as_str(), Some("PF 100"));
+        assert_eq!(t["filter"].as_str(), Some("pf"));
+        assert_eq!(t["options"]["particles"].as_integer(), Some(500));
+        assert_eq!(t["options"]["neff_threshold"].as_float(), Some(0.3));
+        assert!(!t.contains_key("preset"));
+    }
+
+    #[test]
+    fn unknown_presets_are_named_with_the_alternatives() {
+        let user: Table = "preset = \"seed009\"".parse().unwrap();
+        let e = expand(user).unwrap_err();
+        assert!(
+            e.contains("seed009") && e.contains("seed000-adaptive"),
+            "{e}"
+        );
+    }
+}
