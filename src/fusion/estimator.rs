@@ -54,6 +54,7 @@ pub trait Estimator: Send {
 use crate::core::System;
 use crate::fusion::ekf11::{Ekf11, Ekf11Config, IsbConfig, RejectReason, UpdateOutcome};
 use crate::fusion::measurement::{Measurement, RangeMeasurement};
+use crate::fusion::preprocess::{ClockCorrectionConfig, DtmbClockCorrector};
 use crate::fusion::selection::{Admission, ModeSelection, ModeSelector};
 use crate::fusion::wls::{self, WlsOptions};
 
@@ -72,6 +73,8 @@ pub struct EkfEstimator {
     fixes: Vec<String>,
     /// The mode-selection scheme, if any.
     selector: Option<ModeSelector>,
+    /// Seed 000's DTMB clock correction, if configured.
+    corrector: Option<DtmbClockCorrector>,
 }
 
 impl EkfEstimator {
@@ -100,21 +103,24 @@ impl EkfEstimator {
             geometry: Vec::with_capacity(64),
             fixes: Vec::new(),
             selector: None,
+            corrector: None,
         })
     }
 
-    /// The same estimator also taking the position fixes of the sources named in `fixes`
-    /// and selecting what it uses by `selection`.
+    /// The same estimator also taking the position fixes of the sources named in `fixes`,
+    /// selecting what it uses by `selection` and correcting DTMB clocks by `correction`.
     ///
     /// # Errors
     /// When the selection's configuration is invalid.
-    pub fn with_fixes_and_selection(
+    pub fn with_preprocessing(
         mut self,
         fixes: &[String],
         selection: Option<&ModeSelection>,
+        correction: Option<ClockCorrectionConfig>,
     ) -> Result<Self, String> {
         self.fixes = fixes.to_vec();
         self.selector = selection.map(ModeSelector::new).transpose()?;
+        self.corrector = correction.map(DtmbClockCorrector::new);
         Ok(self)
     }
 
@@ -218,6 +224,10 @@ impl Estimator for EkfEstimator {
         };
         select_ranges(batch, &self.systems, &mut self.scratch);
         self.scratch.retain(|m| admitted.admits(m.system()));
+        if let Some(c) = self.corrector.as_mut() {
+            c.observe(batch);
+            out.rejected += c.correct(batch.t, &mut self.scratch);
+        }
         if !self.ekf.is_initialised() {
             // The first fix comes from least squares on this epoch alone; until one exists
             // the epoch counts as an epoch without a fix.

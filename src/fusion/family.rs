@@ -40,6 +40,7 @@ use crate::fusion::models::{
     Pva11Clock, RangeRow, StateLayout,
 };
 use crate::fusion::particle::{ParticleBuffer, ParticleFilter, Resampling};
+use crate::fusion::preprocess::{ClockCorrectionConfig, DtmbClockCorrector};
 use crate::fusion::selection::{ModeSelection, ModeSelector};
 use crate::fusion::wls::{self, WlsOptions};
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
@@ -474,6 +475,7 @@ pub struct FamilyEstimator {
     moments: Option<(State, Cov)>,
     last_t: Option<GpsTime>,
     selector: Option<ModeSelector>,
+    corrector: Option<DtmbClockCorrector>,
     scratch: Vec<RangeMeasurement>,
     fix_scratch: Vec<PositionFix>,
     geometry: Vec<(Vector3<f64>, usize)>,
@@ -495,6 +497,7 @@ impl FamilyEstimator {
         ekf: Option<Ekf11Config>,
         cfg: Option<FamilyConfig>,
         selection: Option<&ModeSelection>,
+        correction: Option<ClockCorrectionConfig>,
         rng: &TrialRng,
     ) -> Result<Self, String> {
         let mut ekf_cfg = ekf.unwrap_or_default();
@@ -537,6 +540,7 @@ impl FamilyEstimator {
             moments: None,
             last_t: None,
             selector,
+            corrector: correction.map(DtmbClockCorrector::new),
             scratch: Vec::with_capacity(64),
             fix_scratch: Vec::with_capacity(4),
             geometry: Vec::with_capacity(64),
@@ -709,6 +713,10 @@ impl Estimator for FamilyEstimator {
                 .filter(|m| self.systems.contains(&m.system()) && admitted.admits(m.system()))
                 .copied(),
         );
+        if let Some(c) = self.corrector.as_mut() {
+            c.observe(batch);
+            out.rejected += c.correct(batch.t, &mut self.scratch);
+        }
         self.fix_scratch.clear();
         if self.fixes.contains(&batch.source) && admitted.fixes {
             self.fix_scratch

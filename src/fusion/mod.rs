@@ -12,5 +12,6 @@ pub mod measurement;
 pub mod mode;
 pub mod models;
 pub mod particle;
+pub mod preprocess;
 pub mod selection;
 pub mod wls;

@@ -674,6 +674,7 @@ fn check_estimator(
             ("fixes", !e.fixes.is_empty()),
             ("selection", e.selection.is_some()),
             ("fuzzy", e.fuzzy.is_some()),
+            ("dtmb_clock_correction", e.dtmb_clock_correction.is_some()),
         ];
         if let Some((k, _)) = extra.iter().find(|(_, set)| *set) {
             return Err(ctx.err(
@@ -696,6 +697,10 @@ fn check_estimator(
             &at("fuzzy"),
             "[estimator.fuzzy] needs selection = \"fuzzy\"",
         ));
+    }
+    if let Some(c) = &e.dtmb_clock_correction {
+        c.validate()
+            .map_err(|(k, m)| ctx.err(&at(&format!("dtmb_clock_correction.{k}")), m))?;
     }
     for (j, f) in e.fixes.iter().enumerate() {
         let simulated_fix = fix_sources(file);

@@ -28,7 +28,8 @@ filter = "ekf11""#,
         about: "seed 000 row 'GPS + DTMB': GPS and DTMB pseudoranges sharing one clock",
         toml: r#"name = "GPS+DTMB"
 sources = ["gps", "dtmb"]
-filter = "ekf11""#,
+filter = "ekf11"
+dtmb_clock_correction = {}"#,
     },
     Preset {
         name: "seed000-adaptive",
@@ -37,7 +38,8 @@ filter = "ekf11""#,
 sources = ["gps", "dtmb"]
 fixes = ["fm"]
 filter = "ekf11"
-selection = "fuzzy""#,
+selection = "fuzzy"
+dtmb_clock_correction = {}"#,
     },
     Preset {
         name: "seed001-pf",

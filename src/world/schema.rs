@@ -7,6 +7,7 @@ use crate::fusion::ekf11::Ekf11Config;
 use crate::fusion::estimator::{EkfEstimator, Estimator, WlsEstimator};
 use crate::fusion::family::{FamilyConfig, FamilyEstimator, FamilyKind};
 use crate::fusion::mode::FuzzyConfig;
+use crate::fusion::preprocess::ClockCorrectionConfig;
 use crate::fusion::selection::{ModeSelection, SelectionKind};
 use crate::gnss::measurement::GnssConfig;
 use crate::gnss::receiver_clock::ClockConfig;
@@ -240,6 +241,9 @@ pub struct EstimatorSpec {
     /// The fuzzy system's sets and rules (`selection = "fuzzy"`); default: seed 000's.
     #[serde(default)]
     pub fuzzy: Option<FuzzyConfig>,
+    /// Seed 000's DTMB clock correction from good GPS fixes (`{}` for the defaults).
+    #[serde(default)]
+    pub dtmb_clock_correction: Option<ClockCorrectionConfig>,
     /// INS filter settings (filter = "ins").
     #[serde(default)]
     pub ins: Option<InsFilterConfig>,
@@ -309,12 +313,16 @@ impl EstimatorSpec {
                     self.ekf,
                     self.options,
                     selection.as_ref(),
+                    self.dtmb_clock_correction,
                     &ctx.rng,
                 )?)
             }
             FilterKind::Ekf11 => Box::new(
-                EkfEstimator::new(&self.name, &self.sources, self.ekf)?
-                    .with_fixes_and_selection(&self.fixes, selection.as_ref())?,
+                EkfEstimator::new(&self.name, &self.sources, self.ekf)?.with_preprocessing(
+                    &self.fixes,
+                    selection.as_ref(),
+                    self.dtmb_clock_correction,
+                )?,
             ),
             FilterKind::Wls => Box::new(WlsEstimator::new(&self.name, &self.sources)),
             FilterKind::Ins => {

@@ -1,0 +1,245 @@
+//! Preprocessing before a filter sees a batch: seed 000's DTMB clock correction.
+//!
+//! A DTMB tower's pseudorange carries the tower's own clock offset relative to GPS time
+//! and the receiver's DTMB inter-system delay, neither of which is broadcast. Seed 000
+//! (Cong et al. 2018, §3.1) removes them with a GPS fix: while the GPS geometry is good
+//! (GDOP_GPS small) the receiver knows its position `r̂` and GPS clock `b̂` well, and
+//!
+//! ```text
+//! β_t = ρ_t − ‖r_t − r̂‖ − b̂                  (one sample per tower t and epoch)
+//! β̂_t ← mean of the first n samples, then β̂_t ← β̂_t + (β_t − β̂_t)/n_max
+//! ρ_t' = ρ_t − β̂_t                            (what the filter uses)
+//! ```
+//!
+//! so the corrected DTMB range shares the GPS clock, which is what lets seed 000's filter
+//! carry a single clock state. The smoothing (a running mean that becomes an exponential
+//! average after `window` samples) follows the tower clock's slow drift. A tower never
+//! calibrated has an unknown bias of up to microseconds, so its ranges are withheld (and
+//! counted as rejected) until its first calibration.
+
+use crate::core::{EmitterId, GpsTime, System};
+use crate::fusion::measurement::{MeasurementBatch, RangeMeasurement};
+use crate::fusion::wls::{self, WlsOptions};
+use nalgebra::Vector3;
+use serde::Deserialize;
+
+/// `dtmb_clock_correction = { … }` in an `[[estimator]]` table.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct ClockCorrectionConfig {
+    /// Calibrate only while the GPS-only GDOP is at most this. Default 4 (the paper says
+    /// "small" without a number; 4 is a common threshold of a good GPS geometry).
+    pub gdop_max: f64,
+    /// Samples averaged before the estimate becomes an exponential average of this length.
+    /// Default 10.
+    pub window: u32,
+}
+
+impl Default for ClockCorrectionConfig {
+    fn default() -> Self {
+        Self {
+            gdop_max: 4.0,
+            window: 10,
+        }
+    }
+}
+
+impl ClockCorrectionConfig {
+    /// # Errors
+    /// `(key, message)` for a GDOP bound that is not positive or a zero window.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        if !(self.gdop_max.is_finite() && self.gdop_max > 0.0) {
+            return Err((
+                "gdop_max".into(),
+                format!("{}: expected > 0", self.gdop_max),
+            ));
+        }
+        if self.window == 0 {
+            return Err(("window".into(), "0: expected at least 1 sample".into()));
+        }
+        Ok(())
+    }
+}
+
+/// The calibration of one tower.
+#[derive(Clone, Copy, Debug)]
+struct TowerBias {
+    id: EmitterId,
+    bias_m: f64,
+    samples: u32,
+}
+
+/// The running DTMB clock correction of one estimator.
+#[derive(Clone, Debug)]
+pub struct DtmbClockCorrector {
+    cfg: ClockCorrectionConfig,
+    /// The last good GPS fix: time, position (ECEF) and GPS clock (m).
+    reference: Option<(GpsTime, Vector3<f64>, f64)>,
+    towers: Vec<TowerBias>,
+    gps: Vec<RangeMeasurement>,
+}
+
+impl DtmbClockCorrector {
+    /// A corrector with no calibration yet.
+    pub fn new(cfg: ClockCorrectionConfig) -> Self {
+        Self {
+            cfg,
+            reference: None,
+            towers: Vec::with_capacity(4),
+            gps: Vec::with_capacity(32),
+        }
+    }
+
+    /// Takes note of a GNSS batch: a GPS-only fix with GDOP ≤ `gdop_max` becomes the
+    /// calibration reference for DTMB batches of the same instant.
+    pub fn observe(&mut self, batch: &MeasurementBatch) {
+        if batch.source != "gnss" {
+            return;
+        }
+        self.gps.clear();
+        self.gps.extend(
+            batch
+                .ranges()
+                .filter(|m| m.system() == System::Gps)
+                .copied(),
+        );
+        self.reference = wls::solve(self.gps.iter(), &WlsOptions::default())
+            .ok()
+            .filter(|f| f.dop.gdop <= self.cfg.gdop_max)
+            .and_then(|f| Some((batch.t, f.pos_ecef_m, f.clock_m(System::Gps)?)));
+    }
+
+    /// The calibrated bias of tower `id` (m), if it has one.
+    pub fn bias_m(&self, id: EmitterId) -> Option<f64> {
+        self.towers.iter().find(|t| t.id == id).map(|t| t.bias_m)
+    }
+
+    /// Calibrates from the DTMB ranges in `ranges` (when a reference of the same instant
+    /// exists), then corrects them in place and removes those of towers without a
+    /// calibration. Returns how many were removed.
+    pub fn correct(&mut self, t: GpsTime, ranges: &mut Vec<RangeMeasurement>) -> u32 {
+        let reference = self
+            .reference
+            .filter(|(t_ref, _, _)| t.seconds_since(*t_ref).abs() < 1e-3);
+        if let Some((_, pos, clock_m)) = reference {
+            for m in ranges.iter().filter(|m| m.system() == System::Dtmb) {
+                let sample = m.pseudorange_m - (m.emitter_pos_ecef_m - pos).norm() - clock_m;
+                if !sample.is_finite() {
+                    continue;
+                }
+                match self.towers.iter_mut().find(|t| t.id == m.emitter) {
+                    Some(tb) => {
+                        tb.samples = tb.samples.saturating_add(1);
+                        let n = tb.samples.min(self.cfg.window);
+                        tb.bias_m += (sample - tb.bias_m) / f64::from(n);
+                    }
+                    None => self.towers.push(TowerBias {
+                        id: m.emitter,
+                        bias_m: sample,
+                        samples: 1,
+                    }),
+                }
+            }
+        }
+        let before = ranges.len();
+        let towers = &self.towers;
+        ranges.retain_mut(|m| {
+            if m.system() != System::Dtmb {
+                return true;
+            }
+            match towers.iter().find(|t| t.id == m.emitter) {
+                Some(tb) => {
+                    m.pseudorange_m -= tb.bias_m;
+                    true
+                }
+                None => false,
+            }
+        });
+        (before - ranges.len()) as u32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fusion::measurement::Measurement;
+
+    fn range(id: EmitterId, e: Vector3<f64>, rx: &Vector3<f64>, bias_m: f64) -> RangeMeasurement {
+        RangeMeasurement {
+            emitter: id,
+            emitter_pos_ecef_m: e,
+            emitter_vel_ecef_mps: Vector3::zeros(),
+            pseudorange_m: (e - rx).norm() + bias_m,
+            sigma_m: 3.0,
+            range_rate_mps: None,
+            sigma_rate_mps: 0.0,
+            cn0_dbhz: 45.0,
+            elevation_rad: 0.5,
+        }
+    }
+
+    /// Noise-free ranges: the calibration recovers the tower's bias exactly (relative to
+    /// the GPS clock), withholds the tower before its first calibration, and corrects its
+    /// range to the GPS clock afterwards.
+    #[test]
+    fn a_good_gps_fix_calibrates_the_tower_bias() {
+        let rx = Vector3::new(-2_178_000.0, 4_388_000.0, 4_069_000.0);
+        let clock_m = 1234.5;
+        let up = rx.normalize();
+        let east = Vector3::new(-rx.y, rx.x, 0.0).normalize();
+        let north = up.cross(&east);
+        let sats: Vec<Vector3<f64>> = [
+            (0.0, 80.0),
+            (0.0, 30.0),
+            (90.0, 35.0),
+            (180.0, 40.0),
+            (270.0, 25.0),
+            (45.0, 60.0),
+        ]
+        .iter()
+        .map(|(az, el): &(f64, f64)| {
+            let (a, e) = (az.to_radians(), el.to_radians());
+            rx + (north * a.cos() * e.cos() + east * a.sin() * e.cos() + up * e.sin()) * 2.2e7
+        })
+        .collect();
+        let gnss = MeasurementBatch {
+            t: GpsTime::from_week_tow(2000, 100.0),
+            source: "gnss".into(),
+            items: sats
+                .iter()
+                .enumerate()
+                .map(|(i, s)| {
+                    Measurement::Range(range(
+                        EmitterId::new(System::Gps, i as u16 + 1),
+                        *s,
+                        &rx,
+                        clock_m,
+                    ))
+                })
+                .collect(),
+            unscored: false,
+        };
+        let tower = EmitterId::new(System::Dtmb, 1);
+        let tower_pos = rx + north * 12_000.0 + up * 300.0;
+        let tower_bias_m = 45.0 + 17.0;
+        let mut c = DtmbClockCorrector::new(ClockCorrectionConfig::default());
+        // Before any GPS fix the tower is unknown: its range is withheld.
+        let mut r = vec![range(tower, tower_pos, &rx, clock_m + tower_bias_m)];
+        assert_eq!(c.correct(gnss.t, &mut r), 1);
+        assert!(r.is_empty());
+        c.observe(&gnss);
+        let mut r = vec![range(tower, tower_pos, &rx, clock_m + tower_bias_m)];
+        assert_eq!(c.correct(gnss.t, &mut r), 0);
+        assert!((c.bias_m(tower).unwrap() - tower_bias_m).abs() < 1e-4);
+        let corrected = r[0].pseudorange_m - (tower_pos - rx).norm();
+        assert!((corrected - clock_m).abs() < 1e-4, "{corrected}");
+        // A fix with a poor geometry does not calibrate.
+        let mut strict = DtmbClockCorrector::new(ClockCorrectionConfig {
+            gdop_max: 0.5,
+            window: 10,
+        });
+        strict.observe(&gnss);
+        let mut r = vec![range(tower, tower_pos, &rx, clock_m + tower_bias_m)];
+        assert_eq!(strict.correct(gnss.t, &mut r), 1);
+    }
+}
