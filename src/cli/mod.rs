@@ -39,6 +39,9 @@ pub enum Command {
     /// DTMB signal tools.
     #[command(subcommand)]
     Dtmb(DtmbCommand),
+    /// List the estimator presets (the papers' systems) an `[[estimator]]` can name, with
+    /// the keys each one sets.
+    Presets,
 }
 
 #[derive(Debug, Subcommand)]
@@ -191,6 +194,15 @@ pub fn run(cli: Cli) -> Result<()> {
         ),
         Command::Ephemeris(EphemerisCommand::Synth { start, hours, out }) => {
             cmd_synth(&start, hours, &out)
+        }
+        Command::Presets => {
+            for p in crate::world::presets::PRESETS {
+                println!("{}\n  {}", p.name, p.about);
+                for line in p.toml.lines() {
+                    println!("    {line}");
+                }
+            }
+            Ok(())
         }
     }
 }
