@@ -104,6 +104,11 @@ pub struct FamilyConfig {
     /// STF: forgetting factor ρ (0 < ρ ≤ 1) and weakening factor β ≥ 1 (Zhou & Frank).
     pub stf_forgetting: f64,
     pub stf_weakening: f64,
+    /// STF: the largest fading factor λ applied. Default 10. Not in Zhou & Frank: λ also
+    /// inflates states the ranges do not observe (velocity and acceleration when there are
+    /// no range rates, indoors on TC-OFDM alone), and uncapped it compounds there epoch
+    /// after epoch until the filter diverges (measured on `worlds/seed004-bupt.toml`).
+    pub stf_max_fading: f64,
     /// RE-KF: the coupling-degree threshold ℵ_threshold (seed 004 eq. 38; the paper gives
     /// no value, default ½ ln 2).
     pub rekf_aleph_threshold: f64,
@@ -132,6 +137,7 @@ impl Default for FamilyConfig {
             ukf_kappa: 0.0,
             stf_forgetting: 0.95,
             stf_weakening: 1.0,
+            stf_max_fading: 10.0,
             rekf_aleph_threshold: DEFAULT_ALEPH_THRESHOLD,
             residual_gate_c: None,
             particles: 2000,
@@ -166,6 +172,12 @@ impl FamilyConfig {
             return bad(
                 "stf_weakening",
                 format!("{}: expected β ≥ 1", self.stf_weakening),
+            );
+        }
+        if !(self.stf_max_fading.is_finite() && self.stf_max_fading >= 1.0) {
+            return bad(
+                "stf_max_fading",
+                format!("{}: expected λ_max ≥ 1", self.stf_max_fading),
             );
         }
         if !(self.rekf_aleph_threshold.is_finite() && self.rekf_aleph_threshold > 0.0) {
@@ -243,34 +255,64 @@ fn tally(out: &mut EpochOutcome, rep: &UpdateReport) {
     }
 }
 
-/// The strong tracking prediction (Zhou & Frank 1996) on a stacked, whitened measurement
-/// of variable size: with `m` whitened pseudorange innovations `ν_j` and rows `h_j` at the
-/// predicted state,
-///
-/// ```text
-/// V_k = (ρ V_{k−1} + Σν_j²/m) / (1 + ρ)          (V_1 = Σν_j²/m)
-/// c_k = (V_k − Σ h_j Q h_jᵀ/m − β) / (Σ h_j F P Fᵀ h_jᵀ/m),   λ_k = max(1, c_k)
-/// P⁻ = λ_k F P Fᵀ + Q
-/// ```
-/// which is the trace form `tr N_k / tr M_k` of the vector filter divided through by the
-/// number of components, so that the memory stays meaningful when the number of
-/// satellites changes from epoch to epoch.
-#[allow(clippy::too_many_arguments)]
+/// The strong tracking prediction (Zhou & Frank 1996), first half: `x⁻ = f(x)` and the
+/// un-inflated `P⁻ = F P Fᵀ + Q`, keeping `F P Fᵀ` and `Q` apart until a batch with
+/// ranges arrives (two predictions without such a batch compose, as in
+/// [`crate::fusion::kalman::StrongTrackingFilter`]). A zero interval changes nothing, so a
+/// second batch at the same instant is not inflated twice.
 fn stf_predict(
     f: &mut Ekf<N>,
     mem: &mut StfMemory,
     model: &Pva11Clock,
     dt_s: f64,
+    gating: Gating,
+) -> bool {
+    if dt_s == 0.0 {
+        return true;
+    }
+    let (x, p) = (*f.state(), *f.covariance());
+    let fj = model.jacobian(&x, dt_s);
+    let q = model.q(&x, dt_s);
+    let (fpf, q) = match mem.pending {
+        Some((fpf0, q0)) => (fj * fpf0 * fj.transpose(), fj * q0 * fj.transpose() + q),
+        None => (fj * p * fj.transpose(), q),
+    };
+    let pp = fpf + q;
+    let pp = (pp + pp.transpose()) * 0.5;
+    mem.pending = Some((fpf, q));
+    match Ekf::new(model.f(&x, dt_s), pp).and_then(|e| e.with_gating(gating)) {
+        Ok(e) => {
+            *f = e;
+            true
+        }
+        Err(_) => false,
+    }
+}
+
+/// The strong tracking prediction, second half: the fading factor from the first batch
+/// with ranges after a prediction. On a stacked, whitened measurement of variable size,
+/// with `m` whitened pseudorange innovations `ν_j` and rows `h_j` at the predicted state,
+///
+/// ```text
+/// V_k = (ρ V_{k−1} + Σν_j²/m) / (1 + ρ)          (V_1 = Σν_j²/m)
+/// c_k = (V_k − Σ h_j Q h_jᵀ/m − β) / (Σ h_j F P Fᵀ h_jᵀ/m),   λ_k = min(λ_max, max(1, c_k))
+/// P⁻ = λ_k F P Fᵀ + Q
+/// ```
+/// which is the trace form `tr N_k / tr M_k` of the vector filter divided through by the
+/// number of components, so that the memory stays meaningful when the number of
+/// emitters changes from epoch to epoch.
+fn stf_inflate(
+    f: &mut Ekf<N>,
+    mem: &mut StfMemory,
     ranges: &[RangeMeasurement],
     layout: &StateLayout,
     cfg: &FamilyConfig,
     gating: Gating,
 ) -> bool {
-    let (x, p) = (*f.state(), *f.covariance());
-    let fj = model.jacobian(&x, dt_s);
-    let q = model.q(&x, dt_s);
-    let xp = model.f(&x, dt_s);
-    let fpf = fj * p * fj.transpose();
+    let Some((fpf, q)) = mem.pending else {
+        return true;
+    };
+    let xp = *f.state();
     let (mut nu2, mut hqh, mut hfh, mut m) = (0.0, 0.0, 0.0, 0usize);
     for r in ranges {
         let Ok(pr) = Pseudoranges::<N, 1>::new(*layout, [RangeRow::from(r)]) else {
@@ -283,22 +325,25 @@ fn stf_predict(
         hfh += (h * fpf * h.transpose())[(0, 0)];
         m += 1;
     }
-    let lambda = if m == 0 {
-        1.0
-    } else {
-        let k = m as f64;
-        let v = match mem.v {
-            None => nu2 / k,
-            Some(v0) => (cfg.stf_forgetting * v0 + nu2 / k) / (1.0 + cfg.stf_forgetting),
-        };
-        mem.v = Some(v);
-        let c = (v - hqh / k - cfg.stf_weakening) / (hfh / k);
-        if c.is_finite() {
-            c.max(1.0)
-        } else {
-            1.0
-        }
+    if m == 0 {
+        return true;
+    }
+    mem.pending = None;
+    let k = m as f64;
+    let v = match mem.v {
+        None => nu2 / k,
+        Some(v0) => (cfg.stf_forgetting * v0 + nu2 / k) / (1.0 + cfg.stf_forgetting),
     };
+    mem.v = Some(v);
+    let c = (v - hqh / k - cfg.stf_weakening) / (hfh / k);
+    let lambda = if c.is_finite() {
+        c.clamp(1.0, cfg.stf_max_fading)
+    } else {
+        1.0
+    };
+    if lambda == 1.0 {
+        return true;
+    }
     let pp = fpf * lambda + q;
     let pp = (pp + pp.transpose()) * 0.5;
     match Ekf::new(xp, pp).and_then(|e| e.with_gating(gating)) {
@@ -378,6 +423,8 @@ fn velocity_and_drift(
 /// The strong tracking filter's innovation memory `V` (per whitened component).
 struct StfMemory {
     v: Option<f64>,
+    /// `F P Fᵀ` and `Q` of the prediction not yet inflated.
+    pending: Option<(Cov, Cov)>,
 }
 
 /// A particle filter with its own random stream.
@@ -589,7 +636,10 @@ impl FamilyEstimator {
                 Ekf::new(x0, p0)
                     .and_then(|f| f.with_gating(self.gating))
                     .map_err(err)?,
-                StfMemory { v: None },
+                StfMemory {
+                    v: None,
+                    pending: None,
+                },
             ),
             FamilyKind::Rekf => Core::Rekf(
                 RelativeEntropyKf::new(x0, p0, cfg.rekf_aleph_threshold, self.gating.residual)
@@ -759,16 +809,10 @@ impl Estimator for FamilyEstimator {
             return out;
         };
         let predicted = match &mut *core {
-            Core::Stf(f, mem) => stf_predict(
-                f,
-                mem,
-                &self.model,
-                dt,
-                &self.scratch,
-                &self.layout,
-                &self.cfg,
-                self.gating,
-            ),
+            Core::Stf(f, mem) => {
+                stf_predict(f, mem, &self.model, dt, self.gating)
+                    && stf_inflate(f, mem, &self.scratch, &self.layout, &self.cfg, self.gating)
+            }
             c => c.predict(&self.model, dt),
         };
         if !predicted {
