@@ -738,8 +738,20 @@ impl Ekf11 {
         r_var: f64,
         gate: Option<f64>,
     ) -> UpdateOutcome {
-        let ph = self.p * h;
-        let s = h.dot(&ph) + r_var;
+        const NS: usize = N_STATES;
+        // h has four to seven non-zero entries, so P h is a sum of that many columns of P
+        // rather than a dense product.
+        let p = self.p.as_slice();
+        let mut ph = [0.0; NS];
+        for (c, &hc) in h.iter().enumerate() {
+            if hc != 0.0 {
+                let col = &p[c * NS..(c + 1) * NS];
+                for (o, &v) in ph.iter_mut().zip(col) {
+                    *o += hc * v;
+                }
+            }
+        }
+        let s = h.iter().zip(&ph).map(|(a, b)| a * b).sum::<f64>() + r_var;
         if !(s.is_finite() && s > 0.0) {
             return UpdateOutcome::rejected(RejectReason::NumericalFailure);
         }
@@ -758,17 +770,18 @@ impl Ekf11 {
                 };
             }
         }
-        let k = ph / s;
-        let x_new = self.x + k * innovation;
-        // Joseph form expanded for a scalar, one pass over the upper triangle:
-        // P⁺_ij = P_ij − k_i c_j − c_i k_j + s k_i k_j, with c = P h; the result is
-        // symmetric by construction.
-        let mut p_new = self.p;
-        for j in 0..N_STATES {
-            for i in 0..=j {
-                let v = self.p[(i, j)] - k[i] * ph[j] - ph[i] * k[j] + s * k[i] * k[j];
-                p_new[(i, j)] = v;
-                p_new[(j, i)] = v;
+        let k: [f64; NS] = std::array::from_fn(|i| ph[i] / s);
+        let x_new = self.x + StateVector::from(k) * innovation;
+        // Joseph form expanded for a scalar: P⁺_ij = P_ij − (k_i c_j + c_i k_j) + s (k_i k_j)
+        // with c = P h. Grouped this way every term is symmetric in (i, j) to the last bit,
+        // so the full square (which vectorises) is as symmetric as the upper triangle was.
+        let mut p_new = StateMatrix::zeros();
+        for (j, col) in p_new.as_mut_slice().chunks_exact_mut(NS).enumerate() {
+            let old = &p[j * NS..(j + 1) * NS];
+            let (kj, cj) = (k[j], ph[j]);
+            for i in 0..NS {
+                let v = old[i] - (k[i] * cj + ph[i] * kj) + s * (k[i] * kj);
+                col[i] = v;
             }
         }
         self.commit(x_new, p_new, nis)
