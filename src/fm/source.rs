@@ -35,7 +35,7 @@ fn one() -> f64 {
 }
 
 /// `[sensors.fm]` in a world file.
-#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct FmSensorConfig {
     /// Fix rate (Hz), default 1.
@@ -58,6 +58,19 @@ pub struct FmSensorConfig {
     /// The constraint circle.
     #[serde(default)]
     pub constraint: ConstraintConfig,
+}
+
+impl Default for FmSensorConfig {
+    fn default() -> Self {
+        Self {
+            rate_hz: one(),
+            database: None,
+            synthetic_stations_total: 0,
+            field: FmFieldConfig::default(),
+            wknn: WknnConfig::default(),
+            constraint: ConstraintConfig::default(),
+        }
+    }
 }
 
 impl FmSensorConfig {
