@@ -338,7 +338,7 @@ pub fn fit_best(
 ) -> Result<(VariogramFit, Vec<VariogramBin>), FmError> {
     let max_pair = max_pair_distance(xy, z);
     let max_lag = opts.max_lag_m.unwrap_or(0.5 * max_pair);
-    if !(max_lag > 0.0) || opts.n_bins < 3 {
+    if max_lag.is_nan() || max_lag <= 0.0 || opts.n_bins < 3 {
         return Err(FmError::Data(format!(
             "expected at least 3 bins and distinct data points, got {} bins, largest lag {max_lag} m",
             opts.n_bins
