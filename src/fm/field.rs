@@ -468,6 +468,46 @@ mod tests {
     }
 
     #[test]
+    fn a_building_in_the_way_costs_two_concrete_walls() {
+        use crate::propagation::scene::{BuildingConfig, SceneConfig, WallMaterial};
+        let cfg = FmFieldConfig {
+            shadowing: ShadowingConfig {
+                sigma_db: 0.0,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let scene = SceneConfig {
+            buildings: vec![BuildingConfig {
+                footprint_enu_m: vec![[20.0, -10.0], [40.0, -10.0], [40.0, 10.0], [20.0, 10.0]],
+                height_m: 30.0,
+                material: WallMaterial::Concrete,
+                class: Default::default(),
+            }],
+            ..Default::default()
+        };
+        let scene = Arc::new(Scene::new(&scene).unwrap());
+        let mut open = FmField::new(cfg.clone(), vec![station(5_000.0)], None, 1).unwrap();
+        let mut built = FmField::new(cfg, vec![station(5_000.0)], Some(scene), 1).unwrap();
+        let (mut a, mut b) = ([0.0], [0.0]);
+        let rx = Vector3::new(0.0, 0.0, 1.5);
+        open.mean_rssi_dbm(&rx, &mut a);
+        built.mean_rssi_dbm(&rx, &mut b);
+        // The path at 2–3 m height crosses the 30 m building's west and east walls.
+        let expected = 2.0 * WallMaterial::Concrete.penetration_loss_db(100e6);
+        assert!(
+            (a[0] - b[0] - expected).abs() < 1e-9,
+            "{} vs {expected}",
+            a[0] - b[0]
+        );
+        // Beside the building the scene costs nothing.
+        let rx = Vector3::new(0.0, 50.0, 1.5);
+        open.mean_rssi_dbm(&rx, &mut a);
+        built.mean_rssi_dbm(&rx, &mut b);
+        assert_eq!(a[0], b[0]);
+    }
+
+    #[test]
     fn quantisation_and_floor() {
         let cfg = FmFieldConfig {
             quantisation_db: 2.0,

@@ -183,6 +183,39 @@ mod tests {
     use super::*;
 
     #[test]
+    fn averaging_n_scans_divides_the_noise_by_root_n() {
+        use crate::core::TrialRng;
+        use crate::fm::field::{FmFieldConfig, FmStation};
+        use crate::propagation::ShadowingConfig;
+        let fcfg = FmFieldConfig {
+            quantisation_db: 0.0,
+            shadowing: ShadowingConfig {
+                sigma_db: 0.0,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let st = FmStation::new("F01", Vector3::new(3_000.0, 0.0, 100.0), 98e6, 40.0, 0.0);
+        let mut field = FmField::new(fcfg, vec![st], None, 1).unwrap();
+        let pts = grid_points([0.0, 0.0], [190.0, 190.0], 10.0).unwrap();
+        let cfg = SurveyConfig {
+            scans_per_point: 16,
+            noise_sigma_db: 2.0,
+        };
+        let mut rng = TrialRng::new(1, 0).stream("test/fm/survey");
+        let v = survey(&mut field, &pts, 1.5, &cfg, &mut rng).unwrap();
+        let mut mean = [0.0];
+        let mut sq = 0.0;
+        for (p, x) in pts.iter().zip(&v) {
+            field.mean_rssi_dbm(&Vector3::new(p[0], p[1], 1.5), &mut mean);
+            sq += (x - mean[0]).powi(2);
+        }
+        let rms = (sq / pts.len() as f64).sqrt();
+        // 2 dB / √16 = 0.5 dB; 400 points give the RMS to about ±4 % (1σ).
+        assert!((rms - 0.5).abs() < 0.06, "{rms}");
+    }
+
+    #[test]
     fn grid_and_polyline_layouts() {
         let g = grid_points([0.0, 0.0], [9.0, 6.0], 3.0).unwrap();
         assert_eq!(g.len(), 4 * 3);
