@@ -457,3 +457,100 @@ pub fn locate(
         best_distance_db: scratch.dist[0],
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::{EnuFrame, Geodetic};
+    use crate::fm::database::{ChannelInfo, WorldTag};
+
+    fn db() -> FingerprintDb {
+        let frame = EnuFrame::new(Geodetic::from_deg(40.0, 116.0, 50.0));
+        let channels = (0..3)
+            .map(|i| ChannelInfo {
+                id: format!("F{i}"),
+                freq_hz: 90e6 + 1e6 * i as f64,
+            })
+            .collect();
+        let rps = vec![[0.0, 0.0, 1.0], [10.0, 0.0, 1.0], [0.0, 50.0, 1.0]];
+        let rssi = vec![
+            -60.0, -60.0, -60.0, -61.0, -61.0, -61.0, -65.0, -65.0, -65.0,
+        ];
+        FingerprintDb::new(
+            WorldTag::new("t", &frame, None),
+            &frame,
+            channels,
+            rps,
+            rssi,
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn two_neighbours_give_the_closed_form_mean_and_spread() {
+        // D = 0 dB and 1 dB: w ∝ 1/0.1 and 1/1.1. For two points the weighted spread along
+        // their axis is w0 w1 |Δ|² (normalised weights).
+        let cfg = WknnConfig {
+            k: 2,
+            ..Default::default()
+        };
+        let mut s = WknnScratch::new(2);
+        let fix = locate(
+            &db(),
+            &[-60.0, -60.0, -60.0],
+            &cfg,
+            None,
+            NoRpPolicy::Error,
+            &mut s,
+        )
+        .unwrap();
+        let (a, b) = (1.0 / 0.1, 1.0 / 1.1);
+        let (w0, w1) = (a / (a + b), b / (a + b));
+        assert!((fix.pos_enu_m.x - 10.0 * w1).abs() < 1e-12 && fix.pos_enu_m.y.abs() < 1e-12);
+        assert!((fix.cov_enu_m2[(0, 0)] - (w0 * w1 * 100.0 + 9.0)).abs() < 1e-9);
+        assert!(
+            (fix.cov_enu_m2[(1, 1)] - 9.0).abs() < 1e-12
+                && (fix.cov_enu_m2[(2, 2)] - 25.0).abs() < 1e-12
+        );
+        assert_eq!((fix.neighbours, fix.best_distance_db), (2, 0.0));
+        // Uniform weights: the midpoint, spread |Δ|²/4.
+        let cfg = WknnConfig {
+            weighting: Weighting::Uniform,
+            ..cfg
+        };
+        let fix = locate(
+            &db(),
+            &[-60.0, -60.0, -60.0],
+            &cfg,
+            None,
+            NoRpPolicy::Error,
+            &mut s,
+        )
+        .unwrap();
+        assert!((fix.pos_enu_m.x - 5.0).abs() < 1e-12);
+        assert!((fix.cov_enu_m2[(0, 0)] - (25.0 + 9.0)).abs() < 1e-9);
+        // K larger than the RPs uses them all.
+        let cfg = WknnConfig { k: 10, ..cfg };
+        let mut s = WknnScratch::new(10);
+        let fix = locate(
+            &db(),
+            &[-60.0, -60.0, -60.0],
+            &cfg,
+            None,
+            NoRpPolicy::Error,
+            &mut s,
+        )
+        .unwrap();
+        assert_eq!(fix.neighbours, 3);
+        assert!((fix.pos_enu_m.y - 50.0 / 3.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn radius_grows_and_saturates() {
+        let c = ConstraintConfig::default();
+        assert_eq!(c.radius_m(0.0), 30.0);
+        assert_eq!(c.radius_m(10.0), 50.0);
+        assert_eq!(c.radius_m(-5.0), 30.0);
+        assert_eq!(c.radius_m(1e6), 200.0);
+    }
+}
