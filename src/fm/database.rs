@@ -320,7 +320,9 @@ impl FingerprintDb {
 
 /// The offline stage in one call: surveys `rp_en_m` with `field` (the surveyor's stream
 /// `rng`, antenna at ENU height `up_m`), kriges every channel onto `grid_en_m`, and
-/// returns the database (the grid as RPs) with the per-channel kriging report.
+/// returns the database (the grid as RPs) with the per-channel kriging report. A channel
+/// with fewer than 10 surveyed values is left missing on the grid (see
+/// [`super::kriging::krige_channels`]).
 #[allow(clippy::too_many_arguments)]
 pub fn build_kriged(
     world: WorldTag,

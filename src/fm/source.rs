@@ -124,8 +124,10 @@ pub struct FmSource {
 }
 
 impl FmSource {
-    /// Builds the source. `stations` are the FM stations (declared and synthetic); each
-    /// database channel is matched to the station with its id. `rng` gives the scan
+    /// Builds the source. `stations` are the world's declared FM stations, completed to
+    /// `cfg.synthetic_stations_total` by [`super::field::synthesize_stations`] with the
+    /// master seed (build the survey's field the same way); each database channel is
+    /// matched to the station with its id. `rng` gives the scan
     /// stream `fm/scan` and its master seed keys the shadowing (`fm/shadowing/<id>`), as
     /// in the survey that built the database. `aid` is the index of the estimator whose
     /// estimate centres the constraint circle. Samples run from 0 to `end`.
@@ -144,6 +146,13 @@ impl FmSource {
         end: SimTime,
     ) -> Result<Self, ConfigIssue> {
         cfg.validate()?;
+        // The same completion (same seed, same stream) as the survey that built the
+        // database, so the synthetic stations are the same ones.
+        let stations = super::field::synthesize_stations(
+            &stations,
+            cfg.synthetic_stations_total,
+            rng.master_seed(),
+        );
         let field = FmField::new(cfg.field.clone(), stations, scene, rng.master_seed())?;
         let channel_station: Vec<Option<usize>> = db
             .channels()

@@ -827,10 +827,20 @@ fn fm_source_is_deterministic_per_trial() {
     let fr = frame();
     let grid = grid_points([-30.0, -30.0], [30.0, 30.0], 3.0).unwrap();
     let db = Arc::new(db_from_survey(&grid, "test/fm/survey/determinism"));
-    let run = |trial: u64| {
+    // `declared_only`: the world's 3 stations, completed to 21 by the source itself.
+    let run = |trial: u64, declared_only: bool| {
+        let (cfg, st) = if declared_only {
+            let cfg = FmSensorConfig {
+                synthetic_stations_total: 21,
+                ..Default::default()
+            };
+            (cfg, stations(&fr)[..3].to_vec())
+        } else {
+            (FmSensorConfig::default(), stations(&fr))
+        };
         let mut src = FmSource::new(
-            FmSensorConfig::default(),
-            stations(&fr),
+            cfg,
+            st,
             None,
             fr.clone(),
             db.clone(),
@@ -854,8 +864,17 @@ fn fm_source_is_deterministic_per_trial() {
         }
         fixes
     };
-    assert_eq!(run(4), run(4));
-    assert_ne!(run(4), run(5), "another trial draws other scan noise");
+    assert_eq!(run(4, false), run(4, false));
+    assert_ne!(
+        run(4, false),
+        run(5, false),
+        "another trial draws other scan noise"
+    );
+    assert_eq!(
+        run(4, true),
+        run(4, false),
+        "the source completes the stations as the survey did"
+    );
 }
 
 #[test]
