@@ -416,6 +416,9 @@ impl FmField {
                         &mut self.link,
                     ) {
                         Ok(()) => self.link.direct_loss_db,
+                        // The scene refuses only non-finite positions; the receiver's
+                        // position comes from the trajectory or a survey layout that are
+                        // already checked, so no extra loss is the neutral answer.
                         Err(_) => 0.0,
                     }
                 }
