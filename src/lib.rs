@@ -6,6 +6,7 @@ pub mod cli;
 pub mod core;
 pub mod dtmb;
 pub mod engine;
+pub mod fm;
 pub mod fusion;
 pub mod gnss;
 pub mod inertial;

@@ -1,0 +1,269 @@
+//! The FM fingerprinting receiver as a measurement source (`"fm"`).
+//!
+//! At each epoch (default 1 Hz) the source
+//!
+//! 1. scans the RSSI of every station at the true position ([`FmField::scan`]: noise,
+//!    quantisation, sensitivity floor), stream `fm/scan`;
+//! 2. takes the constraint centre from the aiding estimator's latest estimate (closed
+//!    loop). The time of the last reliable fix is the last epoch at which that estimate's
+//!    horizontal σ = √((σ_e² + σ_n²)/2) was at most `constraint.reliable_sigma_m`; the
+//!    radius is r(t) = min(r0 + growth (t − t_reliable), r_max) (seed 000 §3.2, Fig. 3).
+//!    Before the first reliable fix, without an aiding estimator or with the constraint
+//!    disabled, every RP is searched;
+//! 3. runs WKNN ([`super::wknn::locate`]) and emits a
+//!    `Measurement::Position(PositionFix)` in ECEF with R_f rotated from ENU and
+//!    `support` = the RPs inside the circle (seed 000 eqs. 18–19).
+//!
+//! An epoch whose search fails (no comparable RP, or no RP in the circle under the
+//! `error` policy) emits nothing; the failures are counted in [`FmSource::warnings`].
+
+use super::check;
+use super::database::FingerprintDb;
+use super::field::{FmField, FmFieldConfig, FmStation};
+use super::wknn::{locate, Constraint, ConstraintConfig, WknnConfig, WknnScratch};
+use crate::core::rng::StreamRng;
+use crate::core::{EnuFrame, SimTime, TrialRng};
+use crate::engine::{SampleContext, Source};
+use crate::fusion::measurement::{Measurement, MeasurementBatch, PositionFix};
+use crate::motion::ConfigIssue;
+use crate::propagation::Scene;
+use serde::Deserialize;
+use std::sync::Arc;
+
+fn one() -> f64 {
+    1.0
+}
+
+/// `[sensors.fm]` in a world file.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FmSensorConfig {
+    /// Fix rate (Hz), default 1.
+    #[serde(default = "one")]
+    pub rate_hz: f64,
+    /// The fingerprint database file (the world layer loads it with
+    /// [`FingerprintDb::load`] and passes it to [`FmSource::new`]).
+    #[serde(default)]
+    pub database: Option<String>,
+    /// Total number of stations; the world's declared FM stations are completed with
+    /// [`super::field::synthesize_stations`] up to it (0, the default: only the declared).
+    #[serde(default)]
+    pub synthetic_stations_total: usize,
+    /// The RSSI field and the receiver.
+    #[serde(default)]
+    pub field: FmFieldConfig,
+    /// The WKNN search.
+    #[serde(default)]
+    pub wknn: WknnConfig,
+    /// The constraint circle.
+    #[serde(default)]
+    pub constraint: ConstraintConfig,
+}
+
+impl Default for FmSensorConfig {
+    fn default() -> Self {
+        Self {
+            rate_hz: one(),
+            database: None,
+            synthetic_stations_total: 0,
+            field: FmFieldConfig::default(),
+            wknn: WknnConfig::default(),
+            constraint: ConstraintConfig::default(),
+        }
+    }
+}
+
+impl FmSensorConfig {
+    /// Checks every value; the key is the field's path (`"wknn.k"`).
+    pub fn validate(&self) -> Result<(), ConfigIssue> {
+        check(
+            "rate_hz",
+            self.rate_hz.is_finite() && self.rate_hz > 0.0 && self.rate_hz <= 100.0,
+            || format!("expected a rate in (0, 100] Hz, got {}", self.rate_hz),
+        )?;
+        check(
+            "synthetic_stations_total",
+            self.synthetic_stations_total <= 50,
+            || {
+                format!(
+                    "expected at most 50 stations in all (the FM band at 400 kHz spacing), got {}",
+                    self.synthetic_stations_total
+                )
+            },
+        )?;
+        self.field.validate().map_err(|c| prefixed("field", c))?;
+        self.wknn.validate().map_err(|c| prefixed("wknn", c))?;
+        self.constraint
+            .validate()
+            .map_err(|c| prefixed("constraint", c))
+    }
+}
+
+fn prefixed(table: &str, c: ConfigIssue) -> ConfigIssue {
+    ConfigIssue::new(format!("{table}.{}", c.key), c.message)
+}
+
+/// The FM fingerprinting source.
+pub struct FmSource {
+    cfg: FmSensorConfig,
+    field: FmField,
+    frame: EnuFrame,
+    db: Arc<FingerprintDb>,
+    aid: Option<usize>,
+    rng: StreamRng,
+    /// For each database channel, the index of its station in the field, if any.
+    channel_station: Vec<Option<usize>>,
+    scan_buf: Vec<f64>,
+    meas_buf: Vec<f64>,
+    scratch: WknnScratch,
+    last_reliable_s: Option<f64>,
+    period_ns: i64,
+    end: SimTime,
+    failures: u64,
+    last_failure: Option<String>,
+}
+
+impl FmSource {
+    /// Builds the source. `stations` are the world's declared FM stations, completed to
+    /// `cfg.synthetic_stations_total` by [`super::field::synthesize_stations`] with the
+    /// master seed (build the survey's field the same way); each database channel is
+    /// matched to the station with its id. `rng` gives the scan
+    /// stream `fm/scan` and its master seed keys the shadowing (`fm/shadowing/<id>`), as
+    /// in the survey that built the database. `aid` is the index of the estimator whose
+    /// estimate centres the constraint circle. Samples run from 0 to `end`.
+    ///
+    /// Errors (with the offending key) for an invalid configuration or station, or a
+    /// database sharing fewer than `wknn.min_common_channels` channels with the stations.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        cfg: FmSensorConfig,
+        stations: Vec<FmStation>,
+        scene: Option<Arc<Scene>>,
+        frame: EnuFrame,
+        db: Arc<FingerprintDb>,
+        rng: &TrialRng,
+        aid: Option<usize>,
+        end: SimTime,
+    ) -> Result<Self, ConfigIssue> {
+        cfg.validate()?;
+        // The same completion (same seed, same stream) as the survey that built the
+        // database, so the synthetic stations are the same ones.
+        let stations = super::field::synthesize_stations(
+            &stations,
+            cfg.synthetic_stations_total,
+            rng.master_seed(),
+        );
+        let field = FmField::new(cfg.field.clone(), stations, scene, rng.master_seed())?;
+        let channel_station: Vec<Option<usize>> = db
+            .channels()
+            .iter()
+            .map(|ch| field.stations().iter().position(|s| s.id == ch.id))
+            .collect();
+        let shared = channel_station.iter().flatten().count();
+        check("database", shared >= cfg.wknn.min_common_channels, || {
+            format!(
+                "expected the database to share at least {} channels with the FM stations, got {shared} (database channels: {})",
+                cfg.wknn.min_common_channels,
+                db.channels().iter().map(|c| c.id.as_str()).collect::<Vec<_>>().join(", ")
+            )
+        })?;
+        let n_st = field.stations().len();
+        let n_ch = db.channels().len();
+        Ok(Self {
+            period_ns: ((1e9 / cfg.rate_hz).round() as i64).max(1),
+            scratch: WknnScratch::new(cfg.wknn.k),
+            cfg,
+            field,
+            frame,
+            db,
+            aid,
+            rng: rng.stream("fm/scan"),
+            channel_station,
+            scan_buf: vec![0.0; n_st],
+            meas_buf: vec![f64::NAN; n_ch],
+            last_reliable_s: None,
+            end,
+            failures: 0,
+            last_failure: None,
+        })
+    }
+
+    /// The constraint for this epoch from the aiding estimate, updating the time of the
+    /// last reliable fix.
+    fn constraint(&mut self, ctx: &SampleContext<'_>, t_s: f64) -> Option<Constraint> {
+        if !self.cfg.constraint.enabled {
+            return None;
+        }
+        let est = ctx.estimates.get(self.aid?)?.as_ref()?;
+        let r = self.frame.rotation();
+        let cov_enu = r * est.cov_pos_m2 * r.transpose();
+        let sigma_h = (0.5 * (cov_enu[(0, 0)] + cov_enu[(1, 1)])).max(0.0).sqrt();
+        if sigma_h <= self.cfg.constraint.reliable_sigma_m {
+            self.last_reliable_s = Some(t_s);
+        }
+        let since = t_s - self.last_reliable_s?;
+        let c = self.frame.enu_of_ecef(&est.pos_ecef_m);
+        Some(Constraint {
+            centre_en_m: [c.x, c.y],
+            radius_m: self.cfg.constraint.radius_m(since),
+        })
+    }
+}
+
+impl Source for FmSource {
+    fn name(&self) -> &str {
+        "fm"
+    }
+
+    fn first_sample(&self) -> SimTime {
+        SimTime(0)
+    }
+
+    fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
+        let truth = ctx.truth;
+        out.t = truth.t;
+        out.source.clear();
+        out.source.push_str("fm");
+        let t_s = truth.sim.seconds();
+        self.field
+            .scan(&truth.enu.pos_enu_m, &mut self.rng, &mut self.scan_buf);
+        for (m, st) in self.meas_buf.iter_mut().zip(&self.channel_station) {
+            *m = st.map_or(f64::NAN, |s| self.scan_buf[s]);
+        }
+        let constraint = self.constraint(ctx, t_s);
+        match locate(
+            &self.db,
+            &self.meas_buf,
+            &self.cfg.wknn,
+            constraint.as_ref(),
+            self.cfg.constraint.no_rp,
+            &mut self.scratch,
+        ) {
+            Ok(fix) => {
+                let r = self.frame.rotation();
+                out.items.push(Measurement::Position(PositionFix {
+                    pos_ecef_m: self.frame.ecef_of_enu(&fix.pos_enu_m),
+                    cov_m2: r.transpose() * fix.cov_enu_m2 * r,
+                    support: fix.support,
+                }));
+            }
+            Err(e) => {
+                self.failures += 1;
+                self.last_failure = Some(e.to_string());
+            }
+        }
+        let next = truth.sim.0 + self.period_ns;
+        (next <= self.end.0).then_some(SimTime(next))
+    }
+
+    fn warnings(&self) -> Vec<String> {
+        let mut w = self.field.warnings().to_vec();
+        if let Some(last) = &self.last_failure {
+            w.push(format!(
+                "FM fingerprinting produced no fix at {} epochs (last: {last})",
+                self.failures
+            ));
+        }
+        w
+    }
+}

@@ -1,0 +1,246 @@
+//! The offline survey: reference-point layouts and the surveyor's measurements.
+//!
+//! A surveyor stands at each reference point (RP) and records `scans_per_point` scans
+//! of every channel with their own instrument (noise σ `noise_sigma_db`, the field's
+//! quantisation and sensitivity). The RP's fingerprint is the mean in dB of the scans
+//! that detected the channel; a channel detected in fewer than half the scans is missing
+//! (NaN), because a mean of the few strong outliers above the floor would be biased high.
+//! Averaging N scans divides the noise variance by N (before quantisation), which is why
+//! a survey is more accurate than one online scan.
+
+use super::field::FmField;
+use super::{check, FmError};
+use crate::core::rng::StreamRng;
+use crate::motion::ConfigIssue;
+use nalgebra::Vector3;
+use serde::Deserialize;
+
+fn default_scans() -> u32 {
+    10
+}
+fn default_noise() -> f64 {
+    2.0
+}
+
+/// How the surveyor measures.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SurveyConfig {
+    /// Scans averaged per RP (1–1000), default 10.
+    #[serde(default = "default_scans")]
+    pub scans_per_point: u32,
+    /// The surveyor's per-scan noise σ (dB), default 2.
+    #[serde(default = "default_noise")]
+    pub noise_sigma_db: f64,
+}
+
+impl Default for SurveyConfig {
+    fn default() -> Self {
+        Self {
+            scans_per_point: default_scans(),
+            noise_sigma_db: default_noise(),
+        }
+    }
+}
+
+impl SurveyConfig {
+    /// Checks every value; the key is the field name.
+    pub fn validate(&self) -> Result<(), ConfigIssue> {
+        check(
+            "scans_per_point",
+            (1..=1000).contains(&self.scans_per_point),
+            || {
+                format!(
+                    "expected 1 to 1000 scans per point, got {}",
+                    self.scans_per_point
+                )
+            },
+        )?;
+        check(
+            "noise_sigma_db",
+            self.noise_sigma_db.is_finite() && (0.0..=30.0).contains(&self.noise_sigma_db),
+            || {
+                format!(
+                    "expected a surveyor noise σ in [0, 30] dB, got {}",
+                    self.noise_sigma_db
+                )
+            },
+        )
+    }
+}
+
+/// Grid points from (`east0`, `north0`) to (`east1`, `north1`) inclusive, every
+/// `spacing_m`, row by row (north outer, east inner).
+pub fn grid_points(
+    min_en_m: [f64; 2],
+    max_en_m: [f64; 2],
+    spacing_m: f64,
+) -> Result<Vec<[f64; 2]>, FmError> {
+    let ok = spacing_m.is_finite()
+        && spacing_m > 0.0
+        && min_en_m.iter().chain(&max_en_m).all(|v| v.is_finite())
+        && max_en_m[0] >= min_en_m[0]
+        && max_en_m[1] >= min_en_m[1];
+    if !ok {
+        return Err(FmError::Data(format!(
+            "expected a grid with min ≤ max corners and a positive spacing, got {min_en_m:?}–{max_en_m:?} every {spacing_m} m"
+        )));
+    }
+    let ne = ((max_en_m[0] - min_en_m[0]) / spacing_m + 1e-9).floor() as usize + 1;
+    let nn = ((max_en_m[1] - min_en_m[1]) / spacing_m + 1e-9).floor() as usize + 1;
+    if ne.saturating_mul(nn) > 10_000_000 {
+        return Err(FmError::Data(format!(
+            "expected at most 10 million grid points, got {ne} × {nn}"
+        )));
+    }
+    let mut out = Vec::with_capacity(ne * nn);
+    for j in 0..nn {
+        for i in 0..ne {
+            out.push([
+                min_en_m[0] + i as f64 * spacing_m,
+                min_en_m[1] + j as f64 * spacing_m,
+            ]);
+        }
+    }
+    Ok(out)
+}
+
+/// Points along the polyline `vertices` every `spacing_m` of arc length, starting at the
+/// first vertex (the last vertex is included only when it falls on the spacing).
+pub fn polyline_points(vertices: &[[f64; 2]], spacing_m: f64) -> Result<Vec<[f64; 2]>, FmError> {
+    if vertices.len() < 2
+        || !(spacing_m.is_finite() && spacing_m > 0.0)
+        || !vertices.iter().flatten().all(|v| v.is_finite())
+    {
+        return Err(FmError::Data(format!(
+            "expected a polyline of at least 2 finite vertices and a positive spacing, got {} vertices every {spacing_m} m",
+            vertices.len()
+        )));
+    }
+    let mut out = vec![vertices[0]];
+    // `carry` is the arc length since the last point.
+    let mut carry = 0.0;
+    for w in vertices.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        let len = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
+        let mut s = spacing_m - carry;
+        while s <= len + 1e-9 {
+            let t = s / len;
+            out.push([a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]);
+            s += spacing_m;
+        }
+        carry = len - (s - spacing_m);
+        if out.len() > 10_000_000 {
+            return Err(FmError::Data(
+                "expected at most 10 million polyline points".into(),
+            ));
+        }
+    }
+    Ok(out)
+}
+
+/// Surveys `points` (horizontal ENU, at ENU height `up_m`) with `field`: returns the
+/// fingerprints row-major (point × station, dBm, NaN where missing). `rng` is the
+/// surveyor's named stream (e.g. `fm/survey`).
+pub fn survey(
+    field: &mut FmField,
+    points: &[[f64; 2]],
+    up_m: f64,
+    cfg: &SurveyConfig,
+    rng: &mut StreamRng,
+) -> Result<Vec<f64>, ConfigIssue> {
+    cfg.validate()?;
+    let c = field.stations().len();
+    let mut out = vec![f64::NAN; points.len() * c];
+    let mut mean = vec![0.0; c];
+    let mut sum = vec![0.0; c];
+    let mut hits = vec![0u32; c];
+    let field_cfg = field.config().clone();
+    for (i, p) in points.iter().enumerate() {
+        field.mean_rssi_dbm(&Vector3::new(p[0], p[1], up_m), &mut mean);
+        sum.iter_mut().for_each(|s| *s = 0.0);
+        hits.iter_mut().for_each(|h| *h = 0);
+        for _ in 0..cfg.scans_per_point {
+            for k in 0..c {
+                let v = field_cfg.read(mean[k], cfg.noise_sigma_db, rng);
+                if v.is_finite() {
+                    sum[k] += v;
+                    hits[k] += 1;
+                }
+            }
+        }
+        for k in 0..c {
+            if 2 * hits[k] >= cfg.scans_per_point && hits[k] > 0 {
+                out[i * c + k] = sum[k] / f64::from(hits[k]);
+            }
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn averaging_n_scans_divides_the_noise_by_root_n() {
+        use crate::core::TrialRng;
+        use crate::fm::field::{FmFieldConfig, FmStation};
+        use crate::propagation::ShadowingConfig;
+        let fcfg = FmFieldConfig {
+            quantisation_db: 0.0,
+            shadowing: ShadowingConfig {
+                sigma_db: 0.0,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let st = FmStation::new("F01", Vector3::new(3_000.0, 0.0, 100.0), 98e6, 40.0, 0.0);
+        let mut field = FmField::new(fcfg, vec![st], None, 1).unwrap();
+        let pts = grid_points([0.0, 0.0], [190.0, 190.0], 10.0).unwrap();
+        let cfg = SurveyConfig {
+            scans_per_point: 16,
+            noise_sigma_db: 2.0,
+        };
+        let mut rng = TrialRng::new(1, 0).stream("test/fm/survey");
+        let v = survey(&mut field, &pts, 1.5, &cfg, &mut rng).unwrap();
+        let mut mean = [0.0];
+        let mut sq = 0.0;
+        for (p, x) in pts.iter().zip(&v) {
+            field.mean_rssi_dbm(&Vector3::new(p[0], p[1], 1.5), &mut mean);
+            sq += (x - mean[0]).powi(2);
+        }
+        let rms = (sq / pts.len() as f64).sqrt();
+        // 2 dB / √16 = 0.5 dB; 400 points give the RMS to about ±4 % (1σ).
+        assert!((rms - 0.5).abs() < 0.06, "{rms}");
+    }
+
+    #[test]
+    fn grid_and_polyline_layouts() {
+        let g = grid_points([0.0, 0.0], [9.0, 6.0], 3.0).unwrap();
+        assert_eq!(g.len(), 4 * 3);
+        assert_eq!(g[5], [3.0, 3.0]);
+        // A 100 m × 50 m rectangle (300 m) every 10 m: 30 points plus the closing vertex.
+        let p = polyline_points(
+            &[
+                [0.0, 0.0],
+                [100.0, 0.0],
+                [100.0, 50.0],
+                [0.0, 50.0],
+                [0.0, 0.0],
+            ],
+            10.0,
+        )
+        .unwrap();
+        assert_eq!(p.len(), 31);
+        for w in p.windows(2) {
+            let d = ((w[1][0] - w[0][0]).powi(2) + (w[1][1] - w[0][1]).powi(2)).sqrt();
+            assert!((d - 10.0).abs() < 1e-9, "{d}");
+        }
+        // A spacing that does not divide the legs still keeps 7 m of arc between points.
+        let p = polyline_points(&[[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]], 7.0).unwrap();
+        assert_eq!(p, vec![[0.0, 0.0], [7.0, 0.0], [10.0, 4.0]]);
+        assert!(grid_points([0.0, 0.0], [1.0, 1.0], 0.0).is_err());
+        assert!(polyline_points(&[[0.0, 0.0]], 1.0).is_err());
+    }
+}
