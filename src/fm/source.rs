@@ -20,6 +20,7 @@
 use super::check;
 use super::database::FingerprintDb;
 use super::field::{FmField, FmFieldConfig, FmStation};
+use super::survey::SurveyConfig;
 use super::wknn::{locate, Constraint, ConstraintConfig, WknnConfig, WknnScratch};
 use crate::core::rng::StreamRng;
 use crate::core::{EnuFrame, SimTime, TrialRng};
@@ -58,6 +59,62 @@ pub struct FmSensorConfig {
     /// The constraint circle.
     #[serde(default)]
     pub constraint: ConstraintConfig,
+    /// The offline survey a world runs when it names no `database` file.
+    #[serde(default)]
+    pub survey: FmSurveySpec,
+}
+
+/// `[sensors.fm.survey]`: the offline survey the world runs (once per master seed) when
+/// `database` is not given. Seed 000 surveyed 282 RPs on its ~380 m campus and kriged them
+/// to 16 640 RPs on a 3 m grid; the defaults reproduce that density: surveyed RPs every
+/// 24 m and the kriged grid every 3 m over the trajectory's bounding box widened by
+/// `margin_m`.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct FmSurveySpec {
+    pub rp_spacing_m: f64,
+    pub grid_spacing_m: f64,
+    pub margin_m: f64,
+    /// Scans averaged per surveyed RP and the surveyor's per-scan noise σ (dB).
+    pub scans_per_point: u32,
+    pub noise_sigma_db: f64,
+}
+
+impl Default for FmSurveySpec {
+    fn default() -> Self {
+        let s = SurveyConfig::default();
+        Self {
+            rp_spacing_m: 24.0,
+            grid_spacing_m: 3.0,
+            margin_m: 30.0,
+            scans_per_point: s.scans_per_point,
+            noise_sigma_db: s.noise_sigma_db,
+        }
+    }
+}
+
+impl FmSurveySpec {
+    /// The surveyor's scan settings.
+    pub fn scan(&self) -> SurveyConfig {
+        SurveyConfig {
+            scans_per_point: self.scans_per_point,
+            noise_sigma_db: self.noise_sigma_db,
+        }
+    }
+
+    /// Checks every value; the key is the field name.
+    pub fn validate(&self) -> Result<(), ConfigIssue> {
+        for (k, v, lo) in [
+            ("rp_spacing_m", self.rp_spacing_m, 1.0),
+            ("grid_spacing_m", self.grid_spacing_m, 0.5),
+            ("margin_m", self.margin_m, 0.0),
+        ] {
+            check(k, v.is_finite() && v >= lo && v <= 10_000.0, || {
+                format!("expected a distance in [{lo}, 10 000] m, got {v}")
+            })?;
+        }
+        self.scan().validate()
+    }
 }
 
 impl Default for FmSensorConfig {
@@ -69,6 +126,7 @@ impl Default for FmSensorConfig {
             field: FmFieldConfig::default(),
             wknn: WknnConfig::default(),
             constraint: ConstraintConfig::default(),
+            survey: FmSurveySpec::default(),
         }
     }
 }
@@ -95,7 +153,8 @@ impl FmSensorConfig {
         self.wknn.validate().map_err(|c| prefixed("wknn", c))?;
         self.constraint
             .validate()
-            .map_err(|c| prefixed("constraint", c))
+            .map_err(|c| prefixed("constraint", c))?;
+        self.survey.validate().map_err(|c| prefixed("survey", c))
     }
 }
 

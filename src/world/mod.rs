@@ -5,6 +5,7 @@
 //! [`locate`], which maps a key path back to the text.
 
 pub mod locate;
+pub mod fm;
 pub mod map;
 pub mod presets;
 pub mod scene;
@@ -81,6 +82,8 @@ pub struct World {
     pub scene: Option<Arc<Scene>>,
     /// The transmitters, positions resolved.
     pub transmitters: Vec<Transmitter>,
+    /// The FM fingerprint database (see [`fm`]).
+    pub fm_db: fm::FmDatabase,
 }
 
 /// Everything a trial needs, freshly built from the world and the trial's random streams.
@@ -269,6 +272,31 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
     let transmitters = check_transmitters(&ctx, &file.transmitters, &frame, scene.as_deref())?;
     let simulated = check_terrestrial_and_inertial(&ctx, &file, &transmitters)?;
 
+    let fm_db = match &file.sensors.fm {
+        None => fm::FmDatabase::None,
+        Some(cfg) => {
+            cfg.validate().map_err(|i| ctx.issue("sensors.fm", i))?;
+            let declared = transmitters
+                .iter()
+                .filter(|t| t.kind == TransmitterKind::Fm)
+                .count();
+            if declared == 0 && cfg.synthetic_stations_total == 0 {
+                return Err(ctx.err(
+                    "sensors.fm",
+                    "expected FM stations: add [[transmitter]] tables with kind = \"fm\" or set synthetic_stations_total",
+                ));
+            }
+            match &cfg.database {
+                Some(db) => {
+                    let p = path.parent().unwrap_or(Path::new(".")).join(db);
+                    let db = crate::fm::FingerprintDb::load(&p, &fm::tag(&file.world.name, &frame))
+                        .map_err(|e| ctx.err("sensors.fm.database", e.to_string()))?;
+                    fm::FmDatabase::Loaded(Arc::new(db))
+                }
+                None => fm::FmDatabase::Surveyed(std::sync::Mutex::new(None)),
+            }
+        }
+    };
     if file.estimators.is_empty() {
         return Err(ctx.err("", "expected at least one [[estimator]] table"));
     }
@@ -303,6 +331,7 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
         shielding,
         scene,
         transmitters,
+        fm_db,
         file,
     })
 }
@@ -617,8 +646,12 @@ fn check_terrestrial_and_inertial(
 }
 
 /// The sources of position fixes the world simulates.
-fn fix_sources(_file: &WorldFile) -> Vec<&'static str> {
-    Vec::new()
+fn fix_sources(file: &WorldFile) -> Vec<&'static str> {
+    let mut v = Vec::new();
+    if file.sensors.fm.is_some() {
+        v.push("fm");
+    }
+    v
 }
 
 fn check_estimator(
@@ -835,6 +868,29 @@ impl World {
                     end,
                 )
                 .map_err(|i| err("sensors.tcofdm", i))?,
+            ));
+        }
+        if let Some(fm) = &sensors.fm {
+            let db = self
+                .fm_database(rng.master_seed())?
+                .ok_or("sensors.fm: no fingerprint database")?;
+            let aid = self
+                .file
+                .estimators
+                .iter()
+                .position(|e| e.fixes.iter().any(|f| f == "fm"));
+            sources.push(Box::new(
+                crate::fm::FmSource::new(
+                    fm.clone(),
+                    fm::stations(self),
+                    self.scene.clone(),
+                    self.frame.clone(),
+                    db,
+                    rng,
+                    aid,
+                    end,
+                )
+                .map_err(|i| err("sensors.fm", i))?,
             ));
         }
         let attitude = self.file.platform.attitude();

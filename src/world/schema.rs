@@ -136,6 +136,9 @@ pub struct SensorsSection {
     /// Pedestrian dead reckoning: step events (source `"pdr"`).
     #[serde(default)]
     pub pdr: Option<PdrSensorConfig>,
+    /// FM fingerprinting: position fixes by WKNN (source `"fm"`).
+    #[serde(default)]
+    pub fm: Option<crate::fm::FmSensorConfig>,
 }
 
 /// One `[[shielding]]` window: exactly one of `keep_highest`, `keep`, `block`.
