@@ -137,8 +137,13 @@ impl MagnetometerConfig {
         // axis, is a typo rather than a phone; the bounds are generous.
         let s = self.soft_iron_matrix();
         let det = s.determinant();
-        if !self.soft_iron.iter().flatten().all(|v| v.is_finite() && v.abs() <= 3.0)
-            || !(det > 0.1)
+        if !self
+            .soft_iron
+            .iter()
+            .flatten()
+            .all(|v| v.is_finite() && v.abs() <= 3.0)
+            || det.is_nan()
+            || det <= 0.1
         {
             return Err(ConfigIssue::new(
                 "soft_iron",

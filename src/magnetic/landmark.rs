@@ -17,8 +17,8 @@
 //!    a flank, not a starting point.
 //! 3. The window's change rate (max − min) / (half its duration) is compared with
 //!    `min_change_rate_ut_per_s`; only windows above it are landmarks.
-//! 4. Windows whose starting extremum lies inside a stronger accepted window are dropped, so
-//!    one bipolar dipole signature (a peak beside a valley) gives one window, not two.
+//! 4. Overlapping windows are merged into their union, so one bipolar dipole signature (a
+//!    peak beside a valley) gives one window, not two, centred on the signature.
 //!
 //! Each window is mapped to a [`LandmarkFeature`]: the smoothed window resampled by linear
 //! interpolation to [`FEATURE_LEN`] points with its minimum subtracted (§2.1's image
@@ -55,7 +55,7 @@ fn d_hyst() -> f64 {
     0.3
 }
 fn d_rate() -> f64 {
-    2.0
+    1.5
 }
 fn d_min_window() -> f64 {
     0.8
@@ -79,7 +79,7 @@ pub struct LandmarkDetectorConfig {
     #[serde(default = "d_hyst")]
     pub hysteresis_ut: f64,
     /// Windows whose change rate (max − min) / (half the duration) is below this are not
-    /// landmarks (µT/s); default 2.
+    /// landmarks (µT/s); default 1.5.
     #[serde(default = "d_rate")]
     pub min_change_rate_ut_per_s: f64,
     /// Shortest window (s); default 0.8.
@@ -106,7 +106,14 @@ impl Default for LandmarkDetectorConfig {
     }
 }
 
-fn check(key: &str, v: f64, lo: f64, hi: f64, open_lo: bool, what: &str) -> Result<(), ConfigIssue> {
+fn check(
+    key: &str,
+    v: f64,
+    lo: f64,
+    hi: f64,
+    open_lo: bool,
+    what: &str,
+) -> Result<(), ConfigIssue> {
     let ok = v.is_finite() && v <= hi && if open_lo { v > lo } else { v >= lo };
     if ok {
         Ok(())
@@ -126,8 +133,22 @@ impl LandmarkDetectorConfig {
     /// A [`ConfigIssue`] naming the first bad field (non-finite, negative, or a shortest
     /// window longer than the longest).
     pub fn validate(&self) -> Result<(), ConfigIssue> {
-        check("smooth_half_width_s", self.smooth_half_width_s, 0.0, 10.0, false, "a half-width in s")?;
-        check("hysteresis_ut", self.hysteresis_ut, 0.0, 100.0, false, "a hysteresis in µT")?;
+        check(
+            "smooth_half_width_s",
+            self.smooth_half_width_s,
+            0.0,
+            10.0,
+            false,
+            "a half-width in s",
+        )?;
+        check(
+            "hysteresis_ut",
+            self.hysteresis_ut,
+            0.0,
+            100.0,
+            false,
+            "a hysteresis in µT",
+        )?;
         check(
             "min_change_rate_ut_per_s",
             self.min_change_rate_ut_per_s,
@@ -136,8 +157,22 @@ impl LandmarkDetectorConfig {
             true,
             "a change-rate threshold in µT/s",
         )?;
-        check("min_window_s", self.min_window_s, 0.0, 60.0, true, "a window length in s")?;
-        check("max_window_s", self.max_window_s, 0.0, 600.0, true, "a window length in s")?;
+        check(
+            "min_window_s",
+            self.min_window_s,
+            0.0,
+            60.0,
+            true,
+            "a window length in s",
+        )?;
+        check(
+            "max_window_s",
+            self.max_window_s,
+            0.0,
+            600.0,
+            true,
+            "a window length in s",
+        )?;
         if self.min_window_s > self.max_window_s {
             return Err(ConfigIssue::new(
                 "min_window_s",
@@ -327,7 +362,9 @@ pub fn extract_windows(
         }
         let (lo, hi) = s[start..=end]
             .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
         let amplitude_ut = hi - lo;
         let half_duration_s = 0.5 * (len - 1) as f64 / rate_hz;
         let change_rate_ut_per_s = amplitude_ut / half_duration_s;
@@ -343,26 +380,35 @@ pub fn extract_windows(
             change_rate_ut_per_s,
         });
     }
-    // Non-maximum suppression: strongest first; a window whose extremum lies inside an
-    // accepted one is the other half of the same signature.
-    out.sort_by(|a, b| {
-        b.amplitude_ut
-            .total_cmp(&a.amplitude_ut)
-            .then(a.start.cmp(&b.start))
-    });
-    let mut kept = 0;
+    // A dipole's signature is usually a peak beside a valley, and a broad extremum can
+    // carry ripples that start windows of their own; overlapping windows are therefore one
+    // landmark, and are merged into their union (so its centre is the signature's centre).
+    out.sort_by_key(|w| (w.start, w.end));
+    let mut merged = 0;
     for k in 0..out.len() {
         let w = out[k];
-        let inside = out[..kept]
-            .iter()
-            .any(|a| w.extremum >= a.start && w.extremum <= a.end);
-        if !inside {
-            out[kept] = w;
-            kept += 1;
+        if merged > 0 && w.start <= out[merged - 1].end {
+            let m = &mut out[merged - 1];
+            if w.amplitude_ut > m.amplitude_ut {
+                m.extremum = w.extremum;
+                m.is_peak = w.is_peak;
+            }
+            m.end = m.end.max(w.end);
+        } else {
+            out[merged] = w;
+            merged += 1;
         }
     }
-    out.truncate(kept);
-    out.sort_by_key(|w| w.start);
+    out.truncate(merged);
+    for w in out.iter_mut() {
+        let (lo, hi) = s[w.start..=w.end]
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+        w.amplitude_ut = hi - lo;
+        w.change_rate_ut_per_s = w.amplitude_ut / (0.5 * (w.end - w.start) as f64 / rate_hz);
+    }
     Ok(())
 }
 
@@ -426,9 +472,54 @@ impl LandmarkFeature {
     /// round(v / full scale · (M − 1)) clamped to the last column.
     pub fn image(&self, full_scale_ut: f64) -> [u8; FEATURE_LEN] {
         let top = (IMAGE_COLUMNS - 1) as f64;
-        let scale = if full_scale_ut > 0.0 { top / full_scale_ut } else { 0.0 };
+        let scale = if full_scale_ut > 0.0 {
+            top / full_scale_ut
+        } else {
+            0.0
+        };
         std::array::from_fn(|i| (self.curve_ut[i] * scale).round().clamp(0.0, top) as u8)
     }
+}
+
+/// Seed 002 §2.1 expands its landmark database by stretching the images (factors 0.5–1.5)
+/// so that a walk at another speed still matches. Here every window is already resampled
+/// to a fixed length, so speed alone changes little; what differs between walks is where
+/// the window's edges fall. The expansion therefore moves each edge by −f, 0 and +f of the
+/// window's length (f = `edge_jitter_frac`), nine features per window, clipped to the
+/// sequence.
+///
+/// # Errors
+/// [`MagneticError::Input`] for a window that does not fit `smoothed` or a fraction outside
+/// [0, 0.45].
+pub fn augmented_features(
+    smoothed: &[f64],
+    window: &LandmarkWindow,
+    edge_jitter_frac: f64,
+) -> Result<Vec<LandmarkFeature>, MagneticError> {
+    if !(edge_jitter_frac.is_finite() && (0.0..=0.45).contains(&edge_jitter_frac)) {
+        return Err(MagneticError::Input(format!(
+            "expected an edge jitter within [0, 0.45] of the window, got {edge_jitter_frac}"
+        )));
+    }
+    let base = LandmarkFeature::from_window(smoothed, window)?;
+    let len = (window.end - window.start + 1) as f64;
+    let d = (edge_jitter_frac * len).round() as isize;
+    let last = smoothed.len() as isize - 1;
+    let mut out = Vec::with_capacity(9);
+    for ds in [-d, 0, d] {
+        for de in [-d, 0, d] {
+            let s0 = (window.start as isize + ds).clamp(0, last);
+            let e0 = (window.end as isize + de).clamp(0, last);
+            if e0 - s0 < 2 {
+                out.push(base);
+                continue;
+            }
+            out.push(LandmarkFeature::from_samples(
+                &smoothed[s0 as usize..=e0 as usize],
+            )?);
+        }
+    }
+    Ok(out)
 }
 
 /// Caller-owned buffers for [`dtw_distance`] and [`DtwLibrary::candidates`]; they grow to
@@ -460,7 +551,9 @@ pub fn dtw_distance(
         ));
     }
     if a.iter().chain(b).any(|v| !v.is_finite()) {
-        return Err(MagneticError::Input("expected finite samples for DTW".into()));
+        return Err(MagneticError::Input(
+            "expected finite samples for DTW".into(),
+        ));
     }
     Ok(dtw_unchecked(a, b, band, scratch))
 }
@@ -498,7 +591,7 @@ fn dtw_unchecked(a: &[f64], b: &[f64], band: Option<usize>, scratch: &mut DtwScr
             prev[j] = acc;
         }
     }
-    for i in 1..n {
+    for (i, &ai) in a.iter().enumerate().skip(1) {
         cur[..m].fill(inf);
         let (lo, hi) = range(i);
         for j in lo..=hi.min(m - 1) {
@@ -506,7 +599,7 @@ fn dtw_unchecked(a: &[f64], b: &[f64], band: Option<usize>, scratch: &mut DtwScr
             if j > 0 {
                 best = best.min(prev[j - 1]).min(cur[j - 1]);
             }
-            cur[j] = best + (a[i] - b[j]).abs();
+            cur[j] = best + (ai - b[j]).abs();
         }
         std::mem::swap(prev, cur);
     }
@@ -547,7 +640,14 @@ impl DtwLibrary {
         if band == 0 {
             return Err(ConfigIssue::new("band", "expected a band of at least one cell").into());
         }
-        check("threshold_ut", threshold_ut, 0.0, 1000.0, true, "a DTW threshold in µT")?;
+        check(
+            "threshold_ut",
+            threshold_ut,
+            0.0,
+            1000.0,
+            true,
+            "a DTW threshold in µT",
+        )?;
         Ok(Self {
             templates: Vec::new(),
             n_labels,
@@ -594,8 +694,8 @@ impl DtwLibrary {
         best.clear();
         best.resize(self.n_labels, f64::INFINITY);
         for (label, t) in &self.templates {
-            let d = dtw_unchecked(&feature.curve_ut, t, Some(self.band), scratch)
-                / FEATURE_LEN as f64;
+            let d =
+                dtw_unchecked(&feature.curve_ut, t, Some(self.band), scratch) / FEATURE_LEN as f64;
             if d < best[*label] {
                 best[*label] = d;
             }
@@ -635,7 +735,14 @@ pub fn select_by_dtmb(
     r_dtmb_m: f64,
     delta_r_m: f64,
 ) -> Result<Option<Candidate>, MagneticError> {
-    check("delta_r_m", delta_r_m, 0.0, 1.0e6, true, "a range threshold in m")?;
+    check(
+        "delta_r_m",
+        delta_r_m,
+        0.0,
+        1.0e6,
+        true,
+        "a range threshold in m",
+    )?;
     check("r_dtmb_m", r_dtmb_m, 0.0, 1.0e8, false, "a range in m")?;
     for c in candidates {
         let p = landmark_positions_enu_m.get(c.label).ok_or_else(|| {
@@ -657,11 +764,11 @@ mod tests {
         let x: Vec<f64> = (0..40).map(|i| ((i * 7919) % 13) as f64 * 0.37).collect();
         let mut out = Vec::new();
         moving_average(&x, 3, &mut out).unwrap();
-        for i in 0..x.len() {
+        for (i, o) in out.iter().enumerate() {
             let lo = i.saturating_sub(3);
             let hi = (i + 3).min(x.len() - 1);
             let direct: f64 = x[lo..=hi].iter().sum::<f64>() / (hi - lo + 1) as f64;
-            assert!((out[i] - direct).abs() < 1e-12, "{i}");
+            assert!((o - direct).abs() < 1e-12, "{i}");
         }
     }
 
@@ -687,16 +794,25 @@ mod tests {
     #[test]
     fn dtw_of_hand_computed_cases() {
         let mut s = DtwScratch::default();
-        assert_eq!(dtw_distance(&[1.0, 2.0, 3.0], &[1.0, 2.0, 3.0], None, &mut s).unwrap(), 0.0);
+        assert_eq!(
+            dtw_distance(&[1.0, 2.0, 3.0], &[1.0, 2.0, 3.0], None, &mut s).unwrap(),
+            0.0
+        );
         // A repeated sample is absorbed by warping.
         assert_eq!(
             dtw_distance(&[0.0, 1.0, 2.0], &[0.0, 1.0, 1.0, 2.0], None, &mut s).unwrap(),
             0.0
         );
         // Both corners are on every path: |1 − 2| + |3 − 2| = 2, and the middle costs 0.
-        assert_eq!(dtw_distance(&[1.0, 2.0, 3.0], &[2.0, 2.0, 2.0], None, &mut s).unwrap(), 2.0);
+        assert_eq!(
+            dtw_distance(&[1.0, 2.0, 3.0], &[2.0, 2.0, 2.0], None, &mut s).unwrap(),
+            2.0
+        );
         // [0, 2] vs [1]: both samples must pair with the only one: 1 + 1.
-        assert_eq!(dtw_distance(&[0.0, 2.0], &[1.0], None, &mut s).unwrap(), 2.0);
+        assert_eq!(
+            dtw_distance(&[0.0, 2.0], &[1.0], None, &mut s).unwrap(),
+            2.0
+        );
         assert!(dtw_distance(&[], &[1.0], None, &mut s).is_err());
         assert!(dtw_distance(&[f64::NAN], &[1.0], None, &mut s).is_err());
     }

@@ -27,8 +27,7 @@ pub mod snn;
 pub use anomaly::{DipoleAnomaly, MagneticAnomalyConfig, MagneticScene, MagneticWalk};
 pub use earth::EarthField;
 pub use landmark::{
-    dtw_distance, DtwLibrary, DtwScratch, LandmarkDetectorConfig, LandmarkFeature,
-    LandmarkWindow,
+    dtw_distance, DtwLibrary, DtwScratch, LandmarkDetectorConfig, LandmarkFeature, LandmarkWindow,
 };
 pub use snn::{SnnClassifier, SnnConfig, Tempotron};
 

@@ -68,6 +68,9 @@ fn d_grid() -> usize {
 fn d_init() -> f64 {
     0.05
 }
+fn d_margin() -> f64 {
+    0.2
+}
 
 /// The Tempotron's constants and training settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -94,6 +97,12 @@ pub struct SnnConfig {
     /// σ of the normal initial weights; default 0.05.
     #[serde(default = "d_init")]
     pub init_weight_sigma: f64,
+    /// Learning margin κ: during training a positive pattern counts as an error unless
+    /// V_max ≥ 1 + κ, a negative one unless V_max < 1 − κ; default 0.2. With κ = 0 the rule
+    /// stops at the first weights that separate the training set, often with every
+    /// pattern a hair from the threshold, and new patterns fall either side by chance.
+    #[serde(default = "d_margin")]
+    pub margin: f64,
 }
 
 impl Default for SnnConfig {
@@ -106,6 +115,7 @@ impl Default for SnnConfig {
             max_epochs: d_epochs(),
             grid_points: d_grid(),
             init_weight_sigma: d_init(),
+            margin: d_margin(),
         }
     }
 }
@@ -150,7 +160,10 @@ impl SnnConfig {
         if self.grid_points < 16 || self.grid_points > 1_000_000 {
             return Err(ConfigIssue::new(
                 "grid_points",
-                format!("expected 16..=1000000 grid points, got {}", self.grid_points),
+                format!(
+                    "expected 16..=1000000 grid points, got {}",
+                    self.grid_points
+                ),
             ));
         }
         if !(self.init_weight_sigma.is_finite() && self.init_weight_sigma >= 0.0) {
@@ -160,6 +173,12 @@ impl SnnConfig {
                     "expected a finite non-negative σ, got {}",
                     self.init_weight_sigma
                 ),
+            ));
+        }
+        if !(self.margin.is_finite() && (0.0..1.0).contains(&self.margin)) {
+            return Err(ConfigIssue::new(
+                "margin",
+                format!("expected a margin within [0, 1), got {}", self.margin),
             ));
         }
         Ok(())
@@ -359,9 +378,9 @@ impl Tempotron {
         Ok(())
     }
 
-    /// One learning trial: if the neuron's decision (fire iff V_max ≥ 1) differs from
-    /// `target`, the weights move by ±λ K(t_max − t_i). Returns whether the trial was an
-    /// error.
+    /// One learning trial: if the neuron's decision (fire iff V_max ≥ 1 + κ for a positive
+    /// `target`, stay below 1 − κ for a negative one; κ = `margin`) is wrong, the weights
+    /// move by ±λ K(t_max − t_i). Returns whether the trial was an error.
     ///
     /// # Errors
     /// As [`Tempotron::v_max`].
@@ -370,11 +389,16 @@ impl Tempotron {
         spike_times_ms: &[f64],
         target: bool,
         learning_rate: f64,
+        margin: f64,
         scratch: &mut SnnScratch,
     ) -> Result<bool, MagneticError> {
         let (v_max, t_max) = self.v_max(spike_times_ms, scratch)?;
-        let fired = v_max >= 1.0;
-        if fired == target {
+        let ok = if target {
+            v_max >= 1.0 + margin
+        } else {
+            v_max < 1.0 - margin
+        };
+        if ok {
             return Ok(false);
         }
         let sign = if target { 1.0 } else { -1.0 };
@@ -387,8 +411,8 @@ impl Tempotron {
     }
 
     /// Trains on `patterns` (spike times, target) for at most `cfg.max_epochs` passes in an
-    /// order shuffled by `rng`, stopping after a pass without error. Returns the errors of
-    /// the last pass.
+    /// order shuffled by `rng`, stopping after a pass without error (margin included).
+    /// Returns the errors of the last pass.
     ///
     /// # Errors
     /// As [`Tempotron::v_max`], or [`MagneticError::Input`] for no patterns.
@@ -400,7 +424,9 @@ impl Tempotron {
         scratch: &mut SnnScratch,
     ) -> Result<usize, MagneticError> {
         if patterns.is_empty() {
-            return Err(MagneticError::Input("expected at least one training pattern".into()));
+            return Err(MagneticError::Input(
+                "expected at least one training pattern".into(),
+            ));
         }
         let mut idx: Vec<usize> = (0..patterns.len()).collect();
         let mut errors = 0;
@@ -409,7 +435,7 @@ impl Tempotron {
             errors = 0;
             for &k in &idx {
                 let (p, target) = &patterns[k];
-                if self.learn(p, *target, cfg.learning_rate, scratch)? {
+                if self.learn(p, *target, cfg.learning_rate, cfg.margin, scratch)? {
                     errors += 1;
                 }
             }
@@ -460,7 +486,10 @@ impl SnnClassifier {
         if samples.is_empty() {
             return Err(MagneticError::Input("expected training samples".into()));
         }
-        if let Some((l, _)) = samples.iter().find(|(l, _)| l.is_some_and(|l| l >= n_labels)) {
+        if let Some((l, _)) = samples
+            .iter()
+            .find(|(l, _)| l.is_some_and(|l| l >= n_labels))
+        {
             return Err(MagneticError::Input(format!(
                 "label {l:?} is not below the classifier's {n_labels} labels"
             )));
@@ -530,7 +559,9 @@ mod tests {
         // The derivative vanishes there: neighbours are lower.
         assert!(k.eval(t - 0.01) < 1.0 && k.eval(t + 0.01) < 1.0);
         // A fine scan finds no larger value.
-        let max = (0..100_000).map(|i| k.eval(i as f64 * 1e-3)).fold(0.0, f64::max);
+        let max = (0..100_000)
+            .map(|i| k.eval(i as f64 * 1e-3))
+            .fold(0.0, f64::max);
         assert!(max <= 1.0 + 1e-12 && max > 1.0 - 1e-6);
         assert_eq!(k.eval(-1.0), 0.0);
         assert!(LifKernel::new(2.0, 3.0).is_err());
@@ -548,7 +579,10 @@ mod tests {
         let spikes = phase_encode(&img, cfg.cycle_ms);
         let mut s = SnnScratch::default();
         let (v_max, t_max) = n.v_max(&spikes, &mut s).unwrap();
-        let direct: f64 = spikes.iter().map(|&ti| 0.3 * n.kernel.eval(t_max - ti)).sum();
+        let direct: f64 = spikes
+            .iter()
+            .map(|&ti| 0.3 * n.kernel.eval(t_max - ti))
+            .sum();
         assert!((v_max - direct).abs() < 1e-9 * direct.abs().max(1.0));
     }
 }
