@@ -79,7 +79,9 @@ pub struct LandmarkDetectorConfig {
     #[serde(default = "d_hyst")]
     pub hysteresis_ut: f64,
     /// Windows whose change rate (max − min) / (half the duration) is below this are not
-    /// landmarks (µT/s); default 1.5.
+    /// landmarks (µT/s); default 1.5 (at 2 the survey walk of `tests/it/landmark.rs` missed
+    /// its two weakest landmarks, ≈ 3 µT bumps at walking speed). The rate is per second,
+    /// so a faster walker passes the same landmark with a higher rate.
     #[serde(default = "d_rate")]
     pub min_change_rate_ut_per_s: f64,
     /// Shortest window (s); default 0.8.

@@ -396,6 +396,8 @@ struct Score {
     detections: usize,
     correct: usize,
     passes: usize,
+    /// Wrong detections that named the look-alike of the landmark actually passed.
+    twin_confusions: usize,
 }
 
 impl Score {
@@ -413,6 +415,18 @@ impl Score {
         self.detections += o.detections;
         self.correct += o.correct;
         self.passes += o.passes;
+        self.twin_confusions += o.twin_confusions;
+    }
+}
+
+/// The look-alike of landmark `l` in [`landmarks`]: L0/L3 and L1/L5.
+fn look_alike(l: usize) -> Option<usize> {
+    match l {
+        0 => Some(3),
+        3 => Some(0),
+        1 => Some(5),
+        5 => Some(1),
+        _ => None,
     }
 }
 
@@ -424,16 +438,21 @@ type Detection = (usize, usize);
 fn score(dets: &[Detection], walk: &MagneticWalk, lms: &[Vector3<f64>]) -> Score {
     let mut claimed = vec![false; lms.len()];
     let mut correct = 0;
+    let mut twin_confusions = 0;
     for &(centre, label) in dets {
-        if horizontal(&walk.pos_enu_m[centre], &lms[label]) <= TOL_M && !claimed[label] {
+        let p = &walk.pos_enu_m[centre];
+        if horizontal(p, &lms[label]) <= TOL_M && !claimed[label] {
             claimed[label] = true;
             correct += 1;
+        } else if label_at(p, lms).and_then(look_alike) == Some(label) {
+            twin_confusions += 1;
         }
     }
     Score {
         detections: dets.len(),
         correct,
         passes: lms.len(),
+        twin_confusions,
     }
 }
 
@@ -514,14 +533,15 @@ fn landmark_detection_dtw_vs_snn_with_and_without_dtmb() {
         }
         println!("{line}");
     }
-    println!("| method | detections | correct | precision | recall |");
-    println!("|---|---|---|---|---|");
+    println!("| method | detections | correct | wrong: look-alike named | precision | recall |");
+    println!("|---|---|---|---|---|---|");
     for (k, s) in total.iter().enumerate() {
         println!(
-            "| {} | {} | {} | {:.3} | {:.3} |",
+            "| {} | {} | {} | {} | {:.3} | {:.3} |",
             names[k],
             s.detections,
             s.correct,
+            s.twin_confusions,
             s.precision(),
             s.recall()
         );
