@@ -25,6 +25,13 @@
 //! halving both spans keeps every spike inside one cycle without wrapping, so a small
 //! change of intensity never moves a spike from the end of the cycle to its start.
 //!
+//! The paper's text also admits a per-pixel reading ("ϕ_i represents the phase of the i-th
+//! pixel"), offered as [`SnnEncoding::Pixel`]: one afferent per pixel, the lit pixel of
+//! each row (and `pixel_spread` neighbours either side) firing at the row's phase
+//! T (r + ½)/N; silent afferents carry +∞. In `tests/it/landmark.rs` it fits the survey
+//! better than the row-phase code but generalises worse to other walks
+//! (docs/validation.md, "Magnetic landmarks").
+//!
 //! **Learning.** On an error trial — a positive pattern that did not fire, or a negative
 //! pattern that did — every weight moves along the gradient of V(t_max):
 //! Δw_i = ±λ Σ_{t_i < t_max} K(t_max − t_i), with t_max the time of the potential's maximum
@@ -71,6 +78,22 @@ fn d_init() -> f64 {
 fn d_margin() -> f64 {
     0.2
 }
+fn d_spread() -> usize {
+    1
+}
+
+/// How an image becomes spikes (see the module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SnnEncoding {
+    /// One afferent per image row, firing once at a time set by the row's phase and its
+    /// lit column ([`phase_encode`]).
+    #[default]
+    RowPhase,
+    /// One afferent per pixel; the lit pixel of each row and its `pixel_spread`
+    /// neighbours on either side fire at the row's phase ([`pixel_encode`]).
+    Pixel,
+}
 
 /// The Tempotron's constants and training settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -103,6 +126,14 @@ pub struct SnnConfig {
     /// pattern a hair from the threshold, and new patterns fall either side by chance.
     #[serde(default = "d_margin")]
     pub margin: f64,
+    /// `row_phase` (default) or `pixel`.
+    #[serde(default)]
+    pub encoding: SnnEncoding,
+    /// With the pixel encoding, the neighbouring columns on either side of the lit pixel
+    /// that fire with it (a population code, so that a one-column shift between walks
+    /// still reaches trained synapses); default 1.
+    #[serde(default = "d_spread")]
+    pub pixel_spread: usize,
 }
 
 impl Default for SnnConfig {
@@ -116,6 +147,8 @@ impl Default for SnnConfig {
             grid_points: d_grid(),
             init_weight_sigma: d_init(),
             margin: d_margin(),
+            encoding: SnnEncoding::RowPhase,
+            pixel_spread: d_spread(),
         }
     }
 }
@@ -172,6 +205,15 @@ impl SnnConfig {
                 format!(
                     "expected a finite non-negative σ, got {}",
                     self.init_weight_sigma
+                ),
+            ));
+        }
+        if self.pixel_spread > IMAGE_COLUMNS {
+            return Err(ConfigIssue::new(
+                "pixel_spread",
+                format!(
+                    "expected at most {IMAGE_COLUMNS} columns, got {}",
+                    self.pixel_spread
                 ),
             ));
         }
@@ -249,10 +291,46 @@ pub fn phase_encode(image: &[u8; FEATURE_LEN], cycle_ms: f64) -> [f64; FEATURE_L
     })
 }
 
-/// Caller-owned buffers for the forward pass (spike order).
+/// Pixel encoding: afferent r·M + c is pixel (row r, column c). The lit pixel of row r and
+/// its `spread` neighbours on either side fire at the row's phase time T (r + ½)/N
+/// (φ_r = φ0 + r Δφ with Δφ = 2π/N, seed 002 eqs. 2–3); every other afferent is silent
+/// (+∞). `out` is resized to N·M.
+pub fn pixel_encode(image: &[u8; FEATURE_LEN], cycle_ms: f64, spread: usize, out: &mut Vec<f64>) {
+    out.clear();
+    out.resize(FEATURE_LEN * IMAGE_COLUMNS, f64::INFINITY);
+    for (r, &c) in image.iter().enumerate() {
+        let c = usize::from(c).min(IMAGE_COLUMNS - 1);
+        let t = cycle_ms * (r as f64 + 0.5) / FEATURE_LEN as f64;
+        for col in c.saturating_sub(spread)..=(c + spread).min(IMAGE_COLUMNS - 1) {
+            out[r * IMAGE_COLUMNS + col] = t;
+        }
+    }
+}
+
+/// The afferent count of an encoding.
+pub fn afferents_of(encoding: SnnEncoding) -> usize {
+    match encoding {
+        SnnEncoding::RowPhase => FEATURE_LEN,
+        SnnEncoding::Pixel => FEATURE_LEN * IMAGE_COLUMNS,
+    }
+}
+
+/// Encodes `image` as `cfg` says into `out` (one time per afferent, +∞ when silent).
+pub fn encode(image: &[u8; FEATURE_LEN], cfg: &SnnConfig, out: &mut Vec<f64>) {
+    match cfg.encoding {
+        SnnEncoding::RowPhase => {
+            out.clear();
+            out.extend_from_slice(&phase_encode(image, cfg.cycle_ms));
+        }
+        SnnEncoding::Pixel => pixel_encode(image, cfg.cycle_ms, cfg.pixel_spread, out),
+    }
+}
+
+/// Caller-owned buffers for the forward pass (spike order, encoded spikes).
 #[derive(Clone, Debug, Default)]
 pub struct SnnScratch {
     order: Vec<usize>,
+    spikes: Vec<f64>,
 }
 
 /// One Tempotron neuron over a fixed number of afferents, each firing once per pattern.
@@ -372,8 +450,15 @@ impl Tempotron {
                 spike_times_ms.len()
             )));
         }
-        if spike_times_ms.iter().any(|t| !t.is_finite()) {
-            return Err(MagneticError::Input("expected finite spike times".into()));
+        // +∞ marks a silent afferent (it never reaches t_max, so it neither contributes
+        // nor learns); NaN and −∞ are errors.
+        if spike_times_ms
+            .iter()
+            .any(|t| t.is_nan() || *t == f64::NEG_INFINITY)
+        {
+            return Err(MagneticError::Input(
+                "expected spike times that are finite or +∞ (silent)".into(),
+            ));
         }
         Ok(())
     }
@@ -460,7 +545,7 @@ fn shuffle(idx: &mut [usize], rng: &mut StreamRng) {
 #[derive(Clone, Debug, PartialEq)]
 pub struct SnnClassifier {
     neurons: Vec<Tempotron>,
-    cycle_ms: f64,
+    cfg: SnnConfig,
     /// Training errors left in each neuron's last epoch.
     pub residual_errors: Vec<usize>,
 }
@@ -496,13 +581,17 @@ impl SnnClassifier {
         }
         let encoded: Vec<(Option<usize>, Vec<f64>)> = samples
             .iter()
-            .map(|(l, img)| (*l, phase_encode(img, cfg.cycle_ms).to_vec()))
+            .map(|(l, img)| {
+                let mut v = Vec::new();
+                encode(img, cfg, &mut v);
+                (*l, v)
+            })
             .collect();
         let mut scratch = SnnScratch::default();
         let mut neurons = Vec::with_capacity(n_labels);
         let mut residual_errors = Vec::with_capacity(n_labels);
         for k in 0..n_labels {
-            let mut neuron = Tempotron::new(FEATURE_LEN, cfg, rng)?;
+            let mut neuron = Tempotron::new(afferents_of(cfg.encoding), cfg, rng)?;
             let patterns: Vec<(Vec<f64>, bool)> = encoded
                 .iter()
                 .map(|(l, p)| (p.clone(), *l == Some(k)))
@@ -512,7 +601,7 @@ impl SnnClassifier {
         }
         Ok(Self {
             neurons,
-            cycle_ms: cfg.cycle_ms,
+            cfg: cfg.clone(),
             residual_errors,
         })
     }
@@ -531,7 +620,8 @@ impl SnnClassifier {
         out: &mut Vec<Candidate>,
     ) {
         out.clear();
-        let spikes = phase_encode(image, self.cycle_ms);
+        let mut spikes = std::mem::take(&mut scratch.spikes);
+        encode(image, &self.cfg, &mut spikes);
         Tempotron::sort_order(&spikes, scratch);
         for (label, n) in self.neurons.iter().enumerate() {
             let (v_max, _) = n.forward_sorted(&spikes, &scratch.order);
@@ -543,6 +633,7 @@ impl SnnClassifier {
             }
         }
         out.sort_by(|a, b| b.score.total_cmp(&a.score).then(a.label.cmp(&b.label)));
+        scratch.spikes = spikes;
     }
 }
 
