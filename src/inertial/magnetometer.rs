@@ -222,3 +222,32 @@ impl Magnetometer {
         self.soft_iron * (q_nb.inverse() * field_enu_ut) + self.hard_iron_ut + n * self.noise_ut
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::TrialRng;
+
+    #[test]
+    fn soft_and_hard_iron_apply_in_body_axes() {
+        let cfg = MagnetometerConfig {
+            noise_ut: 0.0,
+            hard_iron_ut: [1.0, -2.0, 0.5],
+            soft_iron: [[2.0, 0.0, 0.0], [0.0, 1.0, 0.1], [0.0, 0.0, 1.0]],
+            ..MagnetometerConfig::default()
+        };
+        let mut m = Magnetometer::new(&cfg, TrialRng::new(1, 0).stream("test/mag")).unwrap();
+        let field = Vector3::new(3.0, 20.0, -40.0);
+        // With the identity attitude body axes are ENU: S·B + b by hand.
+        let r = m.measure_in_field(&UnitQuaternion::identity(), &field);
+        let expect = Vector3::new(2.0 * 3.0 + 1.0, 20.0 + 0.1 * -40.0 - 2.0, -40.0 + 0.5);
+        assert!((r - expect).norm() < 1e-12, "{r:?}");
+        // The default (identity S, no offset) reads the configured field exactly.
+        let plain = MagnetometerConfig {
+            noise_ut: 0.0,
+            ..MagnetometerConfig::default()
+        };
+        let mut p = Magnetometer::new(&plain, TrialRng::new(1, 0).stream("test/mag")).unwrap();
+        assert_eq!(p.measure(&UnitQuaternion::identity()), plain.field_enu_ut());
+    }
+}

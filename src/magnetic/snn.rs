@@ -676,4 +676,32 @@ mod tests {
             .sum();
         assert!((v_max - direct).abs() < 1e-9 * direct.abs().max(1.0));
     }
+
+    #[test]
+    fn pixel_encoding_lights_the_row_and_its_neighbours_and_silence_is_inert() {
+        let mut img = [5u8; FEATURE_LEN];
+        img[0] = 0; // the left neighbour is clipped
+        img[1] = (IMAGE_COLUMNS - 1) as u8; // the right neighbour is clipped
+        let mut out = Vec::new();
+        pixel_encode(&img, 100.0, 1, &mut out);
+        assert_eq!(out.len(), FEATURE_LEN * IMAGE_COLUMNS);
+        let firing = out.iter().filter(|t| t.is_finite()).count();
+        assert_eq!(firing, 3 * FEATURE_LEN - 2);
+        // Row 2's three pixels fire together at T (2 + ½)/N.
+        let t2 = 100.0 * 2.5 / FEATURE_LEN as f64;
+        for col in 4..=6 {
+            assert_eq!(out[2 * IMAGE_COLUMNS + col], t2);
+        }
+        assert!(out[2 * IMAGE_COLUMNS + 7].is_infinite());
+        // A pattern of silent afferents leaves the potential at rest.
+        let cfg = SnnConfig::default();
+        let mut rng = TrialRng::new(7, 0).stream("magnetic/snn/test");
+        let n = Tempotron::new(4, &cfg, &mut rng).unwrap();
+        let mut s = SnnScratch::default();
+        let (v, _) = n.v_max(&[f64::INFINITY; 4], &mut s).unwrap();
+        assert_eq!(v, 0.0);
+        assert!(n
+            .v_max(&[f64::NEG_INFINITY, 1.0, 2.0, 3.0], &mut s)
+            .is_err());
+    }
 }
