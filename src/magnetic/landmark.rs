@@ -209,7 +209,9 @@ pub struct LandmarkWindow {
     pub is_peak: bool,
     /// max − min of the smoothed signal in the window (µT).
     pub amplitude_ut: f64,
-    /// amplitude / (half the duration) (µT/s).
+    /// amplitude / (half the duration) (µT/s). Each window passed the threshold before
+    /// overlapping ones were merged; a merged window's rate, recomputed over the union,
+    /// may be lower.
     pub change_rate_ut_per_s: f64,
 }
 
@@ -707,7 +709,7 @@ impl DtwLibrary {
                 out.push(Candidate { label, score: -d });
             }
         }
-        out.sort_by(|a, b| b.score.total_cmp(&a.score).then(a.label.cmp(&b.label)));
+        out.sort_unstable_by(|a, b| b.score.total_cmp(&a.score).then(a.label.cmp(&b.label)));
         scratch.best = best;
     }
 }

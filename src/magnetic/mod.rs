@@ -29,7 +29,7 @@ pub use earth::EarthField;
 pub use landmark::{
     dtw_distance, DtwLibrary, DtwScratch, LandmarkDetectorConfig, LandmarkFeature, LandmarkWindow,
 };
-pub use snn::{SnnClassifier, SnnConfig, Tempotron};
+pub use snn::{SnnClassifier, SnnConfig, SnnEncoding, Tempotron};
 
 use crate::motion::ConfigIssue;
 

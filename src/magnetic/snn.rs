@@ -422,9 +422,13 @@ impl Tempotron {
     fn sort_order(spike_times_ms: &[f64], scratch: &mut SnnScratch) {
         scratch.order.clear();
         scratch.order.extend(0..spike_times_ms.len());
-        scratch
-            .order
-            .sort_by(|&x, &y| spike_times_ms[x].total_cmp(&spike_times_ms[y]));
+        // Unstable sort: it never allocates (the stable one takes a buffer), and ties are
+        // broken by index so the order is still fully determined.
+        scratch.order.sort_unstable_by(|&x, &y| {
+            spike_times_ms[x]
+                .total_cmp(&spike_times_ms[y])
+                .then(x.cmp(&y))
+        });
     }
 
     /// The maximum of the membrane potential over the pattern and its time (V_max, t_max ms).
@@ -632,7 +636,7 @@ impl SnnClassifier {
                 });
             }
         }
-        out.sort_by(|a, b| b.score.total_cmp(&a.score).then(a.label.cmp(&b.label)));
+        out.sort_unstable_by(|a, b| b.score.total_cmp(&a.score).then(a.label.cmp(&b.label)));
         scratch.spikes = spikes;
     }
 }
