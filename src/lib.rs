@@ -11,6 +11,7 @@ pub mod fusion;
 pub mod gnss;
 pub mod inertial;
 pub mod io;
+pub mod magnetic;
 pub mod metrics;
 pub mod montecarlo;
 pub mod motion;

@@ -11,6 +11,7 @@ mod fusion_family;
 mod fusion_filters;
 mod gnss_orbits;
 mod inertial;
+mod landmark;
 mod motion_models;
 mod propagation;
 mod skeleton;
