@@ -42,6 +42,26 @@ pub enum Command {
     /// List the estimator presets (the papers' systems) an `[[estimator]]` can name, with
     /// the keys each one sets.
     Presets,
+    /// FM fingerprinting tools.
+    #[command(subcommand)]
+    Fm(FmCommand),
+}
+
+#[derive(Debug, Subcommand)]
+pub enum FmCommand {
+    /// Survey a world's FM field and krige it to its grid as [sensors.fm.survey] says, then
+    /// save the fingerprint database (JSON) for `[sensors.fm] database = "…"` to reuse.
+    Survey {
+        /// The world file (it needs a [sensors.fm] table).
+        world: PathBuf,
+        /// The database file to write.
+        #[arg(long)]
+        out: PathBuf,
+        /// Master seed (the city's shadowing and the surveyor's noise); default: the
+        /// world's [montecarlo] seed.
+        #[arg(long)]
+        seed: Option<u64>,
+    },
 }
 
 #[derive(Debug, Subcommand)]
@@ -195,6 +215,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Ephemeris(EphemerisCommand::Synth { start, hours, out }) => {
             cmd_synth(&start, hours, &out)
         }
+        Command::Fm(FmCommand::Survey { world, out, seed }) => cmd_fm_survey(&world, &out, seed),
         Command::Presets => {
             for p in crate::world::presets::PRESETS {
                 println!("{}\n  {}", p.name, p.about);
@@ -305,6 +326,43 @@ fn cmd_positions(nav: &Path, start: &str, end: &str, step: f64, sats: &[String])
             missing[0].1
         );
     }
+    Ok(())
+}
+
+fn cmd_fm_survey(world: &Path, out: &Path, seed: Option<u64>) -> Result<()> {
+    let w = load_world(world)?;
+    let cfg = w
+        .file
+        .sensors
+        .fm
+        .as_ref()
+        .with_context(|| format!("{}: the world has no [sensors.fm] table", world.display()))?;
+    let seed = seed.unwrap_or(w.file.montecarlo.seed);
+    let (db, report) = crate::world::fm::survey(&w, cfg, seed).map_err(anyhow::Error::msg)?;
+    for (ch, r) in db.channels().iter().zip(&report) {
+        match &r.fit {
+            Some(f) => println!(
+                "{:>6}  {:7.2} MHz  {:4} RPs  {:?} nugget {:.2} dB² psill {:.2} dB² range {:.0} m  (rms residual {:.2} dB²)",
+                ch.id,
+                ch.freq_hz * 1e-6,
+                r.data_points,
+                f.model.kind,
+                f.model.nugget,
+                f.model.psill,
+                f.model.range_m,
+                f.rms_residual
+            ),
+            None => println!("{:>6}  {:7.2} MHz  {:4} RPs  too few values: missing on the grid", ch.id, ch.freq_hz * 1e-6, r.data_points),
+        }
+    }
+    db.save(out)
+        .with_context(|| format!("cannot write {}", out.display()))?;
+    println!(
+        "wrote {} RPs × {} channels to {}",
+        db.len(),
+        db.channels().len(),
+        out.display()
+    );
     Ok(())
 }
 

@@ -75,6 +75,9 @@ pub struct FmSurveySpec {
     pub rp_spacing_m: f64,
     pub grid_spacing_m: f64,
     pub margin_m: f64,
+    /// The surveyed area `[[e_min, n_min], [e_max, n_max]]` (ENU, m); default: the
+    /// trajectory's bounding box widened by `margin_m`.
+    pub area_enu_m: Option<[[f64; 2]; 2]>,
     /// Scans averaged per surveyed RP and the surveyor's per-scan noise σ (dB).
     pub scans_per_point: u32,
     pub noise_sigma_db: f64,
@@ -87,6 +90,7 @@ impl Default for FmSurveySpec {
             rp_spacing_m: 24.0,
             grid_spacing_m: 3.0,
             margin_m: 30.0,
+            area_enu_m: None,
             scans_per_point: s.scans_per_point,
             noise_sigma_db: s.noise_sigma_db,
         }
@@ -112,6 +116,15 @@ impl FmSurveySpec {
             check(k, v.is_finite() && v >= lo && v <= 10_000.0, || {
                 format!("expected a distance in [{lo}, 10 000] m, got {v}")
             })?;
+        }
+        if let Some([lo, hi]) = self.area_enu_m {
+            check(
+                "area_enu_m",
+                lo.iter().chain(&hi).all(|v| v.is_finite()) && hi[0] > lo[0] && hi[1] > lo[1],
+                || {
+                    format!("expected [[e_min, n_min], [e_max, n_max]] with max > min, got {lo:?}, {hi:?}")
+                },
+            )?;
         }
         self.scan().validate()
     }

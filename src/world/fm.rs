@@ -55,19 +55,24 @@ pub fn survey(
     master_seed: u64,
 ) -> Result<(FingerprintDb, Vec<ChannelKriging>), String> {
     let rng = TrialRng::new(master_seed, 0);
-    let trajectory = world.build_trajectory(&rng)?;
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    let mut t = 0.0;
-    while t <= world.duration_s {
-        let p = trajectory.state_at(t).pos_enu_m;
-        for a in 0..2 {
-            lo[a] = lo[a].min(p[a]);
-            hi[a] = hi[a].max(p[a]);
+    let (lo, hi) = match cfg.survey.area_enu_m {
+        Some([lo, hi]) => (lo, hi),
+        None => {
+            let trajectory = world.build_trajectory(&rng)?;
+            let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+            let mut t = 0.0;
+            while t <= world.duration_s {
+                let p = trajectory.state_at(t).pos_enu_m;
+                for a in 0..2 {
+                    lo[a] = lo[a].min(p[a]);
+                    hi[a] = hi[a].max(p[a]);
+                }
+                t += 0.5;
+            }
+            let m = cfg.survey.margin_m;
+            ([lo[0] - m, lo[1] - m], [hi[0] + m, hi[1] + m])
         }
-        t += 0.5;
-    }
-    let m = cfg.survey.margin_m;
-    let (lo, hi) = ([lo[0] - m, lo[1] - m], [hi[0] + m, hi[1] + m]);
+    };
     let err = |e: crate::fm::FmError| format!("sensors.fm.survey: {e}");
     let rps = grid_points(lo, hi, cfg.survey.rp_spacing_m).map_err(err)?;
     let grid = grid_points(lo, hi, cfg.survey.grid_spacing_m).map_err(err)?;
@@ -76,8 +81,13 @@ pub fn survey(
         cfg.synthetic_stations_total,
         master_seed,
     );
-    let mut field = FmField::new(cfg.field.clone(), stations, world.scene.clone(), master_seed)
-        .map_err(|i| format!("sensors.fm.field.{}: {}", i.key, i.message))?;
+    let mut field = FmField::new(
+        cfg.field.clone(),
+        stations,
+        world.scene.clone(),
+        master_seed,
+    )
+    .map_err(|i| format!("sensors.fm.field.{}: {}", i.key, i.message))?;
     build_kriged(
         tag(&world.file.world.name, &world.frame),
         &world.frame,

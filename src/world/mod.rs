@@ -4,8 +4,8 @@
 //! errors through the spans serde reports, value checks made after deserialisation through
 //! [`locate`], which maps a key path back to the text.
 
-pub mod locate;
 pub mod fm;
+pub mod locate;
 pub mod map;
 pub mod presets;
 pub mod scene;

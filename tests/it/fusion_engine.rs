@@ -251,3 +251,126 @@ preset = \"seed000-gps-dtmb\"
     );
     assert!(corrected < 0.25 * raw, "{corrected} vs {raw}");
 }
+
+/// Seed 000's adaptive system on its Beihang world: the fuzzy system leaves GPS-only mode
+/// where the world keeps three satellites per system (the paper's sections 2 and 4,
+/// t = 38–179 s and 382–574 s) and returns to it when the satellites come back (sections 3
+/// and 5), as the paper's Fig. 9 narrative says; and the adaptive row's tail is below
+/// GPS+DTMB's, which is below GPS's (the order of the paper's Table 2).
+#[test]
+fn seed000_adaptive_switches_modes_where_fig9_says() {
+    let world = load_world(&crate::common::repo().join("worlds/seed000-beihang.toml")).unwrap();
+    let (mut in_window, mut in_window_not_a) = (0, 0);
+    let (mut open, mut open_a) = (0, 0);
+    let mut p95 = std::collections::BTreeMap::<String, Vec<f64>>::new();
+    for trial in 0..2 {
+        let r = run_trial(&world, 1, trial).unwrap();
+        for e in &r.estimators {
+            p95.entry(e.name.clone())
+                .or_default()
+                .extend(e.epochs.iter().filter_map(|x| x.err_3d_m));
+        }
+        for e in &trace(&r.estimators, "Proposed").epochs {
+            let t = e.t_s;
+            let window = (45.0..175.0).contains(&t) || (390.0..570.0).contains(&t);
+            let clear = (10.0..35.0).contains(&t) || (200.0..370.0).contains(&t);
+            if window {
+                in_window += 1;
+                in_window_not_a += usize::from(e.mode != Some("A"));
+            }
+            if clear {
+                open += 1;
+                open_a += usize::from(e.mode == Some("A"));
+            }
+        }
+    }
+    let share = |a: usize, b: usize| a as f64 / b as f64;
+    eprintln!(
+        "not A in the windows: {:.3}; A outside them: {:.3}",
+        share(in_window_not_a, in_window),
+        share(open_a, open)
+    );
+    assert!(share(in_window_not_a, in_window) > 0.95);
+    assert!(share(open_a, open) > 0.8);
+    let q95 = |name: &str| {
+        let mut v = p95[name].clone();
+        v.sort_by(f64::total_cmp);
+        v[(0.95 * (v.len() - 1) as f64) as usize]
+    };
+    let (gps, dtmb, proposed) = (q95("GPS"), q95("GPS+DTMB"), q95("Proposed"));
+    eprintln!("95 % error: GPS {gps:.1} m, GPS+DTMB {dtmb:.1} m, Proposed {proposed:.1} m");
+    assert!(proposed < dtmb && dtmb < gps);
+}
+
+/// A survey saved by `hybridnav fm survey` and named by `[sensors.fm] database` gives the
+/// same fixes as the survey the world runs itself (same master seed); a database from
+/// another world is refused with both worlds named.
+#[test]
+fn a_saved_fm_survey_is_reused_and_checked_against_its_world() {
+    let d = crate::common::tmp_dir("fm-reuse");
+    let db = d.join("beihang-fm.json");
+    let o = crate::common::hybridnav(&[
+        "fm",
+        "survey",
+        "worlds/seed000-beihang.toml",
+        "--out",
+        db.to_str().unwrap(),
+        "--seed",
+        "1",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("wrote 16641 RPs × 21 channels"), "{stdout}");
+    let text =
+        std::fs::read_to_string(crate::common::repo().join("worlds/seed000-beihang.toml")).unwrap();
+    let with_db = text.replacen(
+        "[sensors.fm]\n",
+        &format!("[sensors.fm]\ndatabase = {:?}\n", db.to_str().unwrap()),
+        1,
+    );
+    assert_ne!(with_db, text);
+    let write_world = |name: &str, body: &str| {
+        let p = crate::common::repo()
+            .join("worlds")
+            .join(format!("_test-{name}-{}.toml", std::process::id()));
+        std::fs::write(&p, body).unwrap();
+        p
+    };
+    let p = write_world("fmdb", &with_db);
+    let loaded = load_world(&p);
+    let _ = std::fs::remove_file(&p);
+    let loaded = loaded.unwrap();
+    let surveyed = load_world(&crate::common::repo().join("worlds/seed000-beihang.toml")).unwrap();
+    let a = run_trial(&loaded, 1, 0).unwrap();
+    let b = run_trial(&surveyed, 1, 0).unwrap();
+    let (ta, tb) = (
+        trace(&a.estimators, "Proposed"),
+        trace(&b.estimators, "Proposed"),
+    );
+    assert_eq!(ta.epochs.len(), tb.epochs.len());
+    // The file holds decimal numbers, so the fixes agree to rounding, not to the bit.
+    for (x, y) in ta.epochs.iter().zip(&tb.epochs) {
+        let (Some(ex), Some(ey)) = (x.err_3d_m, y.err_3d_m) else {
+            assert_eq!(x.err_3d_m, y.err_3d_m, "t = {}", x.t_s);
+            continue;
+        };
+        assert!((ex - ey).abs() < 1e-6, "t = {}: {ex} vs {ey}", x.t_s);
+    }
+    let renamed = with_db.replacen(
+        "name = \"Seed 000 site 1 — Beihang campus, Beijing\"",
+        "name = \"Another campus\"",
+        1,
+    );
+    assert_ne!(renamed, with_db);
+    let p = write_world("fmdb-other", &renamed);
+    let e = load_world(&p);
+    let _ = std::fs::remove_file(&p);
+    let msg = e
+        .err()
+        .expect("a database of another world is refused")
+        .to_string();
+    assert!(
+        msg.contains("sensors.fm.database") && msg.contains("Another campus"),
+        "{msg}"
+    );
+}
