@@ -438,7 +438,7 @@ enum Core {
     Ekf(Ekf<N>),
     Sigma(SigmaPointKf<N>),
     /// The strong tracking filter: an EKF whose prediction [`FamilyEstimator`] inflates.
-    Stf(Ekf<N>, StfMemory),
+    Stf(Ekf<N>, Box<StfMemory>),
     Rekf(RelativeEntropyKf<N>),
     Pf(Box<PfCore>),
 }
@@ -636,10 +636,10 @@ impl FamilyEstimator {
                 Ekf::new(x0, p0)
                     .and_then(|f| f.with_gating(self.gating))
                     .map_err(err)?,
-                StfMemory {
+                Box::new(StfMemory {
                     v: None,
                     pending: None,
-                },
+                }),
             ),
             FamilyKind::Rekf => Core::Rekf(
                 RelativeEntropyKf::new(x0, p0, cfg.rekf_aleph_threshold, self.gating.residual)
