@@ -366,8 +366,7 @@ fn a_saved_fm_survey_is_reused_and_checked_against_its_world() {
     let e = load_world(&p);
     let _ = std::fs::remove_file(&p);
     let msg = e
-        .err()
-        .expect("a database of another world is refused")
+        .expect_err("a database of another world is refused")
         .to_string();
     assert!(
         msg.contains("sensors.fm.database") && msg.contains("Another campus"),
