@@ -23,6 +23,7 @@ pub mod anomaly;
 pub mod earth;
 pub mod landmark;
 pub mod snn;
+pub mod source;
 
 pub use anomaly::{DipoleAnomaly, MagneticAnomalyConfig, MagneticScene, MagneticWalk};
 pub use earth::EarthField;

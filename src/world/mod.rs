@@ -297,6 +297,29 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
             }
         }
     };
+    let anomalies = file
+        .scene
+        .as_ref()
+        .map_or(&[][..], |s| &s.magnetic_anomalies[..]);
+    for (i, a) in anomalies.iter().enumerate() {
+        a.validate()
+            .map_err(|c| ctx.issue(&format!("scene.magnetic_anomaly[{i}]"), c))?;
+    }
+    if let Some(m) = &file.sensors.magnetic {
+        m.validate().map_err(|i| ctx.issue("sensors.magnetic", i))?;
+        if anomalies.is_empty() {
+            return Err(ctx.err(
+                "sensors.magnetic",
+                "expected landmarks to detect: add [[scene.magnetic_anomaly]] tables",
+            ));
+        }
+        if m.dtmb_check.is_some() && !transmitters.iter().any(|t| t.kind == TransmitterKind::Dtmb) {
+            return Err(ctx.err(
+                "sensors.magnetic.dtmb_check",
+                "the DTMB consistency check needs a DTMB [[transmitter]] to range to",
+            ));
+        }
+    }
     if file.estimators.is_empty() {
         return Err(ctx.err("", "expected at least one [[estimator]] table"));
     }
@@ -651,6 +674,9 @@ fn fix_sources(file: &WorldFile) -> Vec<&'static str> {
     if file.sensors.fm.is_some() {
         v.push("fm");
     }
+    if file.sensors.magnetic.is_some() {
+        v.push("magnetic");
+    }
     v
 }
 
@@ -894,6 +920,33 @@ impl World {
             ));
         }
         let attitude = self.file.platform.attitude();
+        if let Some(m) = &sensors.magnetic {
+            let anomalies = self
+                .file
+                .scene
+                .as_ref()
+                .map_or(&[][..], |s| &s.magnetic_anomalies[..]);
+            let tower = self
+                .transmitters
+                .iter()
+                .find(|t| t.kind == TransmitterKind::Dtmb)
+                .map(|t| t.pos_enu_m);
+            sources.push(Box::new(
+                crate::magnetic::source::MagneticSource::new(
+                    m,
+                    anomalies,
+                    &attitude,
+                    self.build_trajectory(&TrialRng::new(rng.master_seed(), 0))?,
+                    self.build_trajectory(rng)?,
+                    &self.frame,
+                    self.start,
+                    tower,
+                    rng,
+                    end,
+                )
+                .map_err(|i| err("sensors.magnetic", i))?,
+            ));
+        }
         // The inertial sources own a copy of the same (deterministic) trajectory.
         let rebuild = || self.build_trajectory(rng);
         if let Some(imu) = &sensors.imu {

@@ -60,6 +60,15 @@ sources = []
 filter = "pdr""#,
     },
     Preset {
+        name: "seed002-pdr-mag-dtmb",
+        about: "seed 002: PDR corrected by magnetic landmarks, each kept only if consistent with DTMB ranging (sec. 4.1)",
+        toml: r#"name = "PDR+MAG/DTMB"
+sources = []
+filter = "pdr"
+[pdr]
+fix_sources = ["magnetic"]"#,
+    },
+    Preset {
         name: "seed003-ekf",
         about: "seed 003 'EKF': GPS/BDS/DTMB with one clock per system, seamless scheme (Table 1)",
         toml: r#"name = "EKF"

@@ -154,6 +154,10 @@ pub struct SceneSection {
     /// Log-normal shadowing of terrestrial links (σ, decorrelation distance).
     #[serde(default)]
     pub shadowing: Option<ShadowingConfig>,
+    /// `[[scene.magnetic_anomaly]]`: ferromagnetic structures (point dipoles) whose field
+    /// the magnetic-landmark source detects (seed 002 §2).
+    #[serde(default, rename = "magnetic_anomaly")]
+    pub magnetic_anomalies: Vec<crate::magnetic::MagneticAnomalyConfig>,
 }
 
 impl SceneSection {

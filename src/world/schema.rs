@@ -139,6 +139,10 @@ pub struct SensorsSection {
     /// FM fingerprinting: position fixes by WKNN (source `"fm"`).
     #[serde(default)]
     pub fm: Option<crate::fm::FmSensorConfig>,
+    /// Magnetic landmarks: position fixes when a landmark is recognised (source
+    /// `"magnetic"`).
+    #[serde(default)]
+    pub magnetic: Option<crate::magnetic::source::MagneticSensorConfig>,
 }
 
 /// One `[[shielding]]` window: exactly one of `keep_highest`, `keep`, `block`.

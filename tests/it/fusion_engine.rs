@@ -373,3 +373,78 @@ fn a_saved_fm_survey_is_reused_and_checked_against_its_world() {
         "{msg}"
     );
 }
+
+/// The magnetic-landmark source on seed 002's Lianhua world: the survey labels windows at
+/// the landmarks, the trial walks (two laps, a different phone) recognise them, and seed
+/// 002's DTMB consistency check does not lower the precision (it removes look-alike
+/// confusions). Precision and recall are measured against the true landmark positions.
+#[test]
+fn magnetic_landmarks_are_recognised_on_the_lianhua_world() {
+    use hybridnav::core::TrialRng;
+    use hybridnav::magnetic::source::MagneticSource;
+    use nalgebra::Vector3;
+    let world = load_world(&crate::common::repo().join("worlds/seed002-lianhua.toml")).unwrap();
+    let cfg = world.file.sensors.magnetic.clone().unwrap();
+    let anomalies = world
+        .file
+        .scene
+        .as_ref()
+        .unwrap()
+        .magnetic_anomalies
+        .clone();
+    let truth: Vec<Vector3<f64>> = anomalies
+        .iter()
+        .map(|a| Vector3::from(a.position_enu_m))
+        .collect();
+    let tower = world
+        .transmitters
+        .iter()
+        .find(|t| t.kind == hybridnav::world::scene::TransmitterKind::Dtmb)
+        .map(|t| t.pos_enu_m);
+    let mut rows = Vec::new();
+    for (label, check) in [("DTW", None), ("DTW + DTMB", cfg.dtmb_check)] {
+        let c = hybridnav::magnetic::source::MagneticSensorConfig {
+            dtmb_check: check,
+            ..cfg.clone()
+        };
+        let (mut detections, mut correct, mut passes) = (0, 0, 0);
+        for trial in 0..4 {
+            let rng = TrialRng::new(1, trial);
+            let s = MagneticSource::new(
+                &c,
+                &anomalies,
+                &world.file.platform.attitude(),
+                world.build_trajectory(&TrialRng::new(1, 0)).unwrap(),
+                world.build_trajectory(&rng).unwrap(),
+                &world.frame,
+                world.start,
+                tower,
+                &rng,
+                hybridnav::core::SimTime::from_seconds(world.duration_s),
+            )
+            .unwrap();
+            let (windows, labelled) = s.window_counts();
+            assert!(
+                labelled >= 5 && labelled <= windows,
+                "{labelled} of {windows}"
+            );
+            // Two laps pass each landmark twice.
+            passes += 2 * truth.len();
+            for d in s.detections() {
+                detections += 1;
+                let p = d.true_pos_enu_m;
+                let l = truth[d.label];
+                if (p.x - l.x).hypot(p.y - l.y) <= 3.0 {
+                    correct += 1;
+                }
+            }
+        }
+        let precision = correct as f64 / detections.max(1) as f64;
+        let recall = correct as f64 / passes as f64;
+        eprintln!("{label}: {detections} detections, precision {precision:.3}, recall {recall:.3}");
+        rows.push((precision, recall));
+    }
+    assert!(rows[0].1 > 0.3 && rows[1].1 > 0.3, "{rows:?}");
+    assert!(rows[1].0 >= rows[0].0, "{rows:?}");
+    assert!(rows[1].0 > 0.8, "{rows:?}");
+}
