@@ -452,9 +452,13 @@ impl Source for MagneticSource {
     }
 
     fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
-        let now = ctx.truth.sim.seconds();
+        out.t = ctx.truth.t;
+        out.source.clear();
+        out.source.push_str("magnetic");
+        // Compared as the engine's integer times, so a detection is never missed by a
+        // rounding of its time.
         while let Some(d) = self.detections.get(self.next) {
-            if d.t_s > now + 1e-9 {
+            if SimTime::from_seconds(d.t_s) > ctx.truth.sim {
                 break;
             }
             let p = self.landmarks_enu_m[d.label];

@@ -66,7 +66,8 @@ filter = "pdr""#,
 sources = []
 filter = "pdr"
 [pdr]
-fix_sources = ["magnetic"]"#,
+fix_sources = ["magnetic"]
+nis_gate = 13.8"#,
     },
     Preset {
         name: "seed003-ekf",
