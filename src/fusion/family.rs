@@ -17,13 +17,12 @@
 //! A range rate is a second scalar update linearised at the state the pseudorange left,
 //! as [`crate::fusion::ekf11::Ekf11`] does, so with `filter = "ekf"` the family reproduces
 //! the hand-optimised `ekf11` (a test checks it to 1e-6 m on a whole trial). The strong
-//! tracking filter keeps one fading-factor memory per scalar channel, so it takes every
-//! measurement as whitened scalar rows (`z' = L⁻¹z`, `h' = L⁻¹h` with `L Lᵀ = R`), which
-//! for a linearised update is the vector update done row by row.
+//! tracking filter is that EKF with its prediction inflated by a fading factor computed
+//! from the epoch's stacked, whitened pseudorange innovations (see `stf_inflate`).
 //!
 //! Divergence is detected, never passed on: a prediction or update that fails, a state that
-//! is not finite or a position σ beyond [`FamilyConfig::divergence_pos_sigma_m`] resets
-//! the filter, the epoch is reported with `numerical_failure`, and the next epoch
+//! is not finite, a position σ beyond [`FamilyConfig::divergence_pos_sigma_m`] or
+//! pseudorange residuals beyond [`FamilyConfig::divergence_residual_nis`] reset the filter, the epoch is reported with `numerical_failure`, and the next epoch
 //! re-initialises from least squares.
 
 use crate::core::rng::{StreamRng, TrialRng};
@@ -127,6 +126,12 @@ pub struct FamilyConfig {
     /// A position 1-σ (m, from the trace of the position covariance) beyond which the
     /// filter is declared diverged and reset. Default 100 km.
     pub divergence_pos_sigma_m: f64,
+    /// The mean squared normalised pseudorange residual at the estimate, `Σ(ν_j/σ_j)²/m`,
+    /// beyond which the track is declared lost and the filter reset. Default 400 (residuals
+    /// of 20 σ on average): a filter can be confidently wrong (a particle cloud that
+    /// collapsed away from the truth has a small covariance), and only the measurements
+    /// show it.
+    pub divergence_residual_nis: f64,
 }
 
 impl Default for FamilyConfig {
@@ -145,6 +150,7 @@ impl Default for FamilyConfig {
             neff_threshold: 0.5,
             pf_use_rates: false,
             divergence_pos_sigma_m: 1e5,
+            divergence_residual_nis: 400.0,
         }
     }
 }
@@ -201,6 +207,12 @@ impl FamilyConfig {
             return bad(
                 "neff_threshold",
                 format!("{}: expected a fraction in [0, 1]", self.neff_threshold),
+            );
+        }
+        if !(self.divergence_residual_nis.is_finite() && self.divergence_residual_nis > 0.0) {
+            return bad(
+                "divergence_residual_nis",
+                format!("{}: expected > 0", self.divergence_residual_nis),
             );
         }
         if !(self.divergence_pos_sigma_m.is_finite() && self.divergence_pos_sigma_m > 0.0) {
@@ -718,6 +730,20 @@ impl FamilyEstimator {
         out.estimate = None;
     }
 
+    /// True when this epoch's pseudoranges say the estimate `x` is far from them all (see
+    /// [`FamilyConfig::divergence_residual_nis`]); needs at least four ranges.
+    fn lost(&self, x: &State) -> bool {
+        let (mut sum, mut m) = (0.0, 0usize);
+        for r in &self.scratch {
+            if let Ok(pr) = Pseudoranges::<N, 1>::new(self.layout, [RangeRow::from(r)]) {
+                let nu = (r.pseudorange_m - pr.h(x)[0]) / r.sigma_m;
+                sum += nu * nu;
+                m += 1;
+            }
+        }
+        m >= 4 && sum / m as f64 > self.cfg.divergence_residual_nis
+    }
+
     fn usable(&self, x: &State, p: &Cov) -> bool {
         let limit = self.cfg.divergence_pos_sigma_m.powi(2);
         let pos_var: f64 = idx::POS.iter().map(|&k| p[(k, k)]).sum();
@@ -858,7 +884,7 @@ impl Estimator for FamilyEstimator {
             regularise(p, self.cfg.neff_threshold, &q);
         }
         let (x, p) = core.moments();
-        if !self.usable(&x, &p) {
+        if !self.usable(&x, &p) || self.lost(&x) {
             self.reset(&mut out);
             return out;
         }
