@@ -67,29 +67,46 @@ pub enum FmCommand {
 #[derive(Debug, Subcommand)]
 pub enum DtmbCommand {
     /// Write DTMB baseband frames through white noise as a SigMF recording
-    /// (BASE.sigmf-data and BASE.sigmf-meta, with an annotation per frame).
+    /// (BASE.sigmf-data and BASE.sigmf-meta, with an annotation per frame); with --world,
+    /// one tower of a world as the platform's receiver hears it along its trajectory
+    /// (scene multipath, link budget, Doppler, receiver and tower clocks).
     Iq {
-        /// Frame header: pn420, pn595 or pn945.
-        #[arg(long, default_value = "pn945")]
-        mode: String,
+        /// Frame header: pn420, pn595 or pn945 (with --world: the tower's).
+        #[arg(long)]
+        mode: Option<String>,
         /// Number of signal frames.
         #[arg(long)]
         frames: usize,
-        /// Signal-to-noise ratio over the 7.56 MHz band (dB).
+        /// Signal-to-noise ratio over the 7.56 MHz band (dB); required without --world,
+        /// refused with it (the link budget sets it).
         #[arg(long, allow_hyphen_values = true)]
-        snr_db: f64,
+        snr_db: Option<f64>,
+        /// Record a world's DTMB tower along the platform's trajectory instead of AWGN.
+        #[arg(long, value_name = "WORLD.toml")]
+        world: Option<PathBuf>,
+        /// With --world: the tower id (default: the world's first DTMB tower).
+        #[arg(long)]
+        tower: Option<String>,
+        /// With --world: start of the recording, seconds from the world's start.
+        #[arg(long, default_value_t = 0.0, value_name = "T0")]
+        from_s: f64,
+        /// With --world: the trial whose trajectory, clock and noise are used.
+        #[arg(long, default_value_t = 0)]
+        trial: u64,
         /// Sample format: cf32 (32-bit float I/Q) or ci8 (8-bit integer I/Q).
         #[arg(long, default_value = "cf32")]
         format: String,
         /// Integer oversampling of the 7.56 Msps symbol rate (SRRC shaping when > 1).
         #[arg(long, default_value_t = 1)]
         oversampling: usize,
-        /// UHF channel number (China: DS-13 … DS-48), for the recorded centre frequency.
+        /// UHF channel number (China: DS-13 … DS-48), for the recorded centre frequency
+        /// (with --world: ignored, the tower's carrier is recorded).
         #[arg(long, default_value_t = 14)]
         channel: u32,
-        /// Seed of the payload and noise streams.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
+        /// Seed of the payload and noise streams (with --world: the master seed, default
+        /// the world's [montecarlo] seed; without: default 1).
+        #[arg(long)]
+        seed: Option<u64>,
         /// Output base path (without the .sigmf-data / .sigmf-meta suffix).
         #[arg(long)]
         out: PathBuf,
@@ -197,21 +214,29 @@ pub fn run(cli: Cli) -> Result<()> {
             mode,
             frames,
             snr_db,
+            world,
+            tower,
+            from_s,
+            trial,
             format,
             oversampling,
             channel,
             seed,
             out,
-        }) => cmd_dtmb_iq(
-            &mode,
+        }) => cmd_dtmb_iq(DtmbIqArgs {
+            mode,
             frames,
             snr_db,
-            &format,
+            world,
+            tower,
+            from_s,
+            trial,
+            format,
             oversampling,
             channel,
             seed,
-            &out,
-        ),
+            out,
+        }),
         Command::Ephemeris(EphemerisCommand::Synth { start, hours, out }) => {
             cmd_synth(&start, hours, &out)
         }
@@ -381,40 +406,112 @@ fn cmd_synth(start: &str, hours: f64, out: &Path) -> Result<()> {
     Ok(())
 }
 
-#[allow(clippy::too_many_arguments)]
-fn cmd_dtmb_iq(
-    mode: &str,
+/// The options of `dtmb iq`.
+struct DtmbIqArgs {
+    mode: Option<String>,
     frames: usize,
-    snr_db: f64,
-    format: &str,
+    snr_db: Option<f64>,
+    world: Option<PathBuf>,
+    tower: Option<String>,
+    from_s: f64,
+    trial: u64,
+    format: String,
     oversampling: usize,
     channel: u32,
-    seed: u64,
-    out: &Path,
-) -> Result<()> {
+    seed: Option<u64>,
+    out: PathBuf,
+}
+
+fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
     use crate::dtmb::pn::{PnMode, SAMPLE_RATE_HZ};
-    use crate::dtmb::sigmf::{generate_iq, write_sigmf, SampleFormat};
-    let mode: PnMode = mode.parse()?;
-    let format = match format.to_ascii_lowercase().as_str() {
+    use crate::dtmb::sigmf::{generate_iq, write_sigmf, write_sigmf_with, SampleFormat};
+    let format = match a.format.to_ascii_lowercase().as_str() {
         "cf32" | "cf32_le" => SampleFormat::Cf32,
         "ci8" => SampleFormat::Ci8,
         other => bail!("--format: unknown sample format '{other}'; expected cf32 or ci8"),
     };
+    let out = a.out.as_path();
+    let mkdir = || -> Result<()> {
+        if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("cannot create output directory {}", dir.display()))?;
+        }
+        Ok(())
+    };
+    if let Some(path) = &a.world {
+        if a.snr_db.is_some() {
+            bail!("--snr-db cannot be given with --world: the world's link budget sets the SNR");
+        }
+        if a.oversampling != 1 {
+            bail!("--oversampling is not supported with --world (7.56 Msps only)");
+        }
+        if a.frames == 0 {
+            bail!("--frames must be at least 1");
+        }
+        let w = load_world(path).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let req = crate::dtmb::world_iq::WorldIqRequest {
+            tower: a.tower.clone(),
+            from_s: a.from_s,
+            frames: a.frames,
+            seed: a.seed.unwrap_or(w.file.montecarlo.seed),
+            trial: a.trial,
+        };
+        let rec = crate::dtmb::world_iq::world_iq(&w, &req)?;
+        if let Some(m) = &a.mode {
+            let m: PnMode = m.parse()?;
+            if m != rec.mode {
+                bail!(
+                    "--mode {} contradicts tower {}'s {} (with --world the tower sets the mode)",
+                    m.name(),
+                    rec.tower,
+                    rec.mode.name()
+                );
+            }
+        }
+        mkdir()?;
+        write_sigmf_with(
+            out,
+            &rec.samples,
+            format,
+            SAMPLE_RATE_HZ,
+            rec.center_freq_hz,
+            &rec.annotations,
+            &rec.global_extra,
+            &rec.annotation_extra,
+        )?;
+        eprintln!(
+            "wrote {} samples ({} frames of tower {} {}, SNR {:.1} dB at the start, {:.0} MHz) \
+             to {}.sigmf-data and .sigmf-meta",
+            rec.samples.len(),
+            a.frames,
+            rec.tower,
+            rec.mode.name(),
+            rec.snr_db,
+            rec.center_freq_hz * 1e-6,
+            out.display()
+        );
+        return Ok(());
+    }
+    if a.tower.is_some() || a.from_s != 0.0 || a.trial != 0 {
+        bail!("--tower, --from-s and --trial need --world");
+    }
+    let mode: PnMode = a.mode.as_deref().unwrap_or("pn945").parse()?;
+    let Some(snr_db) = a.snr_db else {
+        bail!("--snr-db is required without --world");
+    };
     if !snr_db.is_finite() {
         bail!("--snr-db must be a finite number of dB, got {snr_db}");
     }
-    let center_hz = crate::dtmb::uhf_channel_center_hz(channel)?;
-    let (samples, annotations) = generate_iq(mode, frames, snr_db, oversampling, seed)?;
-    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("cannot create output directory {}", dir.display()))?;
-    }
-    let rate_hz = SAMPLE_RATE_HZ * oversampling as f64;
+    let center_hz = crate::dtmb::uhf_channel_center_hz(a.channel)?;
+    let (samples, annotations) =
+        generate_iq(mode, a.frames, snr_db, a.oversampling, a.seed.unwrap_or(1))?;
+    mkdir()?;
+    let rate_hz = SAMPLE_RATE_HZ * a.oversampling as f64;
     write_sigmf(out, &samples, format, rate_hz, center_hz, &annotations)?;
     eprintln!(
         "wrote {} samples ({} frames at {:.2} Msps, {:.0} MHz) to {}.sigmf-data and .sigmf-meta",
         samples.len(),
-        frames,
+        a.frames,
         rate_hz * 1e-6,
         center_hz * 1e-6,
         out.display()

@@ -7,6 +7,7 @@
 //! frame (SI, QAM, interleaver, IDFT) ─► transmitter (FrameSchedule, generate) ─► channel
 //!     (paths, CFO/SFO, noise) ─► receiver (FFT correlation, first path, CFO) ─► pseudorange
 //! sigmf: samples + frame annotations to BASE.sigmf-data / BASE.sigmf-meta
+//! world_iq: a world's tower as its receiver hears it along the trajectory, for sigmf
 //! measurement: the calibrated timing-error model (level = "measurement")
 //! source: DtmbSource, the "dtmb" engine source at either level; tps: seed 002's
 //!     TPS-CFO range differences; noise: the vectorised AWGN generator
@@ -33,6 +34,7 @@ pub mod sigmf;
 pub mod source;
 pub mod tps;
 pub mod transmitter;
+pub mod world_iq;
 
 pub use channel::{link_snr_db, Channel, ChannelConfig, Path};
 pub use frame::{BodyModulator, CarrierMode, Qam};

@@ -14,7 +14,7 @@ use super::DtmbError;
 use crate::core::{GpsTime, TrialRng};
 use crate::io::atomic::write_atomic;
 use num_complex::Complex32;
-use serde_json::{json, Value};
+use serde_json::{json, Map, Value};
 use std::path::Path;
 
 /// Sample format of the data file.
@@ -81,6 +81,35 @@ pub fn write_sigmf(
     center_freq_hz: f64,
     annotations: &[Annotation],
 ) -> Result<(), DtmbError> {
+    write_sigmf_with(
+        base,
+        samples,
+        format,
+        sample_rate_hz,
+        center_freq_hz,
+        annotations,
+        &Map::new(),
+        &[],
+    )
+}
+
+/// As [`write_sigmf`], with extra keys: `global_extra` is merged into the `global` object
+/// (overriding the defaults, e.g. `core:description`), and `annotation_extra[i]` into
+/// annotation `i` (namespaced keys such as `hybridnav:frame`; missing entries add nothing).
+///
+/// # Errors
+/// As [`write_sigmf`].
+#[allow(clippy::too_many_arguments)]
+pub fn write_sigmf_with(
+    base: &Path,
+    samples: &[Complex32],
+    format: SampleFormat,
+    sample_rate_hz: f64,
+    center_freq_hz: f64,
+    annotations: &[Annotation],
+    global_extra: &Map<String, Value>,
+    annotation_extra: &[Map<String, Value>],
+) -> Result<(), DtmbError> {
     if !(sample_rate_hz.is_finite() && sample_rate_hz > 0.0 && center_freq_hz.is_finite()) {
         return Err(DtmbError::InvalidParameter {
             name: "sample_rate_hz/center_freq_hz",
@@ -127,9 +156,19 @@ pub fn write_sigmf(
                 .collect()
         }
     };
+    for (k, v) in global_extra {
+        global[k] = v.clone();
+    }
     let ann: Vec<Value> = annotations
         .iter()
-        .map(|a| json!({"core:sample_start": a.sample_start, "core:sample_count": a.sample_count, "core:label": a.label}))
+        .enumerate()
+        .map(|(i, a)| {
+            let mut v = json!({"core:sample_start": a.sample_start, "core:sample_count": a.sample_count, "core:label": a.label});
+            for (k, x) in annotation_extra.get(i).into_iter().flatten() {
+                v[k] = x.clone();
+            }
+            v
+        })
         .collect();
     let meta = json!({
         "global": global,

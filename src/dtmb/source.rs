@@ -531,6 +531,89 @@ impl DtmbSource {
     pub fn frame(&self) -> &EnuFrame {
         &self.frame
     }
+
+    /// The link of tower `ti` at the platform's truth: the geometric range (m), the
+    /// reference SNR `γ_ref` of the budget in the module documentation (dB over 7.56 MHz)
+    /// and the Doppler of each path (Hz); the paths' excess delays and gains are left in
+    /// [`DtmbSource::taps`] (the direct path alone, without Doppler, when the world has
+    /// no scene). Shared by [`Source::sample`] and the world IQ recorder
+    /// ([`super::world_iq`]).
+    pub(crate) fn tower_link(
+        &mut self,
+        ti: usize,
+        truth: &crate::engine::Truth,
+    ) -> (f64, f64, [f64; crate::propagation::MAX_PATHS]) {
+        let spec = self.towers[ti].spec.clone();
+        let rx_enu = truth.enu.pos_enu_m;
+        let rx_ecef = truth.pos_ecef_m;
+        let range_m = (spec.pos_ecef_m - rx_ecef).norm();
+        // Path loss: Extended Hata over the 3-D distance, tower height above ground.
+        let (pl_db, validity) = extended_hata_db(
+            self.cfg.environment.hata(),
+            spec.freq_hz * 1e-6,
+            spec.pos_enu_m.z.max(1.0),
+            self.cfg.rx_antenna_height_m,
+            (range_m * 1e-3).max(1e-3),
+        );
+        if let Some(w) = self.validity.note(Model::ExtendedHata, validity) {
+            self.warnings
+                .push(format!("{} {}: {w}", self.name, spec.id));
+        }
+        let shadow_db = self.towers[ti]
+            .shadow
+            .as_ref()
+            .map_or(0.0, |f| f.value_db(rx_enu.x, rx_enu.y));
+        let snr_ref_db = link_snr_db(
+            spec.erp_dbw + self.cfg.antenna_gain_dbi,
+            pl_db + shadow_db,
+            self.cfg.noise_figure_db,
+            BANDWIDTH_HZ,
+        );
+        // Multipath taps from the scene, or the direct path alone.
+        self.taps.clear();
+        let mut dopplers = [0.0f64; crate::propagation::MAX_PATHS];
+        match self.scene.as_ref() {
+            Some(scene) => {
+                let params = LinkParams {
+                    freq_hz: spec.freq_hz,
+                    polarisation: Polarisation::Horizontal,
+                    rx_vel_enu_mps: truth.enu.vel_enu_mps,
+                };
+                match scene.link(
+                    &rx_enu,
+                    &Emitter::Point(spec.pos_enu_m),
+                    &params,
+                    &mut self.link,
+                ) {
+                    Ok(()) => {
+                        for (p, path) in self.link.paths().iter().enumerate() {
+                            self.taps.push(Tap {
+                                delay_samples: path.excess_delay_s * SAMPLE_RATE_HZ,
+                                gain: Complex64::from_polar(path.amplitude, path.phase_rad),
+                            });
+                            dopplers[p] = path.doppler_hz;
+                        }
+                    }
+                    Err(e) => {
+                        if self.warnings.len() < 64 {
+                            self.warnings
+                                .push(format!("{} {}: link: {e}", self.name, spec.id));
+                        }
+                    }
+                }
+            }
+            None => self.taps.push(Tap {
+                delay_samples: 0.0,
+                gain: Complex64::new(1.0, 0.0),
+            }),
+        }
+        (range_m, snr_ref_db, dopplers)
+    }
+
+    /// The paths of the last [`DtmbSource::tower_link`]: excess delay (samples) and gain.
+    pub(crate) fn taps(&self) -> &[Tap] {
+        &self.taps
+    }
 }
 
 /// Half-width of the aided window in samples.
@@ -564,7 +647,6 @@ impl Source for DtmbSource {
         out.source.clear();
         out.source.push_str(self.name);
         let t_s = truth.sim.seconds();
-        let rx_enu = truth.enu.pos_enu_m;
         let rx_ecef = truth.pos_ecef_m;
         let g = Geodetic::from_ecef(&rx_ecef);
         let rot = ecef_to_enu_rotation(g.lat_rad, g.lon_rad);
@@ -581,67 +663,7 @@ impl Source for DtmbSource {
         for ti in 0..self.towers.len() {
             let spec = self.towers[ti].spec.clone();
             let mode = spec.pn_mode;
-            let range_m = (spec.pos_ecef_m - rx_ecef).norm();
-            // Path loss: Extended Hata over the 3-D distance, tower height above ground.
-            let (pl_db, validity) = extended_hata_db(
-                self.cfg.environment.hata(),
-                spec.freq_hz * 1e-6,
-                spec.pos_enu_m.z.max(1.0),
-                self.cfg.rx_antenna_height_m,
-                (range_m * 1e-3).max(1e-3),
-            );
-            if let Some(w) = self.validity.note(Model::ExtendedHata, validity) {
-                self.warnings
-                    .push(format!("{} {}: {w}", self.name, spec.id));
-            }
-            let shadow_db = self.towers[ti]
-                .shadow
-                .as_ref()
-                .map_or(0.0, |f| f.value_db(rx_enu.x, rx_enu.y));
-            let snr_ref_db = link_snr_db(
-                spec.erp_dbw + self.cfg.antenna_gain_dbi,
-                pl_db + shadow_db,
-                self.cfg.noise_figure_db,
-                BANDWIDTH_HZ,
-            );
-            // Multipath taps from the scene, or the direct path alone.
-            self.taps.clear();
-            let mut dopplers = [0.0f64; crate::propagation::MAX_PATHS];
-            match self.scene.as_ref() {
-                Some(scene) => {
-                    let params = LinkParams {
-                        freq_hz: spec.freq_hz,
-                        polarisation: Polarisation::Horizontal,
-                        rx_vel_enu_mps: truth.enu.vel_enu_mps,
-                    };
-                    match scene.link(
-                        &rx_enu,
-                        &Emitter::Point(spec.pos_enu_m),
-                        &params,
-                        &mut self.link,
-                    ) {
-                        Ok(()) => {
-                            for (p, path) in self.link.paths().iter().enumerate() {
-                                self.taps.push(Tap {
-                                    delay_samples: path.excess_delay_s * SAMPLE_RATE_HZ,
-                                    gain: Complex64::from_polar(path.amplitude, path.phase_rad),
-                                });
-                                dopplers[p] = path.doppler_hz;
-                            }
-                        }
-                        Err(e) => {
-                            if self.warnings.len() < 64 {
-                                self.warnings
-                                    .push(format!("{} {}: link: {e}", self.name, spec.id));
-                            }
-                        }
-                    }
-                }
-                None => self.taps.push(Tap {
-                    delay_samples: 0.0,
-                    gain: Complex64::new(1.0, 0.0),
-                }),
-            }
+            let (range_m, snr_ref_db, dopplers) = self.tower_link(ti, truth);
             if self.taps.iter().all(|t| t.gain.norm_sqr() == 0.0) {
                 continue;
             }

@@ -126,9 +126,9 @@ pub struct FamilyConfig {
     /// A position 1-σ (m, from the trace of the position covariance) beyond which the
     /// filter is declared diverged and reset. Default 100 km.
     pub divergence_pos_sigma_m: f64,
-    /// The mean squared normalised pseudorange residual at the estimate, `Σ(ν_j/σ_j)²/m`,
-    /// beyond which the track is declared lost and the filter reset. Default 400 (residuals
-    /// of 20 σ on average): a filter can be confidently wrong (a particle cloud that
+    /// The median squared normalised pseudorange residual at the estimate, `(ν_j/σ_j)²`,
+    /// beyond which the track is declared lost and the filter reset. Default 400 (most
+    /// residuals beyond 20 σ; the median ignores a few NLOS outliers): a filter can be confidently wrong (a particle cloud that
     /// collapsed away from the truth has a small covariance), and only the measurements
     /// show it.
     pub divergence_residual_nis: f64,
@@ -537,6 +537,7 @@ pub struct FamilyEstimator {
     corrector: Option<DtmbClockCorrector>,
     scratch: Vec<RangeMeasurement>,
     fix_scratch: Vec<PositionFix>,
+    residual_scratch: Vec<f64>,
     geometry: Vec<(Vector3<f64>, usize)>,
 }
 
@@ -602,6 +603,7 @@ impl FamilyEstimator {
             corrector: correction.map(DtmbClockCorrector::new),
             scratch: Vec::with_capacity(64),
             fix_scratch: Vec::with_capacity(4),
+            residual_scratch: Vec::with_capacity(64),
             geometry: Vec::with_capacity(64),
         })
     }
@@ -732,16 +734,22 @@ impl FamilyEstimator {
 
     /// True when this epoch's pseudoranges say the estimate `x` is far from them all (see
     /// [`FamilyConfig::divergence_residual_nis`]); needs at least four ranges.
-    fn lost(&self, x: &State) -> bool {
-        let (mut sum, mut m) = (0.0, 0usize);
+    fn lost(&mut self, x: &State) -> bool {
+        let nu2 = &mut self.residual_scratch;
+        nu2.clear();
         for r in &self.scratch {
             if let Ok(pr) = Pseudoranges::<N, 1>::new(self.layout, [RangeRow::from(r)]) {
                 let nu = (r.pseudorange_m - pr.h(x)[0]) / r.sigma_m;
-                sum += nu * nu;
-                m += 1;
+                nu2.push(nu * nu);
             }
         }
-        m >= 4 && sum / m as f64 > self.cfg.divergence_residual_nis
+        if nu2.len() < 4 {
+            return false;
+        }
+        // The median, so that a few NLOS outliers (which the gates handle) do not count.
+        let mid = nu2.len() / 2;
+        let (_, median, _) = nu2.select_nth_unstable_by(mid, f64::total_cmp);
+        *median > self.cfg.divergence_residual_nis
     }
 
     fn usable(&self, x: &State, p: &Cov) -> bool {

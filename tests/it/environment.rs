@@ -369,7 +369,12 @@ fn bad_scene_input_is_named_with_its_line() {
 /// streams), and the INS and TC-OFDM estimators run to the end without numerical failures.
 #[test]
 fn terrestrial_and_inertial_sources_are_deterministic_across_threads() {
-    for world in ["worlds/seed000-kehui.toml", "worlds/seed004-bupt.toml"] {
+    for world in [
+        "worlds/seed000-kehui.toml",
+        "worlds/seed004-bupt.toml",
+        "worlds/seed000-beihang.toml",
+        "worlds/seed002-lianhua.toml",
+    ] {
         let d = tmp_dir(&format!("det-{}", world.len()));
         let mut outs = Vec::new();
         for threads in ["1", "2"] {

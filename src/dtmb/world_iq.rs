@@ -1,0 +1,470 @@
+//! A world's DTMB tower as its receiver hears it along the trajectory, as baseband IQ for
+//! a SigMF recording (`hybridnav dtmb iq --world`).
+//!
+//! Recording sample `n` (7.56 Msps) is taken when the receiver clock reads
+//! `start + T0 + n/f_s` (`T0` = `--from-s`). The tower emits frame `k` (frame 0 at the
+//! world's start, superframes aligned with it) when its clock reads `start + k·T_frame`,
+//! i.e. at GPS time `start + k·T_frame − δt_tower`, `δt_tower = clock_offset + drift·t`.
+//! Path `p` of the link (excess delay `Δτ_p` over the geometric range `ρ`) then puts the
+//! start of frame `k` at recording sample
+//!
+//! ```text
+//! n_k = f_s (k·T_frame − T0 − δt_tower + ρ/c + Δτ_p + δt_rx + ISB_DTMB)   (× (1 + ε) with SFO)
+//! ```
+//!
+//! the same clocks as the `dtmb` source's pseudorange `ρ + c(δt_rx + ISB − δt_tower)`.
+//! The geometry (platform truth, `Scene::link` paths and Dopplers, link budget with
+//! shadowing, receiver and tower clocks) is evaluated at the middle of every frame-long
+//! block of the recording and held through the block, so the paths are updated every
+//! frame (0.63 ms for PN945; the delay drift inside a block is below 10⁻³ sample at car
+//! speeds). The link is computed by [`DtmbSource`]'s own `tower_link` (the world's
+//! `[sensors.dtmb]`, or its defaults), the receiver clock as in `World::build_trial`, so a
+//! recording and a run of the same `(seed, trial)` see the same link and clocks.
+//!
+//! Scaling: the noise is white with unit variance per complex sample over the 7.56 MHz
+//! band (`hybridnav:noise_power` = 1) and the paths are scaled so that a free-space LoS
+//! path's frame power over the noise is the link budget's `γ_ref` (`hybridnav:snr_ref_db`):
+//! a constant noise floor, the signal level following the link. The annotated
+//! `hybridnav:snr_db` is the received frame power over the noise,
+//! `γ_ref + 10 log10 Σ_pq Re(g_p g_q*) sinc(Δτ_p − Δτ_q)` (paths combined coherently over
+//! the flat band: a ground reflection 0.002 samples behind the direct path in antiphase
+//! cancels, not adds). A blocked link (no path) leaves noise.
+//!
+//! Random streams of `TrialRng::new(seed, trial)`: `motion/trajectory`,
+//! `receiver/clock/init`, `receiver/clock`, the shadowing of the master seed (as a run),
+//! the payload `dtmb/Dnn/tx` (the signal-level source's) and the noise `dtmb/iq/Dnn/noise`.
+
+use super::channel::{Channel, ChannelConfig, Path};
+use super::frame::{CarrierMode, Qam};
+use super::pn::{PnMode, SAMPLE_RATE_HZ};
+use super::sigmf::Annotation;
+use super::source::{DtmbLevel, DtmbSource, TowerSpec};
+use super::transmitter::{FrameSchedule, SampleSource, Transmitter, TxConfig};
+use super::DtmbError;
+use crate::core::{EmitterId, SimTime, System, TrialRng, C_MPS};
+use crate::gnss::receiver_clock::{ClockTrack, ReceiverClock};
+use crate::world::scene::TransmitterKind;
+use crate::world::World;
+use num_complex::{Complex32, Complex64};
+use serde_json::{json, Map, Value};
+use std::sync::Arc;
+
+/// Samples of margin ahead of the earliest path in the channel's delays, so the delays
+/// stay positive while the platform approaches the tower (256 samples ≈ 10 km).
+const DELAY_MARGIN_SAMPLES: f64 = 256.0;
+
+/// Most frames a recording may hold (as [`super::sigmf::generate_iq`]).
+pub const MAX_FRAMES: usize = 20_000;
+
+/// What to record.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WorldIqRequest {
+    /// The tower id (`D01`); `None` for the world's first DTMB tower.
+    pub tower: Option<String>,
+    /// Start of the recording in seconds from the world's start (receiver clock).
+    pub from_s: f64,
+    /// Number of frames (the recording holds `frames · frame_len` samples).
+    pub frames: usize,
+    /// Master seed.
+    pub seed: u64,
+    /// Trial index.
+    pub trial: u64,
+}
+
+/// A recording made by [`world_iq`], ready for [`super::sigmf::write_sigmf_with`].
+#[derive(Clone, Debug)]
+pub struct WorldIq {
+    /// The samples (7.56 Msps, unit noise variance).
+    pub samples: Vec<Complex32>,
+    /// One annotation per frame start inside the recording.
+    pub annotations: Vec<Annotation>,
+    /// Per annotation: `hybridnav:` keys (frame, phase, emission time, true first-path
+    /// sample, range, pseudorange, SNR).
+    pub annotation_extra: Vec<Map<String, Value>>,
+    /// `global` keys: world, trial, seed, tower, start, noise power, description.
+    pub global_extra: Map<String, Value>,
+    /// Carrier frequency of the tower (Hz).
+    pub center_freq_hz: f64,
+    /// The tower's header mode.
+    pub mode: PnMode,
+    /// The tower's id.
+    pub tower: String,
+    /// Link SNR (dB over 7.56 MHz) at the middle of the first block.
+    pub snr_db: f64,
+}
+
+/// `sin(πx)/(πx)`.
+fn sinc(x: f64) -> f64 {
+    if x.abs() < 1e-9 {
+        1.0
+    } else {
+        let a = std::f64::consts::PI * x;
+        a.sin() / a
+    }
+}
+
+fn bad(name: &'static str, reason: String) -> DtmbError {
+    DtmbError::InvalidParameter { name, reason }
+}
+
+/// The transmitter's samples with the index shifted by `offset` (the channel's receiver
+/// index starts at the recording's first sample; the transmitter's at the world start).
+struct Shifted<'a> {
+    tx: &'a mut Transmitter,
+    offset: i64,
+}
+
+impl SampleSource for Shifted<'_> {
+    fn generate(&mut self, start_sample: i64, out: &mut [Complex32]) {
+        self.tx.generate(start_sample + self.offset, out);
+    }
+}
+
+/// Records `req.frames` frames of a world's DTMB tower as the receiver on the platform
+/// hears it from `req.from_s` on (see the module documentation).
+///
+/// # Errors
+/// [`DtmbError::InvalidParameter`] naming the problem: a world without DTMB towers, an
+/// unknown tower id, a start outside the world's duration or a recording running past
+/// it, zero or too many frames, a trajectory or link that cannot be built.
+pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbError> {
+    let towers: Vec<_> = world
+        .transmitters
+        .iter()
+        .filter(|t| t.kind == TransmitterKind::Dtmb)
+        .collect();
+    let name = &world.file.world.name;
+    let Some(first) = towers.first() else {
+        return Err(bad(
+            "world",
+            format!(
+                "world {name:?} ({}) has no DTMB tower ([[transmitter]] with kind = \"dtmb\")",
+                world.path.display()
+            ),
+        ));
+    };
+    let t = match &req.tower {
+        None => *first,
+        Some(id) => *towers
+            .iter()
+            .find(|t| t.id.eq_ignore_ascii_case(id))
+            .ok_or_else(|| {
+                let ids: Vec<&str> = towers.iter().map(|t| t.id.as_str()).collect();
+                bad(
+                    "tower",
+                    format!(
+                        "world {name:?} has no DTMB tower {id:?}; its DTMB towers are {}",
+                        ids.join(", ")
+                    ),
+                )
+            })?,
+    };
+    if req.frames == 0 || req.frames > MAX_FRAMES {
+        return Err(bad(
+            "frames",
+            format!("must lie in 1..={MAX_FRAMES}, got {}", req.frames),
+        ));
+    }
+    let mode = t.pn_mode();
+    let n = mode.frame_len();
+    let fs = SAMPLE_RATE_HZ;
+    let t_frame = mode.frame_duration_s();
+    let dur = world.duration_s;
+    if !(req.from_s.is_finite() && req.from_s >= 0.0 && req.from_s < dur) {
+        return Err(bad(
+            "from_s",
+            format!(
+                "start {} s is outside the world's duration [0, {dur}) s",
+                req.from_s
+            ),
+        ));
+    }
+    let end_s = req.from_s + req.frames as f64 * t_frame;
+    if end_s > dur {
+        return Err(bad(
+            "from_s",
+            format!(
+                "{} frames from {} s end at {end_s:.4} s, after the world's duration {dur} s",
+                req.frames, req.from_s
+            ),
+        ));
+    }
+    let rng = TrialRng::new(req.seed, req.trial);
+    let trajectory = world
+        .build_trajectory(&rng)
+        .map_err(|e| bad("trajectory", e))?;
+    // The receiver clock exactly as `World::build_trial` records it.
+    let clock = Arc::new(ClockTrack::record(
+        ReceiverClock::new(
+            &world.file.receiver.clock,
+            &mut rng.stream("receiver/clock/init"),
+        ),
+        dur,
+        0.1,
+        &mut rng.stream("receiver/clock"),
+    ));
+    let spec = TowerSpec {
+        id: t.id.parse().unwrap_or(EmitterId::new(System::Dtmb, 1)),
+        pos_enu_m: t.pos_enu_m,
+        pos_ecef_m: t.pos_ecef_m,
+        channel: t.spec.channel.unwrap_or(0).min(255) as u8,
+        freq_hz: t.freq_hz,
+        erp_dbw: t.erp_dbw,
+        pn_mode: mode,
+        clock_offset_s: t.spec.clock_offset_ns * 1e-9,
+        clock_drift_s_per_s: t.spec.clock_drift_ppb * 1e-9,
+    };
+    let mut cfg = world.file.sensors.dtmb.clone().unwrap_or_default();
+    // The link needs no signal-level state of its own.
+    cfg.level = DtmbLevel::Measurement;
+    let rx_ppm = cfg.rx_oscillator_ppm;
+    let eps = rx_ppm * 1e-6;
+    let mut link = DtmbSource::new(
+        cfg,
+        vec![spec.clone()],
+        world.scene.clone(),
+        world.frame.clone(),
+        Arc::clone(&clock),
+        None,
+        &rng,
+        SimTime::from_seconds(dur),
+    )
+    .map_err(|i| bad("sensors.dtmb", format!("{}: {}", i.key, i.message)))?;
+    let tx_cfg = TxConfig {
+        schedule: FrameSchedule {
+            mode,
+            t0: world.start,
+            tower_clock_offset_s: 0.0,
+        },
+        carrier: CarrierMode::Multi3780,
+        qam: Qam::Qam64,
+        si_vector: 0,
+    };
+    let mut tx = Transmitter::new(tx_cfg, &mut rng.stream(&format!("dtmb/{}/tx", spec.id)));
+    let mut noise = rng.stream(&format!("dtmb/iq/{}/noise", spec.id));
+    let lambda = C_MPS / spec.freq_hz;
+    let total = req.frames * n;
+    let mut samples = vec![Complex32::default(); total];
+    let mut annotations = Vec::new();
+    let mut annotation_extra = Vec::new();
+    let mut channel: Option<Channel> = None;
+    let mut offset: Option<i64> = None;
+    let mut snr_first = f64::NAN;
+    for (j, block) in samples.chunks_mut(n).enumerate() {
+        // Receiver-clock time of the block's middle, taken as the trajectory's time (the
+        // receiver clock's bias, ≤ ms, moves the platform by millimetres).
+        let t_s = req.from_s + (j as f64 + 0.5) * t_frame;
+        let truth = crate::engine::trial::truth_at(
+            &world.frame,
+            world.start,
+            trajectory.as_ref(),
+            SimTime::from_seconds(t_s),
+        );
+        let (range_m, snr_ref_db, dopplers) = link.tower_link(0, &truth);
+        let rx_bias_s = clock.bias_s(t_s) + clock.isb_s(System::Dtmb, t_s);
+        let tower_clock_s = spec.clock_offset_s + spec.clock_drift_s_per_s * t_s;
+        let no_scene_doppler = if world.scene.is_none() {
+            // The direct path's Doppler: the platform's velocity towards the tower.
+            let u = (spec.pos_enu_m - truth.enu.pos_enu_m).normalize();
+            truth.enu.vel_enu_mps.dot(&u) / lambda
+        } else {
+            0.0
+        };
+        let taps: Vec<(f64, Complex64, f64)> = link
+            .taps()
+            .iter()
+            .enumerate()
+            .filter(|(_, tp)| tp.gain.norm_sqr() > 0.0)
+            .map(|(p, tp)| {
+                let d = if world.scene.is_none() {
+                    no_scene_doppler
+                } else {
+                    dopplers[p]
+                };
+                (tp.delay_samples, tp.gain, d)
+            })
+            .collect();
+        // Received power: the paths combine coherently through the band's (flat)
+        // autocorrelation, sinc of their delay difference in samples.
+        let power: f64 = taps
+            .iter()
+            .flat_map(|a| taps.iter().map(move |b| (a, b)))
+            .map(|(a, b)| (a.1 * b.1.conj()).re * sinc(a.0 - b.0))
+            .sum();
+        let snr_db = snr_ref_db + 10.0 * power.max(1e-30).log10();
+        if j == 0 {
+            snr_first = if power > 0.0 {
+                snr_db
+            } else {
+                f64::NEG_INFINITY
+            };
+        }
+        // x_p: transmitter sample minus recording sample for path p (no SFO).
+        let base = fs * (req.from_s - rx_bias_s - range_m / C_MPS + tower_clock_s);
+        let x_of = |delay_samples: f64| base - delay_samples;
+        let first_delay = if taps.is_empty() {
+            0.0
+        } else {
+            taps.iter().map(|t| t.0).fold(f64::INFINITY, f64::min)
+        };
+        let off =
+            *offset.get_or_insert_with(|| (x_of(first_delay).ceil() + DELAY_MARGIN_SAMPLES) as i64);
+        let amp = (10f64.powf(snr_ref_db / 10.0) / mode.nominal_frame_power()).sqrt();
+        let mut paths: Vec<Path> = taps
+            .iter()
+            .map(|&(d, g, dop)| Path {
+                delay_s: (off as f64 - x_of(d)) / fs,
+                gain: g * amp,
+                doppler_hz: dop,
+            })
+            .collect();
+        if paths.is_empty() {
+            // A blocked link: the channel still needs a path; a silent one.
+            paths.push(Path {
+                delay_s: DELAY_MARGIN_SAMPLES / fs,
+                gain: Complex64::new(0.0, 0.0),
+                doppler_hz: 0.0,
+            });
+        }
+        if let Some(p) = paths
+            .iter()
+            .find(|p| !(p.delay_s >= 0.0 && p.delay_s < 1.0))
+        {
+            return Err(bad(
+                "from_s",
+                format!(
+                    "at {t_s:.4} s the path delay moved {:.0} samples from the recording's \
+                     start, beyond the {DELAY_MARGIN_SAMPLES} samples of margin: record fewer frames",
+                    p.delay_s * fs - DELAY_MARGIN_SAMPLES
+                ),
+            ));
+        }
+        let ch_cfg = ChannelConfig::from_oscillators(paths, 0.0, rx_ppm, spec.freq_hz, None);
+        match channel.as_mut() {
+            Some(ch) => ch.set_paths(ch_cfg.paths, mode)?,
+            None => channel = Some(Channel::new(ch_cfg, mode, n)?),
+        }
+        let Some(ch) = channel.as_mut() else {
+            unreachable!("the channel was just built");
+        };
+        let start = (j * n) as i64;
+        ch.process(
+            &mut Shifted {
+                tx: &mut tx,
+                offset: off,
+            },
+            start,
+            block,
+            &mut noise,
+        )?;
+        super::noise::add_awgn(block, 1.0, &mut noise);
+        // Frame starts (first path) inside this block: n = (1 + ε)(k·N − x_first).
+        if taps.is_empty() {
+            continue;
+        }
+        let x1 = x_of(first_delay);
+        let lo = start as f64;
+        let hi = lo + block.len() as f64;
+        let mut k = ((lo / (1.0 + eps) + x1) / n as f64).ceil() as i64;
+        loop {
+            let pos = (1.0 + eps) * (k as f64 * n as f64 - x1);
+            if pos >= hi {
+                break;
+            }
+            if pos >= lo {
+                let s0 = pos.round().min((total - 1) as f64) as u64;
+                let fis = k.rem_euclid(mode.frames_per_superframe() as i64) as usize;
+                let phase = mode.phase_of_frame(fis);
+                let emission = world.start.add_seconds(k as f64 * t_frame - tower_clock_s);
+                annotations.push(Annotation {
+                    sample_start: s0,
+                    sample_count: (n as u64).min(total as u64 - s0),
+                    label: format!("frame {k} {} phase {phase}", mode.name()),
+                });
+                let mut m = Map::new();
+                m.insert("hybridnav:frame".into(), json!(k));
+                m.insert("hybridnav:frame_in_superframe".into(), json!(fis));
+                m.insert("hybridnav:pn_phase".into(), json!(phase));
+                m.insert("hybridnav:emission_gps_week".into(), json!(emission.week()));
+                m.insert(
+                    "hybridnav:emission_gps_tow_s".into(),
+                    json!(emission.tow_s()),
+                );
+                m.insert(
+                    "hybridnav:emission_gpst".into(),
+                    json!(emission.to_iso_gpst()),
+                );
+                m.insert("hybridnav:first_path_sample".into(), json!(pos));
+                m.insert(
+                    "hybridnav:first_path_excess_delay_samples".into(),
+                    json!(first_delay),
+                );
+                m.insert("hybridnav:range_m".into(), json!(range_m));
+                m.insert(
+                    "hybridnav:pseudorange_m".into(),
+                    json!(range_m + C_MPS * (rx_bias_s - tower_clock_s)),
+                );
+                m.insert("hybridnav:snr_db".into(), json!(snr_db));
+                m.insert("hybridnav:snr_ref_db".into(), json!(snr_ref_db));
+                // Each path: excess delay (samples), power relative to the first (dB),
+                // phase (rad), Doppler (Hz).
+                let g0 = taps
+                    .iter()
+                    .find(|t| t.0 == first_delay)
+                    .map_or(1.0, |t| t.1.norm_sqr());
+                let paths: Vec<Value> = taps
+                    .iter()
+                    .map(|(d, g, dop)| json!([d, 10.0 * (g.norm_sqr() / g0).log10(), g.arg(), dop]))
+                    .collect();
+                m.insert("hybridnav:paths".into(), Value::Array(paths));
+                let p = truth.enu.pos_enu_m;
+                m.insert("hybridnav:platform_enu_m".into(), json!([p.x, p.y, p.z]));
+                annotation_extra.push(m);
+            }
+            k += 1;
+        }
+    }
+    let mut g = Map::new();
+    g.insert(
+        "core:description".into(),
+        json!(format!(
+            "DTMB (GB 20600-2006) tower {} ({}, {}) as heard by the receiver of world {name:?} \
+             trial {} seed {} from {} s, generated by hybridnav",
+            t.id,
+            mode.name(),
+            t.spec
+                .channel
+                .map_or("no channel".into(), |c| format!("DS-{c}")),
+            req.trial,
+            req.seed,
+            req.from_s
+        )),
+    );
+    g.insert("hybridnav:world".into(), json!(name));
+    g.insert(
+        "hybridnav:world_file".into(),
+        json!(world.path.display().to_string()),
+    );
+    g.insert("hybridnav:world_hash".into(), json!(world.hash));
+    g.insert("hybridnav:trial".into(), json!(req.trial));
+    g.insert("hybridnav:seed".into(), json!(req.seed));
+    g.insert("hybridnav:tower".into(), json!(t.id));
+    g.insert("hybridnav:pn_mode".into(), json!(mode.name()));
+    g.insert("hybridnav:from_s".into(), json!(req.from_s));
+    g.insert(
+        "hybridnav:start_gpst".into(),
+        json!(world.start.add_seconds(req.from_s).to_iso_gpst()),
+    );
+    g.insert("hybridnav:noise_power".into(), json!(1.0));
+    g.insert("hybridnav:path_update".into(), json!("every frame"));
+    Ok(WorldIq {
+        samples,
+        annotations,
+        annotation_extra,
+        global_extra: g,
+        center_freq_hz: spec.freq_hz,
+        mode,
+        tower: t.id.clone(),
+        snr_db: snr_first,
+    })
+}
