@@ -775,16 +775,15 @@ impl Ekf11 {
         // Joseph form expanded for a scalar: P⁺_ij = P_ij − (k_i c_j + c_i k_j) + s (k_i k_j)
         // with c = P h. Grouped this way every term is symmetric in (i, j) to the last bit,
         // so the full square (which vectorises) is as symmetric as the upper triangle was.
-        let mut p_new = StateMatrix::zeros();
-        for (j, col) in p_new.as_mut_slice().chunks_exact_mut(NS).enumerate() {
-            let old = &p[j * NS..(j + 1) * NS];
-            let (kj, cj) = (k[j], ph[j]);
-            for i in 0..NS {
-                let v = old[i] - (k[i] * cj + ph[i] * kj) + s * (k[i] * kj);
-                col[i] = v;
+        // Column-major [[f64; 12]; 12] arrays let the compiler drop every bounds check.
+        let old: [[f64; NS]; NS] = self.p.into();
+        let mut new = [[0.0; NS]; NS];
+        for ((col, old_col), (&kj, &cj)) in new.iter_mut().zip(&old).zip(k.iter().zip(&ph)) {
+            for (((v, &o), &ki), &ci) in col.iter_mut().zip(old_col).zip(&k).zip(&ph) {
+                *v = o - (ki * cj + ci * kj) + s * (ki * kj);
             }
         }
-        self.commit(x_new, p_new, nis)
+        self.commit(x_new, StateMatrix::from(new), nis)
     }
 
     /// Writes an updated state and covariance if they are finite with non-negative
