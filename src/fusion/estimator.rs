@@ -53,28 +53,22 @@ pub trait Estimator: Send {
 
 use crate::core::System;
 use crate::fusion::ekf11::{Ekf11, Ekf11Config, IsbConfig, RejectReason, UpdateOutcome};
-use crate::fusion::measurement::{Measurement, RangeMeasurement};
-use crate::fusion::preprocess::{ClockCorrectionConfig, DtmbClockCorrector};
-use crate::fusion::selection::{Admission, ModeSelection, ModeSelector};
+use crate::fusion::measurement::RangeMeasurement;
+use crate::fusion::preprocess::{ClockCorrectionConfig, FrontEnd};
+use crate::fusion::selection::ModeSelection;
 use crate::fusion::wls::{self, WlsOptions};
 
 /// Seed 000's EKF driven epoch by epoch: initialised from a weighted-least-squares fix,
 /// then predicted to each batch's time and updated with each range and range rate.
 pub struct EkfEstimator {
     name: String,
-    systems: Vec<System>,
     ekf: Ekf11,
     last_t: Option<GpsTime>,
-    /// Ranges of the current batch from the systems this estimator uses (reused buffer).
-    scratch: Vec<RangeMeasurement>,
+    /// Systems, fix sources, mode selection and DTMB clock correction; holds the current
+    /// batch's admitted ranges.
+    front: FrontEnd,
     /// Emitter geometry of the current batch for the GDOP (reused buffer).
     geometry: Vec<(Vector3<f64>, usize)>,
-    /// Sources whose position fixes it takes (`"fm"`).
-    fixes: Vec<String>,
-    /// The mode-selection scheme, if any.
-    selector: Option<ModeSelector>,
-    /// Seed 000's DTMB clock correction, if configured.
-    corrector: Option<DtmbClockCorrector>,
 }
 
 impl EkfEstimator {
@@ -96,14 +90,10 @@ impl EkfEstimator {
         let ekf = Ekf11::new(cfg).map_err(|e| e.to_string())?;
         Ok(Self {
             name: name.to_string(),
-            systems: systems.to_vec(),
             ekf,
             last_t: None,
-            scratch: Vec::with_capacity(64),
+            front: FrontEnd::new(systems, &[], None, None)?,
             geometry: Vec::with_capacity(64),
-            fixes: Vec::new(),
-            selector: None,
-            corrector: None,
         })
     }
 
@@ -118,9 +108,7 @@ impl EkfEstimator {
         selection: Option<&ModeSelection>,
         correction: Option<ClockCorrectionConfig>,
     ) -> Result<Self, String> {
-        self.fixes = fixes.to_vec();
-        self.selector = selection.map(ModeSelector::new).transpose()?;
-        self.corrector = correction.map(DtmbClockCorrector::new);
+        self.front = FrontEnd::new(self.front.systems(), fixes, selection, correction)?;
         Ok(self)
     }
 
@@ -203,54 +191,31 @@ impl Estimator for EkfEstimator {
     /// GNSS batches, and DTMB or TC-OFDM batches when the estimator uses those systems:
     /// their ranges share the receiver clock (seed 000), so one filter takes them all.
     fn consumes(&self, source: &str) -> bool {
-        match source {
-            "gnss" => true,
-            "dtmb" => self.systems.contains(&System::Dtmb),
-            "tcofdm" => self.systems.contains(&System::Tcofdm),
-            other => self.fixes.iter().any(|f| f == other),
-        }
+        self.front.consumes(source)
     }
 
     fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
         let mut out = EpochOutcome::default();
         let rx = self.ekf.is_initialised().then(|| self.ekf.position_ecef());
-        let admitted = match self.selector.as_mut() {
-            Some(s) => {
-                let d = s.decide(batch, rx.as_ref());
-                out.mode = Some(d.label);
-                d
-            }
-            None => Admission::all(),
-        };
-        select_ranges(batch, &self.systems, &mut self.scratch);
-        self.scratch.retain(|m| admitted.admits(m.system()));
-        if let Some(c) = self.corrector.as_mut() {
-            c.observe(batch);
-            out.rejected += c.correct(batch.t, &mut self.scratch);
-        }
+        self.front.admit(batch, rx.as_ref(), &mut out);
         if !self.ekf.is_initialised() {
             // The first fix comes from least squares on this epoch alone; until one exists
             // the epoch counts as an epoch without a fix.
-            let Ok(fix) = wls::solve(self.scratch.iter(), &WlsOptions::default()) else {
+            let Some(fix) = self.front.first_fix() else {
                 return out;
             };
-            let clock = self
-                .systems
-                .iter()
-                .find_map(|s| fix.clock_m(*s))
-                .unwrap_or(0.0);
-            let pos_sigma = fix.cov_pos_ecef_m2.trace().max(0.0).sqrt().max(1.0);
+            let s = fix.pos_sigma_m;
             if self
                 .ekf
-                .initialise(fix.pos_ecef_m, clock, pos_sigma, 10.0 * pos_sigma)
+                .initialise(fix.pos_ecef_m, fix.clock_m, s, 10.0 * s)
                 .is_err()
             {
                 out.numerical_failure = true;
                 return out;
             }
             self.last_t = Some(batch.t);
-            out.used = fix.n_measurements as u32;
-            out.gdop = Some(fix.dop.gdop);
+            out.used = fix.n_measurements;
+            out.gdop = Some(fix.gdop);
             out.estimate = self.estimate(batch.t);
             return out;
         }
@@ -264,21 +229,21 @@ impl Estimator for EkfEstimator {
                 .unwrap_or_else(|_| unreachable!("config validated at build"));
             return out;
         }
-        for m in &self.scratch {
+        for m in &self.front.ranges {
             let r = self.ekf.update_range(m);
             for o in std::iter::once(r.range).chain(r.rate) {
                 tally_outcome(&mut out, o);
             }
         }
-        if admitted.fixes && self.fixes.contains(&batch.source) {
-            for m in &batch.items {
-                if let Measurement::Position(p) = m {
-                    let o = self.ekf.update_position(p);
-                    tally_outcome(&mut out, o);
-                }
-            }
+        for p in self.front.position_fixes(batch) {
+            let o = self.ekf.update_position(p);
+            tally_outcome(&mut out, o);
         }
-        out.gdop = gdop_of(&self.ekf.position_ecef(), &self.scratch, &mut self.geometry);
+        out.gdop = gdop_of(
+            &self.ekf.position_ecef(),
+            &self.front.ranges,
+            &mut self.geometry,
+        );
         out.estimate = self.estimate(batch.t);
         out
     }

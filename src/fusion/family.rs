@@ -33,15 +33,15 @@ use crate::fusion::kalman::{
     Ekf, Gating, RelativeEntropyKf, ResidualGate, SigmaPointKf, UpdateReport,
     DEFAULT_ALEPH_THRESHOLD,
 };
-use crate::fusion::measurement::{Measurement, MeasurementBatch, PositionFix, RangeMeasurement};
+use crate::fusion::measurement::{MeasurementBatch, RangeMeasurement};
 use crate::fusion::models::{
     MeasurementModel, PositionFixModel, ProcessModel, Pseudoranges, PseudorangesAndRates,
     Pva11Clock, RangeRow, StateLayout,
 };
 use crate::fusion::particle::{ParticleBuffer, ParticleFilter, Resampling};
-use crate::fusion::preprocess::{ClockCorrectionConfig, DtmbClockCorrector};
-use crate::fusion::selection::{ModeSelection, ModeSelector};
-use crate::fusion::wls::{self, WlsOptions};
+use crate::fusion::preprocess::{ClockCorrectionConfig, FrontEnd};
+use crate::fusion::selection::ModeSelection;
+use crate::fusion::wls;
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use serde::Deserialize;
 
@@ -521,8 +521,6 @@ impl Core {
 pub struct FamilyEstimator {
     name: String,
     kind: FamilyKind,
-    systems: Vec<System>,
-    fixes: Vec<String>,
     ekf_cfg: Ekf11Config,
     cfg: FamilyConfig,
     model: Pva11Clock,
@@ -533,10 +531,9 @@ pub struct FamilyEstimator {
     /// The state and covariance after the last epoch (what `latest` reports).
     moments: Option<(State, Cov)>,
     last_t: Option<GpsTime>,
-    selector: Option<ModeSelector>,
-    corrector: Option<DtmbClockCorrector>,
-    scratch: Vec<RangeMeasurement>,
-    fix_scratch: Vec<PositionFix>,
+    /// Systems, fix sources, mode selection and DTMB clock correction; holds the current
+    /// batch's admitted ranges.
+    front: FrontEnd,
     residual_scratch: Vec<f64>,
     geometry: Vec<(Vector3<f64>, usize)>,
 }
@@ -584,12 +581,10 @@ impl FamilyEstimator {
             chi2_prob: ekf_cfg.gate_chi2.map(|g| chi2::cdf(g, 1.0)),
             residual: cfg.residual_gate_c.map(ResidualGate::sigmas),
         };
-        let selector = selection.map(ModeSelector::new).transpose()?;
+        let front = FrontEnd::new(systems, fixes, selection, correction)?;
         Ok(Self {
             name: name.to_string(),
             kind,
-            systems: systems.to_vec(),
-            fixes: fixes.to_vec(),
             ekf_cfg,
             cfg,
             model,
@@ -599,10 +594,7 @@ impl FamilyEstimator {
             core: None,
             moments: None,
             last_t: None,
-            selector,
-            corrector: correction.map(DtmbClockCorrector::new),
-            scratch: Vec::with_capacity(64),
-            fix_scratch: Vec::with_capacity(4),
+            front,
             residual_scratch: Vec::with_capacity(64),
             geometry: Vec::with_capacity(64),
         })
@@ -685,7 +677,7 @@ impl FamilyEstimator {
                         b.column(idx::POS[2])[i],
                     );
                     let (mut sw, mut s) = (0.0, 0.0);
-                    for m in &self.scratch {
+                    for m in &self.front.ranges {
                         let w = 1.0 / (m.sigma_m * m.sigma_m);
                         s += w * (m.pseudorange_m - (m.emitter_pos_ecef_m - pos).norm());
                         sw += w;
@@ -696,7 +688,7 @@ impl FamilyEstimator {
                     // Velocity and clock drift the same way, from the range rates: a
                     // prior of ±10 m/s and ±300 m/s drawn independently would leave a
                     // handful of particles anywhere near the Doppler.
-                    if let Some(vd) = velocity_and_drift(&pos, &self.scratch, &mut self.rng) {
+                    if let Some(vd) = velocity_and_drift(&pos, &self.front.ranges, &mut self.rng) {
                         for axis in 0..3 {
                             b.column_mut(idx::VEL[axis])[i] = vd[axis];
                         }
@@ -737,7 +729,7 @@ impl FamilyEstimator {
     fn lost(&mut self, x: &State) -> bool {
         let nu2 = &mut self.residual_scratch;
         nu2.clear();
-        for r in &self.scratch {
+        for r in &self.front.ranges {
             if let Ok(pr) = Pseudoranges::<N, 1>::new(self.layout, [RangeRow::from(r)]) {
                 let nu = (r.pseudorange_m - pr.h(x)[0]) / r.sigma_m;
                 nu2.push(nu * nu);
@@ -768,12 +760,7 @@ impl Estimator for FamilyEstimator {
     }
 
     fn consumes(&self, source: &str) -> bool {
-        match source {
-            "gnss" => true,
-            "dtmb" => self.systems.contains(&System::Dtmb),
-            "tcofdm" => self.systems.contains(&System::Tcofdm),
-            other => self.fixes.iter().any(|f| f == other),
-        }
+        self.front.consumes(source)
     }
 
     fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
@@ -782,44 +769,12 @@ impl Estimator for FamilyEstimator {
             .moments
             .as_ref()
             .map(|(x, _)| Vector3::new(x[idx::POS[0]], x[idx::POS[1]], x[idx::POS[2]]));
-        let admitted = match self.selector.as_mut() {
-            Some(s) => {
-                let d = s.decide(batch, rx.as_ref());
-                out.mode = Some(d.label);
-                d
-            }
-            None => crate::fusion::selection::Admission::all(),
-        };
-        self.scratch.clear();
-        self.scratch.extend(
-            batch
-                .ranges()
-                .filter(|m| self.systems.contains(&m.system()) && admitted.admits(m.system()))
-                .copied(),
-        );
-        if let Some(c) = self.corrector.as_mut() {
-            c.observe(batch);
-            out.rejected += c.correct(batch.t, &mut self.scratch);
-        }
-        self.fix_scratch.clear();
-        if self.fixes.contains(&batch.source) && admitted.fixes {
-            self.fix_scratch
-                .extend(batch.items.iter().filter_map(|m| match m {
-                    Measurement::Position(p) => Some(*p),
-                    _ => None,
-                }));
-        }
+        self.front.admit(batch, rx.as_ref(), &mut out);
         if self.core.is_none() {
-            let Ok(fix) = wls::solve(self.scratch.iter(), &WlsOptions::default()) else {
+            let Some(fix) = self.front.first_fix() else {
                 return out;
             };
-            let clock = self
-                .systems
-                .iter()
-                .find_map(|s| fix.clock_m(*s))
-                .unwrap_or(0.0);
-            let pos_sigma = fix.cov_pos_ecef_m2.trace().max(0.0).sqrt().max(1.0);
-            let (x0, p0) = self.prior(fix.pos_ecef_m, clock, pos_sigma);
+            let (x0, p0) = self.prior(fix.pos_ecef_m, fix.clock_m, fix.pos_sigma_m);
             match self.build_core(x0, p0) {
                 Ok(core) => self.core = Some(core),
                 Err(_) => {
@@ -829,8 +784,8 @@ impl Estimator for FamilyEstimator {
             }
             self.moments = self.core.as_ref().map(Core::moments);
             self.last_t = Some(batch.t);
-            out.used = fix.n_measurements as u32;
-            out.gdop = Some(fix.dop.gdop);
+            out.used = fix.n_measurements;
+            out.gdop = Some(fix.gdop);
             out.estimate = self.estimate(batch.t);
             return out;
         }
@@ -845,7 +800,14 @@ impl Estimator for FamilyEstimator {
         let predicted = match &mut *core {
             Core::Stf(f, mem) => {
                 stf_predict(f, mem, &self.model, dt, self.gating)
-                    && stf_inflate(f, mem, &self.scratch, &self.layout, &self.cfg, self.gating)
+                    && stf_inflate(
+                        f,
+                        mem,
+                        &self.front.ranges,
+                        &self.layout,
+                        &self.cfg,
+                        self.gating,
+                    )
             }
             c => c.predict(&self.model, dt),
         };
@@ -853,7 +815,7 @@ impl Estimator for FamilyEstimator {
             self.reset(&mut out);
             return out;
         }
-        for m in &self.scratch {
+        for m in &self.front.ranges {
             let row = RangeRow::from(m);
             let Ok(pr) = Pseudoranges::<N, 1>::new(self.layout, [row]) else {
                 out.rejected += 1;
@@ -881,7 +843,7 @@ impl Estimator for FamilyEstimator {
                 core.update(&rate_row, &z, &mut out);
             }
         }
-        for f in &self.fix_scratch {
+        for f in self.front.position_fixes(batch) {
             match PositionFixModel::<N, 3>::new(idx::POS, f.cov_m2) {
                 Ok(model) => core.update(&model, &f.pos_ecef_m, &mut out),
                 Err(_) => out.rejected += 1,
@@ -898,7 +860,7 @@ impl Estimator for FamilyEstimator {
         }
         let rx = Vector3::new(x[idx::POS[0]], x[idx::POS[1]], x[idx::POS[2]]);
         self.moments = Some((x, p));
-        out.gdop = crate::fusion::estimator::gdop_of(&rx, &self.scratch, &mut self.geometry);
+        out.gdop = crate::fusion::estimator::gdop_of(&rx, &self.front.ranges, &mut self.geometry);
         out.estimate = self.estimate(batch.t);
         out
     }

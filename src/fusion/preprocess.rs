@@ -1,4 +1,5 @@
-//! Preprocessing before a filter sees a batch: seed 000's DTMB clock correction.
+//! Preprocessing before a filter sees a batch: the estimators' shared front end
+//! ([`FrontEnd`]: systems, fix sources, mode selection) and seed 000's DTMB clock correction.
 //!
 //! A DTMB tower's pseudorange carries the tower's own clock offset relative to GPS time
 //! and the receiver's DTMB inter-system delay, neither of which is broadcast. Seed 000
@@ -18,7 +19,9 @@
 //! counted as rejected) until its first calibration.
 
 use crate::core::{EmitterId, GpsTime, System};
-use crate::fusion::measurement::{MeasurementBatch, RangeMeasurement};
+use crate::fusion::estimator::EpochOutcome;
+use crate::fusion::measurement::{Measurement, MeasurementBatch, PositionFix, RangeMeasurement};
+use crate::fusion::selection::{Admission, ModeSelection, ModeSelector};
 use crate::fusion::wls::{self, WlsOptions};
 use nalgebra::Vector3;
 use serde::Deserialize;
@@ -156,6 +159,128 @@ impl DtmbClockCorrector {
             }
         });
         (before - ranges.len()) as u32
+    }
+}
+
+/// What a Kalman-type estimator does to a batch before its filter sees it: keep the ranges
+/// of its systems that the mode selection admits, correct the DTMB clocks, and decide
+/// whether the batch's position fixes are used. Shared by `ekf11` and the filter family.
+pub struct FrontEnd {
+    systems: Vec<System>,
+    fixes: Vec<String>,
+    selector: Option<ModeSelector>,
+    corrector: Option<DtmbClockCorrector>,
+    /// This batch's admitted (and corrected) ranges, after [`FrontEnd::admit`].
+    pub ranges: Vec<RangeMeasurement>,
+    fixes_admitted: bool,
+}
+
+/// A filter's first fix: least squares on one epoch's ranges.
+pub struct FirstFix {
+    pub pos_ecef_m: Vector3<f64>,
+    /// The clock (m) of the first of the estimator's systems that has one.
+    pub clock_m: f64,
+    /// `√tr(P_pos)`, at least 1 m.
+    pub pos_sigma_m: f64,
+    pub n_measurements: u32,
+    pub gdop: f64,
+}
+
+impl FrontEnd {
+    /// A front end for the ranges of `systems` and the fixes of the sources `fixes`.
+    ///
+    /// # Errors
+    /// When the selection's configuration is invalid.
+    pub fn new(
+        systems: &[System],
+        fixes: &[String],
+        selection: Option<&ModeSelection>,
+        correction: Option<ClockCorrectionConfig>,
+    ) -> Result<Self, String> {
+        Ok(Self {
+            systems: systems.to_vec(),
+            fixes: fixes.to_vec(),
+            selector: selection.map(ModeSelector::new).transpose()?,
+            corrector: correction.map(DtmbClockCorrector::new),
+            ranges: Vec::with_capacity(64),
+            fixes_admitted: false,
+        })
+    }
+
+    /// The systems whose ranges the estimator uses.
+    pub fn systems(&self) -> &[System] {
+        &self.systems
+    }
+
+    /// GNSS batches, DTMB or TC-OFDM batches when the estimator uses those systems, and the
+    /// batches of its fix sources.
+    pub fn consumes(&self, source: &str) -> bool {
+        match source {
+            "gnss" => true,
+            "dtmb" => self.systems.contains(&System::Dtmb),
+            "tcofdm" => self.systems.contains(&System::Tcofdm),
+            other => self.fixes.iter().any(|f| f == other),
+        }
+    }
+
+    /// Prepares `batch`: fills [`FrontEnd::ranges`], records the mode in `out` and counts
+    /// the ranges the correction withheld as rejected. `rx` is the estimator's position
+    /// (ECEF), for the selection's GDOPs.
+    pub fn admit(
+        &mut self,
+        batch: &MeasurementBatch,
+        rx: Option<&Vector3<f64>>,
+        out: &mut EpochOutcome,
+    ) {
+        let admitted = match self.selector.as_mut() {
+            Some(s) => {
+                let d = s.decide(batch, rx);
+                out.mode = Some(d.label);
+                d
+            }
+            None => Admission::all(),
+        };
+        self.ranges.clear();
+        let systems = &self.systems;
+        self.ranges.extend(
+            batch
+                .ranges()
+                .filter(|m| systems.contains(&m.system()) && admitted.admits(m.system()))
+                .copied(),
+        );
+        if let Some(c) = self.corrector.as_mut() {
+            c.observe(batch);
+            out.rejected += c.correct(batch.t, &mut self.ranges);
+        }
+        self.fixes_admitted = admitted.fixes && self.fixes.contains(&batch.source);
+    }
+
+    /// The position fixes of `batch` the estimator may use (none unless admitted).
+    pub fn position_fixes<'a>(
+        &self,
+        batch: &'a MeasurementBatch,
+    ) -> impl Iterator<Item = &'a PositionFix> + 'a {
+        let admitted = self.fixes_admitted;
+        batch.items.iter().filter_map(move |m| match m {
+            Measurement::Position(p) if admitted => Some(p),
+            _ => None,
+        })
+    }
+
+    /// A first fix from this batch's ranges, if least squares gives one.
+    pub fn first_fix(&self) -> Option<FirstFix> {
+        let fix = wls::solve(self.ranges.iter(), &WlsOptions::default()).ok()?;
+        Some(FirstFix {
+            pos_ecef_m: fix.pos_ecef_m,
+            clock_m: self
+                .systems
+                .iter()
+                .find_map(|s| fix.clock_m(*s))
+                .unwrap_or(0.0),
+            pos_sigma_m: fix.cov_pos_ecef_m2.trace().max(0.0).sqrt().max(1.0),
+            n_measurements: fix.n_measurements as u32,
+            gdop: fix.dop.gdop,
+        })
     }
 }
 
