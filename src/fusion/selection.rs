@@ -65,6 +65,22 @@ impl Admission {
     }
 }
 
+/// GDOP with one shared clock of the emitters in `a` and `b` seen from `rx`; infinite when
+/// it cannot be computed (fewer than four emitters, or no receiver position yet).
+fn shared_clock_gdop(
+    rx: Option<&Vector3<f64>>,
+    a: &[Vector3<f64>],
+    b: &[Vector3<f64>],
+    geometry: &mut Vec<(Vector3<f64>, usize)>,
+) -> f64 {
+    let Some(rx) = rx else {
+        return f64::INFINITY;
+    };
+    geometry.clear();
+    geometry.extend(a.iter().chain(b).map(|p| (*p, 0)));
+    wls::dop(rx, geometry, 1).map_or(f64::INFINITY, |d| d.gdop)
+}
+
 /// The running state of a selection scheme.
 #[derive(Clone, Debug)]
 pub struct ModeSelector {
@@ -94,20 +110,6 @@ impl ModeSelector {
             rp_count: 0,
             geometry: Vec::with_capacity(48),
         })
-    }
-
-    /// GDOP with one shared clock of `emitters` seen from `rx`; infinite when it cannot be
-    /// computed (fewer than four emitters, or no receiver position yet).
-    fn gdop(&mut self, rx: Option<&Vector3<f64>>, with_dtmb: bool) -> f64 {
-        let Some(rx) = rx else {
-            return f64::INFINITY;
-        };
-        self.geometry.clear();
-        self.geometry.extend(self.gps.iter().map(|p| (*p, 0)));
-        if with_dtmb {
-            self.geometry.extend(self.dtmb.iter().map(|p| (*p, 0)));
-        }
-        wls::dop(rx, &self.geometry, 1).map_or(f64::INFINITY, |d| d.gdop)
     }
 
     /// Takes note of `batch` and decides what it may contribute. `rx` is the estimator's
@@ -165,14 +167,11 @@ impl ModeSelector {
                     fixes: true,
                 }
             }
-            ModeSelection::Fuzzy(_) => {
+            ModeSelection::Fuzzy(cfg) => {
                 let inputs = FuzzyInputs {
-                    gdop_gps: self.gdop(rx, false),
-                    gdop_gps_dtmb: self.gdop(rx, true),
+                    gdop_gps: shared_clock_gdop(rx, &self.gps, &[], &mut self.geometry),
+                    gdop_gps_dtmb: shared_clock_gdop(rx, &self.gps, &self.dtmb, &mut self.geometry),
                     rp_count: f64::from(self.rp_count),
-                };
-                let ModeSelection::Fuzzy(cfg) = &self.scheme else {
-                    unreachable!("matched above")
                 };
                 let mode = cfg.decide(&inputs).mode;
                 let mut systems = [true; wls::MAX_CLOCKS];

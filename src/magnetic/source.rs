@@ -51,10 +51,13 @@ pub enum Matcher {
     Snn,
 }
 
-/// `dtmb_check = { sigma_m, delta_r_m }`.
+/// `dtmb_check = { enabled, sigma_m, delta_r_m }`.
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct DtmbCheck {
+    /// Apply the check; default true (`dtmb_check = { enabled = false }` takes the best
+    /// candidate as it is).
+    pub enabled: bool,
     /// σ of the DTMB range (m); default 2.65 (seed 002's median error 1.79 m = 0.674 σ).
     pub sigma_m: f64,
     /// δr (m); default 8 (three σ).
@@ -64,6 +67,7 @@ pub struct DtmbCheck {
 impl Default for DtmbCheck {
     fn default() -> Self {
         Self {
+            enabled: true,
             sigma_m: 2.65,
             delta_r_m: 8.0,
         }
@@ -92,7 +96,7 @@ pub struct MagneticSensorConfig {
     /// Survey windows within this horizontal distance of a landmark label it (m); default 3.
     pub label_tolerance_m: f64,
     /// Seed 002 §4.1's DTMB consistency check; default on.
-    pub dtmb_check: Option<DtmbCheck>,
+    pub dtmb_check: DtmbCheck,
     /// σ of a landmark fix, horizontal and vertical (m); default 1.5 and 5.
     pub fix_sigma_m: f64,
     pub fix_sigma_up_m: f64,
@@ -110,7 +114,7 @@ impl Default for MagneticSensorConfig {
             dtw_threshold_ut: 0.8,
             snn: SnnConfig::default(),
             label_tolerance_m: 3.0,
-            dtmb_check: Some(DtmbCheck::default()),
+            dtmb_check: DtmbCheck::default(),
             fix_sigma_m: 1.5,
             fix_sigma_up_m: 5.0,
         }
@@ -155,7 +159,8 @@ impl MagneticSensorConfig {
                 format!("expected a finite value > 0, got {v}")
             })?;
         }
-        if let Some(d) = &self.dtmb_check {
+        let d = &self.dtmb_check;
+        if d.enabled {
             check(
                 "dtmb_check.sigma_m",
                 d.sigma_m.is_finite() && d.sigma_m >= 0.0,
@@ -242,7 +247,7 @@ fn windows_of(
 impl MagneticSource {
     /// Builds the source: surveys with `survey_trajectory` (trial 0's path), walks
     /// `trajectory` (this trial's), detects and selects. `tower_enu_m` is the DTMB tower of
-    /// the consistency check (required when `cfg.dtmb_check` is set).
+    /// the consistency check (required when `cfg.dtmb_check` is enabled).
     ///
     /// # Errors
     /// An invalid configuration or anomaly (the key names it), no anomaly, or a DTMB check
@@ -275,15 +280,14 @@ impl MagneticSource {
             .iter()
             .map(|a| Vector3::from(a.position_enu_m))
             .collect();
-        let check_tower = match (cfg.dtmb_check, tower_enu_m) {
-            (Some(c), Some(t)) => Some((c, t)),
-            (Some(_), None) => {
-                return Err(ConfigIssue::new(
-                    "dtmb_check",
-                    "needs a DTMB [[transmitter]] to range to (or set dtmb_check to false by leaving it out with `dtmb_check = {}` replaced)",
-                ))
-            }
-            (None, _) => None,
+        let check = cfg.dtmb_check;
+        let check_tower = match (check.enabled, tower_enu_m) {
+            (true, Some(t)) => Some((check, t)),
+            (true, None) => return Err(ConfigIssue::new(
+                "dtmb_check",
+                "needs a DTMB [[transmitter]] to range to (or `dtmb_check = { enabled = false }`)",
+            )),
+            (false, _) => None,
         };
         // The survey: one walk of the path, labelled by the landmarks nearby.
         let survey_rng = TrialRng::new(rng.master_seed(), 0);

@@ -313,7 +313,7 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
                 "expected landmarks to detect: add [[scene.magnetic_anomaly]] tables",
             ));
         }
-        if m.dtmb_check.is_some() && !transmitters.iter().any(|t| t.kind == TransmitterKind::Dtmb) {
+        if m.dtmb_check.enabled && !transmitters.iter().any(|t| t.kind == TransmitterKind::Dtmb) {
             return Err(ctx.err(
                 "sensors.magnetic.dtmb_check",
                 "the DTMB consistency check needs a DTMB [[transmitter]] to range to",

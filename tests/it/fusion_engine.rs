@@ -402,7 +402,11 @@ fn magnetic_landmarks_are_recognised_on_the_lianhua_world() {
         .find(|t| t.kind == hybridnav::world::scene::TransmitterKind::Dtmb)
         .map(|t| t.pos_enu_m);
     let mut rows = Vec::new();
-    for (label, check) in [("DTW", None), ("DTW + DTMB", cfg.dtmb_check)] {
+    let off = hybridnav::magnetic::source::DtmbCheck {
+        enabled: false,
+        ..cfg.dtmb_check
+    };
+    for (label, check) in [("DTW", off), ("DTW + DTMB", cfg.dtmb_check)] {
         let c = hybridnav::magnetic::source::MagneticSensorConfig {
             dtmb_check: check,
             ..cfg.clone()
