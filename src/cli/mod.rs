@@ -2,7 +2,8 @@
 
 use crate::core::{EmitterId, GpsTime};
 use crate::io::atomic::write_atomic;
-use crate::montecarlo::{run_trials, summarise, RunOptions};
+use crate::montecarlo::store::{gather_shards, RunDir, Shard};
+use crate::montecarlo::{run_into, write_outputs, RunOptions};
 use crate::world::load_world;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
@@ -21,6 +22,19 @@ pub struct Cli {
 pub enum Command {
     /// Run the Monte Carlo trials of a world and write OUT/summary.json.
     Run(RunArgs),
+    /// Combine the output directories of a sharded run (`run --shard K/N`) into the
+    /// outputs the unsharded run would have written.
+    Merge {
+        /// The shards' output directories.
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+        /// Output directory of the merged run.
+        #[arg(long)]
+        out: PathBuf,
+        /// No table.
+        #[arg(long)]
+        quiet: bool,
+    },
     /// Validate a world file, print a summary of it and the link visibility along its
     /// trajectory (share of links LOS / through foliage / NLOS / lost per system).
     Check {
@@ -132,6 +146,13 @@ pub struct RunArgs {
     /// No progress bar and no table.
     #[arg(long)]
     pub quiet: bool,
+    /// Run only shard K of N (trials i with i mod N = K − 1), e.g. on N machines; combine
+    /// the shards' directories with `hybridnav merge`.
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<String>,
+    /// Continue the interrupted run in OUT: keep the trials it finished, run the rest.
+    #[arg(long)]
+    pub resume: bool,
 }
 
 #[derive(Debug, Subcommand)]
@@ -186,6 +207,7 @@ fn default_world() -> PathBuf {
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Run(a) => cmd_run(a),
+        Command::Merge { dirs, out, quiet } => cmd_merge(&dirs, &out, quiet),
         Command::Check { world, map, step } => {
             let w = load_world(&world)?;
             print!("{}", w.summary());
@@ -260,6 +282,10 @@ fn cmd_run(a: RunArgs) -> Result<()> {
     if trials == 0 {
         bail!("--trials must be at least 1");
     }
+    let shard = match &a.shard {
+        Some(s) => Shard::parse(s).map_err(anyhow::Error::msg)?,
+        None => Shard::WHOLE,
+    };
     let threads = match a.threads {
         Some(0) => bail!("--threads must be at least 1"),
         Some(t) => t,
@@ -270,24 +296,62 @@ fn cmd_run(a: RunArgs) -> Result<()> {
         seed: a.seed.unwrap_or(world.file.montecarlo.seed),
         threads,
         progress: !a.quiet,
+        shard,
     };
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("cannot create output directory {}", a.out.display()))?;
-    let results = run_trials(&world, &opts).map_err(anyhow::Error::msg)?;
-    let summary = summarise(&world, &opts, &results);
-    let mut json = serde_json::to_string_pretty(&summary)?;
-    json.push('\n');
-    let out = a.out.join("summary.json");
-    write_atomic(&out, json.as_bytes())?;
-    let epochs = a.out.join("epochs.csv");
-    write_atomic(&epochs, crate::montecarlo::epochs_csv(&results).as_bytes())?;
-    for w in &summary.warnings {
+    let dir = RunDir::create(&a.out)
+        .with_context(|| format!("cannot write to output directory {}", a.out.display()))?;
+    let results = run_into(&world, &opts, &dir, a.resume).map_err(anyhow::Error::msg)?;
+    let written = write_outputs(&world, &opts, &results, &a.out).map_err(anyhow::Error::msg)?;
+    report_written(&written, a.quiet);
+    Ok(())
+}
+
+fn report_written(written: &crate::montecarlo::Written, quiet: bool) {
+    for w in &written.summary.warnings {
         eprintln!("warning: {w}");
     }
-    if !a.quiet {
-        print!("{}", summary.table());
-        println!("wrote {} and {}", out.display(), epochs.display());
+    if !quiet {
+        print!("{}", written.summary.table());
+        let names: Vec<String> = written.files.iter().map(|p| p.display().to_string()).collect();
+        println!("wrote {}", names.join(", "));
     }
+}
+
+fn cmd_merge(dirs: &[PathBuf], out: &Path, quiet: bool) -> Result<()> {
+    let (manifest, trials) = gather_shards(dirs).map_err(anyhow::Error::msg)?;
+    // The outputs need the world (its frame, scene and estimators): it must still be the
+    // file the shards ran, unchanged.
+    let world = load_world(Path::new(&manifest.world_file)).with_context(|| {
+        format!(
+            "merge: the shards ran {}, which must still be readable from here",
+            manifest.world_file
+        )
+    })?;
+    if world.hash != manifest.world_hash {
+        bail!(
+            "merge: {} has changed since the shards ran (hash {} now, {} then)",
+            manifest.world_file,
+            world.hash,
+            manifest.world_hash
+        );
+    }
+    let opts = RunOptions {
+        trials: manifest.trials,
+        seed: manifest.seed,
+        threads: 1,
+        progress: false,
+        shard: Shard::WHOLE,
+    };
+    let dir = RunDir::create(out)
+        .with_context(|| format!("cannot write to output directory {}", out.display()))?;
+    dir.clear_trials().map_err(anyhow::Error::msg)?;
+    for t in &trials {
+        dir.write_trial(t).map_err(anyhow::Error::msg)?;
+    }
+    dir.write_manifest(&opts.manifest(&world))
+        .map_err(anyhow::Error::msg)?;
+    let written = write_outputs(&world, &opts, &trials, out).map_err(anyhow::Error::msg)?;
+    report_written(&written, quiet);
     Ok(())
 }
 

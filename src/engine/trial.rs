@@ -2,18 +2,31 @@
 
 use super::queue::{EventKind, EventQueue};
 use super::{SampleContext, Truth};
-use crate::core::{EnuFrame, GpsTime, SimTime, TrialRng};
+use crate::core::{EnuFrame, GpsTime, SimTime, System, TrialRng};
 use crate::fusion::estimator::Estimate;
 use crate::fusion::measurement::MeasurementBatch;
 use crate::motion::Trajectory;
 use crate::world::{TrialSetup, World};
 use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+use std::borrow::Cow;
 
 /// One estimator's record at one measurement epoch.
-#[derive(Clone, Copy, Debug, PartialEq)]
+///
+/// Records are what a run keeps of a trial (`OUT/trials/trial-NNNNNN.json`) and what every
+/// output (`summary.json`, `epochs.csv`, `trials.parquet`, `report.html`) is computed from,
+/// so a resumed or merged run reproduces an uninterrupted one from these alone.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EpochRecord {
     /// Seconds since the start of the trial.
     pub t_s: f64,
+    /// The true antenna position (ECEF, m).
+    pub truth_ecef_m: [f64; 3],
+    /// The estimated position (ECEF, m), when the estimator had an estimate.
+    pub est_ecef_m: Option<[f64; 3]>,
+    /// GNSS satellites (GPS and BeiDou) whose ranges were in this epoch's batch: the
+    /// satellites the receiver tracked, i.e. the visible ones.
+    pub n_gnss: u32,
     /// 3-D position error (m), when the estimator had an estimate.
     pub err_3d_m: Option<f64>,
     /// Horizontal position error (m) in the local frame at the truth.
@@ -30,19 +43,20 @@ pub struct EpochRecord {
     pub mean_nis: Option<f64>,
     /// Measurements an innovation gate rejected as outliers.
     pub rejected_gate: u32,
-    /// The integration mode chosen this epoch (mode-selecting estimators only).
-    pub mode: Option<&'static str>,
+    /// The integration mode chosen this epoch (mode-selecting estimators only). Borrowed
+    /// from the selector's static labels while simulating, so recording allocates nothing.
+    pub mode: Option<Cow<'static, str>>,
 }
 
 /// Everything one estimator did in one trial.
-#[derive(Clone, Debug, PartialEq, Default)]
+#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
 pub struct EstimatorTrace {
     pub name: String,
     pub epochs: Vec<EpochRecord>,
 }
 
 /// The outcome of one trial.
-#[derive(Clone, Debug, PartialEq, Default)]
+#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
 pub struct TrialResult {
     pub trial: u64,
     pub estimators: Vec<EstimatorTrace>,
@@ -142,6 +156,11 @@ pub fn simulate(frame: &EnuFrame, start: GpsTime, setup: &mut TrialSetup) -> Vec
             continue;
         }
         let source_name = source.name();
+        let n_gnss = batch
+            .ranges()
+            .filter(|r| matches!(r.emitter.system, System::Gps | System::Bds))
+            .count() as u32;
+        let truth_ecef_m = [truth.pos_ecef_m.x, truth.pos_ecef_m.y, truth.pos_ecef_m.z];
         for (k, est) in setup.estimators.iter_mut().enumerate() {
             if !est.consumes(source_name) {
                 continue;
@@ -160,6 +179,11 @@ pub fn simulate(frame: &EnuFrame, start: GpsTime, setup: &mut TrialSetup) -> Vec
             };
             traces[k].epochs.push(EpochRecord {
                 t_s: ev.t.seconds(),
+                truth_ecef_m,
+                est_ecef_m: out
+                    .estimate
+                    .map(|e| [e.pos_ecef_m.x, e.pos_ecef_m.y, e.pos_ecef_m.z]),
+                n_gnss,
                 err_3d_m,
                 err_h_m,
                 nees_pos,
@@ -173,7 +197,7 @@ pub fn simulate(frame: &EnuFrame, start: GpsTime, setup: &mut TrialSetup) -> Vec
                     .filter(|v| v.is_finite()),
                 mean_nis: (out.nis_count > 0).then(|| out.nis_sum / f64::from(out.nis_count)),
                 rejected_gate: out.rejected_gate,
-                mode: out.mode,
+                mode: out.mode.map(Cow::Borrowed),
             });
         }
     }

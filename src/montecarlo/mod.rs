@@ -1,7 +1,13 @@
 //! Monte Carlo: many trials of one world, in parallel, reduced in trial order.
 //!
 //! Trial `i` depends only on `(world, seed, i)`; results are collected in trial order
-//! before any reduction, so the summary is bit-identical whatever the thread count.
+//! before any reduction, so the summary is bit-identical whatever the thread count. With a
+//! run directory ([`store::RunDir`]) each trial is written to its own file the moment it
+//! finishes, which is what makes `--resume` after an interruption and `merge` of shards
+//! reproduce an uninterrupted run byte for byte.
+
+pub mod outputs;
+pub mod store;
 
 use crate::engine::trial::{run_trial, TrialResult};
 use crate::metrics::ErrorStats;
@@ -9,16 +15,36 @@ use crate::world::World;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
+use store::{Manifest, RunDir, Shard, STORE_FORMAT};
 
 /// How to run.
 #[derive(Clone, Copy, Debug)]
 pub struct RunOptions {
+    /// Trials of the whole run (a shard runs its part of them).
     pub trials: u64,
     pub seed: u64,
     /// Worker threads (1 runs on the calling thread's pool of one).
     pub threads: usize,
     /// Show a progress bar on stderr.
     pub progress: bool,
+    /// The part of the trials this process runs.
+    pub shard: Shard,
+}
+
+impl RunOptions {
+    /// The manifest a run directory of this run carries.
+    pub fn manifest(&self, world: &World) -> Manifest {
+        Manifest {
+            format: STORE_FORMAT,
+            hybridnav_version: env!("CARGO_PKG_VERSION").to_string(),
+            world: world.file.world.name.clone(),
+            world_file: world.path.display().to_string(),
+            world_hash: world.hash.clone(),
+            seed: self.seed,
+            trials: self.trials,
+            shard: self.shard,
+        }
+    }
 }
 
 /// One estimator's line of the summary.
@@ -50,6 +76,9 @@ pub struct Summary {
     pub world_hash: String,
     pub seed: u64,
     pub trials: u64,
+    /// `"K/N"` for the summary of one shard's trials; absent for a whole run.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub shard: Option<String>,
     pub duration_s: f64,
     pub estimators: Vec<EstimatorSummary>,
     /// Distinct warnings of every trial's sources, sorted (a model used outside its
@@ -57,37 +86,114 @@ pub struct Summary {
     pub warnings: Vec<String>,
 }
 
-/// Runs the trials and returns them in trial order.
+/// Runs the trials of `opts.shard` and returns them in trial order, without a run
+/// directory (nothing written).
 ///
 /// # Errors
-/// When the thread pool cannot be built.
+/// When the thread pool cannot be built or a trial cannot be set up.
 pub fn run_trials(world: &World, opts: &RunOptions) -> Result<Vec<TrialResult>, String> {
+    execute(world, opts, None, Vec::new())
+}
+
+/// Runs the trials of `opts.shard` into `dir`: writes the manifest, then each trial's file
+/// as soon as it finishes. With `resume`, the trials the directory already holds are read
+/// back instead of run (after checking that its manifest is this run's); without it, any
+/// older trial files there are removed first.
+///
+/// Returns every trial of the shard in trial order.
+///
+/// # Errors
+/// A message naming the file or the manifest key that stops the run.
+pub fn run_into(
+    world: &World,
+    opts: &RunOptions,
+    dir: &RunDir,
+    resume: bool,
+) -> Result<Vec<TrialResult>, String> {
+    let manifest = opts.manifest(world);
+    let existing = dir.read_manifest().map_err(|e| e.to_string())?;
+    let mut done = Vec::new();
+    if resume {
+        match existing {
+            None => {
+                return Err(format!(
+                    "--resume: {} holds no run to resume (no run.json); run without --resume",
+                    dir.root.display()
+                ))
+            }
+            Some(m) => {
+                if let Some(why) = manifest.mismatch(&m, true) {
+                    return Err(format!(
+                        "--resume: {} holds a different run ({why}); resume it with the same \
+                         world, --seed, --trials and --shard, or choose another --out",
+                        dir.root.display()
+                    ));
+                }
+            }
+        }
+        for i in opts.shard.trials(opts.trials) {
+            if let Some(r) = dir.read_trial(i).map_err(|e| e.to_string())? {
+                done.push(r);
+            }
+        }
+    } else {
+        dir.clear_trials().map_err(|e| e.to_string())?;
+    }
+    dir.write_manifest(&manifest).map_err(|e| e.to_string())?;
+    execute(world, opts, Some(dir), done)
+}
+
+/// The common loop: runs the shard's trials that `done` lacks, writing each to `dir` (when
+/// given) as it finishes, and returns all of them in trial order.
+fn execute(
+    world: &World,
+    opts: &RunOptions,
+    dir: Option<&RunDir>,
+    done: Vec<TrialResult>,
+) -> Result<Vec<TrialResult>, String> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.threads.max(1))
         .build()
         .map_err(|e| format!("cannot start {} worker threads: {e}", opts.threads))?;
+    let have: std::collections::BTreeSet<u64> = done.iter().map(|r| r.trial).collect();
+    let todo: Vec<u64> = opts
+        .shard
+        .trials(opts.trials)
+        .filter(|i| !have.contains(i))
+        .collect();
+    let total = (todo.len() + done.len()) as u64;
     let bar = if opts.progress {
-        ProgressBar::new(opts.trials)
+        ProgressBar::new(total)
     } else {
         ProgressBar::hidden()
     };
     bar.set_style(
-        ProgressStyle::with_template("{spinner} trials {pos}/{len} [{bar:30}] {per_sec} eta {eta}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
+        ProgressStyle::with_template(
+            "{spinner} trials {pos}/{len} [{bar:30}] {per_sec} elapsed {elapsed} left {eta}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
     );
-    let results = pool.install(|| {
-        (0..opts.trials)
-            .into_par_iter()
-            .map(|i| {
-                let r = run_trial(world, opts.seed, i);
+    bar.set_position(done.len() as u64);
+    bar.reset_eta();
+    let fresh = pool.install(|| {
+        todo.par_iter()
+            .map(|&i| {
+                let r = run_trial(world, opts.seed, i)
+                    .map_err(|e| format!("trial {i}: {e}"))?;
+                if let Some(dir) = dir {
+                    dir.write_trial(&r).map_err(|e| e.to_string())?;
+                }
                 bar.inc(1);
-                r
+                Ok(r)
             })
-            .collect::<Result<Vec<_>, _>>()
+            .collect::<Result<Vec<_>, String>>()
     });
     bar.finish_and_clear();
-    results
+    let mut all = done;
+    all.extend(fresh?);
+    all.sort_by_key(|r| r.trial);
+    Ok(all)
 }
 
 /// Reduces trials (in trial order) to the summary.
@@ -146,6 +252,7 @@ pub fn summarise(world: &World, opts: &RunOptions, trials: &[TrialResult]) -> Su
         world_hash: world.hash.clone(),
         seed: opts.seed,
         trials: opts.trials,
+        shard: (!opts.shard.is_whole()).then(|| opts.shard.to_string()),
         duration_s: world.duration_s,
         estimators,
         warnings: {
@@ -208,45 +315,41 @@ impl Summary {
     }
 }
 
-/// Every estimator's epochs of every trial as CSV (one row per trial, estimator and epoch;
-/// empty cells where an estimator had no estimate), for pandas and spreadsheets.
+
+/// The files a run directory ends with, all computed from the trials alone.
+#[derive(Clone, Debug)]
+pub struct Written {
+    pub summary: Summary,
+    pub files: Vec<std::path::PathBuf>,
+}
+
+/// Writes `summary.json`, `epochs.csv` and `trials.parquet` of `trials` into `out`,
+/// each atomically.
 ///
-/// Columns: `trial, estimator, t_s, err_3d_m, err_h_m, nees_pos, pos_sigma_m, used,
-/// rejected, rejected_gate, mean_nis, gdop, mode, numerical_failure`. Rows are in trial order, then the world's estimator order, then
-/// time, so the file is identical for any thread count.
-pub fn epochs_csv(results: &[TrialResult]) -> String {
-    use std::fmt::Write;
-    let mut s = String::from(
-        "trial,estimator,t_s,err_3d_m,err_h_m,nees_pos,pos_sigma_m,used,rejected,rejected_gate,mean_nis,gdop,mode,numerical_failure\n",
-    );
-    let opt = |v: Option<f64>| v.map(|x| format!("{x:.6}")).unwrap_or_default();
-    let mut sorted: Vec<&TrialResult> = results.iter().collect();
-    sorted.sort_by_key(|r| r.trial);
-    for r in sorted {
-        for est in &r.estimators {
-            // Names are free text: quote them as CSV requires.
-            let name = format!("\"{}\"", est.name.replace('"', "\"\""));
-            for e in &est.epochs {
-                let _ = writeln!(
-                    s,
-                    "{},{},{:.3},{},{},{},{},{},{},{},{},{},{},{}",
-                    r.trial,
-                    name,
-                    e.t_s,
-                    opt(e.err_3d_m),
-                    opt(e.err_h_m),
-                    opt(e.nees_pos),
-                    opt(e.pos_sigma_m),
-                    e.used,
-                    e.rejected,
-                    e.rejected_gate,
-                    opt(e.mean_nis),
-                    opt(e.gdop),
-                    e.mode.unwrap_or(""),
-                    u8::from(e.numerical_failure)
-                );
-            }
-        }
-    }
-    s
+/// # Errors
+/// I/O and encoding errors, naming the file.
+pub fn write_outputs(
+    world: &World,
+    opts: &RunOptions,
+    trials: &[TrialResult],
+    out: &std::path::Path,
+) -> Result<Written, String> {
+    use crate::io::atomic::write_atomic;
+    let summary = summarise(world, opts, trials);
+    let mut json = serde_json::to_string_pretty(&summary)
+        .map_err(|e| format!("encoding summary.json: {e}"))?;
+    json.push('\n');
+    let mut files = Vec::new();
+    let mut put = |name: &str, bytes: &[u8]| -> Result<(), String> {
+        let p = out.join(name);
+        write_atomic(&p, bytes).map_err(|e| e.to_string())?;
+        files.push(p);
+        Ok(())
+    };
+    put("summary.json", json.as_bytes())?;
+    put("epochs.csv", outputs::epochs_csv(trials).as_bytes())?;
+    let parquet = outputs::trials_parquet(&world.frame, trials)
+        .map_err(|e| format!("encoding trials.parquet: {e}"))?;
+    put("trials.parquet", &parquet)?;
+    Ok(Written { summary, files })
 }

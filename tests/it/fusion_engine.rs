@@ -115,7 +115,7 @@ sources = ["gps", "bds"]
         ekf.epochs
             .iter()
             .find(|e| (e.t_s - t).abs() < 1e-9)
-            .and_then(|e| e.mode)
+            .and_then(|e| e.mode.as_deref())
     };
     assert_eq!(mode_at(10.0), Some("GPS+BDS"));
     assert_eq!(mode_at(60.0), Some("GPS+BDS+DTMB"));
@@ -276,11 +276,11 @@ fn seed000_adaptive_switches_modes_where_fig9_says() {
             let clear = (10.0..35.0).contains(&t) || (200.0..370.0).contains(&t);
             if window {
                 in_window += 1;
-                in_window_not_a += usize::from(e.mode != Some("A"));
+                in_window_not_a += usize::from(e.mode.as_deref() != Some("A"));
             }
             if clear {
                 open += 1;
-                open_a += usize::from(e.mode == Some("A"));
+                open_a += usize::from(e.mode.as_deref() == Some("A"));
             }
         }
     }
