@@ -312,7 +312,11 @@ fn report_written(written: &crate::montecarlo::Written, quiet: bool) {
     }
     if !quiet {
         print!("{}", written.summary.table());
-        let names: Vec<String> = written.files.iter().map(|p| p.display().to_string()).collect();
+        let names: Vec<String> = written
+            .files
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect();
         println!("wrote {}", names.join(", "));
     }
 }

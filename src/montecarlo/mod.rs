@@ -179,8 +179,7 @@ fn execute(
     let fresh = pool.install(|| {
         todo.par_iter()
             .map(|&i| {
-                let r = run_trial(world, opts.seed, i)
-                    .map_err(|e| format!("trial {i}: {e}"))?;
+                let r = run_trial(world, opts.seed, i).map_err(|e| format!("trial {i}: {e}"))?;
                 if let Some(dir) = dir {
                     dir.write_trial(&r).map_err(|e| e.to_string())?;
                 }
@@ -314,7 +313,6 @@ impl Summary {
         s
     }
 }
-
 
 /// The files a run directory ends with, all computed from the trials alone.
 #[derive(Clone, Debug)]

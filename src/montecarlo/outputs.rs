@@ -109,7 +109,10 @@ impl Column {
         }
     }
 
-    fn write(&self, w: &mut parquet::file::writer::SerializedColumnWriter<'_>) -> parquet::errors::Result<()> {
+    fn write(
+        &self,
+        w: &mut parquet::file::writer::SerializedColumnWriter<'_>,
+    ) -> parquet::errors::Result<()> {
         use parquet::data_type::{BoolType, ByteArrayType, DoubleType, Int32Type, Int64Type};
         match self {
             Column::I64(v) => w.typed::<Int64Type>().write_batch(v, None, None),

@@ -95,10 +95,7 @@ impl Manifest {
     pub fn mismatch(&self, other: &Manifest, compare_shard: bool) -> Option<String> {
         let mut why = Vec::new();
         if self.format != other.format {
-            why.push(format!(
-                "store format {} vs {}",
-                self.format, other.format
-            ));
+            why.push(format!("store format {} vs {}", self.format, other.format));
         }
         if self.world_hash != other.world_hash {
             why.push(format!(
@@ -185,7 +182,9 @@ impl RunDir {
     }
 
     pub fn trial_path(&self, trial: u64) -> PathBuf {
-        self.root.join("trials").join(format!("trial-{trial:06}.json"))
+        self.root
+            .join("trials")
+            .join(format!("trial-{trial:06}.json"))
     }
 
     /// Reads `run.json`; `Ok(None)` when the directory has none.
@@ -299,7 +298,9 @@ pub fn gather_shards(dirs: &[PathBuf]) -> Result<(Manifest, Vec<TrialResult>), S
     let mut first: Option<(PathBuf, Manifest)> = None;
     let mut by_trial: BTreeMap<u64, (TrialResult, PathBuf)> = BTreeMap::new();
     if dirs.is_empty() {
-        return Err(StoreError::Refused("merge: name at least one run directory".into()));
+        return Err(StoreError::Refused(
+            "merge: name at least one run directory".into(),
+        ));
     }
     for d in dirs {
         let dir = RunDir::existing(d);
@@ -369,7 +370,12 @@ mod tests {
         }
         // The shards of a run partition its trials.
         let mut all: Vec<u64> = (1..=3)
-            .flat_map(|k| Shard::parse(&format!("{k}/3")).unwrap().trials(11).collect::<Vec<_>>())
+            .flat_map(|k| {
+                Shard::parse(&format!("{k}/3"))
+                    .unwrap()
+                    .trials(11)
+                    .collect::<Vec<_>>()
+            })
             .collect();
         all.sort_unstable();
         assert_eq!(all, (0..11).collect::<Vec<_>>());
