@@ -297,9 +297,8 @@ fn bad_output_directories_and_resumes_are_refused_clearly() {
     // A read-only directory (unless we are root, who may write anyway).
     let ro = d.join("ro");
     std::fs::create_dir_all(ro.join("trials")).unwrap();
-    let mut perm = std::fs::metadata(&ro).unwrap().permissions();
-    perm.set_readonly(true);
-    std::fs::set_permissions(&ro, perm.clone()).unwrap();
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o555)).unwrap();
     if std::fs::write(ro.join("probe"), "x").is_err() {
         let o = hybridnav(&["run", "--trials", "1", "--quiet", "--out", &s(&ro)]);
         assert_eq!(o.status.code(), Some(2));
@@ -311,8 +310,7 @@ fn bad_output_directories_and_resumes_are_refused_clearly() {
     } else {
         println!("skipped: running as root, a read-only directory is still writable");
     }
-    perm.set_readonly(false);
-    std::fs::set_permissions(&ro, perm).unwrap();
+    std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o755)).unwrap();
     // --resume where there is nothing to resume; a malformed --shard.
     let o = hybridnav(&[
         "run",
