@@ -16,5 +16,6 @@ pub mod metrics;
 pub mod montecarlo;
 pub mod motion;
 pub mod propagation;
+pub mod report;
 pub mod tcofdm;
 pub mod world;

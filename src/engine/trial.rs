@@ -24,9 +24,11 @@ pub struct EpochRecord {
     pub truth_ecef_m: [f64; 3],
     /// The estimated position (ECEF, m), when the estimator had an estimate.
     pub est_ecef_m: Option<[f64; 3]>,
-    /// GNSS satellites (GPS and BeiDou) whose ranges were in this epoch's batch: the
-    /// satellites the receiver tracked, i.e. the visible ones.
-    pub n_gnss: u32,
+    /// GPS satellites whose ranges were in this epoch's batch: the ones the receiver
+    /// tracked (visible, or received by reflection), whether or not the estimator used them.
+    pub n_gps: u32,
+    /// BeiDou satellites tracked, likewise.
+    pub n_bds: u32,
     /// 3-D position error (m), when the estimator had an estimate.
     pub err_3d_m: Option<f64>,
     /// Horizontal position error (m) in the local frame at the truth.
@@ -156,10 +158,8 @@ pub fn simulate(frame: &EnuFrame, start: GpsTime, setup: &mut TrialSetup) -> Vec
             continue;
         }
         let source_name = source.name();
-        let n_gnss = batch
-            .ranges()
-            .filter(|r| matches!(r.emitter.system, System::Gps | System::Bds))
-            .count() as u32;
+        let count = |sys: System| batch.ranges().filter(|r| r.emitter.system == sys).count() as u32;
+        let (n_gps, n_bds) = (count(System::Gps), count(System::Bds));
         let truth_ecef_m = [truth.pos_ecef_m.x, truth.pos_ecef_m.y, truth.pos_ecef_m.z];
         for (k, est) in setup.estimators.iter_mut().enumerate() {
             if !est.consumes(source_name) {
@@ -183,7 +183,8 @@ pub fn simulate(frame: &EnuFrame, start: GpsTime, setup: &mut TrialSetup) -> Vec
                 est_ecef_m: out
                     .estimate
                     .map(|e| [e.pos_ecef_m.x, e.pos_ecef_m.y, e.pos_ecef_m.z]),
-                n_gnss,
+                n_gps,
+                n_bds,
                 err_3d_m,
                 err_h_m,
                 nees_pos,

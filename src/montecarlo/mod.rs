@@ -321,7 +321,8 @@ pub struct Written {
     pub files: Vec<std::path::PathBuf>,
 }
 
-/// Writes `summary.json`, `epochs.csv` and `trials.parquet` of `trials` into `out`,
+/// Writes `summary.json`, `epochs.csv`, `trials.parquet` and `report.html` of `trials`
+/// into `out`,
 /// each atomically.
 ///
 /// # Errors
@@ -349,5 +350,7 @@ pub fn write_outputs(
     let parquet = outputs::trials_parquet(&world.frame, trials)
         .map_err(|e| format!("encoding trials.parquet: {e}"))?;
     put("trials.parquet", &parquet)?;
+    let report = crate::report::html(world, &summary, trials)?;
+    put("report.html", report.as_bytes())?;
     Ok(Written { summary, files })
 }

@@ -73,7 +73,8 @@ const PARQUET_SCHEMA: &str = "message hybridnav_epochs {
   OPTIONAL DOUBLE mean_nis;
   OPTIONAL DOUBLE gdop;
   OPTIONAL BYTE_ARRAY mode (UTF8);
-  REQUIRED INT32 n_gnss;
+  REQUIRED INT32 n_gps;
+  REQUIRED INT32 n_bds;
   REQUIRED INT32 used;
   REQUIRED INT32 rejected;
   REQUIRED INT32 rejected_gate;
@@ -161,7 +162,7 @@ pub fn trials_parquet(
         c.extend((0..7).map(|_| Column::F64(Vec::new())));
         c.extend((0..12).map(|_| Column::OptF64(Vec::new(), Vec::new())));
         c.push(Column::OptStr(Vec::new(), Vec::new()));
-        c.extend((0..4).map(|_| Column::I32(Vec::new())));
+        c.extend((0..5).map(|_| Column::I32(Vec::new())));
         c.push(Column::Bool(Vec::new()));
         c
     };
@@ -236,7 +237,7 @@ pub fn trials_parquet(
                         None => d.push(0),
                     }
                 }
-                for x in [e.n_gnss, e.used, e.rejected, e.rejected_gate] {
+                for x in [e.n_gps, e.n_bds, e.used, e.rejected, e.rejected_gate] {
                     if let Column::I32(v) = next() {
                         v.push(i32::try_from(x).unwrap_or(i32::MAX));
                     }

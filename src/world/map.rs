@@ -45,11 +45,29 @@ fn polygon(svg: &mut String, v: &View, pts: &[[f64; 2]], style: &str) {
     let _ = writeln!(svg, r#"<polygon points="{}" {style}/>"#, d.trim_end());
 }
 
+/// A line drawn over the map (an estimator's track in a run's report).
+pub struct Overlay<'a> {
+    pub label: &'a str,
+    pub colour: &'a str,
+    /// ENU positions (m); `None` breaks the line (an epoch without an estimate).
+    pub points_enu_m: Vec<Option<[f64; 2]>>,
+}
+
 /// The SVG text of the world's map.
 ///
 /// # Errors
 /// When the trajectory cannot be built.
 pub fn svg(world: &World) -> Result<String, String> {
+    svg_with(world, &[])
+}
+
+/// The world's map with `overlays` drawn over the scene (clipped to the drawing, which
+/// spans the scene and the true trajectory: a diverged estimate leaves the frame rather
+/// than shrinking the city to a dot), with a legend.
+///
+/// # Errors
+/// When the trajectory cannot be built.
+pub fn svg_with(world: &World, overlays: &[Overlay<'_>]) -> Result<String, String> {
     let trajectory = world.build_trajectory(&TrialRng::new(world.file.montecarlo.seed, 0))?;
     let n = ((world.duration_s / 0.5).ceil() as usize).clamp(2, 20_000);
     let track: Vec<[f64; 2]> = (0..=n)
@@ -161,6 +179,13 @@ pub fn svg(world: &World) -> Result<String, String> {
             r##"fill="none" stroke="#d95f02" stroke-width="1.5" stroke-dasharray="5,3""##,
         );
     }
+    // Over a report's coloured estimates the truth is drawn in black, so that no
+    // estimator's colour can be mistaken for it.
+    let truth_colour = if overlays.is_empty() {
+        "#c0392b"
+    } else {
+        "#111"
+    };
     let mut d = String::new();
     for (i, p) in track.iter().enumerate() {
         let (x, y) = v.px(p[0], p[1]);
@@ -168,13 +193,62 @@ pub fn svg(world: &World) -> Result<String, String> {
     }
     let _ = writeln!(
         svg,
-        r##"<path d="{}" fill="none" stroke="#c0392b" stroke-width="2"/>"##,
+        r##"<path d="{}" fill="none" stroke="{truth_colour}" stroke-width="2"/>"##,
         d.trim_end()
     );
+    if !overlays.is_empty() {
+        let (x0, y0) = v.px(min_e, max_n);
+        let (x1, y1) = v.px(max_e, min_n);
+        let _ = writeln!(
+            svg,
+            r#"<clipPath id="map-clip"><rect x="{x0:.1}" y="{y0:.1}" width="{:.1}" height="{:.1}"/></clipPath><g clip-path="url(#map-clip)">"#,
+            x1 - x0,
+            y1 - y0
+        );
+        for o in overlays {
+            let mut d = String::new();
+            let mut pen_up = true;
+            for p in &o.points_enu_m {
+                match p {
+                    Some(p) => {
+                        let (x, y) = v.px(p[0], p[1]);
+                        let _ = write!(d, "{}{x:.1},{y:.1} ", if pen_up { "M" } else { "L" });
+                        pen_up = false;
+                    }
+                    None => pen_up = true,
+                }
+            }
+            let _ = writeln!(
+                svg,
+                r#"<path d="{}" fill="none" stroke="{}" stroke-width="1.3" stroke-opacity="0.85"/>"#,
+                d.trim_end(),
+                o.colour
+            );
+        }
+        svg.push_str("</g>\n");
+        let truth = Overlay {
+            label: "truth",
+            colour: truth_colour,
+            points_enu_m: Vec::new(),
+        };
+        for (k, o) in std::iter::once(&truth).chain(overlays).enumerate() {
+            let y = MARGIN_PX + 14.0 * k as f64;
+            let _ = writeln!(
+                svg,
+                r#"<line x1="{:.1}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="{}" stroke-width="3"/><text x="{:.1}" y="{:.1}">{}</text>"#,
+                WIDTH_PX - 230.0,
+                WIDTH_PX - 210.0,
+                o.colour,
+                WIDTH_PX - 205.0,
+                y + 4.0,
+                escape(o.label)
+            );
+        }
+    }
     let (sx, sy) = v.px(track[0][0], track[0][1]);
     let _ = writeln!(
         svg,
-        r##"<circle cx="{sx:.1}" cy="{sy:.1}" r="4" fill="#c0392b"/><text x="{:.1}" y="{:.1}">start</text>"##,
+        r##"<circle cx="{sx:.1}" cy="{sy:.1}" r="4" fill="{truth_colour}"/><text x="{:.1}" y="{:.1}">start</text>"##,
         sx + 6.0,
         sy - 6.0
     );

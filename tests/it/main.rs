@@ -15,5 +15,6 @@ mod landmark;
 mod montecarlo;
 mod motion_models;
 mod propagation;
+mod report;
 mod skeleton;
 mod tcofdm;

@@ -378,7 +378,7 @@ assert np.abs(d - p.err_3d_m[m]).max() < 1e-6
 h = np.hypot((p.est_e_m - p.truth_e_m)[m], (p.est_n_m - p.truth_n_m)[m])
 assert np.abs(h - p.err_h_m[m]).max() < 1e-2, np.abs(h - p.err_h_m[m]).max()
 assert str(p.numerical_failure.dtype) == "bool"
-assert p.n_gnss.max() > 4
+assert p.n_gps.max() > 4 and p.n_bds.max() > 0
 print("OK", len(p))
 "#;
     match Command::new("python3")
