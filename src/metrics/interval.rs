@@ -70,7 +70,7 @@ fn student_t_upper_tail(t: f64, dof: f64) -> f64 {
 
 /// The CDF of Student's t with `dof` (> 0, not necessarily integer) degrees of freedom.
 pub fn student_t_cdf(t: f64, dof: f64) -> f64 {
-    if !(dof > 0.0) || t.is_nan() {
+    if dof.is_nan() || dof <= 0.0 || t.is_nan() {
         return f64::NAN;
     }
     let tail = student_t_upper_tail(t.abs(), dof);

@@ -7,7 +7,7 @@
 //!
 //! The submodules add the trajectory errors of the TUM benchmark ([`trajectory`]: ATE,
 //! RPE, TUM files), filter consistency against χ² bands ([`consistency`]: NEES, NIS),
-//! confidence intervals across trials ([`interval`]) and the empirical CDF ([`ecdf`]).
+//! confidence intervals across trials ([`interval`]) and the empirical CDF ([`mod@ecdf`]).
 
 pub mod consistency;
 pub mod ecdf;
