@@ -4,6 +4,25 @@
 //! 99.73 % percentiles of the 3-D position error (the fractions of a Gaussian within 1, 2
 //! and 3 σ). Percentiles use linear interpolation between order statistics (Hyndman & Fan
 //! type 7, numpy's default), so a user can recompute them from `trials.parquet`.
+//!
+//! The submodules add the trajectory errors of the TUM benchmark ([`trajectory`]: ATE,
+//! RPE, TUM files), filter consistency against χ² bands ([`consistency`]: NEES, NIS),
+//! confidence intervals across trials ([`interval`]) and the empirical CDF ([`mod@ecdf`]).
+
+pub mod consistency;
+pub mod ecdf;
+pub mod interval;
+pub mod trajectory;
+
+pub use consistency::{
+    chi2_band, nees_epochs, nees_summary, nis_epochs, nis_summary, ConsistencySummary,
+    EpochConsistency,
+};
+pub use ecdf::ecdf;
+pub use interval::{bootstrap_ci, mean_ci95, student_t_cdf, student_t_quantile};
+pub use trajectory::{
+    ate, ate_errors, rigid_alignment, rpe, rpe_errors, write_tum, Alignment, TrajectoryStats,
+};
 
 use serde::Serialize;
 
