@@ -10,11 +10,14 @@ pub mod outputs;
 pub mod store;
 
 use crate::engine::trial::{run_trial, TrialResult};
-use crate::metrics::ErrorStats;
+use crate::metrics::{
+    mean_ci95, nees_summary, Alignment, ConsistencySummary, ErrorStats, TrajectoryStats,
+};
 use crate::world::World;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
+use std::collections::BTreeMap;
 use store::{Manifest, RunDir, Shard, STORE_FORMAT};
 
 /// How to run.
@@ -65,6 +68,38 @@ pub struct EstimatorSummary {
     pub mean_nees_pos: Option<f64>,
     /// Epochs where the estimator reported a numerical failure.
     pub numerical_failures: usize,
+    /// Absolute trajectory error as seed 000 computes it (TUM definition, ECEF, no
+    /// alignment), over every epoch with an estimate of every trial.
+    pub ate_m: Option<TrajectoryStats>,
+    /// The ATE after a rigid (Horn) alignment of each trial's trajectory to the truth.
+    pub ate_aligned_m: Option<TrajectoryStats>,
+    /// Relative pose error of the translation over Δ = 1 s, no alignment (seed 000).
+    pub rpe_m: Option<TrajectoryStats>,
+    /// The RPE after each trial's rigid alignment.
+    pub rpe_aligned_m: Option<TrajectoryStats>,
+    /// Position NEES (3 degrees of freedom) against its χ² bands over the trials.
+    pub nees: Option<ConsistencySummary>,
+    /// Share of scored epochs in each integration mode (mode-selecting estimators only).
+    pub modes: BTreeMap<String, f64>,
+    /// How much each statistic varies from trial to trial: the 95 % confidence interval
+    /// (Student t) of the mean over trials of each trial's own value.
+    pub across_trials: AcrossTrials,
+}
+
+/// 95 % confidence intervals, across trials, of per-trial statistics (`[lo, hi]`; absent
+/// with fewer than two trials with an estimate).
+#[derive(Clone, Debug, Serialize, PartialEq, Default)]
+pub struct AcrossTrials {
+    /// Trials that contributed (those with at least one estimate).
+    pub trials: usize,
+    pub sigma1_ci95_m: Option<[f64; 2]>,
+    pub sigma2_ci95_m: Option<[f64; 2]>,
+    pub sigma3_ci95_m: Option<[f64; 2]>,
+    pub mean_ci95_m: Option<[f64; 2]>,
+    pub rmse_ci95_m: Option<[f64; 2]>,
+    pub ate_rmse_ci95_m: Option<[f64; 2]>,
+    pub rpe_rmse_ci95_m: Option<[f64; 2]>,
+    pub availability_ci95: Option<[f64; 2]>,
 }
 
 /// The content of `summary.json`.
@@ -195,6 +230,160 @@ fn execute(
     Ok(all)
 }
 
+/// The trajectory of one trial's estimator: times, truth and estimate of the epochs with
+/// an estimate.
+struct Track {
+    t_s: Vec<f64>,
+    truth: Vec<nalgebra::Vector3<f64>>,
+    est: Vec<nalgebra::Vector3<f64>>,
+}
+
+fn track(trace: &crate::engine::trial::EstimatorTrace) -> Track {
+    let mut tr = Track {
+        t_s: Vec::new(),
+        truth: Vec::new(),
+        est: Vec::new(),
+    };
+    for ep in &trace.epochs {
+        if let Some(e) = ep.est_ecef_m {
+            // Two batches at one instant (e.g. GNSS and FM) give two records with the
+            // same time; the TUM metrics need one pose per time, the last one.
+            if tr.t_s.last() == Some(&ep.t_s) {
+                tr.t_s.pop();
+                tr.truth.pop();
+                tr.est.pop();
+            }
+            tr.t_s.push(ep.t_s);
+            tr.truth.push(nalgebra::Vector3::from(ep.truth_ecef_m));
+            tr.est.push(nalgebra::Vector3::from(e));
+        }
+    }
+    tr
+}
+
+fn ci(values: &[f64]) -> Option<[f64; 2]> {
+    mean_ci95(values).map(|(a, b)| [a, b])
+}
+
+/// One estimator's line of the summary, from its traces in every trial.
+fn estimator_summary(name: &str, k: usize, trials: &[TrialResult]) -> EstimatorSummary {
+    let mut e3 = Vec::new();
+    let mut eh = Vec::new();
+    let (mut epochs, mut without, mut failures) = (0usize, 0usize, 0usize);
+    let (mut nees_sum, mut nees_n) = (0.0, 0usize);
+    let mut modes: BTreeMap<String, usize> = BTreeMap::new();
+    let mut moded = 0usize;
+    // NEES grouped by epoch time across trials (every trial has the same time grid).
+    let mut nees_by_t: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
+    let (mut ate, mut ate_al, mut rpe, mut rpe_al) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut per_trial: [Vec<f64>; 8] = Default::default();
+    for t in trials {
+        let Some(trace) = t.estimators.get(k) else {
+            continue;
+        };
+        let mut trial_errs = Vec::new();
+        // One NEES per time per trial: the last record of an instant with several
+        // batches (GNSS and FM at the same second), as the TUM tracks below keep.
+        let mut trial_nees: BTreeMap<u64, f64> = BTreeMap::new();
+        for ep in &trace.epochs {
+            epochs += 1;
+            failures += usize::from(ep.numerical_failure);
+            match (ep.err_3d_m, ep.err_h_m) {
+                (Some(a), Some(b)) => {
+                    e3.push(a);
+                    eh.push(b);
+                    trial_errs.push(a);
+                }
+                _ => without += 1,
+            }
+            if let Some(n) = ep.nees_pos {
+                nees_sum += n;
+                nees_n += 1;
+                trial_nees.insert(ep.t_s.to_bits(), n);
+            }
+            if let Some(m) = &ep.mode {
+                *modes.entry(m.to_string()).or_default() += 1;
+                moded += 1;
+            }
+        }
+        for (t, n) in trial_nees {
+            nees_by_t.entry(t).or_default().push(n);
+        }
+        let tr = track(trace);
+        let a = crate::metrics::ate_errors(&tr.truth, &tr.est, Alignment::None);
+        let r = crate::metrics::rpe_errors(&tr.t_s, &tr.truth, &tr.est, 1.0, Alignment::None);
+        if let Some(v) = &a {
+            ate.extend_from_slice(v);
+        }
+        if let Some(v) = &r {
+            rpe.extend_from_slice(v);
+        }
+        if let Some(v) = crate::metrics::ate_errors(&tr.truth, &tr.est, Alignment::Rigid) {
+            ate_al.extend(v);
+        }
+        if let Some(v) =
+            crate::metrics::rpe_errors(&tr.t_s, &tr.truth, &tr.est, 1.0, Alignment::Rigid)
+        {
+            rpe_al.extend(v);
+        }
+        let n_ep = trace.epochs.len();
+        if let Some(st) = ErrorStats::from_errors(&mut trial_errs) {
+            for (slot, v) in per_trial
+                .iter_mut()
+                .zip([st.sigma1, st.sigma2, st.sigma3, st.mean, st.rmse])
+            {
+                slot.push(v);
+            }
+            if let Some(v) = a.and_then(|mut v| TrajectoryStats::from_errors(&mut v)) {
+                per_trial[5].push(v.rmse);
+            }
+            if let Some(v) = r.and_then(|mut v| TrajectoryStats::from_errors(&mut v)) {
+                per_trial[6].push(v.rmse);
+            }
+        }
+        if n_ep > 0 {
+            let with = trace.epochs.iter().filter(|e| e.err_3d_m.is_some()).count();
+            per_trial[7].push(with as f64 / n_ep as f64);
+        }
+    }
+    let nees_epochs: Vec<Vec<f64>> = nees_by_t.into_values().collect();
+    EstimatorSummary {
+        name: name.to_string(),
+        error_3d_m: ErrorStats::from_errors(&mut e3),
+        error_h_m: ErrorStats::from_errors(&mut eh),
+        availability: if epochs > 0 {
+            (epochs - without) as f64 / epochs as f64
+        } else {
+            0.0
+        },
+        epochs,
+        epochs_without_fix: without,
+        mean_nees_pos: (nees_n > 0).then(|| nees_sum / nees_n as f64),
+        numerical_failures: failures,
+        ate_m: TrajectoryStats::from_errors(&mut ate),
+        ate_aligned_m: TrajectoryStats::from_errors(&mut ate_al),
+        rpe_m: TrajectoryStats::from_errors(&mut rpe),
+        rpe_aligned_m: TrajectoryStats::from_errors(&mut rpe_al),
+        nees: nees_summary(&nees_epochs, 3),
+        modes: modes
+            .into_iter()
+            .map(|(m, n)| (m, n as f64 / moded.max(1) as f64))
+            .collect(),
+        across_trials: AcrossTrials {
+            trials: per_trial[0].len(),
+            sigma1_ci95_m: ci(&per_trial[0]),
+            sigma2_ci95_m: ci(&per_trial[1]),
+            sigma3_ci95_m: ci(&per_trial[2]),
+            mean_ci95_m: ci(&per_trial[3]),
+            rmse_ci95_m: ci(&per_trial[4]),
+            ate_rmse_ci95_m: ci(&per_trial[5]),
+            rpe_rmse_ci95_m: ci(&per_trial[6]),
+            availability_ci95: ci(&per_trial[7]),
+        },
+    }
+}
+
 /// Reduces trials (in trial order) to the summary.
 pub fn summarise(world: &World, opts: &RunOptions, trials: &[TrialResult]) -> Summary {
     let names: Vec<String> = world
@@ -206,43 +395,7 @@ pub fn summarise(world: &World, opts: &RunOptions, trials: &[TrialResult]) -> Su
     let estimators = names
         .iter()
         .enumerate()
-        .map(|(k, name)| {
-            let mut e3 = Vec::new();
-            let mut eh = Vec::new();
-            let (mut epochs, mut without, mut failures) = (0usize, 0usize, 0usize);
-            let (mut nees_sum, mut nees_n) = (0.0, 0usize);
-            for t in trials {
-                for ep in &t.estimators[k].epochs {
-                    epochs += 1;
-                    failures += usize::from(ep.numerical_failure);
-                    match (ep.err_3d_m, ep.err_h_m) {
-                        (Some(a), Some(b)) => {
-                            e3.push(a);
-                            eh.push(b);
-                        }
-                        _ => without += 1,
-                    }
-                    if let Some(n) = ep.nees_pos {
-                        nees_sum += n;
-                        nees_n += 1;
-                    }
-                }
-            }
-            EstimatorSummary {
-                name: name.clone(),
-                error_3d_m: ErrorStats::from_errors(&mut e3),
-                error_h_m: ErrorStats::from_errors(&mut eh),
-                availability: if epochs > 0 {
-                    (epochs - without) as f64 / epochs as f64
-                } else {
-                    0.0
-                },
-                epochs,
-                epochs_without_fix: without,
-                mean_nees_pos: (nees_n > 0).then(|| nees_sum / nees_n as f64),
-                numerical_failures: failures,
-            }
-        })
+        .map(|(k, name)| estimator_summary(name, k, trials))
         .collect();
     Summary {
         hybridnav_version: env!("CARGO_PKG_VERSION").to_string(),
@@ -275,40 +428,30 @@ impl Summary {
         );
         let _ = writeln!(
             s,
-            "{:<16} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>7}",
-            "estimator", "1σ (m)", "2σ (m)", "3σ (m)", "mean", "std", "rmse", "max", "avail"
+            "{:<16} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7}",
+            "estimator", "1σ", "2σ", "3σ", "rmse", "ATE", "ATE rms", "RPE", "RPE rms", "avail"
         );
+        let f = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |x| format!("{x:.2}"));
         for e in &self.estimators {
-            match &e.error_3d_m {
-                Some(x) => {
-                    let _ = writeln!(
-                        s,
-                        "{:<16} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>6.1}%",
-                        e.name,
-                        x.sigma1,
-                        x.sigma2,
-                        x.sigma3,
-                        x.mean,
-                        x.std,
-                        x.rmse,
-                        x.max,
-                        100.0 * e.availability
-                    );
-                }
-                None => {
-                    let _ = writeln!(
-                        s,
-                        "{:<16} {:>9} (no estimate in any epoch) {:>6.1}%",
-                        e.name,
-                        "-",
-                        100.0 * e.availability
-                    );
-                }
-            }
+            let x = e.error_3d_m.as_ref();
+            let _ = writeln!(
+                s,
+                "{:<16} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6.1}%",
+                e.name,
+                f(x.map(|x| x.sigma1)),
+                f(x.map(|x| x.sigma2)),
+                f(x.map(|x| x.sigma3)),
+                f(x.map(|x| x.rmse)),
+                f(e.ate_m.as_ref().map(|a| a.mean)),
+                f(e.ate_m.as_ref().map(|a| a.rmse)),
+                f(e.rpe_m.as_ref().map(|a| a.mean)),
+                f(e.rpe_m.as_ref().map(|a| a.rmse)),
+                100.0 * e.availability
+            );
         }
         let _ = writeln!(
             s,
-            "(3-D position error percentiles 68.27/95.45/99.73 % over all epochs of all trials)"
+            "(metres; σ-levels: 3-D error percentiles 68.27/95.45/99.73 % over all epochs of all trials;\n ATE/RPE: mean and RMSE, TUM definitions in ECEF, no alignment, RPE over 1 s)"
         );
         s
     }

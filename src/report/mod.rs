@@ -81,29 +81,72 @@ fn opt(v: Option<f64>, digits: usize) -> String {
 /// The papers' table: σ-levels of the 3-D and horizontal error, their spread, and the
 /// other statistics of `summary.json`.
 fn table(h: &mut String, s: &Summary) {
-    h.push_str("<h2>Position error</h2>\n<table><tr><th>estimator</th><th>1σ</th><th>2σ</th><th>3σ</th><th>mean</th><th>std</th><th>RMSE</th><th>max</th><th>horiz. 1σ</th><th>horiz. 2σ</th><th>horiz. 3σ</th><th>mean NEES</th><th>availability</th></tr>\n");
+    h.push_str("<h2>Position error</h2>\n<table><tr><th>estimator</th><th>1σ</th><th>2σ</th><th>3σ</th><th>mean</th><th>RMSE</th><th>max</th><th>mean ATE</th><th>RMSE ATE</th><th>mean RPE</th><th>RMSE RPE</th><th>RMSE ATE aligned</th><th>horiz. 1σ / 2σ / 3σ</th><th>mean NEES [95 % band]</th><th>availability</th><th>modes</th></tr>\n");
     for e in &s.estimators {
         let a = e.error_3d_m.as_ref();
         let b = e.error_h_m.as_ref();
+        let nees = e.nees.as_ref().map_or_else(
+            || "–".to_string(),
+            |n| format!("{:.2} [{:.2}, {:.2}]", n.mean, n.band_lo, n.band_hi),
+        );
+        let modes: Vec<String> = e
+            .modes
+            .iter()
+            .map(|(m, f)| format!("{} {:.0} %", escape(m), 100.0 * f))
+            .collect();
         let _ = writeln!(
             h,
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{:.1} %</td></tr>",
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{} / {} / {}</td><td>{}</td><td>{:.1} %</td><td>{}</td></tr>",
             escape(&e.name),
             opt(a.map(|x| x.sigma1), 2),
             opt(a.map(|x| x.sigma2), 2),
             opt(a.map(|x| x.sigma3), 2),
             opt(a.map(|x| x.mean), 2),
-            opt(a.map(|x| x.std), 2),
             opt(a.map(|x| x.rmse), 2),
             opt(a.map(|x| x.max), 2),
+            opt(e.ate_m.as_ref().map(|x| x.mean), 2),
+            opt(e.ate_m.as_ref().map(|x| x.rmse), 2),
+            opt(e.rpe_m.as_ref().map(|x| x.mean), 2),
+            opt(e.rpe_m.as_ref().map(|x| x.rmse), 2),
+            opt(e.ate_aligned_m.as_ref().map(|x| x.rmse), 2),
             opt(b.map(|x| x.sigma1), 2),
             opt(b.map(|x| x.sigma2), 2),
             opt(b.map(|x| x.sigma3), 2),
-            opt(e.mean_nees_pos, 2),
-            100.0 * e.availability
+            nees,
+            100.0 * e.availability,
+            modes.join(", ")
         );
     }
-    h.push_str("</table>\n<p class=\"meta\">Metres. σ-levels are the 68.27/95.45/99.73 % percentiles of the error over every epoch of every trial (seed 000's convention); NEES has 3 degrees of freedom (3 for a consistent filter).</p>\n");
+    h.push_str("</table>\n<p class=\"meta\">Metres. σ-levels are the 68.27/95.45/99.73 % percentiles of the 3-D error over every epoch of every trial (seed 000's convention). ATE and RPE follow the TUM benchmark in ECEF without alignment, RPE over Δ = 1 s, as seed 000 computes them; the aligned ATE first fits each trial's trajectory to the truth by a rigid (Horn) transform. NEES is of the position (3 degrees of freedom, 3 for a consistent filter) with the two-sided 95 % χ² band of its mean.</p>\n");
+    across(h, s);
+}
+
+/// The spread of the per-trial statistics.
+fn across(h: &mut String, s: &Summary) {
+    if s.trials < 2 {
+        return;
+    }
+    let iv = |v: Option<[f64; 2]>| {
+        v.map_or_else(|| "–".to_string(), |[a, b]| format!("{a:.2} – {b:.2}"))
+    };
+    h.push_str("<h3>Across trials</h3>\n<table><tr><th>estimator</th><th>trials</th><th>1σ</th><th>2σ</th><th>3σ</th><th>mean</th><th>RMSE</th><th>RMSE ATE</th><th>RMSE RPE</th></tr>\n");
+    for e in &s.estimators {
+        let a = &e.across_trials;
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            escape(&e.name),
+            a.trials,
+            iv(a.sigma1_ci95_m),
+            iv(a.sigma2_ci95_m),
+            iv(a.sigma3_ci95_m),
+            iv(a.mean_ci95_m),
+            iv(a.rmse_ci95_m),
+            iv(a.ate_rmse_ci95_m),
+            iv(a.rpe_rmse_ci95_m),
+        );
+    }
+    h.push_str("</table>\n<p class=\"meta\">95 % confidence interval (Student t) of the mean over trials of each trial's own statistic: how much the figures above would move with another set of trials.</p>\n");
 }
 
 fn cdf(h: &mut String, s: &Summary, trials: &[TrialResult]) {
