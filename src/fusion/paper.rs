@@ -476,6 +476,7 @@ where
             (None, None) if i == j => PLANE_VARIANCE_M2,
             _ => 0.0,
         });
+        let cov_enu = floor_psd(&cov_enu, COV_FLOOR_M2);
         let r = self.frame.rotation().transpose();
         Some(Estimate {
             t,
@@ -554,6 +555,26 @@ where
             }
         }
     }
+}
+
+/// The smallest variance (m²) a reported position covariance has along any axis.
+///
+/// A particle cloud that resampling has collapsed onto one or two particles has a weighted
+/// covariance that is zero along some direction, or slightly indefinite after rounding, and
+/// its inverse (the NEES) would be meaningless or negative. Flooring the eigenvalues at
+/// (1 mm)² keeps the NEES defined and positive; it stays huge for a collapsed cloud that
+/// is far from the truth, which is what the NEES should say about it.
+pub const COV_FLOOR_M2: f64 = 1e-6;
+
+/// `m` symmetrised, with its eigenvalues raised to at least `floor`.
+fn floor_psd(m: &Matrix3<f64>, floor: f64) -> Matrix3<f64> {
+    let sym = (m + m.transpose()) * 0.5;
+    let eig = nalgebra::SymmetricEigen::new(sym);
+    if eig.eigenvalues.iter().all(|l| *l >= floor) {
+        return sym;
+    }
+    let d = Matrix3::from_diagonal(&eig.eigenvalues.map(|l| l.max(floor)));
+    eig.eigenvectors * d * eig.eigenvectors.transpose()
 }
 
 fn position_of<const N: usize>(

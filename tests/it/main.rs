@@ -14,5 +14,6 @@ mod inertial;
 mod landmark;
 mod motion_models;
 mod propagation;
+mod reproductions_abstract;
 mod skeleton;
 mod tcofdm;
