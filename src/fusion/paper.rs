@@ -318,8 +318,9 @@ pub fn build(
             clocks,
             clock_noise_m2ps,
         } => {
-            let motion = PlaneTurning::new(*attenuation_per_s, *turn_rate_rad_per_s, *noise_var_m2ps4)
-                .map_err(|e| format!("process: {e}"))?;
+            let motion =
+                PlaneTurning::new(*attenuation_per_s, *turn_rate_rad_per_s, *noise_var_m2ps4)
+                    .map_err(|e| format!("process: {e}"))?;
             let layout = layout([Some(0), Some(1), Some(2)], [Some(3), Some(4), Some(5)], 9);
             let est = PaperEstimator::<PlaneTurning, 9, { 9 + N_CLOCKS }>::new(
                 name,
@@ -391,7 +392,11 @@ where
             )?),
             ClockMode::Estimated => None,
         };
-        let q_clock = if known.is_some() { 0.0 } else { clock_noise_m2ps };
+        let q_clock = if known.is_some() {
+            0.0
+        } else {
+            clock_noise_m2ps
+        };
         let model = WithClocks {
             motion,
             clock_q: [q_clock; N_CLOCKS],
@@ -605,9 +610,7 @@ where
         if self.failed {
             return out;
         }
-        let rx = self
-            .estimate(self.last_t)
-            .map(|e| e.pos_ecef_m);
+        let rx = self.estimate(self.last_t).map(|e| e.pos_ecef_m);
         self.front.admit(batch, rx.as_ref(), &mut out);
         let dt = batch.t.seconds_since(self.last_t).max(0.0);
         self.last_t = batch.t;
@@ -663,8 +666,11 @@ where
         }
         out.estimate = self.estimate(batch.t);
         if let Some(e) = &out.estimate {
-            out.gdop =
-                crate::fusion::estimator::gdop_of(&e.pos_ecef_m, &self.front.ranges, &mut self.geometry);
+            out.gdop = crate::fusion::estimator::gdop_of(
+                &e.pos_ecef_m,
+                &self.front.ranges,
+                &mut self.geometry,
+            );
         }
         out
     }
@@ -688,7 +694,9 @@ mod tests {
         };
         let x = SVector::<f64, 9>::from_fn(|i, _| i as f64);
         let f = ProcessModel::<9>::jacobian(&m, &x, 1.0);
-        let inner = Singer5::new(0.1, 3.5).unwrap().jacobian(&SVector::<f64, 5>::zeros(), 1.0);
+        let inner = Singer5::new(0.1, 3.5)
+            .unwrap()
+            .jacobian(&SVector::<f64, 5>::zeros(), 1.0);
         assert_eq!(f.fixed_view::<5, 5>(0, 0).into_owned(), inner);
         assert_eq!(f[(7, 7)], 1.0);
         let q = ProcessModel::<9>::q(&m, &x, 0.5);

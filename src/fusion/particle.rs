@@ -662,6 +662,21 @@ mod tests {
         }
     }
 
+    /// Ranges pushed one by one give the same likelihood as a whole model loaded at once.
+    #[test]
+    fn pushed_rows_equal_a_loaded_model() {
+        let m = model();
+        let z = SVector::<f64, 3>::new(1100.0, 1050.0, 1000.0);
+        let mut a = PseudorangeLikelihood::with_capacity(3);
+        a.set(&m, &z);
+        let mut b = PseudorangeLikelihood::with_capacity(3);
+        b.clear(m.layout().pos);
+        for (row, zj) in m.rows().iter().zip(z.iter()) {
+            b.push(m.layout(), row, *zj);
+        }
+        assert_eq!(a, b);
+    }
+
     #[test]
     fn resampling_keeps_heavy_particles_and_degeneracy_is_reported() {
         let mut rng = TrialRng::new(2, 0).stream("test/pf");

@@ -1059,6 +1059,22 @@ impl World {
                 g.elevation_mask_deg
             );
         }
+        if let Some(e) = &f.sensors.emitters {
+            let counts: Vec<String> = e
+                .systems()
+                .iter()
+                .map(|sys| {
+                    let n = e.emitters.iter().filter(|x| x.system == *sys).count();
+                    format!("{n} {}", sys.name())
+                })
+                .collect();
+            let _ = writeln!(
+                s,
+                "emitters   {} at fixed positions, {} Hz",
+                counts.join(" + "),
+                e.rate_hz
+            );
+        }
         for w in &self.shielding {
             let _ = writeln!(
                 s,

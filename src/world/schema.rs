@@ -371,7 +371,11 @@ impl EstimatorSpec {
             }
             SelectionKind::Seamless => ModeSelection::Seamless,
         });
-        if let Some(spec) = self.process.as_ref().filter(|p| **p != ProcessSpec::PvaClock {}) {
+        if let Some(spec) = self
+            .process
+            .as_ref()
+            .filter(|p| **p != ProcessSpec::PvaClock {})
+        {
             return self.build_paper(spec, selection.as_ref(), ctx);
         }
         Ok(match self.filter {
