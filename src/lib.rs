@@ -2,6 +2,7 @@
 //!
 //! See `docs/architecture.md` for the bird's-eye view, the code map and the invariants.
 
+pub mod beacons;
 pub mod cli;
 pub mod core;
 pub mod dtmb;

@@ -11,6 +11,7 @@ pub mod linear_kf;
 pub mod measurement;
 pub mod mode;
 pub mod models;
+pub mod paper;
 pub mod particle;
 pub mod preprocess;
 pub mod selection;

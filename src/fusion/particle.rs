@@ -33,7 +33,7 @@
 //! its particles, resets the weights to uniform and reports `degenerate = true` in the
 //! [`PfUpdate`], so the caller sees the failure instead of a NaN estimate.
 
-use crate::fusion::models::{MeasurementModel, ProcessModel, Pseudoranges};
+use crate::fusion::models::{MeasurementModel, ProcessModel, Pseudoranges, RangeRow, StateLayout};
 use crate::fusion::wls;
 use nalgebra::{SMatrix, SVector};
 use rand::Rng;
@@ -493,6 +493,31 @@ impl PseudorangeLikelihood {
         }
     }
 
+    /// Empties the likelihood for an epoch of any number of ranges, on a state whose
+    /// position components are `pos_col` (`None`: a coordinate taken as 0). Ranges are then
+    /// added one by one with [`PseudorangeLikelihood::push`], without allocating while
+    /// they fit the capacity.
+    pub fn clear(&mut self, pos_col: [Option<usize>; 3]) {
+        self.pos_col = pos_col;
+        self.rows.clear();
+    }
+
+    /// Adds one range `z_m` to the emitter of `row`, its clock columns taken from `layout`.
+    pub fn push(&mut self, layout: &StateLayout, row: &RangeRow, z_m: f64) {
+        let s = wls::system_index(row.system);
+        self.rows.push(LikRow {
+            e: [
+                row.emitter_pos_m.x,
+                row.emitter_pos_m.y,
+                row.emitter_pos_m.z,
+            ],
+            z_m,
+            neg_half_inv_var: -0.5 / (row.sigma_m * row.sigma_m),
+            clock_col: layout.clock[s],
+            isb_col: layout.isb[s],
+        });
+    }
+
     /// The number of ranges loaded.
     pub fn len(&self) -> usize {
         self.rows.len()
@@ -635,6 +660,21 @@ mod tests {
             let g = m.log_likelihood(&x, &z);
             assert!((o - g).abs() <= 1e-9 * g.abs().max(1.0), "{i}: {o} vs {g}");
         }
+    }
+
+    /// Ranges pushed one by one give the same likelihood as a whole model loaded at once.
+    #[test]
+    fn pushed_rows_equal_a_loaded_model() {
+        let m = model();
+        let z = SVector::<f64, 3>::new(1100.0, 1050.0, 1000.0);
+        let mut a = PseudorangeLikelihood::with_capacity(3);
+        a.set(&m, &z);
+        let mut b = PseudorangeLikelihood::with_capacity(3);
+        b.clear(m.layout().pos);
+        for (row, zj) in m.rows().iter().zip(z.iter()) {
+            b.push(m.layout(), row, *zj);
+        }
+        assert_eq!(a, b);
     }
 
     #[test]

@@ -212,11 +212,13 @@ impl FrontEnd {
         &self.systems
     }
 
-    /// GNSS batches, DTMB or TC-OFDM batches when the estimator uses those systems, and the
-    /// batches of its fix sources.
+    /// GNSS batches, the abstract emitters of seeds 001 and 003 (whose batches mix
+    /// systems; the ranges are filtered by system in [`FrontEnd::admit`]), DTMB or
+    /// TC-OFDM batches when the estimator uses those systems, and the batches of its fix
+    /// sources.
     pub fn consumes(&self, source: &str) -> bool {
         match source {
-            "gnss" => true,
+            "gnss" | crate::beacons::SOURCE_NAME => true,
             "dtmb" => self.systems.contains(&System::Dtmb),
             "tcofdm" => self.systems.contains(&System::Tcofdm),
             other => self.fixes.iter().any(|f| f == other),

@@ -130,6 +130,19 @@ impl ModeSelector {
                 self.dtmb
                     .extend(batch.ranges().map(|m| m.emitter_pos_ecef_m));
             }
+            // The abstract emitters (seeds 001 and 003) deliver every system in one batch:
+            // it is at once the latest GPS and the latest DTMB batch.
+            crate::beacons::SOURCE_NAME => {
+                self.gps.clear();
+                self.dtmb.clear();
+                for m in batch.ranges() {
+                    match m.system() {
+                        System::Gps => self.gps.push(m.emitter_pos_ecef_m),
+                        System::Dtmb => self.dtmb.push(m.emitter_pos_ecef_m),
+                        _ => {}
+                    }
+                }
+            }
             _ => {
                 if let Some(support) = batch.items.iter().find_map(|m| match m {
                     Measurement::Position(p) => Some(p.support),

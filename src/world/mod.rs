@@ -329,6 +329,7 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
         imu: file.sensors.imu.as_ref(),
         start_enu_m: probe.state_at(0.0).pos_enu_m,
         rng: TrialRng::new(0, 0),
+        emitter_clocks_m: file.sensors.emitters.as_ref().map(|e| e.clocks_m()),
     };
     for (i, e) in file.estimators.iter().enumerate() {
         check_estimator(&ctx, i, e, &simulated, &file, &build_ctx)?;
@@ -653,6 +654,21 @@ fn check_terrestrial_and_inertial(
         }
         systems.push(System::Tcofdm);
     }
+    if let Some(e) = &file.sensors.emitters {
+        // Resolved once here so that every error names its key; the source resolves
+        // again per trial (the positions are a pure function of the table).
+        e.resolve(&EnuFrame::new(Geodetic::from_deg(
+            file.world.origin.lat_deg,
+            file.world.origin.lon_deg,
+            file.world.origin.h_m,
+        )))
+        .map_err(|i| ctx.issue("sensors.emitters", i))?;
+        for s in e.systems() {
+            if !systems.contains(&s) {
+                systems.push(s);
+            }
+        }
+    }
     if let Some(imu) = &file.sensors.imu {
         imu.validate().map_err(|i| ctx.issue("sensors.imu", i))?;
     }
@@ -703,7 +719,7 @@ fn check_estimator(
             let fix = match s {
                 System::Dtmb => "add [sensors.dtmb] and a DTMB [[transmitter]]",
                 System::Tcofdm => "add [sensors.tcofdm] and a TC-OFDM [[transmitter]]",
-                _ => "add it to [sensors.gnss] systems",
+                _ => "add it to [sensors.gnss] systems or a [[sensors.emitters.emitter]] of it",
             };
             return Err(ctx.err(
                 &at(&format!("sources[{j}]")),
@@ -896,6 +912,12 @@ impl World {
                 .map_err(|i| err("sensors.tcofdm", i))?,
             ));
         }
+        if let Some(e) = &sensors.emitters {
+            sources.push(Box::new(
+                crate::beacons::EmittersSource::new(e, &self.frame, rng, end)
+                    .map_err(|i| err("sensors.emitters", i))?,
+            ));
+        }
         if let Some(fm) = &sensors.fm {
             let db = self
                 .fm_database(rng.master_seed())?
@@ -967,6 +989,7 @@ impl World {
             imu: sensors.imu.as_ref(),
             start_enu_m: trajectory.state_at(0.0).pos_enu_m,
             rng: *rng,
+            emitter_clocks_m: sensors.emitters.as_ref().map(|e| e.clocks_m()),
         };
         let estimators = self
             .file
@@ -1034,6 +1057,22 @@ impl World {
                 names.join("+"),
                 g.rate_hz,
                 g.elevation_mask_deg
+            );
+        }
+        if let Some(e) = &f.sensors.emitters {
+            let counts: Vec<String> = e
+                .systems()
+                .iter()
+                .map(|sys| {
+                    let n = e.emitters.iter().filter(|x| x.system == *sys).count();
+                    format!("{n} {}", sys.name())
+                })
+                .collect();
+            let _ = writeln!(
+                s,
+                "emitters   {} at fixed positions, {} Hz",
+                counts.join(" + "),
+                e.rate_hz
             );
         }
         for w in &self.shielding {

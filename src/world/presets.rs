@@ -43,14 +43,16 @@ dtmb_clock_correction = {}"#,
     },
     Preset {
         name: "seed001-pf",
-        about: "seed 001: SIR particle filter on GPS + DTMB pseudoranges, systematic resampling below N_eff = N/2",
+        about: "seed 001: SIR particle filter (20 particles, resampling whenever N_eff < N) on the 2-D Singer model [x, ẋ, y, ẏ, ÿ] with known clocks, GPS + DTMB pseudoranges",
         toml: r#"name = "PF"
 sources = ["gps", "dtmb"]
 filter = "pf"
 [options]
 particles = 20
 resampling = "systematic"
-neff_threshold = 0.5"#,
+neff_threshold = 1.0
+[process]
+model = "singer_2d""#,
     },
     Preset {
         name: "seed002-pdr",
@@ -71,21 +73,27 @@ nis_gate = 13.8"#,
     },
     Preset {
         name: "seed003-ekf",
-        about: "seed 003 'EKF': GPS/BDS/DTMB with one clock per system, seamless scheme (Table 1)",
+        about: "seed 003 'EKF': plane variable-speed turning model + one clock per system (a1, a2, a3), GPS/BDS/DTMB, seamless scheme (Table 1)",
         toml: r#"name = "EKF"
 sources = ["gps", "bds", "dtmb"]
 filter = "ekf"
-selection = "seamless""#,
+selection = "seamless"
+[process]
+model = "plane_turning""#,
     },
     Preset {
         name: "seed003-pf",
-        about: "seed 003 'PF': the same measurements and scheme, SIR particle filter (500 particles)",
+        about: "seed 003 'PF': the same model, measurements and scheme, SIR particle filter (500 particles, resampling whenever N_eff < N)",
         toml: r#"name = "PF"
 sources = ["gps", "bds", "dtmb"]
 filter = "pf"
 selection = "seamless"
 [options]
-particles = 500"#,
+particles = 500
+resampling = "systematic"
+neff_threshold = 1.0
+[process]
+model = "plane_turning""#,
     },
     Preset {
         name: "seed004-rekf",

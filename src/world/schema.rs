@@ -7,6 +7,7 @@ use crate::fusion::ekf11::Ekf11Config;
 use crate::fusion::estimator::{EkfEstimator, Estimator, WlsEstimator};
 use crate::fusion::family::{FamilyConfig, FamilyEstimator, FamilyKind};
 use crate::fusion::mode::FuzzyConfig;
+use crate::fusion::paper::{PaperContext, PaperFilter, ProcessSpec};
 use crate::fusion::preprocess::ClockCorrectionConfig;
 use crate::fusion::selection::{ModeSelection, SelectionKind};
 use crate::gnss::measurement::GnssConfig;
@@ -143,6 +144,9 @@ pub struct SensorsSection {
     /// `"magnetic"`).
     #[serde(default)]
     pub magnetic: Option<crate::magnetic::source::MagneticSensorConfig>,
+    /// Abstract emitters at fixed positions (source `"emitters"`, seeds 001 and 003).
+    #[serde(default)]
+    pub emitters: Option<crate::beacons::EmittersConfig>,
 }
 
 /// One `[[shielding]]` window: exactly one of `keep_highest`, `keep`, `block`.
@@ -257,6 +261,11 @@ pub struct EstimatorSpec {
     /// PDR filter settings (filter = "pdr").
     #[serde(default)]
     pub pdr: Option<PdrFilterConfig>,
+    /// The process model (`[estimator.process]`, `model = "pva_clock"`, `"singer_2d"` or
+    /// `"plane_turning"`); absent: seed 000's `pva_clock` for the filter family. The paper
+    /// models run with `filter = "ekf"` or `"pf"` ([`crate::fusion::paper`]).
+    #[serde(default)]
+    pub process: Option<ProcessSpec>,
 }
 
 /// What an estimator needs from its world beyond its own table.
@@ -268,6 +277,10 @@ pub struct BuildContext<'a> {
     pub start_enu_m: nalgebra::Vector3<f64>,
     /// The trial's random streams (the particle filter draws from its own).
     pub rng: crate::core::TrialRng,
+    /// The clock term (m) of each system's ranges declared by `[sensors.emitters]`,
+    /// indexed like [`crate::fusion::wls::SYSTEMS`]: what a paper estimator with
+    /// `clocks = "known"` is assumed to know.
+    pub emitter_clocks_m: Option<[f64; crate::fusion::wls::MAX_CLOCKS]>,
 }
 
 fn one() -> u64 {
@@ -291,6 +304,60 @@ impl Default for MonteCarloSection {
 }
 
 impl EstimatorSpec {
+    /// Builds a paper model's estimator ([`crate::fusion::paper`]).
+    fn build_paper(
+        &self,
+        spec: &ProcessSpec,
+        selection: Option<&ModeSelection>,
+        ctx: &BuildContext<'_>,
+    ) -> Result<Box<dyn Estimator>, String> {
+        let cfg = self.options.unwrap_or_default();
+        cfg.validate()
+            .map_err(|(k, m)| format!("options.{k}: {m}"))?;
+        let filter = match self.filter {
+            FilterKind::Ekf => PaperFilter::Ekf,
+            FilterKind::Pf => PaperFilter::Pf {
+                particles: cfg.particles,
+                resampling: match cfg.resampling {
+                    crate::fusion::family::ResamplingKind::Systematic => {
+                        crate::fusion::particle::Resampling::Systematic
+                    }
+                    crate::fusion::family::ResamplingKind::Stratified => {
+                        crate::fusion::particle::Resampling::Stratified
+                    }
+                },
+                neff_threshold: cfg.neff_threshold,
+            },
+            other => {
+                return Err(format!(
+                    "process model '{}' runs with filter = \"ekf\" or \"pf\", not '{}'",
+                    spec.label(),
+                    format!("{other:?}").to_lowercase()
+                ))
+            }
+        };
+        if !self.fixes.is_empty() || self.dtmb_clock_correction.is_some() {
+            return Err(format!(
+                "process model '{}' takes ranges only: remove 'fixes' and 'dtmb_clock_correction'",
+                spec.label()
+            ));
+        }
+        crate::fusion::paper::build(
+            &self.name,
+            spec,
+            filter,
+            &self.sources,
+            selection,
+            &PaperContext {
+                frame: ctx.frame,
+                start: ctx.start,
+                start_enu_m: ctx.start_enu_m,
+                emitter_clocks_m: ctx.emitter_clocks_m,
+                rng: &ctx.rng,
+            },
+        )
+    }
+
     /// Builds the estimator this table describes.
     ///
     /// # Errors
@@ -304,6 +371,13 @@ impl EstimatorSpec {
             }
             SelectionKind::Seamless => ModeSelection::Seamless,
         });
+        if let Some(spec) = self
+            .process
+            .as_ref()
+            .filter(|p| **p != ProcessSpec::PvaClock {})
+        {
+            return self.build_paper(spec, selection.as_ref(), ctx);
+        }
         Ok(match self.filter {
             FilterKind::Ekf
             | FilterKind::Ukf

@@ -17,5 +17,6 @@ mod montecarlo;
 mod motion_models;
 mod propagation;
 mod report;
+mod reproductions_abstract;
 mod skeleton;
 mod tcofdm;

@@ -1,0 +1,709 @@
+//! The abstract papers' own estimators: seed 001's particle filter on the 2-D Singer model
+//! and seed 003's EKF and particle filter on the 3-D plane variable-speed turning model,
+//! each with one pseudorange clock state per system.
+//!
+//! # State
+//!
+//! The motion states of the paper's model, then one clock state (m) per system in
+//! [`wls::SYSTEMS`] order (GPS, BDS, DTMB, TC-OFDM):
+//!
+//! ```text
+//! seed 001 (N = 5 + 4):  [x, ẋ, y, ẏ, ÿ, b_GPS, b_BDS, b_DTMB, b_TCOFDM]   (Singer5)
+//! seed 003 (N = 9 + 4):  [p, v, a, b_GPS, b_BDS, b_DTMB, b_TCOFDM]          (PlaneTurning)
+//! ρ_j = ‖r_j − r‖ + b_sys(j) + ε_j                                         (Pseudoranges)
+//! ```
+//!
+//! in the world's ENU frame (x east, y north, z up); the estimate is reported in ECEF. Seed
+//! 001's eq. 1 has a receiver clock `b_u` on every range and a DTMB-to-GPS offset `b_D` on
+//! the DTMB ranges only; that is the same as a GPS clock `b_GPS = b_u` and a DTMB clock
+//! `b_DTMB = b_u + b_D`. Seed 003's eqs. 1–3 have one clock per system (`a₁`, `a₂`, `a₃`).
+//! A clock state of a system the world does not have is inert (zero variance, no range
+//! refers to it).
+//!
+//! # Clocks: known or estimated
+//!
+//! * `clocks = "known"`: the clock states hold the offsets the world's emitters declare,
+//!   with zero variance. This is seed 001's reading: its state `[x, ẋ, y, ẏ, ÿ]` has no
+//!   clock, so its filter must take the offsets of eq. 1 as calibrated.
+//! * `clocks = "estimated"`: the clocks are unknowns, as seed 003 §2.1 says ("at least six
+//!   unknown parameters, namely, three-dimensional position coordinates and clock deviation
+//!   of three systems"). Each system's clock is initialised from the first batch that has
+//!   its ranges, at the predicted position: `b_s = mean_j∈s (ρ_j − ‖r_j − r̂‖)` (per
+//!   particle for the particle filter, so that position and clock are drawn jointly), with
+//!   variance `σ_s² / n_s`, and then follows a random walk of PSD `clock_noise_m2ps`.
+//!
+//! # The 2-D case (seed 001)
+//!
+//! The paper works in the horizontal plane. The ranges are computed with the receiver at
+//! the plane's height (the platform's start height, the "surveyed start point"), and the
+//! estimate is reported on that plane with a vertical variance of
+//! [`PLANE_VARIANCE_M2`] — small against the horizontal variances, so that the position
+//! NEES is in effect the horizontal one, but invertible so that it stays defined.
+//!
+//! # Initialisation
+//!
+//! Both papers start their filters at the known X(0): seed 001 step 1 draws the particles
+//! from "the distribution function of system noise" around X(0); seed 003 gives X(0) and
+//! P(0) without values. The prior is therefore `N(X(0), P(0))` with `P(0) = Q(T)` (one step's
+//! process noise) unless `initial_sigma` gives standard deviations, at the world's start
+//! time; the first batch is predicted to from there.
+
+use crate::core::rng::{StreamRng, TrialRng};
+use crate::core::{EnuFrame, GpsTime, System};
+use crate::fusion::estimator::{EpochOutcome, Estimate, Estimator};
+use crate::fusion::kalman::Ekf;
+use crate::fusion::measurement::{MeasurementBatch, RangeMeasurement};
+use crate::fusion::models::{
+    PlaneTurning, ProcessModel, Pseudoranges, RangeRow, Singer5, StateLayout,
+};
+use crate::fusion::particle::{ParticleBuffer, ParticleFilter, PseudorangeLikelihood, Resampling};
+use crate::fusion::preprocess::FrontEnd;
+use crate::fusion::selection::ModeSelection;
+use crate::fusion::wls;
+use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+use serde::Deserialize;
+
+/// The vertical variance (m²) reported by a 2-D estimator on its plane.
+pub const PLANE_VARIANCE_M2: f64 = 1e-2;
+
+/// Number of clock states appended to a paper model's motion states.
+pub const N_CLOCKS: usize = wls::MAX_CLOCKS;
+
+/// Whether the receiver knows its clock offsets.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ClockMode {
+    /// The offsets the world's emitters declare, exactly (seed 001's 5-state reading).
+    Known,
+    /// One unknown clock per system (seed 003 eqs. 1–3).
+    Estimated,
+}
+
+fn d_alpha() -> f64 {
+    0.1
+}
+fn d_accel_var() -> f64 {
+    3.5
+}
+fn d_singer_x0() -> [f64; 5] {
+    [4000.0, 14.0, 0.0, 11.0, 0.0]
+}
+fn d_known() -> ClockMode {
+    ClockMode::Known
+}
+fn d_estimated() -> ClockMode {
+    ClockMode::Estimated
+}
+fn d_attenuation() -> f64 {
+    0.03
+}
+fn d_turn() -> f64 {
+    0.1
+}
+fn d_turn_noise() -> f64 {
+    0.01
+}
+fn d_turn_x0() -> [f64; 9] {
+    [0.0, 0.0, 0.0, 4.0, -4.0, 4.0, 0.5, -0.5, -0.5]
+}
+fn d_clock_noise() -> f64 {
+    0.0
+}
+
+/// `[estimator.process]`: the process model an estimator runs. Absent, or
+/// `model = "pva_clock"`, is seed 000's position–velocity–acceleration + clock model of
+/// the filter family ([`crate::fusion::family`]).
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(tag = "model", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ProcessSpec {
+    /// Seed 000's 12-state model (the filter family's default).
+    PvaClock {},
+    /// Seed 001: uniform motion in x, Singer in y ([`Singer5`]), on the plane.
+    #[serde(rename = "singer_2d")]
+    Singer2d {
+        /// Manoeuvre frequency α (1/s); default 0.1.
+        #[serde(default = "d_alpha")]
+        alpha_per_s: f64,
+        /// Acceleration variance σ_a² ((m/s²)²); default 3.5.
+        #[serde(default = "d_accel_var")]
+        accel_var_m2ps4: f64,
+        /// X(0) = [x, ẋ, y, ẏ, ÿ] (ENU m, m/s, m/s²); default [4000, 14, 0, 11, 0].
+        #[serde(default = "d_singer_x0")]
+        initial_state: [f64; 5],
+        /// Standard deviations of the prior around X(0); default √diag of P(0) = Q(T).
+        #[serde(default)]
+        initial_sigma: Option<[f64; 5]>,
+        /// `known` (default) or `estimated`.
+        #[serde(default = "d_known")]
+        clocks: ClockMode,
+        /// Random-walk PSD of estimated clocks (m²/s); default 0 (constant offsets).
+        #[serde(default = "d_clock_noise")]
+        clock_noise_m2ps: f64,
+    },
+    /// Seed 003: the 3-D plane variable-speed turning model ([`PlaneTurning`]).
+    PlaneTurning {
+        /// Attenuation coefficient α (1/s); default 0.03.
+        #[serde(default = "d_attenuation")]
+        attenuation_per_s: f64,
+        /// Angular velocity ω (rad/s); default 0.1.
+        #[serde(default = "d_turn")]
+        turn_rate_rad_per_s: f64,
+        /// Acceleration noise variance per step ((m/s²)²); default 0.01.
+        #[serde(default = "d_turn_noise")]
+        noise_var_m2ps4: f64,
+        /// X(0) = [p, v, a] (ENU); default [0, 0, 0, 4, −4, 4, 0.5, −0.5, −0.5].
+        #[serde(default = "d_turn_x0")]
+        initial_state: [f64; 9],
+        /// Standard deviations of the prior around X(0); default √diag of P(0) = Q(T).
+        #[serde(default)]
+        initial_sigma: Option<[f64; 9]>,
+        /// `estimated` (default) or `known`.
+        #[serde(default = "d_estimated")]
+        clocks: ClockMode,
+        /// Random-walk PSD of estimated clocks (m²/s); default 0 (constant offsets).
+        #[serde(default = "d_clock_noise")]
+        clock_noise_m2ps: f64,
+    },
+}
+
+impl ProcessSpec {
+    /// The name a world file writes.
+    pub fn label(&self) -> &'static str {
+        match self {
+            ProcessSpec::PvaClock {} => "pva_clock",
+            ProcessSpec::Singer2d { .. } => "singer_2d",
+            ProcessSpec::PlaneTurning { .. } => "plane_turning",
+        }
+    }
+}
+
+/// Which filter a paper estimator runs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PaperFilter {
+    /// The EKF (Joseph form), updated range by range.
+    Ekf,
+    /// The SIR particle filter of seed 001 §4 / seed 003 §2.3: `particles`, the resampling
+    /// scheme, and the fraction θ of N below which N_eff triggers resampling.
+    Pf {
+        particles: usize,
+        resampling: Resampling,
+        neff_threshold: f64,
+    },
+}
+
+/// What a paper estimator needs from its world.
+pub struct PaperContext<'a> {
+    pub frame: &'a EnuFrame,
+    pub start: GpsTime,
+    /// The platform's true start (ENU): the plane of the 2-D model.
+    pub start_enu_m: Vector3<f64>,
+    /// The clock term of each system's ranges the world declares (for `clocks = "known"`).
+    pub emitter_clocks_m: Option<[f64; N_CLOCKS]>,
+    pub rng: &'a TrialRng,
+}
+
+/// A motion model with `N − NM` clock states appended, each a random walk of PSD
+/// `clock_q[s]` (m²/s).
+#[derive(Clone, Copy, Debug)]
+pub struct WithClocks<P, const NM: usize> {
+    motion: P,
+    clock_q: [f64; N_CLOCKS],
+}
+
+impl<P: ProcessModel<NM>, const NM: usize, const N: usize> ProcessModel<N> for WithClocks<P, NM> {
+    fn f(&self, x: &SVector<f64, N>, dt_s: f64) -> SVector<f64, N> {
+        let m = SVector::<f64, NM>::from_fn(|i, _| x[i]);
+        let fm = self.motion.f(&m, dt_s);
+        let mut y = *x;
+        y.fixed_rows_mut::<NM>(0).copy_from(&fm);
+        y
+    }
+    fn jacobian(&self, x: &SVector<f64, N>, dt_s: f64) -> SMatrix<f64, N, N> {
+        let m = SVector::<f64, NM>::from_fn(|i, _| x[i]);
+        let mut j = SMatrix::<f64, N, N>::identity();
+        j.fixed_view_mut::<NM, NM>(0, 0)
+            .copy_from(&self.motion.jacobian(&m, dt_s));
+        j
+    }
+    fn q(&self, x: &SVector<f64, N>, dt_s: f64) -> SMatrix<f64, N, N> {
+        let m = SVector::<f64, NM>::from_fn(|i, _| x[i]);
+        let mut q = SMatrix::<f64, N, N>::zeros();
+        q.fixed_view_mut::<NM, NM>(0, 0)
+            .copy_from(&self.motion.q(&m, dt_s));
+        for (s, psd) in self.clock_q.iter().enumerate() {
+            if NM + s < N {
+                q[(NM + s, NM + s)] = psd * dt_s.max(0.0);
+            }
+        }
+        q
+    }
+}
+
+enum Core<const N: usize> {
+    Ekf(Box<Ekf<N>>),
+    Pf(Box<ParticleFilter<N>>),
+}
+
+/// A paper model with its filter, driven by the engine (see the module documentation).
+pub struct PaperEstimator<P, const NM: usize, const N: usize> {
+    name: String,
+    model: WithClocks<P, NM>,
+    layout: StateLayout,
+    frame: EnuFrame,
+    /// The plane's height (2-D models), reported as the estimate's up coordinate.
+    plane_up_m: Option<f64>,
+    core: Core<N>,
+    last_t: GpsTime,
+    clocks: ClockMode,
+    /// Which systems' clocks have been initialised (estimated clocks).
+    clock_ready: [bool; N_CLOCKS],
+    front: FrontEnd,
+    rng: StreamRng,
+    lik: PseudorangeLikelihood,
+    rows: Vec<(RangeRow, f64)>,
+    geometry: Vec<(Vector3<f64>, usize)>,
+    /// True once the filter produced a non-finite state; it then reports nothing.
+    failed: bool,
+}
+
+/// Builds the estimator for a paper `spec` (not [`ProcessSpec::PvaClock`]).
+///
+/// # Errors
+/// An unusable parameter, or `clocks = "known"` in a world without emitters.
+pub fn build(
+    name: &str,
+    spec: &ProcessSpec,
+    filter: PaperFilter,
+    systems: &[System],
+    selection: Option<&ModeSelection>,
+    ctx: &PaperContext<'_>,
+) -> Result<Box<dyn Estimator>, String> {
+    match spec {
+        ProcessSpec::PvaClock {} => {
+            Err("process model 'pva_clock' is built by the filter family".into())
+        }
+        ProcessSpec::Singer2d {
+            alpha_per_s,
+            accel_var_m2ps4,
+            initial_state,
+            initial_sigma,
+            clocks,
+            clock_noise_m2ps,
+        } => {
+            let motion = Singer5::new(*alpha_per_s, *accel_var_m2ps4)
+                .map_err(|e| format!("process: {e}"))?;
+            let layout = layout([Some(0), Some(2), None], [Some(1), Some(3), None], 5);
+            let est = PaperEstimator::<Singer5, 5, { 5 + N_CLOCKS }>::new(
+                name,
+                motion,
+                layout,
+                SVector::from(*initial_state),
+                initial_sigma.map(SVector::from),
+                *clocks,
+                *clock_noise_m2ps,
+                Some(ctx.start_enu_m.z),
+                filter,
+                systems,
+                selection,
+                ctx,
+            )?;
+            Ok(Box::new(est))
+        }
+        ProcessSpec::PlaneTurning {
+            attenuation_per_s,
+            turn_rate_rad_per_s,
+            noise_var_m2ps4,
+            initial_state,
+            initial_sigma,
+            clocks,
+            clock_noise_m2ps,
+        } => {
+            let motion =
+                PlaneTurning::new(*attenuation_per_s, *turn_rate_rad_per_s, *noise_var_m2ps4)
+                    .map_err(|e| format!("process: {e}"))?;
+            let layout = layout([Some(0), Some(1), Some(2)], [Some(3), Some(4), Some(5)], 9);
+            let est = PaperEstimator::<PlaneTurning, 9, { 9 + N_CLOCKS }>::new(
+                name,
+                motion,
+                layout,
+                SVector::from(*initial_state),
+                initial_sigma.map(SVector::from),
+                *clocks,
+                *clock_noise_m2ps,
+                None,
+                filter,
+                systems,
+                selection,
+                ctx,
+            )?;
+            Ok(Box::new(est))
+        }
+    }
+}
+
+fn layout(pos: [Option<usize>; 3], vel: [Option<usize>; 3], nm: usize) -> StateLayout {
+    StateLayout {
+        pos,
+        vel,
+        clock: std::array::from_fn(|s| Some(nm + s)),
+        isb: [None; wls::MAX_CLOCKS],
+        drift: None,
+    }
+}
+
+impl<P, const NM: usize, const N: usize> PaperEstimator<P, NM, N>
+where
+    P: ProcessModel<NM> + Copy + Send,
+{
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        name: &str,
+        motion: P,
+        layout: StateLayout,
+        x0_motion: SVector<f64, NM>,
+        sigma0: Option<SVector<f64, NM>>,
+        clocks: ClockMode,
+        clock_noise_m2ps: f64,
+        plane_up_m: Option<f64>,
+        filter: PaperFilter,
+        systems: &[System],
+        selection: Option<&ModeSelection>,
+        ctx: &PaperContext<'_>,
+    ) -> Result<Self, String> {
+        if N != NM + N_CLOCKS {
+            return Err(format!("state dimension {N} ≠ {NM} + {N_CLOCKS}"));
+        }
+        if !x0_motion.iter().all(|v| v.is_finite()) {
+            return Err("process.initial_state: expected finite numbers".into());
+        }
+        if let Some(s) = &sigma0 {
+            if !s.iter().all(|v| v.is_finite() && *v >= 0.0) {
+                return Err("process.initial_sigma: expected finite values ≥ 0".into());
+            }
+        }
+        if !(clock_noise_m2ps.is_finite() && clock_noise_m2ps >= 0.0) {
+            return Err(format!(
+                "process.clock_noise_m2ps: expected a finite PSD ≥ 0, got {clock_noise_m2ps}"
+            ));
+        }
+        let known = match clocks {
+            ClockMode::Known => Some(ctx.emitter_clocks_m.ok_or(
+                "process.clocks: \"known\" takes the clock offsets of [sensors.emitters], which this world does not have; use clocks = \"estimated\"",
+            )?),
+            ClockMode::Estimated => None,
+        };
+        let q_clock = if known.is_some() {
+            0.0
+        } else {
+            clock_noise_m2ps
+        };
+        let model = WithClocks {
+            motion,
+            clock_q: [q_clock; N_CLOCKS],
+        };
+        let mut x0 = SVector::<f64, N>::zeros();
+        x0.fixed_rows_mut::<NM>(0).copy_from(&x0_motion);
+        let mut p0 = SMatrix::<f64, N, N>::zeros();
+        match sigma0 {
+            Some(s) => {
+                for i in 0..NM {
+                    p0[(i, i)] = s[i] * s[i];
+                }
+            }
+            None => p0
+                .fixed_view_mut::<NM, NM>(0, 0)
+                .copy_from(&motion.q(&x0_motion, 1.0)),
+        }
+        if let Some(k) = known {
+            for s in 0..N_CLOCKS {
+                x0[NM + s] = k[s];
+            }
+        }
+        let mut rng = ctx.rng.stream(&format!("estimator/{name}/paper"));
+        let core = match filter {
+            PaperFilter::Ekf => Core::Ekf(Box::new(Ekf::new(x0, p0).map_err(|e| e.to_string())?)),
+            PaperFilter::Pf {
+                particles,
+                resampling,
+                neff_threshold,
+            } => {
+                let buf = ParticleBuffer::<N>::new(particles).map_err(|e| e.to_string())?;
+                let mut pf = ParticleFilter::new(buf, resampling, neff_threshold)
+                    .map_err(|e| e.to_string())?;
+                pf.init_gaussian(&x0, &p0, &mut rng)
+                    .map_err(|e| e.to_string())?;
+                Core::Pf(Box::new(pf))
+            }
+        };
+        Ok(Self {
+            name: name.to_string(),
+            model,
+            layout,
+            frame: ctx.frame.clone(),
+            plane_up_m,
+            core,
+            last_t: ctx.start,
+            clocks,
+            clock_ready: [known.is_some(); N_CLOCKS],
+            front: FrontEnd::new(systems, &[], selection, None)?,
+            rng,
+            lik: PseudorangeLikelihood::with_capacity(64),
+            rows: Vec::with_capacity(64),
+            geometry: Vec::with_capacity(64),
+            failed: false,
+        })
+    }
+
+    /// The ENU position of a state (the plane's height for a 2-D model).
+    fn position_enu(&self, x: &SVector<f64, N>) -> Vector3<f64> {
+        Vector3::from_fn(|a, _| match self.layout.pos[a] {
+            Some(k) => x[k],
+            None => self.plane_up_m.unwrap_or(0.0),
+        })
+    }
+
+    fn moments(&self) -> (SVector<f64, N>, SMatrix<f64, N, N>) {
+        match &self.core {
+            Core::Ekf(f) => (*f.state(), *f.covariance()),
+            Core::Pf(p) => (p.mean(), p.covariance()),
+        }
+    }
+
+    fn estimate(&self, t: GpsTime) -> Option<Estimate> {
+        if self.failed {
+            return None;
+        }
+        let (x, p) = self.moments();
+        let pos = self.position_enu(&x);
+        let vel = Vector3::from_fn(|a, _| self.layout.vel[a].map_or(0.0, |k| x[k]));
+        let cov_enu = Matrix3::from_fn(|i, j| match (self.layout.pos[i], self.layout.pos[j]) {
+            (Some(a), Some(b)) => p[(a, b)],
+            (None, None) if i == j => PLANE_VARIANCE_M2,
+            _ => 0.0,
+        });
+        let cov_enu = floor_psd(&cov_enu, COV_FLOOR_M2);
+        let r = self.frame.rotation().transpose();
+        Some(Estimate {
+            t,
+            pos_ecef_m: self.frame.ecef_of_enu(&pos),
+            vel_ecef_mps: Some(self.frame.ecef_vector_of_enu(&vel)),
+            cov_pos_m2: r * cov_enu * r.transpose(),
+        })
+    }
+
+    /// Fills `rows` with the admitted ranges, emitter positions in ENU.
+    fn load_rows(&mut self) {
+        self.rows.clear();
+        for m in &self.front.ranges {
+            let m: &RangeMeasurement = m;
+            let mut row = RangeRow::from(m);
+            row.emitter_pos_m = self.frame.enu_of_ecef(&m.emitter_pos_ecef_m);
+            row.emitter_vel_mps = Vector3::zeros();
+            self.rows.push((row, m.pseudorange_m));
+        }
+    }
+
+    /// Initialises the clock of every system that has ranges this epoch and no clock yet
+    /// (estimated clocks only).
+    fn initialise_clocks(&mut self) {
+        if self.clocks == ClockMode::Known {
+            return;
+        }
+        for s in 0..N_CLOCKS {
+            if self.clock_ready[s] {
+                continue;
+            }
+            let sys = wls::SYSTEMS[s];
+            let n = self.rows.iter().filter(|(r, _)| r.system == sys).count();
+            if n == 0 {
+                continue;
+            }
+            self.clock_ready[s] = true;
+            let k = NM + s;
+            let mean_residual = |pos: &Vector3<f64>| {
+                let mut sum = 0.0;
+                let mut var = 0.0;
+                for (r, z) in self.rows.iter().filter(|(r, _)| r.system == sys) {
+                    sum += z - (r.emitter_pos_m - pos).norm();
+                    var += r.sigma_m * r.sigma_m;
+                }
+                (sum / n as f64, var / (n * n) as f64)
+            };
+            match &mut self.core {
+                Core::Ekf(f) => {
+                    let (mut x, mut p) = (*f.state(), *f.covariance());
+                    let (b, var) = mean_residual(&position_of(&self.layout, self.plane_up_m, &x));
+                    x[k] = b;
+                    for i in 0..N {
+                        p[(i, k)] = 0.0;
+                        p[(k, i)] = 0.0;
+                    }
+                    p[(k, k)] = var;
+                    if let Ok(e) = Ekf::new(x, p) {
+                        **f = e;
+                    }
+                }
+                Core::Pf(pf) => {
+                    use rand::Rng;
+                    let len = pf.particles().len();
+                    for i in 0..len {
+                        let b = pf.particles();
+                        let pos = Vector3::from_fn(|a, _| match self.layout.pos[a] {
+                            Some(c) => b.column(c)[i],
+                            None => self.plane_up_m.unwrap_or(0.0),
+                        });
+                        let (mean, var) = mean_residual(&pos);
+                        let w: f64 = self.rng.sample(rand_distr::StandardNormal);
+                        pf.particles_mut().column_mut(k)[i] = mean + var.sqrt() * w;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The smallest variance (m²) a reported position covariance has along any axis.
+///
+/// A particle cloud that resampling has collapsed onto one or two particles has a weighted
+/// covariance that is zero along some direction, or slightly indefinite after rounding, and
+/// its inverse (the NEES) would be meaningless or negative. Flooring the eigenvalues at
+/// (1 mm)² keeps the NEES defined and positive; it stays huge for a collapsed cloud that
+/// is far from the truth, which is what the NEES should say about it.
+pub const COV_FLOOR_M2: f64 = 1e-6;
+
+/// `m` symmetrised, with its eigenvalues raised to at least `floor`.
+fn floor_psd(m: &Matrix3<f64>, floor: f64) -> Matrix3<f64> {
+    let sym = (m + m.transpose()) * 0.5;
+    let eig = nalgebra::SymmetricEigen::new(sym);
+    if eig.eigenvalues.iter().all(|l| *l >= floor) {
+        return sym;
+    }
+    let d = Matrix3::from_diagonal(&eig.eigenvalues.map(|l| l.max(floor)));
+    eig.eigenvectors * d * eig.eigenvectors.transpose()
+}
+
+fn position_of<const N: usize>(
+    layout: &StateLayout,
+    plane_up_m: Option<f64>,
+    x: &SVector<f64, N>,
+) -> Vector3<f64> {
+    Vector3::from_fn(|a, _| match layout.pos[a] {
+        Some(k) => x[k],
+        None => plane_up_m.unwrap_or(0.0),
+    })
+}
+
+impl<P, const NM: usize, const N: usize> Estimator for PaperEstimator<P, NM, N>
+where
+    P: ProcessModel<NM> + Copy + Send,
+{
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn consumes(&self, source: &str) -> bool {
+        self.front.consumes(source)
+    }
+
+    fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
+        let mut out = EpochOutcome::default();
+        if self.failed {
+            return out;
+        }
+        let rx = self.estimate(self.last_t).map(|e| e.pos_ecef_m);
+        self.front.admit(batch, rx.as_ref(), &mut out);
+        let dt = batch.t.seconds_since(self.last_t).max(0.0);
+        self.last_t = batch.t;
+        let predicted = match &mut self.core {
+            Core::Ekf(f) => f.predict(&self.model, dt).is_ok(),
+            Core::Pf(p) => p.predict(&self.model, dt, &mut self.rng).is_ok(),
+        };
+        if !predicted {
+            self.failed = true;
+            out.numerical_failure = true;
+            return out;
+        }
+        self.load_rows();
+        self.initialise_clocks();
+        match &mut self.core {
+            Core::Ekf(f) => {
+                for (row, z) in &self.rows {
+                    let Ok(pr) = Pseudoranges::<N, 1>::new(self.layout, [*row]) else {
+                        out.rejected += 1;
+                        continue;
+                    };
+                    let rep = f.update(&pr, &SVector::<f64, 1>::new(*z));
+                    out.used += rep.used;
+                    out.rejected += rep.rejected;
+                    if let crate::fusion::ekf11::UpdateOutcome::Accepted { nis } = rep.outcome {
+                        if nis.is_finite() {
+                            out.nis_sum += nis;
+                            out.nis_count += 1;
+                        }
+                    }
+                }
+            }
+            Core::Pf(p) => {
+                if !self.rows.is_empty() {
+                    self.lik.clear(self.layout.pos);
+                    for (row, z) in &self.rows {
+                        self.lik.push(&self.layout, row, *z);
+                    }
+                    let up = p.update_soa(&self.lik, &mut self.rng);
+                    if up.degenerate {
+                        out.rejected += self.rows.len() as u32;
+                    } else {
+                        out.used += self.rows.len() as u32;
+                    }
+                }
+            }
+        }
+        let (x, p) = self.moments();
+        if !(x.iter().all(|v| v.is_finite()) && p.iter().all(|v| v.is_finite())) {
+            self.failed = true;
+            out.numerical_failure = true;
+            return out;
+        }
+        out.estimate = self.estimate(batch.t);
+        if let Some(e) = &out.estimate {
+            out.gdop = crate::fusion::estimator::gdop_of(
+                &e.pos_ecef_m,
+                &self.front.ranges,
+                &mut self.geometry,
+            );
+        }
+        out
+    }
+
+    fn latest(&self) -> Option<Estimate> {
+        self.estimate(self.last_t)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The clock-augmented model leaves the motion block to the motion model and adds a
+    /// random walk to each clock.
+    #[test]
+    fn clocks_are_appended_as_random_walks() {
+        let m = WithClocks {
+            motion: Singer5::new(0.1, 3.5).unwrap(),
+            clock_q: [2.0; N_CLOCKS],
+        };
+        let x = SVector::<f64, 9>::from_fn(|i, _| i as f64);
+        let f = ProcessModel::<9>::jacobian(&m, &x, 1.0);
+        let inner = Singer5::new(0.1, 3.5)
+            .unwrap()
+            .jacobian(&SVector::<f64, 5>::zeros(), 1.0);
+        assert_eq!(f.fixed_view::<5, 5>(0, 0).into_owned(), inner);
+        assert_eq!(f[(7, 7)], 1.0);
+        let q = ProcessModel::<9>::q(&m, &x, 0.5);
+        assert_eq!(q[(8, 8)], 1.0);
+        assert_eq!(q[(0, 0)], 0.0);
+        let y = ProcessModel::<9>::f(&m, &x, 1.0);
+        assert_eq!(y[0], 0.0 + 1.0);
+        assert_eq!(y[6], 6.0);
+    }
+}
