@@ -97,6 +97,9 @@ preset = "seed000-gps"
 [[estimator]]
 preset = "seed003-ekf"
 sources = ["gps", "bds"]
+# The preset's plane-turning model is seed 003's simulated aircraft; a car on real
+# orbits takes the PVA + clock model with the same seamless scheme.
+process = { model = "pva_clock" }
 
 [[estimator]]
 preset = "seed004-rekf"

@@ -120,7 +120,10 @@ fn abstract_worlds_load_and_run_the_papers_rows() {
                 .iter()
                 .all(|x| x.nees_pos.is_some_and(|n| n >= 0.0)));
             if file.starts_with("seed003") {
-                assert!(e.epochs.iter().all(|x| x.mode == Some("GPS+BDS+DTMB")));
+                assert!(e
+                    .epochs
+                    .iter()
+                    .all(|x| x.mode.as_deref() == Some("GPS+BDS+DTMB")));
                 assert!(e.epochs.iter().all(|x| x.used == 6));
             }
         }
@@ -215,10 +218,10 @@ fn seed003_seamless_mode_follows_gps_outages() {
             .find(|e| (e.t_s - t).abs() < 1e-9)
             .unwrap()
     };
-    assert_eq!(at(20.0).mode, Some("GPS+BDS+DTMB"));
-    assert_eq!(at(40.0).mode, Some("DTMB"));
+    assert_eq!(at(20.0).mode.as_deref(), Some("GPS+BDS+DTMB"));
+    assert_eq!(at(40.0).mode.as_deref(), Some("DTMB"));
     assert_eq!(at(40.0).used, 1);
-    assert_eq!(at(60.0).mode, Some("GPS+BDS+DTMB"));
+    assert_eq!(at(60.0).mode.as_deref(), Some("GPS+BDS+DTMB"));
     assert!(ekf.epochs.iter().all(|e| !e.numerical_failure));
 }
 
