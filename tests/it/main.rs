@@ -17,6 +17,7 @@ mod montecarlo;
 mod motion_models;
 mod propagation;
 mod report;
+mod reproductions;
 mod reproductions_abstract;
 mod skeleton;
 mod tcofdm;
