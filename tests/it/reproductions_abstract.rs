@@ -132,7 +132,7 @@ fn abstract_worlds_load_and_run_the_papers_rows() {
 
 /// Seed 001, Table 1: twenty particles track better than ten. The paper's run is one
 /// realisation; the ordering is checked on the mean over 200 trials (the per-trial means
-/// spread from tens of metres to over a kilometre, see docs/reproductions-abstract.md).
+/// spread from tens of metres to over a kilometre, see docs/reproductions.md).
 /// The simulated mean error is within a factor of 2 of the paper's for both rows.
 #[test]
 fn seed001_twenty_particles_beat_ten() {
@@ -167,7 +167,7 @@ fn seed001_twenty_particles_beat_ten() {
 /// consistent (mean NEES ≈ 3) and therefore close to the optimal filter, so no particle
 /// filter can beat it on average; the bootstrap filters' sample impoverishment makes them
 /// worse, and they approach the EKF as the particle count grows
-/// (docs/reproductions-abstract.md has the evidence). The EKF's mean error is within a
+/// (docs/reproductions.md has the evidence). The EKF's mean error is within a
 /// factor of 2 of the paper's.
 #[test]
 fn seed003_more_particles_help_and_the_ekf_is_consistent() {
