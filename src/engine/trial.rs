@@ -43,6 +43,10 @@ pub struct EpochRecord {
     pub pos_sigma_m: Option<f64>,
     /// Mean NIS of the updates used this epoch.
     pub mean_nis: Option<f64>,
+    /// Summed NIS of the updates used this epoch, χ² with `nis_dof` degrees of freedom
+    /// for a consistent filter.
+    pub nis: Option<f64>,
+    pub nis_dof: u32,
     /// Measurements an innovation gate rejected as outliers.
     pub rejected_gate: u32,
     /// The integration mode chosen this epoch (mode-selecting estimators only). Borrowed
@@ -197,6 +201,8 @@ pub fn simulate(frame: &EnuFrame, start: GpsTime, setup: &mut TrialSetup) -> Vec
                     .map(|e| e.cov_pos_m2.trace().max(0.0).sqrt())
                     .filter(|v| v.is_finite()),
                 mean_nis: (out.nis_count > 0).then(|| out.nis_sum / f64::from(out.nis_count)),
+                nis: (out.nis_dof > 0).then_some(out.nis_sum),
+                nis_dof: out.nis_dof,
                 rejected_gate: out.rejected_gate,
                 mode: out.mode.map(Cow::Borrowed),
             });

@@ -31,6 +31,9 @@ pub struct EpochOutcome {
     /// (with `nis_count`, their mean: about the measurement dimension when consistent).
     pub nis_sum: f64,
     pub nis_count: u32,
+    /// The summed dimensions of the updates in `nis_sum`: its expectation for a
+    /// consistent filter, and the degrees of freedom of its χ² distribution.
+    pub nis_dof: u32,
     /// Of `rejected`, how many an innovation gate refused as outliers (the rest were
     /// refused for invalid input or a numerical failure).
     pub rejected_gate: u32,
@@ -122,14 +125,15 @@ impl EkfEstimator {
     }
 }
 
-/// Adds one scalar or vector update's outcome to the epoch's counts.
-fn tally_outcome(out: &mut EpochOutcome, o: UpdateOutcome) {
+/// Adds one update's outcome (of dimension `dim`) to the epoch's counts.
+fn tally_outcome(out: &mut EpochOutcome, o: UpdateOutcome, dim: u32) {
     match o {
         UpdateOutcome::Accepted { nis } => {
             out.used += 1;
             if nis.is_finite() {
                 out.nis_sum += nis;
                 out.nis_count += 1;
+                out.nis_dof += dim;
             }
         }
         UpdateOutcome::Rejected { reason, .. } => {
@@ -232,12 +236,12 @@ impl Estimator for EkfEstimator {
         for m in &self.front.ranges {
             let r = self.ekf.update_range(m);
             for o in std::iter::once(r.range).chain(r.rate) {
-                tally_outcome(&mut out, o);
+                tally_outcome(&mut out, o, 1);
             }
         }
         for p in self.front.position_fixes(batch) {
             let o = self.ekf.update_position(p);
-            tally_outcome(&mut out, o);
+            tally_outcome(&mut out, o, 3);
         }
         out.gdop = gdop_of(
             &self.ekf.position_ecef(),

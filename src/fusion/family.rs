@@ -250,14 +250,15 @@ where
     }
 }
 
-/// Adds what one update did to the epoch's outcome.
-fn tally(out: &mut EpochOutcome, rep: &UpdateReport) {
+/// Adds what one update (of dimension `dim`) did to the epoch's outcome.
+fn tally(out: &mut EpochOutcome, rep: &UpdateReport, dim: u32) {
     out.used += rep.used;
     out.rejected += rep.rejected;
     match rep.outcome {
         UpdateOutcome::Accepted { nis } if nis.is_finite() => {
             out.nis_sum += nis;
             out.nis_count += 1;
+            out.nis_dof += dim;
         }
         UpdateOutcome::Rejected {
             reason: RejectReason::Gate,
@@ -501,7 +502,7 @@ impl Core {
                 }
             }
         };
-        tally(out, &rep);
+        tally(out, &rep, M as u32);
     }
 
     fn moments(&self) -> (State, Cov) {

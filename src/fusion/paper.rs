@@ -639,6 +639,7 @@ where
                         if nis.is_finite() {
                             out.nis_sum += nis;
                             out.nis_count += 1;
+                            out.nis_dof += 1;
                         }
                     }
                 }

@@ -79,6 +79,10 @@ pub struct EstimatorSummary {
     pub rpe_aligned_m: Option<TrajectoryStats>,
     /// Position NEES (3 degrees of freedom) against its χ² bands over the trials.
     pub nees: Option<ConsistencySummary>,
+    /// NIS (summed over each epoch's updates, with their summed dimensions as degrees of
+    /// freedom) against its χ² bands. Particle filters have no innovation covariance and
+    /// report none.
+    pub nis: Option<ConsistencySummary>,
     /// Share of scored epochs in each integration mode (mode-selecting estimators only).
     pub modes: BTreeMap<String, f64>,
     /// How much each statistic varies from trial to trial: the 95 % confidence interval
@@ -275,6 +279,7 @@ fn estimator_summary(name: &str, k: usize, trials: &[TrialResult]) -> EstimatorS
     let mut moded = 0usize;
     // NEES grouped by epoch time across trials (every trial has the same time grid).
     let mut nees_by_t: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
+    let mut nis_by_t: BTreeMap<u64, Vec<(f64, usize)>> = BTreeMap::new();
     let (mut ate, mut ate_al, mut rpe, mut rpe_al) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut per_trial: [Vec<f64>; 8] = Default::default();
@@ -286,6 +291,7 @@ fn estimator_summary(name: &str, k: usize, trials: &[TrialResult]) -> EstimatorS
         // One NEES per time per trial: the last record of an instant with several
         // batches (GNSS and FM at the same second), as the TUM tracks below keep.
         let mut trial_nees: BTreeMap<u64, f64> = BTreeMap::new();
+        let mut trial_nis: BTreeMap<u64, (f64, usize)> = BTreeMap::new();
         for ep in &trace.epochs {
             epochs += 1;
             failures += usize::from(ep.numerical_failure);
@@ -302,6 +308,12 @@ fn estimator_summary(name: &str, k: usize, trials: &[TrialResult]) -> EstimatorS
                 nees_n += 1;
                 trial_nees.insert(ep.t_s.to_bits(), n);
             }
+            if let Some(n) = ep.nis {
+                // Several batches at one instant: their NIS add, as do their dimensions.
+                let slot = trial_nis.entry(ep.t_s.to_bits()).or_insert((0.0, 0));
+                slot.0 += n;
+                slot.1 += ep.nis_dof as usize;
+            }
             if let Some(m) = &ep.mode {
                 *modes.entry(m.to_string()).or_default() += 1;
                 moded += 1;
@@ -309,6 +321,9 @@ fn estimator_summary(name: &str, k: usize, trials: &[TrialResult]) -> EstimatorS
         }
         for (t, n) in trial_nees {
             nees_by_t.entry(t).or_default().push(n);
+        }
+        for (t, n) in trial_nis {
+            nis_by_t.entry(t).or_default().push(n);
         }
         let tr = track(trace);
         let a = crate::metrics::ate_errors(&tr.truth, &tr.est, Alignment::None);
@@ -366,6 +381,7 @@ fn estimator_summary(name: &str, k: usize, trials: &[TrialResult]) -> EstimatorS
         rpe_m: TrajectoryStats::from_errors(&mut rpe),
         rpe_aligned_m: TrajectoryStats::from_errors(&mut rpe_al),
         nees: nees_summary(&nees_epochs, 3),
+        nis: crate::metrics::nis_summary(&nis_by_t.into_values().collect::<Vec<_>>()),
         modes: modes
             .into_iter()
             .map(|(m, n)| (m, n as f64 / moded.max(1) as f64))

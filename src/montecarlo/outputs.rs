@@ -71,6 +71,7 @@ const PARQUET_SCHEMA: &str = "message hybridnav_epochs {
   OPTIONAL DOUBLE nees_pos;
   OPTIONAL DOUBLE pos_sigma_m;
   OPTIONAL DOUBLE mean_nis;
+  OPTIONAL DOUBLE nis;
   OPTIONAL DOUBLE gdop;
   OPTIONAL BYTE_ARRAY mode (UTF8);
   REQUIRED INT32 n_gps;
@@ -78,6 +79,7 @@ const PARQUET_SCHEMA: &str = "message hybridnav_epochs {
   REQUIRED INT32 used;
   REQUIRED INT32 rejected;
   REQUIRED INT32 rejected_gate;
+  REQUIRED INT32 nis_dof;
   REQUIRED BOOLEAN numerical_failure;
 }";
 
@@ -160,9 +162,9 @@ pub fn trials_parquet(
     let new_columns = || -> Vec<Column> {
         let mut c = vec![Column::I64(Vec::new()), Column::Str(Vec::new())];
         c.extend((0..7).map(|_| Column::F64(Vec::new())));
-        c.extend((0..12).map(|_| Column::OptF64(Vec::new(), Vec::new())));
+        c.extend((0..13).map(|_| Column::OptF64(Vec::new(), Vec::new())));
         c.push(Column::OptStr(Vec::new(), Vec::new()));
-        c.extend((0..5).map(|_| Column::I32(Vec::new())));
+        c.extend((0..6).map(|_| Column::I32(Vec::new())));
         c.push(Column::Bool(Vec::new()));
         c
     };
@@ -224,6 +226,7 @@ pub fn trials_parquet(
                     e.nees_pos,
                     e.pos_sigma_m,
                     e.mean_nis,
+                    e.nis,
                     e.gdop,
                 ] {
                     next().push_opt(x);
@@ -237,7 +240,14 @@ pub fn trials_parquet(
                         None => d.push(0),
                     }
                 }
-                for x in [e.n_gps, e.n_bds, e.used, e.rejected, e.rejected_gate] {
+                for x in [
+                    e.n_gps,
+                    e.n_bds,
+                    e.used,
+                    e.rejected,
+                    e.rejected_gate,
+                    e.nis_dof,
+                ] {
                     if let Column::I32(v) = next() {
                         v.push(i32::try_from(x).unwrap_or(i32::MAX));
                     }

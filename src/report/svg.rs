@@ -71,11 +71,24 @@ pub fn ticks(lo: f64, hi: f64, target: usize) -> Vec<f64> {
     let step = [1.0, 2.0, 5.0, 10.0]
         .iter()
         .map(|m| m * mag)
-        .find(|s| *s >= raw)
+        // A relative tolerance, so that a range of 0.6 in three steps is 0.2 each, not 0.5.
+        .find(|s| *s >= raw * (1.0 - 1e-9))
         .unwrap_or(10.0 * mag);
     let start = (lo / step).ceil() as i64;
     let end = (hi / step).floor() as i64;
-    (start..=end).map(|k| k as f64 * step).collect()
+    // Multiples of the integer mantissa, scaled by an exact power of ten, so that tick
+    // values print as 0.6 rather than 0.6000000000000001.
+    let mantissa = (step / mag).round();
+    (start..=end)
+        .map(|k| {
+            let v = k as f64 * mantissa;
+            if mag < 1.0 {
+                v / (1.0 / mag).round()
+            } else {
+                v * mag
+            }
+        })
+        .collect()
 }
 
 fn fmt_tick(v: f64) -> String {

@@ -46,7 +46,10 @@ fn seed000_beihang_proposed_beats_gps_dtmb_beats_gps() {
     assert!(ate("Proposed") < ate("GPS+DTMB") && ate("GPS+DTMB") < ate("GPS"));
     // The mode-selecting estimator records its modes; both A and C occur on this campus.
     let modes = &get(&s, "Proposed").modes;
-    assert!(modes.contains_key("A") && modes.contains_key("C"), "{modes:?}");
+    assert!(
+        modes.contains_key("A") && modes.contains_key("C"),
+        "{modes:?}"
+    );
     let total: f64 = modes.values().sum();
     assert!((total - 1.0).abs() < 1e-9);
 }
