@@ -23,7 +23,7 @@ const STYLE: &str = "body{font-family:sans-serif;max-width:1100px;margin:1.5em a
 h1{font-size:1.5em}h2{font-size:1.15em;margin-top:1.8em;border-bottom:1px solid #ccc}
 table{border-collapse:collapse;font-size:0.9em}th,td{padding:3px 8px;border-bottom:1px solid #e3e3e3;text-align:right}
 th:first-child,td:first-child{text-align:left}th{background:#f3f3f3}.meta{color:#555;font-size:0.9em}
-figure{margin:0.8em 0}figcaption{color:#555;font-size:0.85em;max-width:860px}svg{max-width:100%;height:auto}";
+figure{margin:0.8em 0}.wide{overflow-x:auto}figcaption{color:#555;font-size:0.85em;max-width:860px}svg{max-width:100%;height:auto}";
 
 /// Renders the report of a run.
 ///
@@ -81,7 +81,7 @@ fn opt(v: Option<f64>, digits: usize) -> String {
 /// The papers' table: σ-levels of the 3-D and horizontal error, their spread, and the
 /// other statistics of `summary.json`.
 fn table(h: &mut String, s: &Summary) {
-    h.push_str("<h2>Position error</h2>\n<table><tr><th>estimator</th><th>1σ</th><th>2σ</th><th>3σ</th><th>mean</th><th>RMSE</th><th>max</th><th>mean ATE</th><th>RMSE ATE</th><th>mean RPE</th><th>RMSE RPE</th><th>RMSE ATE aligned</th><th>horiz. 1σ / 2σ / 3σ</th><th>mean NEES [95 % band]</th><th>mean NIS / dof</th><th>availability</th><th>modes</th></tr>\n");
+    h.push_str("<h2>Position error</h2>\n<div class=\"wide\"><table><tr><th>estimator</th><th>1σ</th><th>2σ</th><th>3σ</th><th>mean</th><th>RMSE</th><th>max</th><th>mean ATE</th><th>RMSE ATE</th><th>mean RPE</th><th>RMSE RPE</th><th>RMSE ATE aligned</th><th>horiz. 1σ / 2σ / 3σ</th><th>mean NEES [95 % band]</th><th>mean NIS / dof</th><th>availability</th><th>modes</th></tr>\n");
     for e in &s.estimators {
         let a = e.error_3d_m.as_ref();
         let b = e.error_h_m.as_ref();
@@ -122,7 +122,7 @@ fn table(h: &mut String, s: &Summary) {
             modes.join(", ")
         );
     }
-    h.push_str("</table>\n<p class=\"meta\">Metres. σ-levels are the 68.27/95.45/99.73 % percentiles of the 3-D error over every epoch of every trial (seed 000's convention). ATE and RPE follow the TUM benchmark in ECEF without alignment, RPE over Δ = 1 s, as seed 000 computes them; the aligned ATE first fits each trial's trajectory to the truth by a rigid (Horn) transform. NEES is of the position (3 degrees of freedom, 3 for a consistent filter) with the two-sided 95 % χ² band of its mean; NIS is summed over each epoch's updates, against the summed dimensions (its expectation for a consistent filter; particle filters have none).</p>\n");
+    h.push_str("</table></div>\n<p class=\"meta\">Metres. σ-levels are the 68.27/95.45/99.73 % percentiles of the 3-D error over every epoch of every trial (seed 000's convention). ATE and RPE follow the TUM benchmark in ECEF without alignment, RPE over Δ = 1 s, as seed 000 computes them; the aligned ATE first fits each trial's trajectory to the truth by a rigid (Horn) transform. NEES is of the position (3 degrees of freedom, 3 for a consistent filter) with the two-sided 95 % χ² band of its mean; NIS is summed over each epoch's updates, against the summed dimensions (its expectation for a consistent filter; particle filters have none).</p>\n");
     across(h, s);
 }
 
@@ -151,7 +151,7 @@ fn across(h: &mut String, s: &Summary) {
             iv(a.rpe_rmse_ci95_m),
         );
     }
-    h.push_str("</table>\n<p class=\"meta\">95 % confidence interval (Student t) of the mean over trials of each trial's own statistic: how much the figures above would move with another set of trials.</p>\n");
+    h.push_str("</table>\n<p class=\"meta\">95 % confidence interval (Student t) of the mean over trials of each trial's own statistic: how much the figures above would move with another set of trials. The interval is symmetric: with few trials and a skewed statistic its lower end can fall below zero.</p>\n");
 }
 
 fn cdf(h: &mut String, s: &Summary, trials: &[TrialResult]) {

@@ -214,11 +214,22 @@ pub fn line_chart(c: &Chart<'_>, series: &[Series<'_>]) -> String {
             } else {
                 &[1.0]
             };
-            decades
+            let t: Vec<f64> = decades
                 .iter()
                 .flat_map(|d| mults.iter().map(move |m| d + m.log10()))
                 .filter(|t| (y0..=y1).contains(t))
-                .collect()
+                .collect();
+            if t.len() >= 2 {
+                t
+            } else {
+                // Less than a 1-2-5 step wide (a GDOP between 3 and 4.5): ticks of the
+                // values themselves.
+                ticks(10f64.powf(y0), 10f64.powf(y1), 4)
+                    .into_iter()
+                    .filter(|v| *v > 0.0)
+                    .map(f64::log10)
+                    .collect()
+            }
         }
     };
     for t in yt {
@@ -354,18 +365,28 @@ pub fn mode_timeline(title: &str, rows: &[ModeRow<'_>]) -> String {
             y + 16.0,
             escape(r.label)
         );
-        for w in r.epochs.windows(2) {
-            let Some(m) = w[0].1 else { continue };
-            let idx = modes.iter().position(|x| *x == m).unwrap_or(0);
-            let _ = writeln!(
-                svg,
-                r#"<rect x="{:.2}" y="{:.1}" width="{:.2}" height="{:.1}" fill="{}"/>"#,
-                px(w[0].0),
-                y + 4.0,
-                (px(w[1].0) - px(w[0].0)).max(0.5),
-                row_h - 8.0,
-                colour(idx + 4)
-            );
+        // One band per run of epochs in the same mode (not one per epoch: adjacent
+        // rectangles leave hairline seams in most renderers).
+        let mut k = 0;
+        while k + 1 < r.epochs.len() {
+            let mode = r.epochs[k].1;
+            let mut j = k + 1;
+            while j + 1 < r.epochs.len() && r.epochs[j].1 == mode {
+                j += 1;
+            }
+            if let Some(m) = mode {
+                let idx = modes.iter().position(|x| *x == m).unwrap_or(0);
+                let _ = writeln!(
+                    svg,
+                    r#"<rect x="{:.2}" y="{:.1}" width="{:.2}" height="{:.1}" fill="{}"/>"#,
+                    px(r.epochs[k].0),
+                    y + 4.0,
+                    (px(r.epochs[j].0) - px(r.epochs[k].0)).max(0.5),
+                    row_h - 8.0,
+                    colour(idx + 4)
+                );
+            }
+            k = j;
         }
     }
     let ya = T + row_h * rows.len() as f64;
