@@ -311,12 +311,22 @@ impl FuzzyConfig {
             .map(|t| t.c)
             .fold(f64::NEG_INFINITY, f64::max);
         let n = self.resolution.max(11);
+        // Mamdani max–min aggregation folded per output set: since min is monotone,
+        // max over the rules r → j of min(w_r, μ_j(y)) = min(max_r w_r, μ_j(y)), so each
+        // sample needs one term per output set instead of one per rule (same result).
+        let mut clip = [0.0f64; 3];
+        for (w, r) in strengths.iter().zip(&self.rules) {
+            let j = r.then.index();
+            clip[j] = clip[j].max(*w);
+        }
         let (mut num, mut den) = (0.0, 0.0);
         for k in 0..n {
             let y = lo + (hi - lo) * k as f64 / (n - 1) as f64;
             let mut mu: f64 = 0.0;
-            for (w, r) in strengths.iter().zip(&self.rules) {
-                mu = mu.max(w.min(self.output[r.then.index()].mu(y)));
+            for (j, c) in clip.iter().enumerate() {
+                if *c > 0.0 {
+                    mu = mu.max(c.min(self.output[j].mu(y)));
+                }
             }
             // Trapezoidal weights: the end samples count half.
             let wt = if k == 0 || k == n - 1 { 0.5 } else { 1.0 };
