@@ -13,7 +13,7 @@ use std::borrow::Cow;
 
 /// One estimator's record at one measurement epoch.
 ///
-/// Records are what a run keeps of a trial (`OUT/trials/trial-NNNNNN.json`) and what every
+/// Records are what a run keeps of a trial (`OUT/trials/trial-NNNNNN.json.gz`) and what every
 /// output (`summary.json`, `epochs.csv`, `trials.parquet`, `report.html`) is computed from,
 /// so a resumed or merged run reproduces an uninterrupted one from these alone.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

