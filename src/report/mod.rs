@@ -9,7 +9,7 @@
 pub mod svg;
 
 use crate::core::{SimTime, TrialRng};
-use crate::engine::trial::{truth_at, TrialResult};
+use crate::engine::trial::{truth_at, EpochRecord, TrialResult};
 use crate::montecarlo::Summary;
 use crate::world::map::Overlay;
 use crate::world::World;
@@ -273,22 +273,31 @@ fn poor_coverage_spans(t0: &TrialResult) -> Vec<(f64, f64)> {
     spans
 }
 
-fn error_vs_time(h: &mut String, t0: &TrialResult) {
-    let spans = poor_coverage_spans(t0);
-    let series: Vec<Series<'_>> = t0
-        .estimators
+/// One series per estimator of trial `t0` that has `value` at some epoch, in the world's
+/// colours; epochs without a value break the line.
+fn time_series<'a>(
+    t0: &'a TrialResult,
+    value: impl Fn(&EpochRecord) -> Option<f64>,
+) -> Vec<Series<'a>> {
+    t0.estimators
         .iter()
         .enumerate()
+        .filter(|(_, e)| e.epochs.iter().any(|ep| value(ep).is_some()))
         .map(|(k, e)| Series {
             label: &e.name,
             colour: colour(k),
             points: e
                 .epochs
                 .iter()
-                .map(|ep| (ep.t_s, ep.err_3d_m.unwrap_or(f64::NAN)))
+                .map(|ep| (ep.t_s, value(ep).unwrap_or(f64::NAN)))
                 .collect(),
         })
-        .collect();
+        .collect()
+}
+
+fn error_vs_time(h: &mut String, t0: &TrialResult) {
+    let spans = poor_coverage_spans(t0);
+    let series = time_series(t0, |ep| ep.err_3d_m);
     let svg = svg::line_chart(
         &Chart {
             title: "3-D position error against time",
@@ -333,21 +342,7 @@ fn modes(h: &mut String, t0: &TrialResult) {
 }
 
 fn gdop(h: &mut String, t0: &TrialResult) {
-    let series: Vec<Series<'_>> = t0
-        .estimators
-        .iter()
-        .enumerate()
-        .filter(|(_, e)| e.epochs.iter().any(|ep| ep.gdop.is_some()))
-        .map(|(k, e)| Series {
-            label: &e.name,
-            colour: colour(k),
-            points: e
-                .epochs
-                .iter()
-                .map(|ep| (ep.t_s, ep.gdop.unwrap_or(f64::NAN)))
-                .collect(),
-        })
-        .collect();
+    let series = time_series(t0, |ep| ep.gdop);
     if series.is_empty() {
         return;
     }
