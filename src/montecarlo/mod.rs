@@ -11,7 +11,8 @@ pub mod store;
 
 use crate::engine::trial::{run_trial, TrialResult};
 use crate::metrics::{
-    mean_ci95, nees_summary, Alignment, ConsistencySummary, ErrorStats, TrajectoryStats,
+    ate_errors, mean_ci95, nees_summary, nis_summary, rpe_errors, Alignment, ConsistencySummary,
+    ErrorStats, TrajectoryStats,
 };
 use crate::world::World;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -269,6 +270,35 @@ fn ci(values: &[f64]) -> Option<[f64; 2]> {
     mean_ci95(values).map(|(a, b)| [a, b])
 }
 
+/// Each trial's own value of the statistics [`AcrossTrials`] gives intervals of.
+#[derive(Default)]
+struct PerTrial {
+    sigma1: Vec<f64>,
+    sigma2: Vec<f64>,
+    sigma3: Vec<f64>,
+    mean: Vec<f64>,
+    rmse: Vec<f64>,
+    ate_rmse: Vec<f64>,
+    rpe_rmse: Vec<f64>,
+    availability: Vec<f64>,
+}
+
+impl PerTrial {
+    fn intervals(&self) -> AcrossTrials {
+        AcrossTrials {
+            trials: self.sigma1.len(),
+            sigma1_ci95_m: ci(&self.sigma1),
+            sigma2_ci95_m: ci(&self.sigma2),
+            sigma3_ci95_m: ci(&self.sigma3),
+            mean_ci95_m: ci(&self.mean),
+            rmse_ci95_m: ci(&self.rmse),
+            ate_rmse_ci95_m: ci(&self.ate_rmse),
+            rpe_rmse_ci95_m: ci(&self.rpe_rmse),
+            availability_ci95: ci(&self.availability),
+        }
+    }
+}
+
 /// One estimator's line of the summary, from its traces in every trial.
 fn estimator_summary(name: &str, k: usize, trials: &[TrialResult]) -> EstimatorSummary {
     let mut e3 = Vec::new();
@@ -282,7 +312,7 @@ fn estimator_summary(name: &str, k: usize, trials: &[TrialResult]) -> EstimatorS
     let mut nis_by_t: BTreeMap<u64, Vec<(f64, usize)>> = BTreeMap::new();
     let (mut ate, mut ate_al, mut rpe, mut rpe_al) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let mut per_trial: [Vec<f64>; 8] = Default::default();
+    let mut per_trial = PerTrial::default();
     for t in trials {
         let Some(trace) = t.estimators.get(k) else {
             continue;
@@ -326,40 +356,37 @@ fn estimator_summary(name: &str, k: usize, trials: &[TrialResult]) -> EstimatorS
             nis_by_t.entry(t).or_default().push(n);
         }
         let tr = track(trace);
-        let a = crate::metrics::ate_errors(&tr.truth, &tr.est, Alignment::None);
-        let r = crate::metrics::rpe_errors(&tr.t_s, &tr.truth, &tr.est, 1.0, Alignment::None);
+        let a = ate_errors(&tr.truth, &tr.est, Alignment::None);
+        let r = rpe_errors(&tr.t_s, &tr.truth, &tr.est, 1.0, Alignment::None);
         if let Some(v) = &a {
             ate.extend_from_slice(v);
         }
         if let Some(v) = &r {
             rpe.extend_from_slice(v);
         }
-        if let Some(v) = crate::metrics::ate_errors(&tr.truth, &tr.est, Alignment::Rigid) {
+        if let Some(v) = ate_errors(&tr.truth, &tr.est, Alignment::Rigid) {
             ate_al.extend(v);
         }
-        if let Some(v) =
-            crate::metrics::rpe_errors(&tr.t_s, &tr.truth, &tr.est, 1.0, Alignment::Rigid)
-        {
+        if let Some(v) = rpe_errors(&tr.t_s, &tr.truth, &tr.est, 1.0, Alignment::Rigid) {
             rpe_al.extend(v);
         }
         let n_ep = trace.epochs.len();
         if let Some(st) = ErrorStats::from_errors(&mut trial_errs) {
-            for (slot, v) in per_trial
-                .iter_mut()
-                .zip([st.sigma1, st.sigma2, st.sigma3, st.mean, st.rmse])
-            {
-                slot.push(v);
-            }
+            per_trial.sigma1.push(st.sigma1);
+            per_trial.sigma2.push(st.sigma2);
+            per_trial.sigma3.push(st.sigma3);
+            per_trial.mean.push(st.mean);
+            per_trial.rmse.push(st.rmse);
             if let Some(v) = a.and_then(|mut v| TrajectoryStats::from_errors(&mut v)) {
-                per_trial[5].push(v.rmse);
+                per_trial.ate_rmse.push(v.rmse);
             }
             if let Some(v) = r.and_then(|mut v| TrajectoryStats::from_errors(&mut v)) {
-                per_trial[6].push(v.rmse);
+                per_trial.rpe_rmse.push(v.rmse);
             }
         }
         if n_ep > 0 {
             let with = trace.epochs.iter().filter(|e| e.err_3d_m.is_some()).count();
-            per_trial[7].push(with as f64 / n_ep as f64);
+            per_trial.availability.push(with as f64 / n_ep as f64);
         }
     }
     let nees_epochs: Vec<Vec<f64>> = nees_by_t.into_values().collect();
@@ -381,22 +408,12 @@ fn estimator_summary(name: &str, k: usize, trials: &[TrialResult]) -> EstimatorS
         rpe_m: TrajectoryStats::from_errors(&mut rpe),
         rpe_aligned_m: TrajectoryStats::from_errors(&mut rpe_al),
         nees: nees_summary(&nees_epochs, 3),
-        nis: crate::metrics::nis_summary(&nis_by_t.into_values().collect::<Vec<_>>()),
+        nis: nis_summary(&nis_by_t.into_values().collect::<Vec<_>>()),
         modes: modes
             .into_iter()
             .map(|(m, n)| (m, n as f64 / moded.max(1) as f64))
             .collect(),
-        across_trials: AcrossTrials {
-            trials: per_trial[0].len(),
-            sigma1_ci95_m: ci(&per_trial[0]),
-            sigma2_ci95_m: ci(&per_trial[1]),
-            sigma3_ci95_m: ci(&per_trial[2]),
-            mean_ci95_m: ci(&per_trial[3]),
-            rmse_ci95_m: ci(&per_trial[4]),
-            ate_rmse_ci95_m: ci(&per_trial[5]),
-            rpe_rmse_ci95_m: ci(&per_trial[6]),
-            availability_ci95: ci(&per_trial[7]),
-        },
+        across_trials: per_trial.intervals(),
     }
 }
 

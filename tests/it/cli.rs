@@ -11,10 +11,6 @@ fn line_of(needle: &str) -> usize {
         + 1
 }
 
-fn stderr(o: &std::process::Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
 #[test]
 fn summary_is_identical_for_one_and_two_threads() {
     let d = tmp_dir("threads");

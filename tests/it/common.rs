@@ -39,6 +39,27 @@ pub fn hybridnav(args: &[&str]) -> Output {
         .expect("run hybridnav")
 }
 
+/// The standard error of a finished command, as text.
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Runs `hybridnav` with `args`, asserts that it refused them (exit code 2) with a message
+/// containing every one of `needles`, and returns the message.
+pub fn refused(args: &[&str], needles: &[&str]) -> String {
+    let o = hybridnav(args);
+    let e = stderr(&o);
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "hybridnav {args:?} was not refused: {e}"
+    );
+    for n in needles {
+        assert!(e.contains(n), "hybridnav {args:?}: expected {n:?} in: {e}");
+    }
+    e
+}
+
 /// Writes `text` to `dir/name` and returns the path.
 pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     let p = dir.join(name);

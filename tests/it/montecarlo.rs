@@ -1,17 +1,13 @@
 //! Monte Carlo runs as a user drives them: shards merged, runs killed and resumed, the
 //! Parquet table read by pandas, and the refusals of bad arguments.
 
-use crate::common::{hybridnav, repo, tmp_dir};
+use crate::common::{hybridnav, refused, repo, stderr, tmp_dir};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// The files of a finished run directory that must not depend on how it was produced.
 const OUTPUTS: [&str; 4] = ["summary.json", "epochs.csv", "trials.parquet", "run.json"];
-
-fn stderr(o: &std::process::Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 fn ok(o: std::process::Output) -> std::process::Output {
     assert!(o.status.success(), "hybridnav failed: {}", stderr(&o));
@@ -109,31 +105,29 @@ fn four_shards_merged_equal_the_unsharded_run_byte_for_byte() {
     assert_same_run(&whole, &merged);
 
     // Merging with a shard missing names what is missing; a shard given twice is refused.
-    let o = hybridnav(&[
-        "merge",
-        &shard_dirs[0],
-        &shard_dirs[1],
-        "--out",
-        &s(&d.join("x")),
-    ]);
-    assert_eq!(o.status.code(), Some(2));
-    assert!(
-        stderr(&o).contains("4 of 10 trials are missing (e.g. 2, 3, 6, 7)"),
-        "{}",
-        stderr(&o)
+    refused(
+        &[
+            "merge",
+            &shard_dirs[0],
+            &shard_dirs[1],
+            "--out",
+            &s(&d.join("x")),
+        ],
+        &["4 of 10 trials are missing (e.g. 2, 3, 6, 7)"],
     );
-    let o = hybridnav(&[
-        "merge",
-        &shard_dirs[0],
-        &shard_dirs[0],
-        &shard_dirs[1],
-        &shard_dirs[2],
-        &shard_dirs[3],
-        "--out",
-        &s(&d.join("x")),
-    ]);
-    assert_eq!(o.status.code(), Some(2));
-    assert!(stderr(&o).contains("given twice"), "{}", stderr(&o));
+    refused(
+        &[
+            "merge",
+            &shard_dirs[0],
+            &shard_dirs[0],
+            &shard_dirs[1],
+            &shard_dirs[2],
+            &shard_dirs[3],
+            "--out",
+            &s(&d.join("x")),
+        ],
+        &["given twice"],
+    );
     let _ = std::fs::remove_dir_all(&d);
 }
 
@@ -166,9 +160,10 @@ fn merging_shards_of_different_seeds_or_worlds_is_refused() {
         "--out",
         &s(&b),
     ]));
-    let o = hybridnav(&["merge", &s(&a), &s(&b), "--out", &s(&d.join("m"))]);
-    assert_eq!(o.status.code(), Some(2));
-    assert!(stderr(&o).contains("seed 1 vs 2"), "{}", stderr(&o));
+    refused(
+        &["merge", &s(&a), &s(&b), "--out", &s(&d.join("m"))],
+        &["seed 1 vs 2"],
+    );
     ok(hybridnav(&[
         "run",
         "worlds/seed002-lianhua.toml",
@@ -182,17 +177,15 @@ fn merging_shards_of_different_seeds_or_worlds_is_refused() {
         "--out",
         &s(&c),
     ]));
-    let o = hybridnav(&["merge", &s(&a), &s(&c), "--out", &s(&d.join("m"))]);
-    assert_eq!(o.status.code(), Some(2));
-    let e = stderr(&o);
-    assert!(
-        e.contains("cannot merge") && e.contains("seed002-lianhua.toml"),
-        "{e}"
+    refused(
+        &["merge", &s(&a), &s(&c), "--out", &s(&d.join("m"))],
+        &["cannot merge", "seed002-lianhua.toml"],
     );
     // A directory that is not a run.
-    let o = hybridnav(&["merge", &s(&d), "--out", &s(&d.join("m"))]);
-    assert_eq!(o.status.code(), Some(2));
-    assert!(stderr(&o).contains("no run.json"), "{}", stderr(&o));
+    refused(
+        &["merge", &s(&d), "--out", &s(&d.join("m"))],
+        &["no run.json"],
+    );
     let _ = std::fs::remove_dir_all(&d);
 }
 
@@ -251,18 +244,19 @@ fn a_killed_run_resumed_equals_an_uninterrupted_one() {
     );
 
     // Resuming with another seed or trial count is refused, naming the difference.
-    let o = hybridnav(&[
-        "run",
-        world,
-        "--trials",
-        "13",
-        "--resume",
-        "--quiet",
-        "--out",
-        &s(&killed),
-    ]);
-    assert_eq!(o.status.code(), Some(2));
-    assert!(stderr(&o).contains("trials 13 vs 12"), "{}", stderr(&o));
+    refused(
+        &[
+            "run",
+            world,
+            "--trials",
+            "13",
+            "--resume",
+            "--quiet",
+            "--out",
+            &s(&killed),
+        ],
+        &["trials 13 vs 12"],
+    );
 
     ok(hybridnav(&[
         "run",
@@ -287,12 +281,9 @@ fn bad_output_directories_and_resumes_are_refused_clearly() {
     // A file where the output directory should be.
     let file = d.join("not-a-dir");
     std::fs::write(&file, "x").unwrap();
-    let o = hybridnav(&["run", "--trials", "1", "--quiet", "--out", &s(&file)]);
-    assert_eq!(o.status.code(), Some(2));
-    let e = stderr(&o);
-    assert!(
-        e.contains("cannot write to output directory") && e.contains("not-a-dir"),
-        "{e}"
+    refused(
+        &["run", "--trials", "1", "--quiet", "--out", &s(&file)],
+        &["cannot write to output directory", "not-a-dir"],
     );
     // A read-only directory (unless we are root, who may write anyway).
     let ro = d.join("ro");
@@ -300,41 +291,40 @@ fn bad_output_directories_and_resumes_are_refused_clearly() {
     use std::os::unix::fs::PermissionsExt;
     std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o555)).unwrap();
     if std::fs::write(ro.join("probe"), "x").is_err() {
-        let o = hybridnav(&["run", "--trials", "1", "--quiet", "--out", &s(&ro)]);
-        assert_eq!(o.status.code(), Some(2));
-        assert!(
-            stderr(&o).contains("cannot write to output directory"),
-            "{}",
-            stderr(&o)
+        refused(
+            &["run", "--trials", "1", "--quiet", "--out", &s(&ro)],
+            &["cannot write to output directory"],
         );
     } else {
         println!("skipped: running as root, a read-only directory is still writable");
     }
     std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o755)).unwrap();
     // --resume where there is nothing to resume; a malformed --shard.
-    let o = hybridnav(&[
-        "run",
-        "--trials",
-        "1",
-        "--resume",
-        "--quiet",
-        "--out",
-        &s(&d.join("new")),
-    ]);
-    assert_eq!(o.status.code(), Some(2));
-    assert!(stderr(&o).contains("no run to resume"), "{}", stderr(&o));
-    let o = hybridnav(&[
-        "run",
-        "--trials",
-        "4",
-        "--shard",
-        "5/4",
-        "--quiet",
-        "--out",
-        &s(&d.join("new")),
-    ]);
-    assert_eq!(o.status.code(), Some(2));
-    assert!(stderr(&o).contains("expected K/N"), "{}", stderr(&o));
+    refused(
+        &[
+            "run",
+            "--trials",
+            "1",
+            "--resume",
+            "--quiet",
+            "--out",
+            &s(&d.join("new")),
+        ],
+        &["no run to resume"],
+    );
+    refused(
+        &[
+            "run",
+            "--trials",
+            "4",
+            "--shard",
+            "5/4",
+            "--quiet",
+            "--out",
+            &s(&d.join("new")),
+        ],
+        &["expected K/N"],
+    );
     let _ = std::fs::remove_dir_all(&d);
 }
 
