@@ -193,6 +193,7 @@ fn engine_epochs(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::W
     let gravity = local_earth_of(&frame).gravity_mps2(0.0);
     let mut imu_batch = MeasurementBatch {
         unscored: false,
+        raw: None,
         t: start,
         source: "imu".into(),
         items: vec![Measurement::Imu(ImuSample {
@@ -213,6 +214,7 @@ fn engine_epochs(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::W
     };
     let mut fix = MeasurementBatch {
         unscored: false,
+        raw: None,
         t: start,
         source: "fix".into(),
         items: vec![Measurement::Position(PositionFix {
@@ -277,6 +279,7 @@ fn engine_epochs(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::W
         .collect();
     let gnss = MeasurementBatch {
         unscored: false,
+        raw: None,
         t: start.add_seconds(t_ins),
         source: "gnss".into(),
         items: ranges,

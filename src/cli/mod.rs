@@ -59,6 +59,33 @@ pub enum Command {
     /// FM fingerprinting tools.
     #[command(subcommand)]
     Fm(FmCommand),
+    /// Write one trial of a world as datasets other tools read: RINEX observations (with
+    /// the navigation file), NMEA, TUM, measurement tables (CSV, Parquet), GeoJSON/KML and
+    /// SigMF IQ.
+    Export(ExportArgs),
+    /// Transmitter-layout design: coverage, GDOP and predicted accuracy over a grid, and
+    /// the choice of new transmitter sites (`--place K --candidates FILE`).
+    Layout(crate::layout::LayoutArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct ExportArgs {
+    /// The world file.
+    pub world: PathBuf,
+    /// Formats, comma-separated: rinex, nmea, tum, csv, parquet, geojson, kml, sigmf, or
+    /// all.
+    #[arg(long, default_value = "all")]
+    pub format: String,
+    /// Output directory.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Master seed (default: the world's [montecarlo] seed).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// The trial to record (its trajectory, clocks and noise are those of trial N of a
+    /// `run` with the same seed).
+    #[arg(long, default_value_t = 0)]
+    pub trial: u64,
 }
 
 #[derive(Debug, Subcommand)]
@@ -153,6 +180,10 @@ pub struct RunArgs {
     /// Continue the interrupted run in OUT: keep the trials it finished, run the rest.
     #[arg(long)]
     pub resume: bool,
+    /// Also export each trial this run ran as datasets (formats as `export --format`) to
+    /// OUT/datasets/trial-NNNNNN/.
+    #[arg(long, value_name = "FORMATS")]
+    pub datasets: Option<String>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -263,6 +294,8 @@ pub fn run(cli: Cli) -> Result<()> {
             cmd_synth(&start, hours, &out)
         }
         Command::Fm(FmCommand::Survey { world, out, seed }) => cmd_fm_survey(&world, &out, seed),
+        Command::Export(a) => cmd_export(&a),
+        Command::Layout(a) => crate::layout::run(&a),
         Command::Presets => {
             for p in crate::world::presets::PRESETS {
                 println!("{}\n  {}", p.name, p.about);
@@ -275,8 +308,31 @@ pub fn run(cli: Cli) -> Result<()> {
     }
 }
 
+fn cmd_export(a: &ExportArgs) -> Result<()> {
+    let formats = crate::export::Format::parse_list(&a.format)
+        .map_err(anyhow::Error::msg)
+        .context("--format")?;
+    let world = load_world(&a.world)?;
+    let seed = a.seed.unwrap_or(world.file.montecarlo.seed);
+    let rec = crate::export::record_trial(&world, seed, a.trial).map_err(anyhow::Error::msg)?;
+    let files =
+        crate::export::export(&world, &rec, &formats, &a.out).map_err(anyhow::Error::msg)?;
+    for f in &files {
+        println!("wrote {}", f.display());
+    }
+    Ok(())
+}
+
 fn cmd_run(a: RunArgs) -> Result<()> {
     let path = a.world.unwrap_or_else(default_world);
+    let datasets = match &a.datasets {
+        Some(list) => Some(
+            crate::export::Format::parse_list(list)
+                .map_err(anyhow::Error::msg)
+                .context("--datasets")?,
+        ),
+        None => None,
+    };
     let world = load_world(&path)?;
     let trials = a.trials.unwrap_or(world.file.montecarlo.trials);
     if trials == 0 {
@@ -303,6 +359,19 @@ fn cmd_run(a: RunArgs) -> Result<()> {
     let results = run_into(&world, &opts, &dir, a.resume).map_err(anyhow::Error::msg)?;
     let written = write_outputs(&world, &opts, &results, &a.out).map_err(anyhow::Error::msg)?;
     report_written(&written, a.quiet);
+    if let Some(formats) = datasets {
+        // Each trial is simulated again with a recorder; it depends only on (seed, trial),
+        // so the datasets are those of the trial just stored.
+        for t in &results {
+            let rec = crate::export::record_trial(&world, opts.seed, t.trial)
+                .map_err(anyhow::Error::msg)?;
+            let dir = a.out.join("datasets").join(format!("trial-{:06}", t.trial));
+            crate::export::export(&world, &rec, &formats, &dir).map_err(anyhow::Error::msg)?;
+        }
+        if !a.quiet {
+            println!("datasets   {}", a.out.join("datasets").display());
+        }
+    }
     Ok(())
 }
 

@@ -125,6 +125,32 @@ pub fn run_trial(world: &World, seed: u64, trial: u64) -> Result<TrialResult, St
 /// the estimators that consume it, records their errors against the truth, and makes each
 /// estimator's latest estimate visible to every source at its next event.
 pub fn simulate(frame: &EnuFrame, start: GpsTime, setup: &mut TrialSetup) -> Vec<EstimatorTrace> {
+    simulate_observed(frame, start, setup, None)
+}
+
+/// Watches a trial's measurement stream: every batch a source produced, with the truth at
+/// its time (dataset export records trials through it).
+///
+/// Observing does not perturb the trial: the observer sees each batch after the source
+/// made it and before the estimators read it, and draws no random numbers, so an observed
+/// trial's estimator traces are bit-identical to an unobserved one's.
+pub trait BatchObserver {
+    /// Whether the sources should also fill [`MeasurementBatch::raw`] with the raw
+    /// observations a receiver would log (RINEX observables, FM RSSI).
+    fn wants_raw(&self) -> bool {
+        false
+    }
+    /// One batch, including the empty ones (an epoch with every satellite blocked).
+    fn batch(&mut self, truth: &Truth, batch: &MeasurementBatch);
+}
+
+/// [`simulate`] with an optional [`BatchObserver`].
+pub fn simulate_observed(
+    frame: &EnuFrame,
+    start: GpsTime,
+    setup: &mut TrialSetup,
+    mut observer: Option<&mut dyn BatchObserver>,
+) -> Vec<EstimatorTrace> {
     let mut queue = EventQueue::with_capacity(setup.sources.len() + 1);
     for (i, s) in setup.sources.iter().enumerate() {
         queue.schedule(s.first_sample(), EventKind::Sample(i));
@@ -141,6 +167,9 @@ pub fn simulate(frame: &EnuFrame, start: GpsTime, setup: &mut TrialSetup) -> Vec
         })
         .collect();
     let mut batch = MeasurementBatch::default();
+    if observer.as_ref().is_some_and(|o| o.wants_raw()) {
+        batch.raw = Some(crate::fusion::measurement::RawLog::default());
+    }
 
     while let Some(ev) = queue.pop() {
         let source_idx = match ev.kind {
@@ -149,6 +178,9 @@ pub fn simulate(frame: &EnuFrame, start: GpsTime, setup: &mut TrialSetup) -> Vec
         };
         let truth = truth_at(frame, start, setup.trajectory.as_ref(), ev.t);
         batch.items.clear();
+        if let Some(raw) = batch.raw.as_mut() {
+            raw.clear();
+        }
         batch.unscored = false;
         let ctx = SampleContext {
             truth: &truth,
@@ -157,6 +189,9 @@ pub fn simulate(frame: &EnuFrame, start: GpsTime, setup: &mut TrialSetup) -> Vec
         let source = &mut setup.sources[source_idx];
         if let Some(next) = source.sample(&ctx, &mut batch) {
             queue.schedule(next, EventKind::Sample(source_idx));
+        }
+        if let Some(o) = observer.as_mut() {
+            o.batch(&truth, &batch);
         }
         if batch.items.is_empty() && !source.empty_batches_are_epochs() {
             continue;

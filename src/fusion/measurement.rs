@@ -111,6 +111,28 @@ pub struct MeasurementBatch {
     /// first of each second's IMU propagation batches), so that a fast source neither
     /// outweighs the 1 Hz sources in the statistics nor floods the per-epoch output.
     pub unscored: bool,
+    /// The raw observations behind the batch, as a receiver logs them (dataset export).
+    /// `None` unless a [`crate::engine::trial::BatchObserver`] asked for them, so a Monte
+    /// Carlo trial neither fills nor allocates it; estimators never read it.
+    pub raw: Option<RawLog>,
+}
+
+/// Raw observations a source logs beside its measurements when asked (see
+/// [`MeasurementBatch::raw`]).
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct RawLog {
+    /// GNSS code, phase, Doppler and C/N0 per tracked satellite (RINEX observables).
+    pub gnss: Vec<crate::gnss::raw::RawGnssObservation>,
+    /// FM scan: (carrier frequency in MHz, RSSI in dBm) per scanned station.
+    pub fm_rssi: Vec<(f64, f64)>,
+}
+
+impl RawLog {
+    /// Empties every list, keeping the capacity.
+    pub fn clear(&mut self) {
+        self.gnss.clear();
+        self.fm_rssi.clear();
+    }
 }
 
 impl MeasurementBatch {

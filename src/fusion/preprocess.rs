@@ -345,6 +345,7 @@ mod tests {
                 })
                 .collect(),
             unscored: false,
+            raw: None,
         };
         let tower = EmitterId::new(System::Dtmb, 1);
         let tower_pos = rx + north * 12_000.0 + up * 300.0;

@@ -1048,6 +1048,7 @@ mod tests {
         let t = |k: u64| k as f64 * 0.01;
         MeasurementBatch {
             unscored: false,
+            raw: None,
             t: start.add_seconds(t(k0 + n - 1)),
             source: "imu".into(),
             items: (k0..k0 + n)
@@ -1082,6 +1083,7 @@ mod tests {
         // A fix at the time of IMU sample `k`.
         let fix_at = |k: u64| MeasurementBatch {
             unscored: false,
+            raw: None,
             t: start.add_seconds(k as f64 * 0.01),
             source: "fix".into(),
             items: vec![Measurement::Position(PositionFix {
@@ -1184,6 +1186,7 @@ mod tests {
             PdrEstimator::new("PDR", &cfg, &[], &f, Some(Vector3::new(1.0, 2.0, 0.0))).unwrap();
         let mut batch = MeasurementBatch {
             unscored: false,
+            raw: None,
             source: "pdr".into(),
             ..Default::default()
         };
@@ -1213,6 +1216,7 @@ mod tests {
         cov[(2, 2)] = 1.0;
         let b = MeasurementBatch {
             unscored: false,
+            raw: None,
             source: "fm".into(),
             items: vec![Measurement::Position(PositionFix {
                 pos_ecef_m: f.ecef_of_enu(&fix_enu),

@@ -1,0 +1,237 @@
+//! Synthetic datasets for other tools: one trial of a world, recorded as the files a real
+//! receiver, logger or GIS would have produced.
+//!
+//! `hybridnav export WORLD --format rinex,nmea,… --out DIR` re-simulates one trial with a
+//! [`BatchObserver`] that keeps every batch, the truth at its time, and the raw
+//! observations the sources log on request; each format's writer then reads only that
+//! [`Recording`]. Because a trial depends only on `(world, seed, trial)` and observing does
+//! not perturb it, the exported estimator trajectories are those of the same trial in a
+//! Monte Carlo run (`run --datasets` exports each trial it ran this way).
+
+pub mod geo;
+pub mod nmea;
+pub mod rinex_obs;
+pub mod tables;
+
+use crate::core::TrialRng;
+use crate::engine::trial::{simulate_observed, BatchObserver, EstimatorTrace};
+use crate::engine::Truth;
+use crate::fusion::measurement::{Measurement, MeasurementBatch, RawLog};
+use crate::io::atomic::write_atomic;
+use crate::world::World;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// A dataset format `export` writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Format {
+    /// RINEX 3.04 observation file plus the navigation file the trial used.
+    Rinex,
+    /// NMEA 0183 GGA/RMC/GSA/GSV for the truth and each estimator.
+    Nmea,
+    /// TUM trajectories (truth and each estimator), as evo reads them.
+    Tum,
+    /// One CSV per measurement kind, each row with its truth.
+    Csv,
+    /// The same tables as Parquet.
+    Parquet,
+    /// GeoJSON of the scene, transmitters and trajectories.
+    Geojson,
+    /// KML of the same.
+    Kml,
+    /// SigMF baseband IQ of each DTMB tower along the trajectory.
+    Sigmf,
+}
+
+impl Format {
+    /// Every format, in the order `all` writes them.
+    pub const ALL: [Format; 8] = [
+        Format::Rinex,
+        Format::Nmea,
+        Format::Tum,
+        Format::Csv,
+        Format::Parquet,
+        Format::Geojson,
+        Format::Kml,
+        Format::Sigmf,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::Rinex => "rinex",
+            Format::Nmea => "nmea",
+            Format::Tum => "tum",
+            Format::Csv => "csv",
+            Format::Parquet => "parquet",
+            Format::Geojson => "geojson",
+            Format::Kml => "kml",
+            Format::Sigmf => "sigmf",
+        }
+    }
+
+    /// Parses a comma-separated list (`rinex,nmea`, or `all`), sorted and deduplicated.
+    ///
+    /// # Errors
+    /// An unknown or empty name, with the known names.
+    pub fn parse_list(list: &str) -> Result<Vec<Format>, String> {
+        let mut out = Vec::new();
+        for name in list.split(',').map(str::trim) {
+            if name.eq_ignore_ascii_case("all") {
+                out.extend(Format::ALL);
+                continue;
+            }
+            match Format::ALL
+                .iter()
+                .find(|f| f.name().eq_ignore_ascii_case(name))
+            {
+                Some(f) => out.push(*f),
+                None => {
+                    let known: Vec<&str> = Format::ALL.iter().map(|f| f.name()).collect();
+                    return Err(format!(
+                        "unknown dataset format '{name}'; expected one or more of {}, or all \
+                         (comma-separated)",
+                        known.join(", ")
+                    ));
+                }
+            }
+        }
+        out.sort();
+        out.dedup();
+        Ok(out)
+    }
+}
+
+impl fmt::Display for Format {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// One batch as recorded: when, from which source, the truth then, what it measured.
+#[derive(Clone, Debug)]
+pub struct RecordedBatch {
+    pub truth: Truth,
+    pub source: String,
+    pub items: Vec<Measurement>,
+    pub raw: RawLog,
+}
+
+/// Everything one trial produced, for the format writers.
+pub struct Recording {
+    pub seed: u64,
+    pub trial: u64,
+    /// Every batch every source produced, in event order (empty receiver epochs included).
+    pub batches: Vec<RecordedBatch>,
+    /// The estimators' traces (estimates at their scored epochs).
+    pub estimators: Vec<EstimatorTrace>,
+}
+
+impl Recording {
+    /// The truth at the epochs of the first source that samples at the start (the GNSS
+    /// receiver in most worlds), one per distinct time: the reference trajectory.
+    pub fn truth_track(&self) -> Vec<&Truth> {
+        let mut out: Vec<&Truth> = Vec::new();
+        let Some(first) = self.batches.first() else {
+            return out;
+        };
+        for b in self.batches.iter().filter(|b| b.source == first.source) {
+            if out.last().is_none_or(|t| t.sim != b.truth.sim) {
+                out.push(&b.truth);
+            }
+        }
+        out
+    }
+}
+
+struct Recorder {
+    batches: Vec<RecordedBatch>,
+}
+
+impl BatchObserver for Recorder {
+    fn wants_raw(&self) -> bool {
+        true
+    }
+    fn batch(&mut self, truth: &Truth, batch: &MeasurementBatch) {
+        self.batches.push(RecordedBatch {
+            truth: *truth,
+            source: batch.source.clone(),
+            items: batch.items.clone(),
+            raw: batch.raw.clone().unwrap_or_default(),
+        });
+    }
+}
+
+/// Simulates trial `trial` of `world` under `seed` and records it.
+///
+/// # Errors
+/// When the world cannot build the trial.
+pub fn record_trial(world: &World, seed: u64, trial: u64) -> Result<Recording, String> {
+    let rng = TrialRng::new(seed, trial);
+    let mut setup = world.build_trial(&rng)?;
+    let mut rec = Recorder {
+        batches: Vec::new(),
+    };
+    let estimators = simulate_observed(&world.frame, world.start, &mut setup, Some(&mut rec));
+    Ok(Recording {
+        seed,
+        trial,
+        batches: rec.batches,
+        estimators,
+    })
+}
+
+/// Writes `formats` of a recorded trial into `dir` and returns the files written.
+///
+/// # Errors
+/// A writer's failure, naming the format and the file.
+pub fn export(
+    world: &World,
+    rec: &Recording,
+    formats: &[Format],
+    dir: &Path,
+) -> Result<Vec<PathBuf>, String> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| format!("cannot create the dataset directory {}: {e}", dir.display()))?;
+    let mut files = Vec::new();
+    for f in formats {
+        let written = match f {
+            Format::Rinex => rinex_obs::write(world, rec, dir),
+            Format::Nmea => nmea::write(world, rec, dir),
+            Format::Tum => tables::write_tum(world, rec, dir),
+            Format::Csv => tables::write_csv(world, rec, dir),
+            Format::Parquet => tables::write_parquet(world, rec, dir),
+            Format::Geojson => geo::write_geojson(world, rec, dir),
+            Format::Kml => geo::write_kml(world, rec, dir),
+            Format::Sigmf => write_sigmf(world, rec, dir),
+        }
+        .map_err(|e| format!("{f} export: {e}"))?;
+        files.extend(written);
+    }
+    Ok(files)
+}
+
+/// Writes `text` atomically to `dir/name`, returning the path.
+pub(crate) fn write_text(dir: &Path, name: &str, text: &str) -> Result<PathBuf, String> {
+    let path = dir.join(name);
+    write_atomic(&path, text.as_bytes()).map_err(|e| e.to_string())?;
+    Ok(path)
+}
+
+/// A file-name-safe form of an estimator's name (`GPS+DTMB` → `GPS_DTMB`).
+pub(crate) fn file_stem(name: &str) -> String {
+    name.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// The SigMF recordings: each DTMB tower as the platform hears it from the trial's start.
+fn write_sigmf(world: &World, rec: &Recording, dir: &Path) -> Result<Vec<PathBuf>, String> {
+    let _ = (world, rec, dir);
+    Err("not yet written".into())
+}
