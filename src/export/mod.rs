@@ -230,8 +230,45 @@ pub(crate) fn file_stem(name: &str) -> String {
         .collect()
 }
 
-/// The SigMF recordings: each DTMB tower as the platform hears it from the trial's start.
+/// DTMB signal frames each SigMF recording holds: 50 PN945 frames (4725 symbols each) are
+/// 31 ms at 7.56 Msps (1.9 MB of cf32), enough for a receiver's acquisition and a few tracking updates; a
+/// longer recording is `hybridnav dtmb iq --world … --frames N`.
+pub const SIGMF_FRAMES: usize = 50;
+
+/// The SigMF recordings: each DTMB tower as the platform hears it from the trial's start
+/// (`dtmb-<tower>.sigmf-data` and `.sigmf-meta`, cf32 at 7.56 Msps).
 fn write_sigmf(world: &World, rec: &Recording, dir: &Path) -> Result<Vec<PathBuf>, String> {
-    let _ = (world, rec, dir);
-    Err("not yet written".into())
+    use crate::dtmb::pn::SAMPLE_RATE_HZ;
+    use crate::dtmb::sigmf::{write_sigmf_with, SampleFormat};
+    use crate::world::scene::TransmitterKind;
+    let mut files = Vec::new();
+    for t in world
+        .transmitters
+        .iter()
+        .filter(|t| t.kind == TransmitterKind::Dtmb)
+    {
+        let req = crate::dtmb::world_iq::WorldIqRequest {
+            tower: Some(t.id.clone()),
+            from_s: 0.0,
+            frames: SIGMF_FRAMES,
+            seed: rec.seed,
+            trial: rec.trial,
+        };
+        let iq = crate::dtmb::world_iq::world_iq(world, &req).map_err(|e| e.to_string())?;
+        let base = dir.join(format!("dtmb-{}", file_stem(&t.id)));
+        write_sigmf_with(
+            &base,
+            &iq.samples,
+            SampleFormat::Cf32,
+            SAMPLE_RATE_HZ,
+            iq.center_freq_hz,
+            &iq.annotations,
+            &iq.global_extra,
+            &iq.annotation_extra,
+        )
+        .map_err(|e| e.to_string())?;
+        files.push(base.with_extension("sigmf-data"));
+        files.push(base.with_extension("sigmf-meta"));
+    }
+    Ok(files)
 }

@@ -1,20 +1,395 @@
 //! Measurement tables (CSV, Parquet) and TUM trajectories of a recorded trial.
+//!
+//! Every measurement row carries the truth at its time, so a user can compute any error
+//! without hybridnav: `ranges` (GNSS pseudoranges, DTMB and TC-OFDM TOAs as ranges, beacon
+//! ranges) with the true geometric range — the ranges as the estimators receive them, i.e.
+//! after the satellite clock and the receiver's atmosphere models are applied, so
+//! `pseudorange_m − true_range_m` is the receiver clock plus the residual errors (the raw
+//! observables are in the RINEX export), `fixes` (FM fingerprint and magnetic-landmark
+//! positions), `fm_rssi` (each scanned FM station's RSSI), `imu` (gyro and accelerometer
+//! samples, the magnetometer's heading through the truth), `steps` (PDR), `range_diffs`
+//! (carrier-phase range differences) and `truth` (the reference track).
 
-use super::Recording;
+use super::{file_stem, Recording};
+use crate::engine::Truth;
+use crate::fusion::measurement::Measurement;
+use crate::io::atomic::write_atomic;
+use crate::io::table::{Table, Values};
 use crate::world::World;
+use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 
-pub fn write_tum(world: &World, rec: &Recording, dir: &Path) -> Result<Vec<PathBuf>, String> {
-    let _ = (world, rec, dir);
-    Err("not yet written".into())
+/// The truth columns every table ends with: time, ECEF and ENU position, ENU velocity,
+/// geodetic position and heading.
+#[derive(Default)]
+struct TruthColumns {
+    t_s: Vec<f64>,
+    tow_s: Vec<f64>,
+    ecef: [Vec<f64>; 3],
+    enu: [Vec<f64>; 3],
+    vel_enu: [Vec<f64>; 3],
+    lat_deg: Vec<f64>,
+    lon_deg: Vec<f64>,
+    h_m: Vec<f64>,
+    heading_deg: Vec<f64>,
 }
 
+impl TruthColumns {
+    fn push(&mut self, t: &Truth) {
+        self.t_s.push(t.sim.seconds());
+        self.tow_s.push(t.t.tow_s());
+        for k in 0..3 {
+            self.ecef[k].push(t.pos_ecef_m[k]);
+            self.enu[k].push(t.enu.pos_enu_m[k]);
+            self.vel_enu[k].push(t.enu.vel_enu_mps[k]);
+        }
+        let g = crate::core::Geodetic::from_ecef(&t.pos_ecef_m);
+        self.lat_deg.push(g.lat_deg());
+        self.lon_deg.push(g.lon_deg());
+        self.h_m.push(g.h_m);
+        self.heading_deg.push(t.enu.heading_rad.to_degrees());
+    }
+
+    /// Time columns first, so a table reads like a log.
+    fn prepend_time(&self, table: &mut Table) {
+        let mut front = Table::default();
+        front.push("t_s", Values::F64(self.t_s.clone()));
+        front.push("gpst_tow_s", Values::F64(self.tow_s.clone()));
+        front.columns.append(&mut table.columns);
+        *table = front;
+    }
+
+    fn append(self, table: &mut Table, prefix: &str) {
+        let [x, y, z] = self.ecef;
+        let [e, n, u] = self.enu;
+        let [ve, vn, vu] = self.vel_enu;
+        for (name, v) in [
+            ("x_ecef_m", x),
+            ("y_ecef_m", y),
+            ("z_ecef_m", z),
+            ("e_m", e),
+            ("n_m", n),
+            ("u_m", u),
+            ("ve_mps", ve),
+            ("vn_mps", vn),
+            ("vu_mps", vu),
+            ("lat_deg", self.lat_deg),
+            ("lon_deg", self.lon_deg),
+            ("h_m", self.h_m),
+            ("heading_deg", self.heading_deg),
+        ] {
+            table.push(&format!("{prefix}{name}"), Values::F64(v));
+        }
+    }
+}
+
+/// The tables of a recording, by file stem; tables without rows are left out.
+pub fn tables(world: &World, rec: &Recording) -> Vec<(&'static str, Table)> {
+    let frame = &world.frame;
+    let mut out = Vec::new();
+
+    // Ranges: every range measurement with the geometric range from the truth.
+    let mut tr = TruthColumns::default();
+    let (mut src, mut emitter, mut system) = (Vec::new(), Vec::new(), Vec::new());
+    let mut cols: [Vec<f64>; 7] = Default::default();
+    let mut rate: Vec<Option<f64>> = Vec::new();
+    let mut em: [Vec<f64>; 3] = Default::default();
+    for b in &rec.batches {
+        for m in &b.items {
+            if let Measurement::Range(r) = m {
+                tr.push(&b.truth);
+                src.push(b.source.clone());
+                emitter.push(r.emitter.to_string());
+                system.push(format!("{:?}", r.emitter.system).to_lowercase());
+                let geometric_m = (r.emitter_pos_ecef_m - b.truth.pos_ecef_m).norm();
+                let u = (b.truth.pos_ecef_m - r.emitter_pos_ecef_m) / geometric_m;
+                let true_rate = u.dot(&(b.truth.vel_ecef_mps - r.emitter_vel_ecef_mps));
+                for (k, v) in [
+                    r.pseudorange_m,
+                    r.sigma_m,
+                    r.sigma_rate_mps,
+                    r.cn0_dbhz,
+                    r.elevation_rad.to_degrees(),
+                    geometric_m,
+                    true_rate,
+                ]
+                .into_iter()
+                .enumerate()
+                {
+                    cols[k].push(v);
+                }
+                rate.push(r.range_rate_mps);
+                for (col, x) in em.iter_mut().zip(r.emitter_pos_ecef_m.iter()) {
+                    col.push(*x);
+                }
+            }
+        }
+    }
+    if !src.is_empty() {
+        let mut t = Table::default();
+        t.push("source", Values::Str(src));
+        t.push("system", Values::Str(system));
+        t.push("emitter", Values::Str(emitter));
+        let [pr, sig, sig_rate, cn0, el, geo, true_rate] = cols;
+        t.push("pseudorange_m", Values::F64(pr));
+        t.push("sigma_m", Values::F64(sig));
+        t.push("range_rate_mps", Values::OptF64(rate));
+        t.push("sigma_rate_mps", Values::F64(sig_rate));
+        t.push("cn0_dbhz", Values::F64(cn0));
+        t.push("elevation_deg", Values::F64(el));
+        let [ex, ey, ez] = em;
+        t.push("emitter_x_ecef_m", Values::F64(ex));
+        t.push("emitter_y_ecef_m", Values::F64(ey));
+        t.push("emitter_z_ecef_m", Values::F64(ez));
+        t.push("true_range_m", Values::F64(geo));
+        t.push("true_range_rate_mps", Values::F64(true_rate));
+        tr.prepend_time(&mut t);
+        tr.append(&mut t, "truth_");
+        out.push(("ranges", t));
+    }
+
+    // Position fixes (FM fingerprinting, magnetic landmarks).
+    let mut tr = TruthColumns::default();
+    let mut src = Vec::new();
+    let mut cols: [Vec<f64>; 6] = Default::default();
+    let mut support = Vec::new();
+    for b in &rec.batches {
+        for m in &b.items {
+            if let Measurement::Position(f) = m {
+                tr.push(&b.truth);
+                src.push(b.source.clone());
+                let enu = frame.enu_of_ecef(&f.pos_ecef_m);
+                let r = frame.rotation();
+                let cov_enu = r * f.cov_m2 * r.transpose();
+                let err = enu - b.truth.enu.pos_enu_m;
+                for (k, v) in [
+                    enu.x,
+                    enu.y,
+                    enu.z,
+                    cov_enu[(0, 0)].max(0.0).sqrt(),
+                    cov_enu[(1, 1)].max(0.0).sqrt(),
+                    (err.x * err.x + err.y * err.y).sqrt(),
+                ]
+                .into_iter()
+                .enumerate()
+                {
+                    cols[k].push(v);
+                }
+                support.push(i64::from(f.support));
+            }
+        }
+    }
+    if !src.is_empty() {
+        let mut t = Table::default();
+        t.push("source", Values::Str(src));
+        let [e, n, u, se, sn, err_h] = cols;
+        t.push("e_m", Values::F64(e));
+        t.push("n_m", Values::F64(n));
+        t.push("u_m", Values::F64(u));
+        t.push("sigma_e_m", Values::F64(se));
+        t.push("sigma_n_m", Values::F64(sn));
+        t.push("support", Values::I64(support));
+        t.push("err_h_m", Values::F64(err_h));
+        tr.prepend_time(&mut t);
+        tr.append(&mut t, "truth_");
+        out.push(("fixes", t));
+    }
+
+    // FM scans: each station's RSSI.
+    let mut tr = TruthColumns::default();
+    let (mut freq, mut rssi) = (Vec::new(), Vec::new());
+    for b in &rec.batches {
+        for &(f_mhz, p_dbm) in &b.raw.fm_rssi {
+            tr.push(&b.truth);
+            freq.push(f_mhz);
+            rssi.push(p_dbm.is_finite().then_some(p_dbm));
+        }
+    }
+    if !freq.is_empty() {
+        let mut t = Table::default();
+        t.push("freq_mhz", Values::F64(freq));
+        t.push("rssi_dbm", Values::OptF64(rssi));
+        tr.prepend_time(&mut t);
+        tr.append(&mut t, "truth_");
+        out.push(("fm_rssi", t));
+    }
+
+    // IMU samples, with the truth's specific force in ENU for reference.
+    let mut tr = TruthColumns::default();
+    let mut cols: [Vec<f64>; 9] = Default::default();
+    for b in &rec.batches {
+        for m in &b.items {
+            if let Measurement::Imu(s) = m {
+                tr.push(&b.truth);
+                let a = b.truth.enu.acc_enu_mps2;
+                for (k, v) in [
+                    s.gyro_rps.x,
+                    s.gyro_rps.y,
+                    s.gyro_rps.z,
+                    s.accel_mps2.x,
+                    s.accel_mps2.y,
+                    s.accel_mps2.z,
+                    a.x,
+                    a.y,
+                    a.z,
+                ]
+                .into_iter()
+                .enumerate()
+                {
+                    cols[k].push(v);
+                }
+            }
+        }
+    }
+    if !cols[0].is_empty() {
+        let mut t = Table::default();
+        let names = [
+            "gyro_x_rps",
+            "gyro_y_rps",
+            "gyro_z_rps",
+            "accel_x_mps2",
+            "accel_y_mps2",
+            "accel_z_mps2",
+            "truth_acc_e_mps2",
+            "truth_acc_n_mps2",
+            "truth_acc_u_mps2",
+        ];
+        for (name, v) in names.into_iter().zip(cols) {
+            t.push(name, Values::F64(v));
+        }
+        tr.prepend_time(&mut t);
+        tr.append(&mut t, "truth_");
+        out.push(("imu", t));
+    }
+
+    // PDR steps.
+    let mut tr = TruthColumns::default();
+    let mut cols: [Vec<f64>; 4] = Default::default();
+    for b in &rec.batches {
+        for m in &b.items {
+            if let Measurement::Step(s) = m {
+                tr.push(&b.truth);
+                for (k, v) in [
+                    s.length_m,
+                    s.sigma_length_m,
+                    s.heading_rad.to_degrees(),
+                    s.sigma_heading_rad.to_degrees(),
+                ]
+                .into_iter()
+                .enumerate()
+                {
+                    cols[k].push(v);
+                }
+            }
+        }
+    }
+    if !cols[0].is_empty() {
+        let mut t = Table::default();
+        let [l, sl, h, sh] = cols;
+        t.push("length_m", Values::F64(l));
+        t.push("sigma_length_m", Values::F64(sl));
+        t.push("heading_deg", Values::F64(h));
+        t.push("sigma_heading_deg", Values::F64(sh));
+        tr.prepend_time(&mut t);
+        tr.append(&mut t, "truth_");
+        out.push(("steps", t));
+    }
+
+    // Range differences (seed 002's carrier-frequency-offset integrals).
+    let mut tr = TruthColumns::default();
+    let mut emitter = Vec::new();
+    let mut cols: [Vec<f64>; 4] = Default::default();
+    for b in &rec.batches {
+        for m in &b.items {
+            if let Measurement::RangeDifference(d) = m {
+                tr.push(&b.truth);
+                emitter.push(d.emitter.to_string());
+                for (k, v) in [
+                    d.t0.seconds_since(world.start),
+                    d.delta_range_m,
+                    d.sigma_m,
+                    (d.emitter_pos_ecef_m - b.truth.pos_ecef_m).norm(),
+                ]
+                .into_iter()
+                .enumerate()
+                {
+                    cols[k].push(v);
+                }
+            }
+        }
+    }
+    if !emitter.is_empty() {
+        let mut t = Table::default();
+        t.push("emitter", Values::Str(emitter));
+        let [t0, dr, s, geo] = cols;
+        t.push("t0_s", Values::F64(t0));
+        t.push("delta_range_m", Values::F64(dr));
+        t.push("sigma_m", Values::F64(s));
+        t.push("true_range_m", Values::F64(geo));
+        tr.prepend_time(&mut t);
+        tr.append(&mut t, "truth_");
+        out.push(("range_diffs", t));
+    }
+
+    // The reference track.
+    let mut tr = TruthColumns::default();
+    for t in rec.truth_track() {
+        tr.push(t);
+    }
+    let mut t = Table::default();
+    tr.prepend_time(&mut t);
+    tr.append(&mut t, "");
+    out.push(("truth", t));
+    out
+}
+
+/// Writes every table as `DIR/<stem>.csv`.
 pub fn write_csv(world: &World, rec: &Recording, dir: &Path) -> Result<Vec<PathBuf>, String> {
-    let _ = (world, rec, dir);
-    Err("not yet written".into())
+    let mut files = Vec::new();
+    for (stem, t) in tables(world, rec) {
+        let path = dir.join(format!("{stem}.csv"));
+        write_atomic(&path, t.to_csv()?.as_bytes()).map_err(|e| e.to_string())?;
+        files.push(path);
+    }
+    Ok(files)
 }
 
+/// Writes every table as `DIR/<stem>.parquet`.
 pub fn write_parquet(world: &World, rec: &Recording, dir: &Path) -> Result<Vec<PathBuf>, String> {
-    let _ = (world, rec, dir);
-    Err("not yet written".into())
+    let mut files = Vec::new();
+    for (stem, t) in tables(world, rec) {
+        let path = dir.join(format!("{stem}.parquet"));
+        write_atomic(&path, &t.to_parquet()?).map_err(|e| e.to_string())?;
+        files.push(path);
+    }
+    Ok(files)
+}
+
+/// Writes `DIR/truth.tum` and `DIR/<estimator>.tum`: seconds since the trial start and the
+/// position in the world's ENU frame (its `[world] origin`), identity orientation — the
+/// TUM RGB-D format evo reads (`evo_ape tum truth.tum EKF.tum`).
+pub fn write_tum(world: &World, rec: &Recording, dir: &Path) -> Result<Vec<PathBuf>, String> {
+    use crate::metrics::trajectory::write_tum as tum;
+    let frame = &world.frame;
+    let mut files = Vec::new();
+    let track = rec.truth_track();
+    let t: Vec<f64> = track.iter().map(|t| t.sim.seconds()).collect();
+    let p: Vec<Vector3<f64>> = track.iter().map(|t| t.enu.pos_enu_m).collect();
+    let path = dir.join("truth.tum");
+    tum(&path, &t, &p).map_err(|e| e.to_string())?;
+    files.push(path);
+    for est in &rec.estimators {
+        let (t, p): (Vec<f64>, Vec<Vector3<f64>>) = est
+            .epochs
+            .iter()
+            .filter_map(|e| {
+                e.est_ecef_m
+                    .map(|x| (e.t_s, frame.enu_of_ecef(&Vector3::from(x))))
+            })
+            .unzip();
+        let path = dir.join(format!("{}.tum", file_stem(&est.name)));
+        tum(&path, &t, &p).map_err(|e| e.to_string())?;
+        files.push(path);
+    }
+    Ok(files)
 }

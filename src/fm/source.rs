@@ -302,6 +302,12 @@ impl Source for FmSource {
         for (m, st) in self.meas_buf.iter_mut().zip(&self.channel_station) {
             *m = st.map_or(f64::NAN, |s| self.scan_buf[s]);
         }
+        if let Some(raw) = out.raw.as_mut() {
+            // The whole scan, every station the field holds, as a scanner would log it.
+            for (st, &rssi_dbm) in self.field.stations().iter().zip(&self.scan_buf) {
+                raw.fm_rssi.push((st.freq_hz * 1e-6, rssi_dbm));
+            }
+        }
         let constraint = self.constraint(ctx, t_s);
         match locate(
             &self.db,

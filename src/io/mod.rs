@@ -1,3 +1,4 @@
 //! Writing results: atomic files and the run summary.
 
 pub mod atomic;
+pub mod table;

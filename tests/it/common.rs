@@ -71,3 +71,27 @@ pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
 pub fn default_world_text() -> String {
     std::fs::read_to_string(repo().join("worlds/default.toml")).expect("read default world")
 }
+
+/// Whether `python3` can import every one of `modules`; prints why not (the test then
+/// reports itself skipped; CI installs them in `.ci/run`).
+pub fn python_has(modules: &[&str]) -> bool {
+    let probe = format!("import {}", modules.join(", "));
+    match Command::new("python3").args(["-c", &probe]).output() {
+        Ok(o) if o.status.success() => true,
+        Ok(o) => {
+            eprintln!(
+                "skipped: python3 cannot import {}: {}",
+                modules.join(", "),
+                String::from_utf8_lossy(&o.stderr)
+                    .lines()
+                    .last()
+                    .unwrap_or("")
+            );
+            false
+        }
+        Err(e) => {
+            eprintln!("skipped: python3 not found ({e})");
+            false
+        }
+    }
+}

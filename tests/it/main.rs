@@ -5,6 +5,7 @@ mod cli;
 mod common;
 mod dtmb_signal;
 mod environment;
+mod export;
 mod fm;
 mod fusion_engine;
 mod fusion_family;

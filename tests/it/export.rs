@@ -1,0 +1,259 @@
+//! Dataset export (`hybridnav export`, `run --datasets`): the files other tools read.
+//!
+//! The NMEA, GeoJSON, KML and Parquet files are read by pynmea2 (checksums verified),
+//! the `geojson` package and pandas in `tests/python/export_check.py`; the measurement
+//! tables are checked against their own truth columns; the exported trial is checked to
+//! be the Monte Carlo trial of the same seed and index.
+
+use crate::common::{hybridnav, python_has, refused, repo, stderr, tmp_dir};
+use hybridnav::engine::trial::run_trial;
+use hybridnav::export::record_trial;
+use hybridnav::world::load_world;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+fn read(p: &Path) -> String {
+    std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+/// The rows of a CSV file as maps from column name to cell (the export's cells hold no
+/// commas except in quoted names, which these tests do not read).
+fn csv_rows(p: &Path) -> Vec<BTreeMap<String, String>> {
+    let text = read(p);
+    let mut lines = text.lines();
+    let header: Vec<String> = lines
+        .next()
+        .expect("a header")
+        .split(',')
+        .map(String::from)
+        .collect();
+    lines
+        .map(|l| {
+            header
+                .iter()
+                .cloned()
+                .zip(l.split(',').map(String::from))
+                .collect()
+        })
+        .collect()
+}
+
+fn num(row: &BTreeMap<String, String>, k: &str) -> f64 {
+    row[k]
+        .parse()
+        .unwrap_or_else(|_| panic!("{k} = {:?} is not a number", row[k]))
+}
+
+#[test]
+fn every_format_is_written_and_read_by_the_tools_users_pair_it_with() {
+    let out = tmp_dir("export-all");
+    let o = hybridnav(&[
+        "export",
+        "worlds/default.toml",
+        "--format",
+        "nmea,tum,csv,parquet,geojson,kml,sigmf",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in [
+        "truth.nmea",
+        "GPS_BDS.nmea",
+        "truth.tum",
+        "GPS_BDS.tum",
+        "ranges.csv",
+        "truth.csv",
+        "ranges.parquet",
+        "scene.geojson",
+        "scene.kml",
+        "dtmb-D01.sigmf-data",
+        "dtmb-D01.sigmf-meta",
+    ] {
+        assert!(out.join(f).exists(), "{f} was not written");
+    }
+
+    // Every NMEA sentence's checksum, recomputed here independently of the writer.
+    let nmea = read(&out.join("GPS_BDS.nmea"));
+    let mut kinds = BTreeMap::new();
+    for line in nmea.split("\r\n").filter(|l| !l.is_empty()) {
+        let (body, cs) = line[1..].split_once('*').expect("a checksum");
+        let x = body.bytes().fold(0u8, |a, b| a ^ b);
+        assert_eq!(format!("{x:02X}"), cs, "{line}");
+        *kinds.entry(&body[..5]).or_insert(0) += 1;
+    }
+    // One GGA, RMC and two GSA per epoch; GSV per system.
+    let epochs = kinds["GNGGA"];
+    assert!(epochs > 100, "{kinds:?}");
+    assert_eq!(kinds["GNRMC"], epochs);
+    assert_eq!(kinds["GNGSA"], 2 * epochs);
+    assert!(kinds["GPGSV"] >= epochs && kinds["GBGSV"] >= epochs);
+
+    // The SigMF recording is 50 PN945 signal frames (945-symbol header + 3780-symbol body,
+    // GB 20600-2006) as cf32, 8 bytes a sample.
+    let len = std::fs::metadata(out.join("dtmb-D01.sigmf-data"))
+        .unwrap()
+        .len();
+    assert_eq!(len, 50 * (945 + 3780) * 8);
+
+    if python_has(&["pynmea2", "geojson", "pandas", "pyarrow"]) {
+        let py = std::process::Command::new("python3")
+            .arg(repo().join("tests/python/export_check.py"))
+            .arg(&out)
+            .output()
+            .expect("run python3");
+        let text = String::from_utf8_lossy(&py.stdout);
+        println!("{text}");
+        assert!(py.status.success(), "{text}{}", stderr(&py));
+    }
+}
+
+#[test]
+fn the_exported_trial_is_the_monte_carlo_trial() {
+    // Recording a trial (raw observations on) must not change a single estimate.
+    let world = load_world(&repo().join("worlds/seed000-kehui.toml")).unwrap();
+    let rec = record_trial(&world, 7, 1).unwrap();
+    let run = run_trial(&world, 7, 1).unwrap();
+    assert_eq!(rec.estimators, run.estimators);
+    assert!(rec.batches.iter().any(|b| !b.raw.fm_rssi.is_empty()));
+
+    // `run --datasets` writes each trial's files, equal to a separate `export --trial`.
+    let out = tmp_dir("export-run");
+    let run_dir = out.join("run");
+    let o = hybridnav(&[
+        "run",
+        "worlds/default.toml",
+        "--trials",
+        "2",
+        "--seed",
+        "5",
+        "--quiet",
+        "--datasets",
+        "tum,csv",
+        "--out",
+        run_dir.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let single = out.join("single");
+    let o = hybridnav(&[
+        "export",
+        "worlds/default.toml",
+        "--seed",
+        "5",
+        "--trial",
+        "1",
+        "--format",
+        "tum,csv",
+        "--out",
+        single.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in ["truth.tum", "GPS_BDS.tum", "ranges.csv"] {
+        assert_eq!(
+            read(&run_dir.join("datasets/trial-000001").join(f)),
+            read(&single.join(f)),
+            "{f}"
+        );
+    }
+    assert_ne!(
+        read(&run_dir.join("datasets/trial-000000/ranges.csv")),
+        read(&single.join("ranges.csv"))
+    );
+}
+
+#[test]
+fn measurement_tables_carry_their_truth() {
+    let out = tmp_dir("export-kehui");
+    let o = hybridnav(&[
+        "export",
+        "worlds/seed000-kehui.toml",
+        "--format",
+        "csv",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let rows = csv_rows(&out.join("ranges.csv"));
+
+    // GNSS: pseudorange − true range is the receiver clock (common to a system's
+    // satellites at an epoch) plus the errors; with the clock removed by the per-epoch,
+    // per-system median, the spread must be that of the σ the receiver reports.
+    let mut by_epoch: BTreeMap<(String, String), Vec<(f64, f64)>> = BTreeMap::new();
+    for r in rows.iter().filter(|r| r["source"] == "gnss") {
+        by_epoch
+            .entry((r["t_s"].clone(), r["system"].clone()))
+            .or_default()
+            .push((
+                num(r, "pseudorange_m") - num(r, "true_range_m"),
+                num(r, "sigma_m"),
+            ));
+    }
+    let (mut sq, mut sig2, mut n) = (0.0, 0.0, 0usize);
+    for v in by_epoch.values().filter(|v| v.len() >= 4) {
+        let mut d: Vec<f64> = v.iter().map(|x| x.0).collect();
+        d.sort_by(f64::total_cmp);
+        let med = d[d.len() / 2];
+        for (x, s) in v {
+            sq += (x - med).powi(2);
+            sig2 += s * s;
+            n += 1;
+        }
+    }
+    assert!(n > 1000, "{n} GNSS ranges");
+    let ratio = (sq / sig2).sqrt();
+    println!("GNSS range residual RMS / reported σ = {ratio:.2} over {n} ranges");
+    assert!((0.3..1.5).contains(&ratio), "{ratio}");
+
+    // DTMB TOAs as ranges, and the FM scans: every station at every epoch.
+    let dtmb: Vec<_> = rows.iter().filter(|r| r["system"] == "dtmb").collect();
+    assert!(!dtmb.is_empty());
+    for r in &dtmb {
+        assert!(num(r, "true_range_m") > 100.0);
+    }
+    let fm = csv_rows(&out.join("fm_rssi.csv"));
+    let truth = csv_rows(&out.join("truth.csv"));
+    assert!(fm.len() >= truth.len(), "{} scans rows", fm.len());
+    // A station below the scanner's sensitivity is an empty cell, not a number.
+    let heard: Vec<f64> = fm
+        .iter()
+        .filter(|r| !r["rssi_dbm"].is_empty())
+        .map(|r| num(r, "rssi_dbm"))
+        .collect();
+    assert!(
+        heard.len() * 2 > fm.len(),
+        "{} of {} heard",
+        heard.len(),
+        fm.len()
+    );
+    for p in heard {
+        assert!((-130.0..0.0).contains(&p), "{p} dBm");
+    }
+}
+
+#[test]
+fn bad_formats_are_refused_before_anything_runs() {
+    let out = tmp_dir("export-bad");
+    let e = refused(
+        &[
+            "export",
+            "worlds/default.toml",
+            "--format",
+            "nmea,gpx",
+            "--out",
+            out.join("x").to_str().unwrap(),
+        ],
+        &["unknown dataset format 'gpx'", "rinex, nmea, tum"],
+    );
+    assert!(e.contains("--format"), "{e}");
+    refused(
+        &[
+            "run",
+            "worlds/default.toml",
+            "--datasets",
+            "csv,foo",
+            "--out",
+            out.join("y").to_str().unwrap(),
+        ],
+        &["--datasets", "unknown dataset format 'foo'"],
+    );
+    assert!(!out.join("x").exists() && !out.join("y").exists());
+}
