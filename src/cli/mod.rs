@@ -174,7 +174,8 @@ pub struct RunArgs {
     #[arg(long)]
     pub quiet: bool,
     /// Run only shard K of N (trials i with i mod N = K − 1), e.g. on N machines; combine
-    /// the shards' directories with `hybridnav merge`.
+    /// the shards' directories with `hybridnav merge`. `auto/N` takes K from a Slurm job
+    /// array (SLURM_ARRAY_TASK_ID) or a Kubernetes Indexed Job (JOB_COMPLETION_INDEX).
     #[arg(long, value_name = "K/N")]
     pub shard: Option<String>,
     /// Continue the interrupted run in OUT: keep the trials it finished, run the rest.
@@ -339,7 +340,9 @@ fn cmd_run(a: RunArgs) -> Result<()> {
         bail!("--trials must be at least 1");
     }
     let shard = match &a.shard {
-        Some(s) => Shard::parse(s).map_err(anyhow::Error::msg)?,
+        Some(s) => {
+            Shard::parse_with_env(s, |k| std::env::var(k).ok()).map_err(anyhow::Error::msg)?
+        }
         None => Shard::WHOLE,
     };
     let threads = match a.threads {

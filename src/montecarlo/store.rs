@@ -59,6 +59,72 @@ impl Shard {
         })
     }
 
+    /// Parses `--shard` as [`Shard::parse`] does, and also `auto/N`, where K comes from the
+    /// array-job scheduler running this process (`env` looks a variable up):
+    ///
+    /// - Slurm job arrays: K = `SLURM_ARRAY_TASK_ID` − `SLURM_ARRAY_TASK_MIN` + 1, so
+    ///   `--array=0-63` and `--array=1-64` both give shards 1…64; when Slurm says how many
+    ///   tasks the array has (`SLURM_ARRAY_TASK_COUNT`), it must be N.
+    /// - Kubernetes Indexed Jobs: K = `JOB_COMPLETION_INDEX` + 1 (the index is 0-based).
+    ///
+    /// # Errors
+    /// A message naming the variable that is missing, malformed or inconsistent with N.
+    pub fn parse_with_env(
+        text: &str,
+        env: impl Fn(&str) -> Option<String>,
+    ) -> Result<Self, String> {
+        let Some(n_text) = text.trim().strip_prefix("auto/") else {
+            return Shard::parse(text);
+        };
+        let n: u64 = n_text
+            .trim()
+            .parse()
+            .ok()
+            .filter(|n| *n > 0)
+            .ok_or_else(|| format!("--shard {text:?}: expected auto/N with N ≥ 1, e.g. auto/64"))?;
+        let int = |name: &str| -> Result<Option<u64>, String> {
+            match env(name) {
+                None => Ok(None),
+                Some(v) => v.trim().parse().map(Some).map_err(|_| {
+                    format!("--shard auto: {name}={v:?} is not a non-negative integer")
+                }),
+            }
+        };
+        let k = if let Some(id) = int("SLURM_ARRAY_TASK_ID")? {
+            if let Some(count) = int("SLURM_ARRAY_TASK_COUNT")? {
+                if count != n {
+                    return Err(format!(
+                        "--shard auto/{n}: the Slurm array has {count} tasks \
+                         (SLURM_ARRAY_TASK_COUNT), not {n}"
+                    ));
+                }
+            }
+            let min = int("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
+            id.checked_sub(min).map(|k| k + 1).ok_or_else(|| {
+                format!(
+                    "--shard auto: SLURM_ARRAY_TASK_ID {id} is below SLURM_ARRAY_TASK_MIN {min}"
+                )
+            })?
+        } else if let Some(index) = int("JOB_COMPLETION_INDEX")? {
+            index + 1
+        } else {
+            return Err(format!(
+                "--shard auto/{n}: neither SLURM_ARRAY_TASK_ID (a Slurm job array) nor \
+                 JOB_COMPLETION_INDEX (a Kubernetes Indexed Job) is set; give --shard K/N"
+            ));
+        };
+        if k > n {
+            return Err(format!(
+                "--shard auto/{n}: this task is shard {k}, beyond the {n} shards \
+                 (is the array or the job's completions larger than N?)"
+            ));
+        }
+        Ok(Shard {
+            index: k - 1,
+            count: n,
+        })
+    }
+
     /// Whether trial `i` belongs to this shard.
     pub fn contains(&self, i: u64) -> bool {
         i % self.count == self.index
@@ -384,6 +450,46 @@ pub fn gather_shards(dirs: &[PathBuf]) -> Result<(Manifest, Vec<TrialResult>), S
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn shard_from_the_schedulers_environment() {
+        let env = |vars: &'static [(&'static str, &'static str)]| {
+            move |k: &str| {
+                vars.iter()
+                    .find(|(name, _)| *name == k)
+                    .map(|(_, v)| v.to_string())
+            }
+        };
+        let slurm = env(&[
+            ("SLURM_ARRAY_TASK_ID", "7"),
+            ("SLURM_ARRAY_TASK_MIN", "1"),
+            ("SLURM_ARRAY_TASK_COUNT", "8"),
+        ]);
+        assert_eq!(
+            Shard::parse_with_env("auto/8", slurm).unwrap(),
+            Shard { index: 6, count: 8 }
+        );
+        let err = Shard::parse_with_env("auto/9", slurm).unwrap_err();
+        assert!(err.contains("has 8 tasks"), "{err}");
+        let k8s = env(&[("JOB_COMPLETION_INDEX", "0")]);
+        assert_eq!(
+            Shard::parse_with_env("auto/3", k8s).unwrap(),
+            Shard { index: 0, count: 3 }
+        );
+        let err =
+            Shard::parse_with_env("auto/3", env(&[("JOB_COMPLETION_INDEX", "3")])).unwrap_err();
+        assert!(err.contains("shard 4, beyond the 3"), "{err}");
+        let err = Shard::parse_with_env("auto/3", env(&[])).unwrap_err();
+        assert!(err.contains("neither SLURM_ARRAY_TASK_ID"), "{err}");
+        let err =
+            Shard::parse_with_env("auto/3", env(&[("JOB_COMPLETION_INDEX", "x")])).unwrap_err();
+        assert!(err.contains("JOB_COMPLETION_INDEX=\"x\""), "{err}");
+        // Explicit K/N ignores the environment.
+        assert_eq!(
+            Shard::parse_with_env("2/3", k8s).unwrap(),
+            Shard { index: 1, count: 3 }
+        );
+    }
 
     #[test]
     fn shard_parsing_and_membership() {

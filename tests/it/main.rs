@@ -2,6 +2,7 @@
 //! the public API or the `hybridnav` binary.
 
 mod cli;
+mod cluster;
 mod common;
 mod dtmb_signal;
 mod environment;

@@ -28,7 +28,7 @@ fn trial_files(dir: &Path) -> Vec<String> {
 }
 
 /// Asserts that two run directories hold byte-identical outputs and trial files.
-fn assert_same_run(a: &Path, b: &Path) {
+pub(crate) fn assert_same_run(a: &Path, b: &Path) {
     for f in OUTPUTS {
         let x = std::fs::read(a.join(f)).unwrap_or_else(|e| panic!("{}: {e}", a.join(f).display()));
         let y = std::fs::read(b.join(f)).unwrap_or_else(|e| panic!("{}: {e}", b.join(f).display()));
