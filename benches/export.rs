@@ -1,7 +1,7 @@
 //! Dataset export rates: recording a trial (the simulation with every batch kept) and
-//! writing each format from the recording, on the default world (300 s of city driving,
+//! writing each format from the recording, on the default world (172 s of city driving,
 //! GPS + BeiDou at 1 Hz, three estimators) and on seed 000's Kehui world (GNSS, DTMB and
-//! a 10-station FM scan every second). Throughput is receiver epochs per second.
+//! a 21-station FM scan every second, five estimators). Throughput is receiver epochs per second.
 //!
 //! Run: `cargo bench --bench export`. RINEX is benchmarked with the other formats once it
 //! writes; files go to a temporary directory (the page cache, not the disk, is measured).
