@@ -127,6 +127,26 @@ pub struct Recording {
 }
 
 impl Recording {
+    /// A file stem per estimator, in the world's order: the name with every character
+    /// other than a letter, digit or `-` replaced by `_`, made unique (`-2`, `-3`, …) and
+    /// never `truth`, whose files hold the reference.
+    pub fn estimator_stems(&self) -> Vec<String> {
+        let mut used: Vec<String> = vec!["truth".to_string()];
+        let mut out = Vec::with_capacity(self.estimators.len());
+        for est in &self.estimators {
+            let base = file_stem(&est.name);
+            let mut stem = base.clone();
+            let mut k = 2;
+            while used.iter().any(|u| u.eq_ignore_ascii_case(&stem)) {
+                stem = format!("{base}-{k}");
+                k += 1;
+            }
+            used.push(stem.clone());
+            out.push(stem);
+        }
+        out
+    }
+
     /// The truth at the epochs of the first source that samples at the start (the GNSS
     /// receiver in most worlds), one per distinct time: the reference trajectory.
     pub fn truth_track(&self) -> Vec<&Truth> {
@@ -217,8 +237,8 @@ pub(crate) fn write_text(dir: &Path, name: &str, text: &str) -> Result<PathBuf, 
     Ok(path)
 }
 
-/// A file-name-safe form of an estimator's name (`GPS+DTMB` → `GPS_DTMB`).
-pub(crate) fn file_stem(name: &str) -> String {
+/// A file-name-safe form of a name (`GPS+DTMB` → `GPS_DTMB`).
+fn file_stem(name: &str) -> String {
     name.chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() || c == '-' {
@@ -271,4 +291,40 @@ fn write_sigmf(world: &World, rec: &Recording, dir: &Path) -> Result<Vec<PathBuf
         files.push(base.with_extension("sigmf-meta"));
     }
     Ok(files)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::trial::EstimatorTrace;
+
+    #[test]
+    fn estimator_file_stems_are_safe_and_unique() {
+        let est = |name: &str| EstimatorTrace {
+            name: name.into(),
+            epochs: Vec::new(),
+        };
+        let rec = Recording {
+            seed: 0,
+            trial: 0,
+            batches: Vec::new(),
+            estimators: vec![est("GPS+BDS"), est("GPS BDS"), est("Truth"), est("a/b")],
+        };
+        assert_eq!(
+            rec.estimator_stems(),
+            ["GPS_BDS", "GPS_BDS-2", "Truth-2", "a_b"]
+        );
+    }
+
+    #[test]
+    fn format_lists() {
+        assert_eq!(
+            Format::parse_list("kml, NMEA,kml").unwrap(),
+            [Format::Nmea, Format::Kml]
+        );
+        assert_eq!(Format::parse_list("all").unwrap(), Format::ALL);
+        assert!(Format::parse_list("nmea,")
+            .unwrap_err()
+            .contains("unknown dataset format ''"));
+    }
 }

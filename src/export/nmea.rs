@@ -12,7 +12,7 @@
 //!   altitude + separation is exactly the ellipsoidal height a reader reconstructs.
 //! - Every sentence ends with `*hh` (XOR of the bytes between `$` and `*`) and CR LF.
 
-use super::{file_stem, write_text, RecordedBatch, Recording};
+use super::{write_text, RecordedBatch, Recording};
 use crate::core::geodesy::azimuth_elevation;
 use crate::core::{Geodetic, GpsTime, System};
 use crate::fusion::measurement::Measurement;
@@ -264,7 +264,7 @@ pub fn write(world: &World, rec: &Recording, dir: &Path) -> Result<Vec<PathBuf>,
     }
     files.push(write_text(dir, "truth.nmea", &text)?);
 
-    for est in &rec.estimators {
+    for (est, stem) in rec.estimators.iter().zip(rec.estimator_stems()) {
         let mut text = String::new();
         let mut prev: Option<(f64, Vector3<f64>)> = None;
         for e in &est.epochs {
@@ -288,11 +288,7 @@ pub fn write(world: &World, rec: &Recording, dir: &Path) -> Result<Vec<PathBuf>,
                 },
             );
         }
-        files.push(write_text(
-            dir,
-            &format!("{}.nmea", file_stem(&est.name)),
-            &text,
-        )?);
+        files.push(write_text(dir, &format!("{stem}.nmea"), &text)?);
     }
     Ok(files)
 }

@@ -10,7 +10,7 @@
 //! samples, the magnetometer's heading through the truth), `steps` (PDR), `range_diffs`
 //! (carrier-phase range differences) and `truth` (the reference track).
 
-use super::{file_stem, Recording};
+use super::Recording;
 use crate::engine::Truth;
 use crate::fusion::measurement::Measurement;
 use crate::io::atomic::write_atomic;
@@ -378,7 +378,7 @@ pub fn write_tum(world: &World, rec: &Recording, dir: &Path) -> Result<Vec<PathB
     let path = dir.join("truth.tum");
     tum(&path, &t, &p).map_err(|e| e.to_string())?;
     files.push(path);
-    for est in &rec.estimators {
+    for (est, stem) in rec.estimators.iter().zip(rec.estimator_stems()) {
         let (t, p): (Vec<f64>, Vec<Vector3<f64>>) = est
             .epochs
             .iter()
@@ -387,7 +387,7 @@ pub fn write_tum(world: &World, rec: &Recording, dir: &Path) -> Result<Vec<PathB
                     .map(|x| (e.t_s, frame.enu_of_ecef(&Vector3::from(x))))
             })
             .unzip();
-        let path = dir.join(format!("{}.tum", file_stem(&est.name)));
+        let path = dir.join(format!("{stem}.tum"));
         tum(&path, &t, &p).map_err(|e| e.to_string())?;
         files.push(path);
     }
