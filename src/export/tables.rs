@@ -7,7 +7,8 @@
 //! `pseudorange_m − true_range_m` is the receiver clock plus the residual errors (the raw
 //! observables are in the RINEX export), `fixes` (FM fingerprint and magnetic-landmark
 //! positions), `fm_rssi` (each scanned FM station's RSSI), `imu` (gyro and accelerometer
-//! samples, the magnetometer's heading through the truth), `steps` (PDR), `range_diffs`
+//! samples), `magnetometer` (body-frame field samples with the true position at each),
+//! `steps` (PDR), `range_diffs`
 //! (carrier-phase range differences) and `truth` (the reference track).
 
 use super::Recording;
@@ -260,6 +261,36 @@ pub fn tables(world: &World, rec: &Recording) -> Vec<(&'static str, Table)> {
         tr.prepend_time(&mut t);
         tr.append(&mut t, "truth_");
         out.push(("imu", t));
+    }
+
+    // Magnetometer samples, each with the true position at its own time.
+    let mut cols: [Vec<f64>; 8] = Default::default();
+    for b in &rec.batches {
+        for m in &b.raw.mag {
+            let [bx, by, bz] = m.b_body_ut;
+            let [e, n, u] = m.true_pos_enu_m;
+            let norm = (bx * bx + by * by + bz * bz).sqrt();
+            for (k, v) in [m.t_s, bx, by, bz, norm, e, n, u].into_iter().enumerate() {
+                cols[k].push(v);
+            }
+        }
+    }
+    if !cols[0].is_empty() {
+        let mut t = Table::default();
+        let names = [
+            "t_s",
+            "b_x_ut",
+            "b_y_ut",
+            "b_z_ut",
+            "b_norm_ut",
+            "truth_e_m",
+            "truth_n_m",
+            "truth_u_m",
+        ];
+        for (name, v) in names.into_iter().zip(cols) {
+            t.push(name, Values::F64(v));
+        }
+        out.push(("magnetometer", t));
     }
 
     // PDR steps.

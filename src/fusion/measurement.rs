@@ -125,6 +125,20 @@ pub struct RawLog {
     pub gnss: Vec<crate::gnss::raw::RawGnssObservation>,
     /// FM scan: (carrier frequency in MHz, RSSI in dBm) per scanned station.
     pub fm_rssi: Vec<(f64, f64)>,
+    /// Magnetometer samples (each with its own time and true position: the magnetic
+    /// source logs the samples since its previous batch).
+    pub mag: Vec<MagSample>,
+}
+
+/// One magnetometer sample as logged for a dataset.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MagSample {
+    /// Seconds since the trial start.
+    pub t_s: f64,
+    /// Body-frame reading (µT).
+    pub b_body_ut: [f64; 3],
+    /// True position (ENU, m).
+    pub true_pos_enu_m: [f64; 3],
 }
 
 impl RawLog {
@@ -132,6 +146,7 @@ impl RawLog {
     pub fn clear(&mut self) {
         self.gnss.clear();
         self.fm_rssi.clear();
+        self.mag.clear();
     }
 }
 

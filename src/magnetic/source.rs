@@ -212,6 +212,11 @@ pub struct MagneticSource {
     survey_windows: usize,
     survey_labelled: usize,
     end: SimTime,
+    /// The trial's magnetometer walk (times, body-frame readings, true positions), kept
+    /// for a dataset export that asks for the raw samples.
+    walk: MagneticWalk,
+    /// The first walk sample not yet logged.
+    walk_next: usize,
 }
 
 fn walk(
@@ -424,6 +429,8 @@ impl MagneticSource {
             survey_windows,
             survey_labelled: labelled,
             end,
+            walk: trial,
+            walk_next: 0,
         })
     }
 
@@ -473,9 +480,27 @@ impl Source for MagneticSource {
             }));
             self.next += 1;
         }
-        self.detections
+        let next = self
+            .detections
             .get(self.next)
             .map(|d| SimTime::from_seconds(d.t_s))
-            .filter(|t| *t < self.end)
+            .filter(|t| *t < self.end);
+        if let Some(raw) = out.raw.as_mut() {
+            // The samples up to now; after the last detection, the rest of the walk, so
+            // that a dataset holds the whole magnetometer record.
+            let w = &self.walk;
+            while self.walk_next < w.t_s.len()
+                && (next.is_none() || SimTime::from_seconds(w.t_s[self.walk_next]) <= ctx.truth.sim)
+            {
+                let k = self.walk_next;
+                raw.mag.push(crate::fusion::measurement::MagSample {
+                    t_s: w.t_s[k],
+                    b_body_ut: w.b_body_ut[k].into(),
+                    true_pos_enu_m: w.pos_enu_m[k].into(),
+                });
+                self.walk_next += 1;
+            }
+        }
+        next
     }
 }

@@ -115,6 +115,33 @@ fn the_exported_trial_is_the_monte_carlo_trial() {
     let run = run_trial(&world, 7, 1).unwrap();
     assert_eq!(rec.estimators, run.estimators);
     assert!(rec.batches.iter().any(|b| !b.raw.fm_rssi.is_empty()));
+    // Likewise with the magnetometer walk logged (seed 002).
+    let world = load_world(&repo().join("worlds/seed002-lianhua.toml")).unwrap();
+    let rec = record_trial(&world, 7, 0).unwrap();
+    assert_eq!(rec.estimators, run_trial(&world, 7, 0).unwrap().estimators);
+    let mag: Vec<_> = rec.batches.iter().flat_map(|b| &b.raw.mag).collect();
+    // The whole walk, at the magnetometer's rate, in time order.
+    assert!(mag.windows(2).all(|w| w[1].t_s > w[0].t_s));
+    let span_s = mag.last().unwrap().t_s - mag[0].t_s;
+    assert!(mag.len() as f64 > 0.95 * span_s * 50.0, "{} samples over {span_s} s", mag.len());
+    // |B| is the Earth's field plus the structures' anomalies. The centred dipole by hand:
+    // B = B0·√(1 + 3 sin² λm), B0 ≈ 29.4 µT and the geomagnetic pole near 80.8° N,
+    // 72.6° W (IGRF, 2020s), λm the site's geomagnetic latitude — about 35 µT in Wuhan.
+    let o = world.frame.origin();
+    let (pole_lat, pole_lon) = (80.8f64.to_radians(), (-72.6f64).to_radians());
+    let sin_lm = o.lat_rad.sin() * pole_lat.sin()
+        + o.lat_rad.cos() * pole_lat.cos() * (o.lon_rad - pole_lon).cos();
+    let dipole_ut = 29.4 * (1.0 + 3.0 * sin_lm * sin_lm).sqrt();
+    let mut norms: Vec<f64> = mag
+        .iter()
+        .map(|m| m.b_body_ut.iter().map(|x| x * x).sum::<f64>().sqrt())
+        .collect();
+    norms.sort_by(f64::total_cmp);
+    let median = norms[norms.len() / 2];
+    assert!(
+        (median / dipole_ut - 1.0).abs() < 0.1,
+        "median |B| {median} µT, dipole {dipole_ut} µT"
+    );
 
     // `run --datasets` writes each trial's files, equal to a separate `export --trial`.
     let out = tmp_dir("export-run");
