@@ -39,6 +39,7 @@ use crate::fusion::measurement::{Measurement, MeasurementBatch, RangeMeasurement
 use crate::gnss::atmosphere::{saastamoinen_m, Klobuchar};
 use crate::gnss::ephemeris::sagnac_rotate;
 use crate::gnss::link::{Signal, TrackingConfig};
+use crate::gnss::raw::RawGnssObservation;
 use crate::gnss::receiver_clock::ClockTrack;
 use crate::gnss::rinex_nav::NavData;
 use crate::gnss::visibility::{scene_effect, LinkClass};
@@ -168,6 +169,17 @@ struct Channel {
     rng: StreamRng,
     ure_m: f64,
     iono_factor: f64,
+    /// The carrier-phase arc a dataset export logs (created at the first raw epoch, so a
+    /// Monte Carlo trial never builds it).
+    raw: Option<PhaseArc>,
+}
+
+/// A channel's carrier tracking as logged for RINEX: its own random stream (phase noise,
+/// ambiguities), the integer ambiguity of the current arc and the last epoch it tracked.
+struct PhaseArc {
+    rng: StreamRng,
+    ambiguity_cycles: f64,
+    last: Option<SimTime>,
 }
 
 /// A satellite above the mask at one epoch, before shielding.
@@ -212,6 +224,8 @@ pub struct GnssSource {
     step_ns: i64,
     end: SimTime,
     last_sim: Option<SimTime>,
+    /// The trial's streams, for the raw-observable streams made on demand.
+    trial_rng: TrialRng,
 }
 
 impl GnssSource {
@@ -252,6 +266,7 @@ impl GnssSource {
                     rng: r,
                     ure_m,
                     iono_factor,
+                    raw: None,
                 }
             })
             .collect::<Vec<_>>();
@@ -271,6 +286,7 @@ impl GnssSource {
             step_ns,
             end,
             last_sim: None,
+            trial_rng: *rng,
         }
     }
 
@@ -320,6 +336,86 @@ impl GnssSource {
                     .retain(|c| !list.contains(&channels[c.channel].sat)),
             }
         }
+    }
+}
+
+/// The terms of one satellite's observables at one epoch (m, m/s).
+struct RawGeometry {
+    range_m: f64,
+    /// c·(receiver clock + inter-system bias).
+    rx_clock_m: f64,
+    /// The true ionospheric group delay (the phase advances by as much).
+    iono_m: f64,
+    tropo_m: f64,
+    ure_m: f64,
+    /// c·(Δt_sv − T_GD), the broadcast satellite clock of the signal.
+    sat_clock_m: f64,
+    sat_drift_mps: f64,
+}
+
+/// Carrier-phase tracking noise (m): the PLL's thermal jitter
+/// σ_φ = (λ/2π)·√(B_L/(C/N0)·(1 + 1/(2·T·C/N0))) (Kaplan & Hegarty, *Understanding GPS*,
+/// 2nd ed., eq. 5.6) with a 15 Hz loop and 20 ms coherent integration.
+fn phase_sigma_m(lambda_m: f64, cn0_dbhz: f64) -> f64 {
+    let (b_l_hz, t_s) = (15.0, 0.02);
+    let cn0 = 10f64.powf(cn0_dbhz / 10.0);
+    lambda_m / std::f64::consts::TAU * (b_l_hz / cn0 * (1.0 + 1.0 / (2.0 * t_s * cn0))).sqrt()
+}
+
+/// The raw observables a receiver logs for one satellite (RINEX 3.04 §5.1):
+///
+/// ```text
+/// C = ρ + c(δt_r + b_sys) − c(Δt_sv − T_GD) + I + T + e_URE + m + ε_code
+/// L = [ρ + c(δt_r + b_sys) − c(Δt_sv − T_GD) − I + T + e_URE + ε_φ] / λ + N
+/// D = −(ρ̇ + c·δṫ_r − c·Δṫ_sv) / λ
+/// ```
+///
+/// The ionosphere delays the code and advances the carrier by the same amount
+/// (code–carrier divergence); N is an integer, drawn anew when tracking resumes after a
+/// gap, with the loss of lock flagged on that epoch. The phase is started within a few
+/// hundred cycles of the code, as receivers do.
+#[allow(clippy::too_many_arguments)]
+fn raw_observation(
+    ch: &mut Channel,
+    trial_rng: &TrialRng,
+    now: SimTime,
+    step_ns: i64,
+    g: &RawGeometry,
+    code_m: f64,
+    range_rate_mps: f64,
+    cn0_dbhz: f64,
+    rx_clock_s: f64,
+) -> RawGnssObservation {
+    let f_hz = if ch.sat.system == System::Bds {
+        F_B1I_HZ
+    } else {
+        F_L1_HZ
+    };
+    let lambda_m = C_MPS / f_hz;
+    let arc = ch.raw.get_or_insert_with(|| PhaseArc {
+        rng: trial_rng.stream(&format!("gnss/raw/{}", ch.sat)),
+        ambiguity_cycles: 0.0,
+        last: None,
+    });
+    let n: f64 = arc.rng.sample(StandardNormal);
+    let phase_m = g.range_m + g.rx_clock_m - g.sat_clock_m - g.iono_m
+        + g.tropo_m
+        + g.ure_m
+        + phase_sigma_m(lambda_m, cn0_dbhz) * n;
+    let lock_lost = arc.last.is_none_or(|l| now.0 - l.0 > step_ns);
+    if lock_lost {
+        let offset: i32 = arc.rng.random_range(-500..=500);
+        arc.ambiguity_cycles = ((code_m - phase_m) / lambda_m).round() + f64::from(offset);
+    }
+    arc.last = Some(now);
+    RawGnssObservation {
+        sat: ch.sat,
+        pseudorange_m: code_m,
+        carrier_phase_cycles: phase_m / lambda_m + arc.ambiguity_cycles,
+        doppler_hz: -(range_rate_mps - g.sat_drift_mps) / lambda_m,
+        cn0_dbhz,
+        lock_lost,
+        rx_clock_s,
     }
 }
 
@@ -498,6 +594,37 @@ impl Source for GnssSource {
                     .powi(2)
                 + (self.cfg.errors.tropo_residual * tropo_model).powi(2))
             .sqrt();
+            if let Some(raw) = out.raw.as_mut() {
+                let eph = self.nav.select(sat, truth.t);
+                let (clock_s, drift) = eph.map_or((0.0, 0.0), |e| {
+                    let st = e.state(truth.t.add_seconds(-range / C_MPS));
+                    // IS-GPS-200 §20.3.3.3.3.2 (L1 C/A) and BDS-SIS-ICD §5.2.4.10 (B1I):
+                    // the single-frequency user's satellite clock is Δt_sv − T_GD.
+                    (st.clock_s - e.tgd_s, st.clock_drift_s_per_s)
+                });
+                let geometry = RawGeometry {
+                    range_m: range,
+                    rx_clock_m: C_MPS * (rx_bias_s + isb_s),
+                    iono_m: iono_model * (1.0 + ch.iono_factor),
+                    tropo_m: tropo_model * (1.0 + self.tropo_factor),
+                    ure_m: ch.ure_m,
+                    sat_clock_m: C_MPS * clock_s,
+                    sat_drift_mps: C_MPS * drift,
+                };
+                raw.gnss.push(raw_observation(
+                    ch,
+                    &self.trial_rng,
+                    truth.sim,
+                    self.step_ns,
+                    &geometry,
+                    // The receiver removes the broadcast models it knows; the raw code has
+                    // them back, and the satellite clock it never had.
+                    pseudorange_m + iono_model + tropo_model - geometry.sat_clock_m,
+                    range_rate,
+                    cn0,
+                    rx_bias_s,
+                ));
+            }
             out.items.push(Measurement::Range(RangeMeasurement {
                 emitter: sat,
                 emitter_pos_ecef_m: c.pos_rot,

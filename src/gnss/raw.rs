@@ -19,4 +19,7 @@ pub struct RawGnssObservation {
     pub cn0_dbhz: f64,
     /// Loss of lock since the previous epoch (RINEX LLI bit 0).
     pub lock_lost: bool,
+    /// The receiver clock offset δt_r at this epoch (s; without the inter-system bias):
+    /// the time tag of a real receiver is its clock's reading, GPST + δt_r.
+    pub rx_clock_s: f64,
 }

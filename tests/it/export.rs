@@ -123,7 +123,11 @@ fn the_exported_trial_is_the_monte_carlo_trial() {
     // The whole walk, at the magnetometer's rate, in time order.
     assert!(mag.windows(2).all(|w| w[1].t_s > w[0].t_s));
     let span_s = mag.last().unwrap().t_s - mag[0].t_s;
-    assert!(mag.len() as f64 > 0.95 * span_s * 50.0, "{} samples over {span_s} s", mag.len());
+    assert!(
+        mag.len() as f64 > 0.95 * span_s * 50.0,
+        "{} samples over {span_s} s",
+        mag.len()
+    );
     // |B| is the Earth's field plus the structures' anomalies. The centred dipole by hand:
     // B = B0·√(1 + 3 sin² λm), B0 ≈ 29.4 µT and the geomagnetic pole near 80.8° N,
     // 72.6° W (IGRF, 2020s), λm the site's geomagnetic latitude — about 35 µT in Wuhan.

@@ -7,6 +7,7 @@ mod common;
 mod dtmb_signal;
 mod environment;
 mod export;
+mod export_rinex;
 mod fm;
 mod fusion_engine;
 mod fusion_family;
