@@ -265,15 +265,15 @@ impl<'a> Context<'a> {
                     }
                 });
         } else {
-            metrics
-                .par_chunks_mut(nx)
-                .enumerate()
-                .for_each_init(Scratch::default, |scratch, (j, row)| {
+            metrics.par_chunks_mut(nx).enumerate().for_each_init(
+                Scratch::default,
+                |scratch, (j, row)| {
                     for (i, cell) in row.iter_mut().enumerate() {
                         let rx = self.cell_rx(grid, i, j);
                         *cell = self.eval_cell(&rx, scratch, None);
                     }
-                });
+                },
+            );
         }
         (metrics, base)
     }

@@ -95,7 +95,11 @@ impl Region {
                 .config;
             pts.extend(cfg.buildings.iter().flat_map(|b| b.footprint_enu_m.clone()));
             pts.extend(cfg.forests.iter().flat_map(|f| f.polygon_enu_m.clone()));
-            pts.extend(cfg.indoor_zones.iter().flat_map(|z| z.polygon_enu_m.clone()));
+            pts.extend(
+                cfg.indoor_zones
+                    .iter()
+                    .flat_map(|z| z.polygon_enu_m.clone()),
+            );
             pts.extend(cfg.surfaces.iter().flat_map(|s| s.polygon_enu_m.clone()));
         }
         let mut r = Self {
@@ -152,8 +156,12 @@ impl Grid {
     /// `candidates` candidate sites (0 without placement), in floating point so that an
     /// absurd spacing cannot overflow the count.
     pub fn cost(region: &Region, spacing_m: f64, epochs: usize, candidates: usize) -> GridCost {
-        let nx = ((region.east_m - region.west_m) / spacing_m).ceil().max(1.0);
-        let ny = ((region.north_m - region.south_m) / spacing_m).ceil().max(1.0);
+        let nx = ((region.east_m - region.west_m) / spacing_m)
+            .ceil()
+            .max(1.0);
+        let ny = ((region.north_m - region.south_m) / spacing_m)
+            .ceil()
+            .max(1.0);
         let cells = nx * ny;
         let per_cell = BYTES_PER_CELL as f64
             + if candidates > 0 {
@@ -183,9 +191,7 @@ impl Grid {
         candidates: usize,
     ) -> Result<Self, String> {
         if !(spacing_m.is_finite() && spacing_m > 0.0) {
-            return Err(format!(
-                "--grid: expected a spacing > 0 m, got {spacing_m}"
-            ));
+            return Err(format!("--grid: expected a spacing > 0 m, got {spacing_m}"));
         }
         let c = Self::cost(&region, spacing_m, epochs, candidates);
         if c.cells > MAX_CELLS as f64 || c.bytes > MAX_BYTES as f64 {

@@ -162,7 +162,7 @@ fn trace_of_inverse(upper: &Normal, position_only: bool) -> f64 {
     let l = chol.l_dirty();
     for k in 0..UNKNOWNS {
         let p2 = l[(k, k)] * l[(k, k)];
-        if !(p2 > 1e-12 * n[(k, k)]) {
+        if p2.is_nan() || p2 <= 1e-12 * n[(k, k)] {
             return f64::INFINITY;
         }
     }

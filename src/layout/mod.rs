@@ -21,7 +21,7 @@ use eval::Context;
 use grid::{Grid, Region};
 use metrics::{CellMetrics, ClockModel, Coverage};
 use nalgebra::Vector3;
-use place::{Candidate, Objective, Placement, Score};
+use place::{Candidate, Objective, Placement};
 use serde_json::{json, Value};
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
@@ -133,15 +133,18 @@ pub fn run(args: &LayoutArgs) -> anyhow::Result<()> {
                 .display()
         );
     }
-    let grid = Grid::new(region, args.grid, times.len(), candidates.len())
-        .map_err(anyhow::Error::msg)?;
+    let grid =
+        Grid::new(region, args.grid, times.len(), candidates.len()).map_err(anyhow::Error::msg)?;
     let centre = (
         0.5 * (region.west_m + region.east_m),
         0.5 * (region.south_m + region.north_m),
     );
     let ctx = Context::new(&world, &times, args.clocks, args.height, centre);
     std::fs::create_dir_all(&args.out).map_err(|e| {
-        anyhow::anyhow!("cannot create the output directory {}: {e}", args.out.display())
+        anyhow::anyhow!(
+            "cannot create the output directory {}: {e}",
+            args.out.display()
+        )
     })?;
 
     let t0 = std::time::Instant::now();
@@ -173,10 +176,7 @@ pub fn run(args: &LayoutArgs) -> anyhow::Result<()> {
 
     let mut placed: Option<(Placement, Vec<CellMetrics>)> = None;
     if k > 0 {
-        let sites: Vec<_> = candidates
-            .iter()
-            .map(|c| candidate_site(&ctx, c))
-            .collect();
+        let sites: Vec<_> = candidates.iter().map(|c| candidate_site(&ctx, c)).collect();
         let rows = ctx.site_rows(&grid, &sites);
         let problem = place::Problem {
             base: &base,
@@ -214,6 +214,14 @@ pub fn run(args: &LayoutArgs) -> anyhow::Result<()> {
                 step.score.mean
             );
         });
+        // Each candidate alone: what the first greedy step compared, kept for the user (and
+        // for checking the evaluation's symmetry).
+        let single: Vec<Value> = (0..candidates.len())
+            .map(|i| {
+                let s = f(&[i]);
+                json!({ "id": candidates[i].id, "p95": s.p95, "mean": s.mean })
+            })
+            .collect();
         let random = place::random_baseline(candidates.len(), k, args.random_trials, args.seed, &f);
         let rp: Vec<f64> = random.iter().map(|s| s.p95).collect();
         let r_mean = rp.iter().sum::<f64>() / rp.len().max(1) as f64;
@@ -259,6 +267,7 @@ pub fn run(args: &LayoutArgs) -> anyhow::Result<()> {
                 "mean": s.score.mean,
             })).collect::<Vec<_>>(),
             "evaluations": p.evaluations,
+            "single_site": single,
             "random": {
                 "seed": args.seed,
                 "trials": random.len(),
@@ -281,7 +290,13 @@ pub fn run(args: &LayoutArgs) -> anyhow::Result<()> {
     write_json(&args.out.join("layout.json"), &summary)?;
     write_file(
         &args.out.join("grid.csv"),
-        &grid_csv(&world, &grid, &cells, placed.as_ref().map(|p| &p.1[..]), args.height),
+        &grid_csv(
+            &world,
+            &grid,
+            &cells,
+            placed.as_ref().map(|p| &p.1[..]),
+            args.height,
+        ),
     )?;
     write_file(
         &args.out.join("layout.geojson"),
@@ -296,7 +311,15 @@ pub fn run(args: &LayoutArgs) -> anyhow::Result<()> {
             colour: c,
         })
         .collect();
-    write_maps(&args.out, "", &world, &grid, &cells, &outlines, &marker_refs)?;
+    write_maps(
+        &args.out,
+        "",
+        &world,
+        &grid,
+        &cells,
+        &outlines,
+        &marker_refs,
+    )?;
     if let Some((p, after)) = &placed {
         let mut m2 = marker_refs;
         for &i in &p.chosen {
@@ -362,7 +385,11 @@ fn num(v: f64) -> Value {
 /// p50, p95 and max of one metric over the considered cells (nearest rank; an
 /// infinite value, a cell without a fix, sorts last and shows as `null`), and the share
 /// of cells with a finite value.
-fn metric_stats(cells: &[CellMetrics], considered: &[usize], f: impl Fn(&CellMetrics) -> f64) -> Value {
+fn metric_stats(
+    cells: &[CellMetrics],
+    considered: &[usize],
+    f: impl Fn(&CellMetrics) -> f64,
+) -> Value {
     let mut v: Vec<f64> = considered.iter().map(|&c| f(&cells[c])).collect();
     v.sort_by(f64::total_cmp);
     let finite = v.iter().filter(|x| x.is_finite()).count();
@@ -663,9 +690,4 @@ fn write_maps(
         write_file(&dir.join(format!("{prefix}{file}.svg")), &text)?;
     }
     Ok(())
-}
-
-/// A placement's score, for callers that report it.
-pub fn describe(score: &Score) -> String {
-    format!("p95 {:.4} (mean {:.4})", score.p95, score.mean)
 }

@@ -93,7 +93,10 @@ pub const DEFAULT_TCOFDM_FREQ_MHZ: f64 = 1900.0;
 /// `FILE:LINE: message` for an unreadable file, a malformed line, a non-finite
 /// coordinate, a site outside the region, a duplicate id, an unknown kind, an ERP or
 /// frequency out of range, or a file without candidates.
-pub fn parse_candidates(path: &Path, region: &super::grid::Region) -> Result<Vec<Candidate>, String> {
+pub fn parse_candidates(
+    path: &Path,
+    region: &super::grid::Region,
+) -> Result<Vec<Candidate>, String> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| format!("{}: cannot read the candidates file: {e}", path.display()))?;
     parse_candidates_text(&text, &path.display().to_string(), region)
@@ -156,18 +159,24 @@ pub fn parse_candidates_text(
         let kind = f.get(4).map_or("dtmb", |s| s).to_ascii_lowercase();
         let (erp0, freq0, band) = match kind.as_str() {
             "dtmb" => (DEFAULT_DTMB_ERP_KW, DEFAULT_DTMB_FREQ_MHZ, 470.0..=862.0),
-            "tcofdm" => (DEFAULT_TCOFDM_ERP_KW, DEFAULT_TCOFDM_FREQ_MHZ, 100.0..=6000.0),
-            other => {
-                return Err(err(format!(
-                    "kind: expected dtmb or tcofdm, got {other:?}"
-                )))
-            }
+            "tcofdm" => (
+                DEFAULT_TCOFDM_ERP_KW,
+                DEFAULT_TCOFDM_FREQ_MHZ,
+                100.0..=6000.0,
+            ),
+            other => return Err(err(format!("kind: expected dtmb or tcofdm, got {other:?}"))),
         };
         let erp_kw = if f.len() > 5 { num(5, "erp_kw")? } else { erp0 };
         if !(erp_kw > 0.0 && erp_kw <= 1e4) {
-            return Err(err(format!("erp_kw: expected an ERP in (0, 10000] kW, got {erp_kw}")));
+            return Err(err(format!(
+                "erp_kw: expected an ERP in (0, 10000] kW, got {erp_kw}"
+            )));
         }
-        let freq_mhz = if f.len() > 6 { num(6, "freq_mhz")? } else { freq0 };
+        let freq_mhz = if f.len() > 6 {
+            num(6, "freq_mhz")?
+        } else {
+            freq0
+        };
         if !band.contains(&freq_mhz) {
             return Err(err(format!(
                 "freq_mhz: expected {:?} MHz for a {kind} site, got {freq_mhz}",
@@ -311,7 +320,10 @@ pub fn optimise(
         for c in (0..n).filter(|c| !chosen.contains(c)) {
             *trial.last_mut().unwrap_or(&mut 0) = c;
             let s = eval(&trial);
-            if best.as_ref().is_none_or(|(_, b)| s.cmp(b) == Ordering::Less) {
+            if best
+                .as_ref()
+                .is_none_or(|(_, b)| s.cmp(b) == Ordering::Less)
+            {
                 best = Some((c, s));
             }
         }
@@ -445,8 +457,14 @@ mod tests {
         assert_eq!((c[0].kind.as_str(), c[0].line), ("dtmb", 3));
         assert_eq!((c[1].erp_kw, c[1].freq_mhz), (0.5, 2100.0));
         for (text, needle) in [
-            ("A,10,20,30\nA,30,30,30\n", "c.csv:2: duplicate candidate id \"A\" (first on line 1)"),
-            ("A,500,20,30\n", "c.csv:1: candidate A at (500, 20) m is outside the region"),
+            (
+                "A,10,20,30\nA,30,30,30\n",
+                "c.csv:2: duplicate candidate id \"A\" (first on line 1)",
+            ),
+            (
+                "A,500,20,30\n",
+                "c.csv:1: candidate A at (500, 20) m is outside the region",
+            ),
             ("A,NaN,20,30\n", "c.csv:1: east_m: expected a finite number"),
             ("A,1,2\n", "c.csv:1: expected id,east_m"),
             ("A,1,2,3,fm\n", "c.csv:1: kind: expected dtmb or tcofdm"),
