@@ -17,9 +17,10 @@ pub const NO_SCENE_MARGIN_M: f64 = 100.0;
 pub const MAX_CELLS: u64 = 20_000_000;
 /// The most memory (bytes) a layout run may estimate for itself before it refuses.
 pub const MAX_BYTES: u64 = 2 << 30;
-/// Memory per cell independent of the epochs and candidates: the metrics, and the text of
-/// the CSV, GeoJSON and SVG outputs (measured on the default world: about 170, 520 and
-/// 5 × 90 bytes per cell).
+/// Memory per cell independent of the epochs and candidates: the metrics (about 70 bytes)
+/// and the text of the outputs, measured on the default world at about 100 bytes per cell
+/// for the CSV, 465 for the GeoJSON and 87 for each of up to seven SVG maps; counted as if
+/// all were held at once, which overestimates (they are written one after the other).
 pub const BYTES_PER_CELL: u64 = 1_300;
 /// Memory per cell and epoch when sites are placed: the two 7 × 7 normal matrices of the
 /// base geometry (2 · 49 · 8 bytes).

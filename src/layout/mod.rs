@@ -140,6 +140,12 @@ pub fn run(args: &LayoutArgs) -> anyhow::Result<()> {
         0.5 * (region.south_m + region.north_m),
     );
     let ctx = Context::new(&world, &times, args.clocks, args.height, centre);
+    if ctx.gnss.is_none() && ctx.sites.is_empty() && k == 0 {
+        eprintln!(
+            "note: {} has no [sensors.gnss] and no DTMB or TC-OFDM transmitter: no cell can have a fix (other emitters are not modelled by layout)",
+            args.world.display()
+        );
+    }
     std::fs::create_dir_all(&args.out).map_err(|e| {
         anyhow::anyhow!(
             "cannot create the output directory {}: {e}",
