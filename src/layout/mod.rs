@@ -123,6 +123,23 @@ pub fn run(args: &LayoutArgs) -> anyhow::Result<()> {
         Some(p) => place::parse_candidates(p, &region).map_err(anyhow::Error::msg)?,
         None => Vec::new(),
     };
+    // A candidate mast must stand where the world would accept a transmitter: above the
+    // ground and not inside a building (on a roof is fine).
+    if let (Some(scene), Some(file)) = (world.scene.as_deref(), &args.candidates) {
+        for c in &candidates {
+            scene
+                .check_transmitter(&Vector3::new(c.east_m, c.north_m, c.height_m))
+                .map_err(|i| {
+                    anyhow::anyhow!(
+                        "{}:{}: candidate {}: {}",
+                        file.display(),
+                        c.line,
+                        c.id,
+                        i.message
+                    )
+                })?;
+        }
+    }
     if k > candidates.len() {
         anyhow::bail!(
             "--place {k}: only {} candidate sites in {}",

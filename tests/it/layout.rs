@@ -123,10 +123,10 @@ fn layout_writes_every_output_of_the_default_world() {
 }
 
 /// The greedy-then-swap search on a seeded scene: the default world's street canyons
-/// with twelve seeded candidate sites (tests/data/layout/canyon-candidates.csv), K = 2.
+/// with twenty seeded candidate sites (tests/data/layout/canyon-candidates.csv), K = 2.
 /// There greedy is myopic — its first site is the best single site but not part of the
 /// best pair — and the swaps find a strictly better pair that no random placement of the
-/// baseline reaches; an exhaustive search over all 66 pairs confirms it is the optimum.
+/// baseline reaches; an exhaustive search over all 190 pairs confirms it is the optimum.
 #[test]
 fn placement_beats_greedy_alone_and_random_placement_on_a_seeded_scene() {
     let d = tmp_dir("layout-place");
@@ -405,12 +405,12 @@ fn bad_input_is_refused_with_clear_messages() {
             "--out",
             o,
             "--place",
-            "13",
+            "21",
             "--candidates",
             cand,
         ],
         &[
-            "--place 13: only 12 candidate sites in",
+            "--place 21: only 20 candidate sites in",
             "canyon-candidates.csv",
         ],
     );
@@ -449,6 +449,10 @@ fn bad_input_is_refused_with_clear_messages() {
         (
             "A,100,0,30,fm\n",
             "bad.csv:1: kind: expected dtmb or tcofdm",
+        ),
+        (
+            "A,100,0,30\nB,250,40,20\n",
+            "bad.csv:2: candidate B: the transmitter at [250.0, 40.0, 20.0] is inside building",
         ),
     ] {
         let f = write(&d, "bad.csv", text);
