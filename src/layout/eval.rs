@@ -101,6 +101,12 @@ impl<'a> Context<'a> {
                 Epoch { t, sats }
             })
             .collect();
+        // The receiver of a layout study stands at `--height`: the Hata mobile-height term
+        // follows it (at least 1 m, the model's lower bound) rather than the sensors'.
+        let mut dtmb_rx = TerrestrialRx::of(&dtmb_cfg);
+        let mut tcofdm_rx = TerrestrialRx::of(&tc_as_dtmb);
+        dtmb_rx.rx_antenna_height_m = rx_height_m.max(1.0);
+        tcofdm_rx.rx_antenna_height_m = rx_height_m.max(1.0);
         let mut ctx = Self {
             world,
             scene: world.scene.as_deref(),
@@ -109,8 +115,8 @@ impl<'a> Context<'a> {
             sites: Vec::new(),
             clocks,
             rx_height_m,
-            dtmb_rx: TerrestrialRx::of(&dtmb_cfg),
-            tcofdm_rx: TerrestrialRx::of(&tc_as_dtmb),
+            dtmb_rx,
+            tcofdm_rx,
             tcofdm_nav_power_db: tc_cfg.nav_power_db,
         };
         ctx.sites = world
