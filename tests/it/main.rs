@@ -15,6 +15,7 @@ mod fusion_filters;
 mod gnss_orbits;
 mod inertial;
 mod landmark;
+mod layout;
 mod metrics;
 mod montecarlo;
 mod motion_models;
