@@ -3,8 +3,8 @@
 //! GPS + BeiDou at 1 Hz, three estimators) and on seed 000's Kehui world (GNSS, DTMB and
 //! a 21-station FM scan every second, five estimators). Throughput is receiver epochs per second.
 //!
-//! Run: `cargo bench --bench export`. RINEX is benchmarked with the other formats once it
-//! writes; files go to a temporary directory (the page cache, not the disk, is measured).
+//! Run: `cargo bench --bench export`. Files go to a temporary directory (the page cache,
+//! not the disk, is measured).
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use hybridnav::export::{export, record_trial, Format};
@@ -32,11 +32,11 @@ fn export_rates(c: &mut Criterion) {
             if f == Format::Sigmf {
                 continue;
             }
-            if export(&world, &rec, &[f], &dir).is_err() {
+            if export(&world, &rec, &[f], false, &dir).is_err() {
                 continue;
             }
             g.bench_function(format!("{name}/{f}"), |b| {
-                b.iter(|| export(&world, &rec, &[f], &dir).expect("export"));
+                b.iter(|| export(&world, &rec, &[f], false, &dir).expect("export"));
             });
         }
     }

@@ -316,16 +316,27 @@ fn cmd_export(a: &ExportArgs) -> Result<()> {
     let world = load_world(&a.world)?;
     let seed = a.seed.unwrap_or(world.file.montecarlo.seed);
     let rec = crate::export::record_trial(&world, seed, a.trial).map_err(anyhow::Error::msg)?;
-    let files =
-        crate::export::export(&world, &rec, &formats, &a.out).map_err(anyhow::Error::msg)?;
-    for f in &files {
+    let done = crate::export::export(&world, &rec, &formats, names_all(&a.format), &a.out)
+        .map_err(anyhow::Error::msg)?;
+    for f in &done.files {
         println!("wrote {}", f.display());
+    }
+    for s in &done.skipped {
+        eprintln!("note: skipped {s}");
     }
     Ok(())
 }
 
+/// Whether a format list asks for `all` (formats the world cannot produce are then
+/// skipped rather than refused).
+fn names_all(list: &str) -> bool {
+    list.split(',')
+        .any(|n| n.trim().eq_ignore_ascii_case("all"))
+}
+
 fn cmd_run(a: RunArgs) -> Result<()> {
     let path = a.world.unwrap_or_else(default_world);
+    let all_datasets = a.datasets.as_deref().is_some_and(names_all);
     let datasets = match &a.datasets {
         Some(list) => Some(
             crate::export::Format::parse_list(list)
@@ -369,7 +380,13 @@ fn cmd_run(a: RunArgs) -> Result<()> {
             let rec = crate::export::record_trial(&world, opts.seed, t.trial)
                 .map_err(anyhow::Error::msg)?;
             let dir = a.out.join("datasets").join(format!("trial-{:06}", t.trial));
-            crate::export::export(&world, &rec, &formats, &dir).map_err(anyhow::Error::msg)?;
+            let done = crate::export::export(&world, &rec, &formats, all_datasets, &dir)
+                .map_err(anyhow::Error::msg)?;
+            if t.trial == results[0].trial {
+                for s in &done.skipped {
+                    eprintln!("note: datasets: skipped {s}");
+                }
+            }
         }
         if !a.quiet {
             println!("datasets   {}", a.out.join("datasets").display());

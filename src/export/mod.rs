@@ -200,7 +200,43 @@ pub fn record_trial(world: &World, seed: u64, trial: u64) -> Result<Recording, S
     })
 }
 
-/// Writes `formats` of a recorded trial into `dir` and returns the files written.
+impl Format {
+    /// Why the recording has nothing to write in this format, if so: no GNSS receiver for
+    /// RINEX, no DTMB tower for SigMF.
+    pub fn unavailable(self, world: &World, rec: &Recording) -> Option<String> {
+        match self {
+            Format::Rinex if !rec.batches.iter().any(|b| !b.raw.gnss.is_empty()) => Some(
+                "the trial has no GNSS observations (the world needs [sensors.gnss] and a \
+                 satellite in view)"
+                    .into(),
+            ),
+            Format::Sigmf
+                if !world
+                    .transmitters
+                    .iter()
+                    .any(|t| t.kind == crate::world::scene::TransmitterKind::Dtmb) =>
+            {
+                Some("the world has no DTMB tower to record".into())
+            }
+            _ => None,
+        }
+    }
+}
+
+/// What an export wrote, and the formats it passed over.
+#[derive(Debug, Default)]
+pub struct Exported {
+    pub files: Vec<PathBuf>,
+    /// `format: reason` for each format the world cannot produce (only when those may be
+    /// skipped, as with `--format all`).
+    pub skipped: Vec<String>,
+}
+
+/// Writes `formats` of a recorded trial into `dir`.
+///
+/// A format the world cannot produce ([`Format::unavailable`]) is an error when asked for
+/// by name, and passed over (listed in [`Exported::skipped`]) when `skip_unavailable`
+/// (`--format all`).
 ///
 /// # Errors
 /// A writer's failure, naming the format and the file.
@@ -208,12 +244,20 @@ pub fn export(
     world: &World,
     rec: &Recording,
     formats: &[Format],
+    skip_unavailable: bool,
     dir: &Path,
-) -> Result<Vec<PathBuf>, String> {
+) -> Result<Exported, String> {
     std::fs::create_dir_all(dir)
         .map_err(|e| format!("cannot create the dataset directory {}: {e}", dir.display()))?;
-    let mut files = Vec::new();
+    let mut out = Exported::default();
     for f in formats {
+        if let Some(why) = f.unavailable(world, rec) {
+            if skip_unavailable {
+                out.skipped.push(format!("{f}: {why}"));
+                continue;
+            }
+            return Err(format!("{f} export: {why}"));
+        }
         let written = match f {
             Format::Rinex => rinex_obs::write(world, rec, dir),
             Format::Nmea => nmea::write(world, rec, dir),
@@ -225,9 +269,9 @@ pub fn export(
             Format::Sigmf => write_sigmf(world, rec, dir),
         }
         .map_err(|e| format!("{f} export: {e}"))?;
-        files.extend(written);
+        out.files.extend(written);
     }
-    Ok(files)
+    Ok(out)
 }
 
 /// Writes `text` atomically to `dir/name`, returning the path.

@@ -287,4 +287,35 @@ fn bad_formats_are_refused_before_anything_runs() {
         &["--datasets", "unknown dataset format 'foo'"],
     );
     assert!(!out.join("x").exists() && !out.join("y").exists());
+
+    // A world without a GNSS receiver or a DTMB tower (seed 003's abstract emitters):
+    // `all` writes what it can and says what it skipped; RINEX by name is refused.
+    let o = hybridnav(&[
+        "export",
+        "worlds/seed003-seamless.toml",
+        "--out",
+        out.join("z").to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(
+        e.contains("note: skipped rinex: the trial has no GNSS observations"),
+        "{e}"
+    );
+    assert!(
+        e.contains("note: skipped sigmf: the world has no DTMB tower"),
+        "{e}"
+    );
+    assert!(out.join("z/truth.tum").exists() && out.join("z/ranges.csv").exists());
+    refused(
+        &[
+            "export",
+            "worlds/seed003-seamless.toml",
+            "--format",
+            "rinex",
+            "--out",
+            out.join("w").to_str().unwrap(),
+        ],
+        &["rinex export: the trial has no GNSS observations"],
+    );
 }
