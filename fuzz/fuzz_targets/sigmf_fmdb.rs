@@ -25,9 +25,8 @@ fuzz_target!(|data: &[u8]| {
         let _ = hybridnav::dtmb::sigmf::read_sigmf(&dir.join("r"));
     } else {
         write("db.json", rest);
-        let frame = hybridnav::core::EnuFrame::new(hybridnav::core::Geodetic::from_deg(
-            40.0, 116.0, 0.0,
-        ));
+        let frame =
+            hybridnav::core::EnuFrame::new(hybridnav::core::Geodetic::from_deg(40.0, 116.0, 0.0));
         let tag = hybridnav::fm::database::WorldTag::new("fuzz", &frame, None);
         let _ = hybridnav::fm::database::FingerprintDb::load(&dir.join("db.json"), &tag);
     }
