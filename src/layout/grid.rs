@@ -8,7 +8,6 @@
 //! zero width). Cells are squares of the grid spacing; the last column and row may stick
 //! out of the region by less than one spacing, so that the region is covered whole.
 
-use crate::core::{SimTime, TrialRng};
 use crate::world::World;
 
 /// Margin around the trajectory's box when the world has no scene (m).
@@ -77,17 +76,7 @@ impl Region {
     /// # Errors
     /// When the trajectory or the scene cannot be built.
     pub fn of_world(world: &World) -> Result<Self, String> {
-        let trajectory = world.build_trajectory(&TrialRng::new(world.file.montecarlo.seed, 0))?;
-        let n = ((world.duration_s / 0.5).ceil() as usize).clamp(2, 200_000);
-        let mut pts: Vec<[f64; 2]> = (0..=n)
-            .map(|k| {
-                let t_s = world.duration_s * k as f64 / n as f64;
-                let p = trajectory
-                    .state_at(SimTime::from_seconds(t_s).seconds())
-                    .pos_enu_m;
-                [p.x, p.y]
-            })
-            .collect();
+        let mut pts = world.track_enu_m(200_001)?;
         let has_scene = world.file.scene.is_some();
         if let Some(section) = &world.file.scene {
             let cfg = section

@@ -6,7 +6,6 @@
 //! Transmitters farther than the drawing's extent (a TV tower kilometres away) are drawn as
 //! an arrow on the border pointing towards them, labelled with their distance.
 
-use crate::core::{SimTime, TrialRng};
 use crate::world::scene::TransmitterKind;
 use crate::world::World;
 use std::fmt::Write;
@@ -68,17 +67,7 @@ pub fn svg(world: &World) -> Result<String, String> {
 /// # Errors
 /// When the trajectory cannot be built.
 pub fn svg_with(world: &World, overlays: &[Overlay<'_>]) -> Result<String, String> {
-    let trajectory = world.build_trajectory(&TrialRng::new(world.file.montecarlo.seed, 0))?;
-    let n = ((world.duration_s / 0.5).ceil() as usize).clamp(2, 20_000);
-    let track: Vec<[f64; 2]> = (0..=n)
-        .map(|k| {
-            let t = world.duration_s * k as f64 / n as f64;
-            let p = trajectory
-                .state_at(SimTime::from_seconds(t).seconds())
-                .pos_enu_m;
-            [p.x, p.y]
-        })
-        .collect();
+    let track = world.track_enu_m(20_001)?;
     let cfg = world
         .file
         .scene

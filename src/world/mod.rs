@@ -816,6 +816,26 @@ impl World {
             .map_err(|i| format!("platform.trajectory.{}: {}", i.key, i.message))
     }
 
+    /// The plan view of trial 0's path under the world's seed: ENU `[east, north]` every
+    /// 0.5 s (fewer, evenly spaced, when that would exceed `max_points`), ends included —
+    /// what maps draw and what regions are fitted around.
+    ///
+    /// # Errors
+    /// When the trajectory cannot be built.
+    pub fn track_enu_m(&self, max_points: usize) -> Result<Vec<[f64; 2]>, String> {
+        let trajectory = self.build_trajectory(&TrialRng::new(self.file.montecarlo.seed, 0))?;
+        let n = ((self.duration_s / 0.5).ceil() as usize).clamp(2, max_points.max(3) - 1);
+        Ok((0..=n)
+            .map(|k| {
+                let t_s = self.duration_s * k as f64 / n as f64;
+                let p = trajectory
+                    .state_at(SimTime::from_seconds(t_s).seconds())
+                    .pos_enu_m;
+                [p.x, p.y]
+            })
+            .collect())
+    }
+
     /// Builds the trajectory, sources and estimators of one trial.
     ///
     /// # Errors
