@@ -188,8 +188,9 @@ pub fn run(args: &LayoutArgs) -> anyhow::Result<()> {
         cells.len() as f64 / grid_s.max(1e-9)
     );
 
+    // The wall time is printed above, not stored: the same world and options must give
+    // the same files.
     let mut summary = summary_json(&world, &ctx, &grid, &cells, &considered, args);
-    summary["evaluation_s"] = json!(grid_s);
     let outlines = building_outlines(&world);
     let markers: Vec<(String, f64, f64, &str)> = ctx
         .sites

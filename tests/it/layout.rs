@@ -120,6 +120,28 @@ fn layout_writes_every_output_of_the_default_world() {
             "exterior ring must be counter-clockwise"
         );
     }
+
+    // The same world and options give the same files, on one thread or two.
+    let again = tmp_dir("layout-default-again");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_hybridnav"))
+        .args(["layout", "worlds/default.toml", "--grid", "20", "--out"])
+        .arg(&again)
+        .env("RAYON_NUM_THREADS", "1")
+        .current_dir(crate::common::repo())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in [
+        "layout.json",
+        "grid.csv",
+        "layout.geojson",
+        "gdop_hybrid.svg",
+    ] {
+        assert!(
+            std::fs::read(d.join(f)).unwrap() == std::fs::read(again.join(f)).unwrap(),
+            "{f} differs between two runs"
+        );
+    }
 }
 
 /// The greedy-then-swap search on a seeded scene: the default world's street canyons
