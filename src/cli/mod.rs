@@ -2,8 +2,8 @@
 
 use crate::core::{EmitterId, GpsTime};
 use crate::io::atomic::write_atomic;
-use crate::montecarlo::store::{gather_shards, RunDir, Shard};
-use crate::montecarlo::{run_into, write_outputs, RunOptions};
+use crate::montecarlo::store::{MergePlan, RunDir, Shard};
+use crate::montecarlo::{merge_into, run_into, RunOptions};
 use crate::world::load_world;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
@@ -370,19 +370,19 @@ fn cmd_run(a: RunArgs) -> Result<()> {
     };
     let dir = RunDir::create(&a.out)
         .with_context(|| format!("cannot write to output directory {}", a.out.display()))?;
-    let results = run_into(&world, &opts, &dir, a.resume).map_err(anyhow::Error::msg)?;
-    let written = write_outputs(&world, &opts, &results, &a.out).map_err(anyhow::Error::msg)?;
+    let written = run_into(&world, &opts, &dir, a.resume).map_err(anyhow::Error::msg)?;
     report_written(&written, a.quiet);
     if let Some(formats) = datasets {
         // Each trial is simulated again with a recorder; it depends only on (seed, trial),
         // so the datasets are those of the trial just stored.
-        for t in &results {
-            let rec = crate::export::record_trial(&world, opts.seed, t.trial)
+        let first = opts.shard.trials(opts.trials).next();
+        for trial in opts.shard.trials(opts.trials) {
+            let rec = crate::export::record_trial(&world, opts.seed, trial)
                 .map_err(anyhow::Error::msg)?;
-            let dir = a.out.join("datasets").join(format!("trial-{:06}", t.trial));
+            let dir = a.out.join("datasets").join(format!("trial-{trial:06}"));
             let done = crate::export::export(&world, &rec, &formats, all_datasets, &dir)
                 .map_err(anyhow::Error::msg)?;
-            if t.trial == results[0].trial {
+            if Some(trial) == first {
                 for s in &done.skipped {
                     eprintln!("note: datasets: skipped {s}");
                 }
@@ -399,6 +399,14 @@ fn report_written(written: &crate::montecarlo::Written, quiet: bool) {
     for w in &written.summary.warnings {
         eprintln!("warning: {w}");
     }
+    for e in &written.summary.estimators {
+        if let Some(f) = e.first_failures.first() {
+            eprintln!(
+                "warning: estimator {:?} reported {} numerical failure(s) (first in trial {} at t = {:.3} s); it re-initialised each time, and summary.json lists them",
+                e.name, e.numerical_failures, f.trial, f.t_s
+            );
+        }
+    }
     if !quiet {
         print!("{}", written.summary.table());
         let names: Vec<String> = written
@@ -411,7 +419,8 @@ fn report_written(written: &crate::montecarlo::Written, quiet: bool) {
 }
 
 fn cmd_merge(dirs: &[PathBuf], out: &Path, quiet: bool) -> Result<()> {
-    let (manifest, trials) = gather_shards(dirs).map_err(anyhow::Error::msg)?;
+    let plan = MergePlan::new(dirs).map_err(anyhow::Error::msg)?;
+    let manifest = &plan.manifest;
     // The outputs need the world (its frame, scene and estimators): it must still be the
     // file the shards ran, unchanged.
     let world = load_world(Path::new(&manifest.world_file)).with_context(|| {
@@ -428,22 +437,9 @@ fn cmd_merge(dirs: &[PathBuf], out: &Path, quiet: bool) -> Result<()> {
             manifest.world_hash
         );
     }
-    let opts = RunOptions {
-        trials: manifest.trials,
-        seed: manifest.seed,
-        threads: 1,
-        progress: false,
-        shard: Shard::WHOLE,
-    };
     let dir = RunDir::create(out)
         .with_context(|| format!("cannot write to output directory {}", out.display()))?;
-    dir.clear_trials().map_err(anyhow::Error::msg)?;
-    for t in &trials {
-        dir.write_trial(t).map_err(anyhow::Error::msg)?;
-    }
-    dir.write_manifest(&opts.manifest(&world))
-        .map_err(anyhow::Error::msg)?;
-    let written = write_outputs(&world, &opts, &trials, out).map_err(anyhow::Error::msg)?;
+    let written = merge_into(&world, &plan, &dir).map_err(anyhow::Error::msg)?;
     report_written(&written, quiet);
     Ok(())
 }

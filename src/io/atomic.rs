@@ -3,43 +3,112 @@
 //! the old file or the complete new one, never a torn write.
 
 use std::fs;
-use std::io::{self, Write};
-use std::path::Path;
+use std::io::{self, BufWriter, Write};
+use std::path::{Path, PathBuf};
 
 /// Writes `bytes` to `path` atomically.
 ///
 /// # Errors
 /// Any I/O error, with the path in the message. The temporary file is removed on failure.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let name = path.file_name().ok_or_else(|| {
-        io::Error::new(
-            io::ErrorKind::InvalidInput,
-            format!("{}: not a file path", path.display()),
-        )
-    })?;
-    let tmp = dir.join(format!(
-        ".{}.{}.tmp",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    let result = (|| {
-        let mut f = fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        fs::rename(&tmp, path)
-    })();
-    if let Err(e) = result {
-        let _ = fs::remove_file(&tmp);
-        return Err(io::Error::new(
-            e.kind(),
-            format!("writing {}: {e}", path.display()),
+    let mut f = AtomicFile::create(path)?;
+    f.write_all(bytes).map_err(|e| f.error(e))?;
+    f.commit()
+}
+
+/// A file written as a stream and published atomically: the bytes go to a temporary file
+/// beside `path`, and [`AtomicFile::commit`] flushes it to disk and renames it over `path`.
+/// Dropped without a commit (an error, a panic, an interrupted run), it removes the
+/// temporary file and leaves `path` as it was.
+#[derive(Debug)]
+pub struct AtomicFile {
+    path: PathBuf,
+    tmp: PathBuf,
+    w: Option<BufWriter<fs::File>>,
+}
+
+impl AtomicFile {
+    /// Creates the temporary file for `path`.
+    ///
+    /// # Errors
+    /// When the directory is missing or not writable (the message names `path`).
+    pub fn create(path: &Path) -> io::Result<Self> {
+        let dir = path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        let name = path.file_name().ok_or_else(|| {
+            io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!("{}: not a file path", path.display()),
+            )
+        })?;
+        let tmp = dir.join(format!(
+            ".{}.{}.tmp",
+            name.to_string_lossy(),
+            std::process::id()
         ));
+        let f = fs::File::create(&tmp).map_err(|e| named(path, e))?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            tmp,
+            w: Some(BufWriter::with_capacity(1 << 16, f)),
+        })
     }
-    Ok(())
+
+    /// The destination.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// `e` with the destination's name in its message.
+    pub fn error(&self, e: io::Error) -> io::Error {
+        named(&self.path, e)
+    }
+
+    /// Flushes the file to disk and renames it over the destination.
+    ///
+    /// # Errors
+    /// Any I/O error (a full disk shows here at the latest), naming the destination; the
+    /// temporary file is then removed.
+    pub fn commit(mut self) -> io::Result<()> {
+        let w = self.w.take().expect("an AtomicFile is committed once");
+        let result = w
+            .into_inner()
+            .map_err(|e| e.into_error())
+            .and_then(|f| f.sync_all())
+            .and_then(|()| fs::rename(&self.tmp, &self.path));
+        if let Err(e) = result {
+            let _ = fs::remove_file(&self.tmp);
+            return Err(named(&self.path, e));
+        }
+        Ok(())
+    }
+}
+
+impl Write for AtomicFile {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        self.w.as_mut().expect("not yet committed").write(buf)
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        self.w.as_mut().expect("not yet committed").flush()
+    }
+}
+
+impl Drop for AtomicFile {
+    fn drop(&mut self) {
+        if self.w.take().is_some() {
+            let _ = fs::remove_file(&self.tmp);
+        }
+    }
+}
+
+fn named(path: &Path, e: io::Error) -> io::Error {
+    if e.to_string().contains(&path.display().to_string()) {
+        return e;
+    }
+    io::Error::new(e.kind(), format!("writing {}: {e}", path.display()))
 }
 
 #[cfg(test)]
@@ -56,6 +125,16 @@ mod tests {
         assert_eq!(fs::read(&p).unwrap(), b"two");
         // No temporary files are left behind.
         assert_eq!(fs::read_dir(&dir).unwrap().count(), 1);
+        // A stream dropped before its commit leaves the old file and no temporary file.
+        let mut f = AtomicFile::create(&p).unwrap();
+        f.write_all(b"three").unwrap();
+        drop(f);
+        assert_eq!(fs::read(&p).unwrap(), b"two");
+        assert_eq!(fs::read_dir(&dir).unwrap().count(), 1);
+        let mut f = AtomicFile::create(&p).unwrap();
+        f.write_all(b"four").unwrap();
+        f.commit().unwrap();
+        assert_eq!(fs::read(&p).unwrap(), b"four");
         fs::remove_dir_all(&dir).unwrap();
     }
 

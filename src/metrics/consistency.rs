@@ -98,26 +98,67 @@ pub struct ConsistencySummary {
 fn epoch_from_samples(
     samples: impl Iterator<Item = (f64, f64)>,
 ) -> Result<Option<EpochConsistency>, ()> {
-    let (mut sum, mut dof, mut n) = (0.0, 0.0, 0usize);
+    let mut acc = EpochSamples::default();
     for (v, m) in samples {
+        acc.push(v, m);
+    }
+    acc.finish()
+}
+
+/// One epoch's NEES or NIS values across runs, accumulated one run at a time so that a
+/// Monte Carlo run need not keep every value (the sums are taken in push order).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct EpochSamples {
+    sum: f64,
+    dof: f64,
+    n: usize,
+    invalid: bool,
+}
+
+impl EpochSamples {
+    /// Adds run's value `v` with `m` degrees of freedom.
+    pub fn push(&mut self, v: f64, m: f64) {
         if !(v.is_finite() && v >= 0.0 && m.is_finite() && m > 0.0) {
+            self.invalid = true;
+        }
+        self.sum += v;
+        self.dof += m;
+        self.n += 1;
+    }
+
+    /// The epoch's consistency; `Ok(None)` without values, `Err` when a value was negative
+    /// or not finite or a dimension not positive.
+    #[allow(clippy::result_unit_err)]
+    pub fn finish(&self) -> Result<Option<EpochConsistency>, ()> {
+        if self.invalid {
             return Err(());
         }
-        sum += v;
-        dof += m;
-        n += 1;
+        if self.n == 0 {
+            return Ok(None);
+        }
+        let (band_lo, band_hi) = chi2_band(self.dof, self.n);
+        Ok(Some(EpochConsistency {
+            mean: self.sum / self.n as f64,
+            dof: self.dof / self.n as f64,
+            band_lo,
+            band_hi,
+            runs: self.n,
+        }))
     }
-    if n == 0 {
-        return Ok(None);
+}
+
+/// The summary of epochs accumulated with [`EpochSamples`], in epoch order; `None` when a
+/// value was invalid or there is none.
+pub fn summary_of_samples<'a>(
+    epochs: impl Iterator<Item = &'a EpochSamples>,
+) -> Option<ConsistencySummary> {
+    let mut out = Vec::new();
+    for e in epochs {
+        if let Some(c) = e.finish().ok()? {
+            out.push(c);
+        }
     }
-    let (band_lo, band_hi) = chi2_band(dof, n);
-    Ok(Some(EpochConsistency {
-        mean: sum / n as f64,
-        dof: dof / n as f64,
-        band_lo,
-        band_hi,
-        runs: n,
-    }))
+    summarise(&out)
 }
 
 /// The summary of per-epoch results (`None` when there are none).

@@ -14,18 +14,46 @@ pub fn ecdf(sorted: &[f64], max_points: usize) -> Vec<(f64, f64)> {
         "ecdf needs ascending data"
     );
     let n = sorted.len();
+    ecdf_ranks(n, max_points)
+        .into_iter()
+        .map(|i| (sorted[i], (i + 1) as f64 / n as f64))
+        .collect()
+}
+
+/// The ranks [`ecdf`] keeps of `n` sorted values.
+fn ecdf_ranks(n: usize, max_points: usize) -> Vec<usize> {
     if n == 0 || max_points == 0 {
         return Vec::new();
     }
-    let point = |i: usize| (sorted[i], (i + 1) as f64 / n as f64);
     if max_points == 1 {
-        return vec![point(n - 1)];
+        return vec![n - 1];
     }
     let m = max_points.min(n);
     // Rounding k (n − 1)/(m − 1) gives strictly increasing ranks because m ≤ n.
     (0..m)
-        .map(|k| point(((k * (n - 1)) as f64 / (m - 1) as f64).round() as usize))
+        .map(|k| ((k * (n - 1)) as f64 / (m - 1) as f64).round() as usize)
         .collect()
+}
+
+/// [`ecdf`] of values that may not fit in memory, read in one sorted pass.
+///
+/// # Errors
+/// When values kept on disk cannot be read back.
+pub fn ecdf_of(
+    v: &mut dyn super::SortedValues,
+    max_points: usize,
+) -> std::io::Result<Vec<(f64, f64)>> {
+    let n = v.count();
+    let ranks = ecdf_ranks(n, max_points);
+    let mut out = Vec::with_capacity(ranks.len());
+    let mut next = ranks.iter().peekable();
+    v.pass(&mut |i, x| {
+        if next.peek() == Some(&&i) {
+            next.next();
+            out.push((x, (i + 1) as f64 / n as f64));
+        }
+    })?;
+    Ok(out)
 }
 
 #[cfg(test)]

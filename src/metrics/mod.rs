@@ -15,15 +15,16 @@ pub mod interval;
 pub mod trajectory;
 
 pub use consistency::{
-    chi2_band, nees_epochs, nees_summary, nis_epochs, nis_summary, ConsistencySummary,
-    EpochConsistency,
+    chi2_band, nees_epochs, nees_summary, nis_epochs, nis_summary, summary_of_samples,
+    ConsistencySummary, EpochConsistency, EpochSamples,
 };
-pub use ecdf::ecdf;
+pub use ecdf::{ecdf, ecdf_of};
 pub use interval::{bootstrap_ci, mean_ci95, student_t_cdf, student_t_quantile};
 pub use trajectory::{
     ate, ate_errors, rigid_alignment, rpe, rpe_errors, write_tum, Alignment, TrajectoryStats,
 };
 
+use crate::io::spill::SortedSpill;
 use serde::Serialize;
 
 /// The probability masses of the 1σ, 2σ and 3σ levels.
@@ -51,38 +52,139 @@ pub fn quantile_sorted(sorted: &[f64], p: f64) -> f64 {
     if sorted.is_empty() {
         return f64::NAN;
     }
-    let h = (sorted.len() - 1) as f64 * p.clamp(0.0, 1.0);
+    let (lo, hi, w) = quantile_ranks(sorted.len(), p);
+    sorted[lo] + w * (sorted[hi] - sorted[lo])
+}
+
+/// The ranks `(lo, hi)` and weight of the type-7 `p`-quantile of `n ≥ 1` sorted values:
+/// `x_lo + w (x_hi − x_lo)`.
+fn quantile_ranks(n: usize, p: f64) -> (usize, usize, f64) {
+    let h = (n - 1) as f64 * p.clamp(0.0, 1.0);
     let lo = h.floor() as usize;
-    let hi = (lo + 1).min(sorted.len() - 1);
-    sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
+    (lo, (lo + 1).min(n - 1), h - lo as f64)
+}
+
+/// Values in ascending `total_cmp` order that can be visited more than once: a sorted
+/// slice, or a [`SortedSpill`] holding more than memory should.
+pub trait SortedValues {
+    /// How many values there are.
+    fn count(&self) -> usize;
+    /// Calls `f(rank, value)` for every value in order.
+    ///
+    /// # Errors
+    /// When values kept on disk cannot be read back.
+    fn pass(&mut self, f: &mut dyn FnMut(usize, f64)) -> std::io::Result<()>;
+}
+
+impl SortedValues for &[f64] {
+    fn count(&self) -> usize {
+        self.len()
+    }
+    fn pass(&mut self, f: &mut dyn FnMut(usize, f64)) -> std::io::Result<()> {
+        for (i, &v) in self.iter().enumerate() {
+            f(i, v);
+        }
+        Ok(())
+    }
+}
+
+impl SortedValues for SortedSpill {
+    fn count(&self) -> usize {
+        self.len()
+    }
+    fn pass(&mut self, f: &mut dyn FnMut(usize, f64)) -> std::io::Result<()> {
+        self.for_each_sorted(f)
+    }
+}
+
+/// What [`sorted_moments`] gathers in two passes over sorted values.
+pub(crate) struct SortedMoments {
+    pub mean: f64,
+    /// Σ (x − mean)².
+    pub sq_dev: f64,
+    /// Σ x².
+    pub sq: f64,
+    /// The values at the requested ranks, in the order asked.
+    pub at: Vec<f64>,
+}
+
+/// Mean, squared deviations, squares and the values at `ranks` of `n ≥ 1` sorted values,
+/// summed in ascending order (so a slice and a spill of the same values agree to the bit).
+pub(crate) fn sorted_moments(
+    v: &mut dyn SortedValues,
+    ranks: &[usize],
+) -> std::io::Result<SortedMoments> {
+    let n = v.count();
+    let (mut sum, mut sq) = (0.0, 0.0);
+    let mut at = vec![f64::NAN; ranks.len()];
+    v.pass(&mut |i, x| {
+        sum += x;
+        sq += x * x;
+        for (slot, &r) in at.iter_mut().zip(ranks) {
+            if r == i {
+                *slot = x;
+            }
+        }
+    })?;
+    let mean = sum / n as f64;
+    let mut sq_dev = 0.0;
+    v.pass(&mut |_, x| sq_dev += (x - mean).powi(2))?;
+    Ok(SortedMoments {
+        mean,
+        sq_dev,
+        sq,
+        at,
+    })
 }
 
 impl ErrorStats {
     /// Statistics of `errors`; the slice is sorted in place. Returns `None` when empty or
     /// when any error is not finite (a filter that diverged must be reported, not averaged).
     pub fn from_errors(errors: &mut [f64]) -> Option<Self> {
-        if errors.is_empty() || errors.iter().any(|e| !e.is_finite()) {
+        if errors.iter().any(|e| !e.is_finite()) {
             return None;
         }
         errors.sort_by(f64::total_cmp);
-        let n = errors.len() as f64;
-        let mean = errors.iter().sum::<f64>() / n;
-        let var = if errors.len() > 1 {
-            errors.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / (n - 1.0)
-        } else {
-            0.0
+        let mut sorted: &[f64] = errors;
+        Self::from_sorted(&mut sorted).ok().flatten()
+    }
+
+    /// Statistics of finite values already in ascending order (`None` when there are
+    /// none); the caller checks finiteness, as [`SortedSpill::non_finite`] allows.
+    ///
+    /// # Errors
+    /// When values kept on disk cannot be read back.
+    pub fn from_sorted(v: &mut dyn SortedValues) -> std::io::Result<Option<Self>> {
+        let n = v.count();
+        if n == 0 {
+            return Ok(None);
+        }
+        let q = SIGMA_LEVELS.map(|p| quantile_ranks(n, p));
+        let ranks: Vec<usize> = q
+            .iter()
+            .flat_map(|&(lo, hi, _)| [lo, hi])
+            .chain([n - 1])
+            .collect();
+        let m = sorted_moments(v, &ranks)?;
+        let level = |k: usize| {
+            let (lo, hi) = (m.at[2 * k], m.at[2 * k + 1]);
+            lo + q[k].2 * (hi - lo)
         };
-        let rmse = (errors.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
-        Some(Self {
-            sigma1: quantile_sorted(errors, SIGMA_LEVELS[0]),
-            sigma2: quantile_sorted(errors, SIGMA_LEVELS[1]),
-            sigma3: quantile_sorted(errors, SIGMA_LEVELS[2]),
-            mean,
-            std: var.sqrt(),
-            rmse,
-            max: *errors.last().unwrap_or(&f64::NAN),
-            count: errors.len(),
-        })
+        let nf = n as f64;
+        Ok(Some(Self {
+            sigma1: level(0),
+            sigma2: level(1),
+            sigma3: level(2),
+            mean: m.mean,
+            std: if n > 1 {
+                (m.sq_dev / (nf - 1.0)).sqrt()
+            } else {
+                0.0
+            },
+            rmse: (m.sq / nf).sqrt(),
+            max: m.at[6],
+            count: n,
+        }))
     }
 }
 

@@ -29,8 +29,6 @@ use std::path::Path;
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use serde::Serialize;
 
-use super::quantile_sorted;
-
 /// Absolute tolerance (seconds) within which `t_j − t_i` must equal the RPE interval Δ.
 pub const RPE_TIME_TOLERANCE_S: f64 = 1e-6;
 
@@ -65,22 +63,35 @@ impl TrajectoryStats {
     /// Statistics of `errors` (sorted in place). `None` when empty or when an error is
     /// not finite, because a diverged estimate must be reported, not averaged.
     pub fn from_errors(errors: &mut [f64]) -> Option<Self> {
-        if errors.is_empty() || errors.iter().any(|e| !e.is_finite()) {
+        if errors.iter().any(|e| !e.is_finite()) {
             return None;
         }
         errors.sort_by(f64::total_cmp);
-        let n = errors.len() as f64;
-        let mean = errors.iter().sum::<f64>() / n;
-        let var = errors.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / n;
-        let rmse = (errors.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
-        Some(Self {
-            mean,
-            rmse,
-            median: quantile_sorted(errors, 0.5),
-            std: var.sqrt(),
-            max: errors[errors.len() - 1],
-            count: errors.len(),
-        })
+        let mut sorted: &[f64] = errors;
+        Self::from_sorted(&mut sorted).ok().flatten()
+    }
+
+    /// Statistics of finite values already in ascending order (`None` when there are
+    /// none), summed in that order as [`TrajectoryStats::from_errors`] does.
+    ///
+    /// # Errors
+    /// When values kept on disk cannot be read back.
+    pub fn from_sorted(v: &mut dyn super::SortedValues) -> std::io::Result<Option<Self>> {
+        let n = v.count();
+        if n == 0 {
+            return Ok(None);
+        }
+        let (lo, hi, w) = super::quantile_ranks(n, 0.5);
+        let m = super::sorted_moments(v, &[lo, hi, n - 1])?;
+        let nf = n as f64;
+        Ok(Some(Self {
+            mean: m.mean,
+            rmse: (m.sq / nf).sqrt(),
+            median: m.at[0] + w * (m.at[1] - m.at[0]),
+            std: (m.sq_dev / nf).sqrt(),
+            max: m.at[2],
+            count: n,
+        }))
     }
 }
 

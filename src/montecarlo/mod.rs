@@ -1,19 +1,21 @@
 //! Monte Carlo: many trials of one world, in parallel, reduced in trial order.
 //!
-//! Trial `i` depends only on `(world, seed, i)`; results are collected in trial order
-//! before any reduction, so the summary is bit-identical whatever the thread count. With a
-//! run directory ([`store::RunDir`]) each trial is written to its own file the moment it
-//! finishes, which is what makes `--resume` after an interruption and `merge` of shards
-//! reproduce an uninterrupted run byte for byte.
+//! Trial `i` depends only on `(world, seed, i)`. Trials run in parallel a window at a
+//! time and are handed on in trial order — to their own files in the run directory
+//! ([`store::RunDir`]), to the streamed outputs (`epochs.csv`, `trials.parquet`) and to
+//! the [`reduce::RunReducer`] — so every output is bit-identical whatever the thread
+//! count, and memory does not grow with the number of trials. Because each trial's file is
+//! written the moment it finishes and the outputs are a function of those files, a run
+//! resumed after an interruption (`--resume`) or merged from shards reproduces an
+//! uninterrupted run byte for byte.
 
 pub mod outputs;
+pub mod reduce;
 pub mod store;
 
 use crate::engine::trial::{run_trial, TrialResult};
-use crate::metrics::{
-    ate_errors, mean_ci95, nees_summary, nis_summary, rpe_errors, Alignment, ConsistencySummary,
-    ErrorStats, TrajectoryStats,
-};
+use crate::io::atomic::AtomicFile;
+use crate::metrics::{ConsistencySummary, ErrorStats, TrajectoryStats};
 use crate::world::World;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
@@ -67,8 +69,11 @@ pub struct EstimatorSummary {
     pub epochs_without_fix: usize,
     /// Mean position NEES (3 degrees of freedom; 3 for a consistent filter).
     pub mean_nees_pos: Option<f64>,
-    /// Epochs where the estimator reported a numerical failure.
+    /// Epochs where the estimator reported a numerical failure (a non-finite state or a
+    /// divergence it detected), after which it re-initialised.
     pub numerical_failures: usize,
+    /// The first of them (at most [`reduce::FAILURES_LISTED`]), in trial and time order.
+    pub first_failures: Vec<FailureEpoch>,
     /// Absolute trajectory error as seed 000 computes it (TUM definition, ECEF, no
     /// alignment), over every epoch with an estimate of every trial.
     pub ate_m: Option<TrajectoryStats>,
@@ -89,6 +94,13 @@ pub struct EstimatorSummary {
     /// How much each statistic varies from trial to trial: the 95 % confidence interval
     /// (Student t) of the mean over trials of each trial's own value.
     pub across_trials: AcrossTrials,
+}
+
+/// An epoch at which an estimator reported a numerical failure.
+#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
+pub struct FailureEpoch {
+    pub trial: u64,
+    pub t_s: f64,
 }
 
 /// 95 % confidence intervals, across trials, of per-trial statistics (`[lo, hi]`; absent
@@ -126,33 +138,43 @@ pub struct Summary {
     pub warnings: Vec<String>,
 }
 
+/// Trials in memory at once per worker thread: enough to keep every thread busy while
+/// the slowest trial of a window finishes, few enough that memory stays flat.
+const WINDOW_PER_THREAD: usize = 8;
+
 /// Runs the trials of `opts.shard` and returns them in trial order, without a run
-/// directory (nothing written).
+/// directory (nothing written). For benchmarks and tests; a run of many trials should
+/// stream them instead ([`run_into`]).
 ///
 /// # Errors
 /// When the thread pool cannot be built or a trial cannot be set up.
 pub fn run_trials(world: &World, opts: &RunOptions) -> Result<Vec<TrialResult>, String> {
-    execute(world, opts, None, Vec::new())
+    let mut all = Vec::new();
+    execute(world, opts, None, &|_| false, &mut |t| {
+        all.push(t);
+        Ok(())
+    })?;
+    Ok(all)
 }
 
-/// Runs the trials of `opts.shard` into `dir`: writes the manifest, then each trial's file
-/// as soon as it finishes. With `resume`, the trials the directory already holds are read
-/// back instead of run (after checking that its manifest is this run's); without it, any
-/// older trial files there are removed first.
-///
-/// Returns every trial of the shard in trial order.
+/// Runs the trials of `opts.shard` into `dir` and writes the run's outputs there: the
+/// manifest first, each trial's file as soon as it finishes, then `epochs.csv`,
+/// `trials.parquet`, `report.html` and, last, `summary.json`, streamed as the trials come
+/// in trial order. With `resume`, the trials the directory already holds are read back
+/// instead of run (after checking that its manifest is this run's); without it, any older
+/// trial files there are removed first.
 ///
 /// # Errors
-/// A message naming the file or the manifest key that stops the run.
+/// A message naming the file or the manifest key that stops the run. Trial files finished
+/// before the error stay complete and readable: `--resume` continues from them.
 pub fn run_into(
     world: &World,
     opts: &RunOptions,
     dir: &RunDir,
     resume: bool,
-) -> Result<Vec<TrialResult>, String> {
+) -> Result<Written, String> {
     let manifest = opts.manifest(world);
     let existing = dir.read_manifest().map_err(|e| e.to_string())?;
-    let mut done = Vec::new();
     if resume {
         match existing {
             None => {
@@ -171,37 +193,33 @@ pub fn run_into(
                 }
             }
         }
-        for i in opts.shard.trials(opts.trials) {
-            if let Some(r) = dir.read_trial(i).map_err(|e| e.to_string())? {
-                done.push(r);
-            }
-        }
     } else {
         dir.clear_trials().map_err(|e| e.to_string())?;
     }
     dir.write_manifest(&manifest).map_err(|e| e.to_string())?;
-    execute(world, opts, Some(dir), done)
+    let mut out = Outputs::create(world, &dir.root)?;
+    let has = |i: u64| resume && dir.trial_path(i).is_file();
+    execute(world, opts, Some(dir), &has, &mut |t| out.push(&t))?;
+    out.finish(world, opts)
 }
 
-/// The common loop: runs the shard's trials that `done` lacks, writing each to `dir` (when
-/// given) as it finishes, and returns all of them in trial order.
+/// The common loop: runs the shard's trials in windows of [`WINDOW_PER_THREAD`] per
+/// thread, in parallel within a window, and hands each to `sink` in trial order. A trial
+/// with `stored(i)` is read back from `dir` instead of run; a trial that is run is written
+/// to `dir` (when given) as soon as it finishes.
 fn execute(
     world: &World,
     opts: &RunOptions,
     dir: Option<&RunDir>,
-    done: Vec<TrialResult>,
-) -> Result<Vec<TrialResult>, String> {
+    stored: &(dyn Fn(u64) -> bool + Sync),
+    sink: &mut dyn FnMut(TrialResult) -> Result<(), String>,
+) -> Result<(), String> {
+    let threads = opts.threads.max(1);
     let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(opts.threads.max(1))
+        .num_threads(threads)
         .build()
         .map_err(|e| format!("cannot start {} worker threads: {e}", opts.threads))?;
-    let have: std::collections::BTreeSet<u64> = done.iter().map(|r| r.trial).collect();
-    let todo: Vec<u64> = opts
-        .shard
-        .trials(opts.trials)
-        .filter(|i| !have.contains(i))
-        .collect();
-    let total = (todo.len() + done.len()) as u64;
+    let total = opts.shard.trials(opts.trials).count() as u64;
     let bar = if opts.progress {
         ProgressBar::new(total)
     } else {
@@ -214,239 +232,180 @@ fn execute(
         .unwrap_or_else(|_| ProgressStyle::default_bar())
         .progress_chars("=> "),
     );
-    bar.set_position(done.len() as u64);
-    bar.reset_eta();
-    let fresh = pool.install(|| {
-        todo.par_iter()
-            .map(|&i| {
-                let r = run_trial(world, opts.seed, i).map_err(|e| format!("trial {i}: {e}"))?;
-                if let Some(dir) = dir {
-                    dir.write_trial(&r).map_err(|e| e.to_string())?;
-                }
-                bar.inc(1);
-                Ok(r)
-            })
-            .collect::<Result<Vec<_>, String>>()
-    });
-    bar.finish_and_clear();
-    let mut all = done;
-    all.extend(fresh?);
-    all.sort_by_key(|r| r.trial);
-    Ok(all)
-}
-
-/// The trajectory of one trial's estimator: times, truth and estimate of the epochs with
-/// an estimate.
-struct Track {
-    t_s: Vec<f64>,
-    truth: Vec<nalgebra::Vector3<f64>>,
-    est: Vec<nalgebra::Vector3<f64>>,
-}
-
-fn track(trace: &crate::engine::trial::EstimatorTrace) -> Track {
-    let mut tr = Track {
-        t_s: Vec::new(),
-        truth: Vec::new(),
-        est: Vec::new(),
+    let one = |i: u64| -> Result<TrialResult, String> {
+        if let Some(dir) = dir.filter(|_| stored(i)) {
+            if let Some(r) = dir.read_trial(i).map_err(|e| e.to_string())? {
+                return Ok(r);
+            }
+        }
+        let r = run_trial(world, opts.seed, i).map_err(|e| format!("trial {i}: {e}"))?;
+        if let Some(dir) = dir {
+            dir.write_trial(&r).map_err(|e| e.to_string())?;
+        }
+        Ok(r)
     };
-    for ep in &trace.epochs {
-        if let Some(e) = ep.est_ecef_m {
-            // Two batches at one instant (e.g. GNSS and FM) give two records with the
-            // same time; the TUM metrics need one pose per time, the last one.
-            if tr.t_s.last() == Some(&ep.t_s) {
-                tr.t_s.pop();
-                tr.truth.pop();
-                tr.est.pop();
-            }
-            tr.t_s.push(ep.t_s);
-            tr.truth.push(nalgebra::Vector3::from(ep.truth_ecef_m));
-            tr.est.push(nalgebra::Vector3::from(e));
+    let mut trials = opts.shard.trials(opts.trials);
+    let mut window: Vec<u64> = Vec::with_capacity(threads * WINDOW_PER_THREAD);
+    loop {
+        window.clear();
+        window.extend(trials.by_ref().take(threads * WINDOW_PER_THREAD));
+        if window.is_empty() {
+            break;
+        }
+        let done: Vec<Result<TrialResult, String>> = pool.install(|| {
+            window
+                .par_iter()
+                .map(|&i| {
+                    let r = one(i);
+                    bar.inc(1);
+                    r
+                })
+                .collect()
+        });
+        for r in done {
+            sink(r?)?;
         }
     }
-    tr
+    bar.finish_and_clear();
+    Ok(())
 }
 
-fn ci(values: &[f64]) -> Option<[f64; 2]> {
-    mean_ci95(values).map(|(a, b)| [a, b])
+/// The outputs of a run, written as its trials stream past in trial order.
+struct Outputs {
+    dir: std::path::PathBuf,
+    csv: outputs::EpochsCsv<AtomicFile>,
+    parquet: outputs::TrialsParquet<AtomicFile>,
+    reducer: reduce::RunReducer,
 }
 
-/// Each trial's own value of the statistics [`AcrossTrials`] gives intervals of.
-#[derive(Default)]
-struct PerTrial {
-    sigma1: Vec<f64>,
-    sigma2: Vec<f64>,
-    sigma3: Vec<f64>,
-    mean: Vec<f64>,
-    rmse: Vec<f64>,
-    ate_rmse: Vec<f64>,
-    rpe_rmse: Vec<f64>,
-    availability: Vec<f64>,
-}
+impl Outputs {
+    fn create(world: &World, dir: &std::path::Path) -> Result<Self, String> {
+        let open = |name: &str| AtomicFile::create(&dir.join(name)).map_err(|e| e.to_string());
+        let csv = outputs::EpochsCsv::new(open("epochs.csv")?).map_err(|e| e.to_string())?;
+        let parquet = outputs::TrialsParquet::new(open("trials.parquet")?, &world.frame)
+            .map_err(|e| format!("writing {}: {e}", dir.join("trials.parquet").display()))?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            csv,
+            parquet,
+            reducer: reduce::RunReducer::new(world, dir),
+        })
+    }
 
-impl PerTrial {
-    fn intervals(&self) -> AcrossTrials {
-        AcrossTrials {
-            trials: self.sigma1.len(),
-            sigma1_ci95_m: ci(&self.sigma1),
-            sigma2_ci95_m: ci(&self.sigma2),
-            sigma3_ci95_m: ci(&self.sigma3),
-            mean_ci95_m: ci(&self.mean),
-            rmse_ci95_m: ci(&self.rmse),
-            ate_rmse_ci95_m: ci(&self.ate_rmse),
-            rpe_rmse_ci95_m: ci(&self.rpe_rmse),
-            availability_ci95: ci(&self.availability),
-        }
+    fn push(&mut self, t: &TrialResult) -> Result<(), String> {
+        let path = |n: &str| self.dir.join(n).display().to_string();
+        self.csv
+            .push(t)
+            .map_err(|e| format!("writing {}: {e}", path("epochs.csv")))?;
+        self.parquet
+            .push(t)
+            .map_err(|e| format!("writing {}: {e}", path("trials.parquet")))?;
+        self.reducer.push(t)
+    }
+
+    /// Publishes every output; `summary.json` last, so a directory with a summary is a
+    /// complete run.
+    fn finish(self, world: &World, opts: &RunOptions) -> Result<Written, String> {
+        let dir = self.dir;
+        let path = |n: &str| dir.join(n);
+        let commit = |f: AtomicFile| f.commit().map_err(|e| e.to_string());
+        commit(
+            self.csv
+                .finish()
+                .map_err(|e| format!("writing {}: {e}", path("epochs.csv").display()))?,
+        )?;
+        commit(
+            self.parquet
+                .finish()
+                .map_err(|e| format!("writing {}: {e}", path("trials.parquet").display()))?,
+        )?;
+        let reduce::Reduced {
+            summary,
+            first,
+            cdfs,
+        } = self.reducer.finish(world, opts)?;
+        let report = crate::report::html(world, &summary, first.as_ref(), &cdfs)?;
+        crate::io::atomic::write_atomic(&path("report.html"), report.as_bytes())
+            .map_err(|e| e.to_string())?;
+        let mut json = serde_json::to_string_pretty(&summary)
+            .map_err(|e| format!("encoding summary.json: {e}"))?;
+        json.push('\n');
+        crate::io::atomic::write_atomic(&path("summary.json"), json.as_bytes())
+            .map_err(|e| e.to_string())?;
+        Ok(Written {
+            summary,
+            files: [
+                "summary.json",
+                "epochs.csv",
+                "trials.parquet",
+                "report.html",
+            ]
+            .map(path)
+            .to_vec(),
+        })
     }
 }
 
-/// One estimator's line of the summary, from its traces in every trial.
-fn estimator_summary(name: &str, k: usize, trials: &[TrialResult]) -> EstimatorSummary {
-    let mut e3 = Vec::new();
-    let mut eh = Vec::new();
-    let (mut epochs, mut without, mut failures) = (0usize, 0usize, 0usize);
-    let (mut nees_sum, mut nees_n) = (0.0, 0usize);
-    let mut modes: BTreeMap<String, usize> = BTreeMap::new();
-    let mut moded = 0usize;
-    // NEES grouped by epoch time across trials (every trial has the same time grid).
-    let mut nees_by_t: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
-    let mut nis_by_t: BTreeMap<u64, Vec<(f64, usize)>> = BTreeMap::new();
-    let (mut ate, mut ate_al, mut rpe, mut rpe_al) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let mut per_trial = PerTrial::default();
+/// Merges the shard directories `dirs` (their manifests agree and together they hold
+/// every trial) into `out`: copies each trial file and writes the outputs of the whole
+/// run, streaming the trials in order as [`run_into`] does. Returns the merged summary.
+///
+/// # Errors
+/// A message naming the directory, file or manifest key at fault.
+pub fn merge_into(world: &World, plan: &store::MergePlan, out: &RunDir) -> Result<Written, String> {
+    let opts = RunOptions {
+        trials: plan.manifest.trials,
+        seed: plan.manifest.seed,
+        threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+        progress: false,
+        shard: Shard::WHOLE,
+    };
+    out.clear_trials().map_err(|e| e.to_string())?;
+    out.write_manifest(&opts.manifest(world))
+        .map_err(|e| e.to_string())?;
+    let mut outputs = Outputs::create(world, &out.root)?;
+    let mut trials = 0..opts.trials;
+    let window = opts.threads * WINDOW_PER_THREAD;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(opts.threads)
+        .build()
+        .map_err(|e| format!("cannot start worker threads: {e}"))?;
+    loop {
+        let ids: Vec<u64> = trials.by_ref().take(window).collect();
+        if ids.is_empty() {
+            break;
+        }
+        let done: Vec<Result<TrialResult, String>> = pool.install(|| {
+            ids.par_iter()
+                .map(|&i| {
+                    let r = plan.read(i)?;
+                    out.write_trial(&r).map_err(|e| e.to_string())?;
+                    Ok(r)
+                })
+                .collect()
+        });
+        for r in done {
+            outputs.push(&r?)?;
+        }
+    }
+    outputs.finish(world, &opts)
+}
+
+/// Reduces trials (in trial order) to the summary; spilled errors, if any, go to the
+/// system's temporary directory.
+///
+/// # Errors
+/// When spilled errors cannot be written or read back.
+pub fn summarise(
+    world: &World,
+    opts: &RunOptions,
+    trials: &[TrialResult],
+) -> Result<Summary, String> {
+    let mut r = reduce::RunReducer::new(world, &std::env::temp_dir());
     for t in trials {
-        let Some(trace) = t.estimators.get(k) else {
-            continue;
-        };
-        let mut trial_errs = Vec::new();
-        // One NEES per time per trial: the last record of an instant with several
-        // batches (GNSS and FM at the same second), as the TUM tracks below keep.
-        let mut trial_nees: BTreeMap<u64, f64> = BTreeMap::new();
-        let mut trial_nis: BTreeMap<u64, (f64, usize)> = BTreeMap::new();
-        for ep in &trace.epochs {
-            epochs += 1;
-            failures += usize::from(ep.numerical_failure);
-            match (ep.err_3d_m, ep.err_h_m) {
-                (Some(a), Some(b)) => {
-                    e3.push(a);
-                    eh.push(b);
-                    trial_errs.push(a);
-                }
-                _ => without += 1,
-            }
-            if let Some(n) = ep.nees_pos {
-                nees_sum += n;
-                nees_n += 1;
-                trial_nees.insert(ep.t_s.to_bits(), n);
-            }
-            if let Some(n) = ep.nis {
-                // Several batches at one instant: their NIS add, as do their dimensions.
-                let slot = trial_nis.entry(ep.t_s.to_bits()).or_insert((0.0, 0));
-                slot.0 += n;
-                slot.1 += ep.nis_dof as usize;
-            }
-            if let Some(m) = &ep.mode {
-                *modes.entry(m.to_string()).or_default() += 1;
-                moded += 1;
-            }
-        }
-        for (t, n) in trial_nees {
-            nees_by_t.entry(t).or_default().push(n);
-        }
-        for (t, n) in trial_nis {
-            nis_by_t.entry(t).or_default().push(n);
-        }
-        let tr = track(trace);
-        let a = ate_errors(&tr.truth, &tr.est, Alignment::None);
-        let r = rpe_errors(&tr.t_s, &tr.truth, &tr.est, 1.0, Alignment::None);
-        if let Some(v) = &a {
-            ate.extend_from_slice(v);
-        }
-        if let Some(v) = &r {
-            rpe.extend_from_slice(v);
-        }
-        if let Some(v) = ate_errors(&tr.truth, &tr.est, Alignment::Rigid) {
-            ate_al.extend(v);
-        }
-        if let Some(v) = rpe_errors(&tr.t_s, &tr.truth, &tr.est, 1.0, Alignment::Rigid) {
-            rpe_al.extend(v);
-        }
-        let n_ep = trace.epochs.len();
-        if let Some(st) = ErrorStats::from_errors(&mut trial_errs) {
-            per_trial.sigma1.push(st.sigma1);
-            per_trial.sigma2.push(st.sigma2);
-            per_trial.sigma3.push(st.sigma3);
-            per_trial.mean.push(st.mean);
-            per_trial.rmse.push(st.rmse);
-            if let Some(v) = a.and_then(|mut v| TrajectoryStats::from_errors(&mut v)) {
-                per_trial.ate_rmse.push(v.rmse);
-            }
-            if let Some(v) = r.and_then(|mut v| TrajectoryStats::from_errors(&mut v)) {
-                per_trial.rpe_rmse.push(v.rmse);
-            }
-        }
-        if n_ep > 0 {
-            let with = trace.epochs.iter().filter(|e| e.err_3d_m.is_some()).count();
-            per_trial.availability.push(with as f64 / n_ep as f64);
-        }
+        r.push(t)?;
     }
-    let nees_epochs: Vec<Vec<f64>> = nees_by_t.into_values().collect();
-    EstimatorSummary {
-        name: name.to_string(),
-        error_3d_m: ErrorStats::from_errors(&mut e3),
-        error_h_m: ErrorStats::from_errors(&mut eh),
-        availability: if epochs > 0 {
-            (epochs - without) as f64 / epochs as f64
-        } else {
-            0.0
-        },
-        epochs,
-        epochs_without_fix: without,
-        mean_nees_pos: (nees_n > 0).then(|| nees_sum / nees_n as f64),
-        numerical_failures: failures,
-        ate_m: TrajectoryStats::from_errors(&mut ate),
-        ate_aligned_m: TrajectoryStats::from_errors(&mut ate_al),
-        rpe_m: TrajectoryStats::from_errors(&mut rpe),
-        rpe_aligned_m: TrajectoryStats::from_errors(&mut rpe_al),
-        nees: nees_summary(&nees_epochs, 3),
-        nis: nis_summary(&nis_by_t.into_values().collect::<Vec<_>>()),
-        modes: modes
-            .into_iter()
-            .map(|(m, n)| (m, n as f64 / moded.max(1) as f64))
-            .collect(),
-        across_trials: per_trial.intervals(),
-    }
-}
-
-/// Reduces trials (in trial order) to the summary.
-pub fn summarise(world: &World, opts: &RunOptions, trials: &[TrialResult]) -> Summary {
-    let names: Vec<String> = world
-        .file
-        .estimators
-        .iter()
-        .map(|e| e.name.clone())
-        .collect();
-    let estimators = names
-        .iter()
-        .enumerate()
-        .map(|(k, name)| estimator_summary(name, k, trials))
-        .collect();
-    Summary {
-        hybridnav_version: env!("CARGO_PKG_VERSION").to_string(),
-        world: world.file.world.name.clone(),
-        world_file: world.path.display().to_string(),
-        world_hash: world.hash.clone(),
-        seed: opts.seed,
-        trials: opts.trials,
-        shard: (!opts.shard.is_whole()).then(|| opts.shard.to_string()),
-        duration_s: world.duration_s,
-        estimators,
-        warnings: {
-            let mut w: Vec<String> = trials.iter().flat_map(|t| t.warnings.clone()).collect();
-            w.sort();
-            w.dedup();
-            w
-        },
-    }
+    Ok(r.finish(world, opts)?.summary)
 }
 
 impl Summary {
@@ -495,38 +454,4 @@ impl Summary {
 pub struct Written {
     pub summary: Summary,
     pub files: Vec<std::path::PathBuf>,
-}
-
-/// Writes `summary.json`, `epochs.csv`, `trials.parquet` and `report.html` of `trials`
-/// into `out`,
-/// each atomically.
-///
-/// # Errors
-/// I/O and encoding errors, naming the file.
-pub fn write_outputs(
-    world: &World,
-    opts: &RunOptions,
-    trials: &[TrialResult],
-    out: &std::path::Path,
-) -> Result<Written, String> {
-    use crate::io::atomic::write_atomic;
-    let summary = summarise(world, opts, trials);
-    let mut json = serde_json::to_string_pretty(&summary)
-        .map_err(|e| format!("encoding summary.json: {e}"))?;
-    json.push('\n');
-    let mut files = Vec::new();
-    let mut put = |name: &str, bytes: &[u8]| -> Result<(), String> {
-        let p = out.join(name);
-        write_atomic(&p, bytes).map_err(|e| e.to_string())?;
-        files.push(p);
-        Ok(())
-    };
-    put("summary.json", json.as_bytes())?;
-    put("epochs.csv", outputs::epochs_csv(trials).as_bytes())?;
-    let parquet = outputs::trials_parquet(&world.frame, trials)
-        .map_err(|e| format!("encoding trials.parquet: {e}"))?;
-    put("trials.parquet", &parquet)?;
-    let report = crate::report::html(world, &summary, trials)?;
-    put("report.html", report.as_bytes())?;
-    Ok(Written { summary, files })
 }

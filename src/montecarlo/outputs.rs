@@ -1,48 +1,89 @@
 //! The files a run writes from its trials: `epochs.csv` and `trials.parquet`.
 
 use crate::engine::trial::TrialResult;
+use std::io::Write;
 
-/// Every estimator's epochs of every trial as CSV (one row per trial, estimator and epoch;
-/// empty cells where an estimator had no estimate), for pandas and spreadsheets.
+/// The header of `epochs.csv`.
+const EPOCHS_CSV_HEADER: &str = "trial,estimator,t_s,err_3d_m,err_h_m,nees_pos,pos_sigma_m,used,rejected,rejected_gate,mean_nis,gdop,mode,numerical_failure\n";
+
+/// `epochs.csv`, written a trial at a time: every estimator's epochs of every trial (one
+/// row per trial, estimator and epoch; empty cells where an estimator had no estimate),
+/// for pandas and spreadsheets.
 ///
 /// Columns: `trial, estimator, t_s, err_3d_m, err_h_m, nees_pos, pos_sigma_m, used,
-/// rejected, rejected_gate, mean_nis, gdop, mode, numerical_failure`. Rows are in trial order, then the world's estimator order, then
-/// time, so the file is identical for any thread count.
-pub fn epochs_csv(results: &[TrialResult]) -> String {
-    use std::fmt::Write;
-    let mut s = String::from(
-        "trial,estimator,t_s,err_3d_m,err_h_m,nees_pos,pos_sigma_m,used,rejected,rejected_gate,mean_nis,gdop,mode,numerical_failure\n",
-    );
-    let opt = |v: Option<f64>| v.map(|x| format!("{x:.6}")).unwrap_or_default();
-    let mut sorted: Vec<&TrialResult> = results.iter().collect();
-    sorted.sort_by_key(|r| r.trial);
-    for r in sorted {
+/// rejected, rejected_gate, mean_nis, gdop, mode, numerical_failure`. Trials are pushed in
+/// trial order; within one, rows follow the world's estimator order, then time, so the
+/// file is identical for any thread count.
+pub struct EpochsCsv<W: Write> {
+    w: W,
+    line: String,
+}
+
+impl<W: Write> EpochsCsv<W> {
+    /// Writes the header.
+    ///
+    /// # Errors
+    /// I/O errors of `w`.
+    pub fn new(mut w: W) -> std::io::Result<Self> {
+        w.write_all(EPOCHS_CSV_HEADER.as_bytes())?;
+        Ok(Self {
+            w,
+            line: String::new(),
+        })
+    }
+
+    /// Writes one trial's rows.
+    ///
+    /// # Errors
+    /// I/O errors of the writer.
+    pub fn push(&mut self, r: &TrialResult) -> std::io::Result<()> {
+        use std::fmt::Write as _;
+        struct Opt(Option<f64>);
+        impl std::fmt::Display for Opt {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                match self.0 {
+                    Some(x) => write!(f, "{x:.6}"),
+                    None => Ok(()),
+                }
+            }
+        }
         for est in &r.estimators {
             // Names are free text: quote them as CSV requires.
             let name = format!("\"{}\"", est.name.replace('"', "\"\""));
             for e in &est.epochs {
+                self.line.clear();
                 let _ = writeln!(
-                    s,
+                    self.line,
                     "{},{},{:.3},{},{},{},{},{},{},{},{},{},{},{}",
                     r.trial,
                     name,
                     e.t_s,
-                    opt(e.err_3d_m),
-                    opt(e.err_h_m),
-                    opt(e.nees_pos),
-                    opt(e.pos_sigma_m),
+                    Opt(e.err_3d_m),
+                    Opt(e.err_h_m),
+                    Opt(e.nees_pos),
+                    Opt(e.pos_sigma_m),
                     e.used,
                     e.rejected,
                     e.rejected_gate,
-                    opt(e.mean_nis),
-                    opt(e.gdop),
+                    Opt(e.mean_nis),
+                    Opt(e.gdop),
                     e.mode.as_deref().unwrap_or(""),
                     u8::from(e.numerical_failure)
                 );
+                self.w.write_all(self.line.as_bytes())?;
             }
         }
+        Ok(())
     }
-    s
+
+    /// The writer, flushed.
+    ///
+    /// # Errors
+    /// I/O errors of the flush.
+    pub fn finish(mut self) -> std::io::Result<W> {
+        self.w.flush()?;
+        Ok(self.w)
+    }
 }
 
 /// The columns of `trials.parquet`, in file order, as a Parquet message type.
@@ -83,9 +124,10 @@ const PARQUET_SCHEMA: &str = "message hybridnav_epochs {
   REQUIRED BOOLEAN numerical_failure;
 }";
 
-/// Rows per Parquet row group: large enough for fast scans, small enough that a writer
-/// of a long run never holds more than a few tens of megabytes of columns.
-const ROWS_PER_GROUP: usize = 262_144;
+/// Rows per Parquet row group: large enough for fast scans (a few trials of a typical
+/// world per group), small enough that the writer's columns stay near 16 MB — the largest
+/// buffer a long run holds.
+const ROWS_PER_GROUP: usize = 65_536;
 
 /// One column's values for a row group (`def` holds the definition levels of optional
 /// columns: 1 present, 0 null).
@@ -130,70 +172,81 @@ impl Column {
     }
 }
 
-/// Every estimator's epochs of every trial as a Parquet file (see [`PARQUET_SCHEMA`] for
-/// the columns), in the same row order as [`epochs_csv`]: trial, then the world's
-/// estimator order, then time. The bytes depend only on the trials, so a merged or resumed
-/// run writes the same file.
-///
-/// # Errors
-/// Parquet encoding errors (none are expected for well-formed records).
-pub fn trials_parquet(
-    frame: &crate::core::EnuFrame,
-    results: &[TrialResult],
-) -> Result<Vec<u8>, parquet::errors::ParquetError> {
-    use nalgebra::Vector3;
-    use parquet::data_type::ByteArray;
-    use parquet::file::properties::WriterProperties;
-    use parquet::file::writer::SerializedFileWriter;
-    use std::sync::Arc;
+/// `trials.parquet`, written a trial at a time (see [`PARQUET_SCHEMA`] for the columns),
+/// in the same row order as [`EpochsCsv`]: trial, then the world's estimator order, then
+/// time. A row group is written every [`ROWS_PER_GROUP`] rows, so the writer holds at most
+/// one group of columns. The bytes depend only on the trials, so a merged or resumed run
+/// writes the same file.
+pub struct TrialsParquet<W: Write + Send> {
+    writer: parquet::file::writer::SerializedFileWriter<W>,
+    frame: crate::core::EnuFrame,
+    cols: Vec<Column>,
+    rows: usize,
+}
 
-    let schema = Arc::new(parquet::schema::parser::parse_message_type(PARQUET_SCHEMA)?);
-    let props = Arc::new(
-        WriterProperties::builder()
-            .set_compression(parquet::basic::Compression::SNAPPY)
-            .set_created_by(format!("hybridnav {}", env!("CARGO_PKG_VERSION")))
-            .build(),
-    );
-    let mut writer = SerializedFileWriter::new(Vec::new(), schema.clone(), props)?;
-    let n_cols = schema.get_fields().len();
+fn new_columns() -> Vec<Column> {
+    let mut c = vec![Column::I64(Vec::new()), Column::Str(Vec::new())];
+    c.extend((0..7).map(|_| Column::F64(Vec::new())));
+    c.extend((0..13).map(|_| Column::OptF64(Vec::new(), Vec::new())));
+    c.push(Column::OptStr(Vec::new(), Vec::new()));
+    c.extend((0..6).map(|_| Column::I32(Vec::new())));
+    c.push(Column::Bool(Vec::new()));
+    c
+}
 
-    let mut sorted: Vec<&TrialResult> = results.iter().collect();
-    sorted.sort_by_key(|r| r.trial);
-    let new_columns = || -> Vec<Column> {
-        let mut c = vec![Column::I64(Vec::new()), Column::Str(Vec::new())];
-        c.extend((0..7).map(|_| Column::F64(Vec::new())));
-        c.extend((0..13).map(|_| Column::OptF64(Vec::new(), Vec::new())));
-        c.push(Column::OptStr(Vec::new(), Vec::new()));
-        c.extend((0..6).map(|_| Column::I32(Vec::new())));
-        c.push(Column::Bool(Vec::new()));
-        c
-    };
-    let mut cols = new_columns();
-    debug_assert_eq!(cols.len(), n_cols);
-    let mut rows = 0usize;
-    let flush = |cols: &mut Vec<Column>,
-                 writer: &mut SerializedFileWriter<Vec<u8>>|
-     -> parquet::errors::Result<()> {
-        let mut rg = writer.next_row_group()?;
+impl<W: Write + Send> TrialsParquet<W> {
+    /// Starts the file in `w`; positions are also given in `frame`'s ENU.
+    ///
+    /// # Errors
+    /// Parquet encoding or I/O errors.
+    pub fn new(w: W, frame: &crate::core::EnuFrame) -> parquet::errors::Result<Self> {
+        use parquet::file::properties::WriterProperties;
+        use std::sync::Arc;
+        let schema = Arc::new(parquet::schema::parser::parse_message_type(PARQUET_SCHEMA)?);
+        let props = Arc::new(
+            WriterProperties::builder()
+                .set_compression(parquet::basic::Compression::SNAPPY)
+                .set_created_by(format!("hybridnav {}", env!("CARGO_PKG_VERSION")))
+                .build(),
+        );
+        let cols = new_columns();
+        debug_assert_eq!(cols.len(), schema.get_fields().len());
+        Ok(Self {
+            writer: parquet::file::writer::SerializedFileWriter::new(w, schema, props)?,
+            frame: frame.clone(),
+            cols,
+            rows: 0,
+        })
+    }
+
+    fn flush_group(&mut self) -> parquet::errors::Result<()> {
+        let mut rg = self.writer.next_row_group()?;
         let mut k = 0;
         while let Some(mut col) = rg.next_column()? {
-            cols[k].write(&mut col)?;
+            self.cols[k].write(&mut col)?;
             col.close()?;
             k += 1;
         }
         rg.close()?;
-        *cols = new_columns();
+        self.cols = new_columns();
         Ok(())
-    };
-    for r in sorted {
+    }
+
+    /// Adds one trial's rows.
+    ///
+    /// # Errors
+    /// Parquet encoding or I/O errors.
+    pub fn push(&mut self, r: &TrialResult) -> parquet::errors::Result<()> {
+        use nalgebra::Vector3;
+        use parquet::data_type::ByteArray;
         for est in &r.estimators {
             let name = ByteArray::from(est.name.as_str());
             for e in &est.epochs {
                 let truth = Vector3::from(e.truth_ecef_m);
-                let truth_enu = frame.enu_of_ecef(&truth);
+                let truth_enu = self.frame.enu_of_ecef(&truth);
                 let est_ecef = e.est_ecef_m.map(Vector3::from);
-                let est_enu = est_ecef.map(|p| frame.enu_of_ecef(&p));
-                let mut it = cols.iter_mut();
+                let est_enu = est_ecef.map(|p| self.frame.enu_of_ecef(&p));
+                let mut it = self.cols.iter_mut();
                 let mut next = || it.next().expect("the column list matches the schema");
                 if let Column::I64(v) = next() {
                     v.push(r.trial as i64);
@@ -255,15 +308,23 @@ pub fn trials_parquet(
                 if let Column::Bool(v) = next() {
                     v.push(e.numerical_failure);
                 }
-                rows += 1;
-                if rows % ROWS_PER_GROUP == 0 {
-                    flush(&mut cols, &mut writer)?;
+                self.rows += 1;
+                if self.rows % ROWS_PER_GROUP == 0 {
+                    self.flush_group()?;
                 }
             }
         }
+        Ok(())
     }
-    if rows % ROWS_PER_GROUP != 0 || rows == 0 {
-        flush(&mut cols, &mut writer)?;
+
+    /// Writes the last row group and the footer; returns the writer.
+    ///
+    /// # Errors
+    /// Parquet encoding or I/O errors.
+    pub fn finish(mut self) -> parquet::errors::Result<W> {
+        if self.rows % ROWS_PER_GROUP != 0 || self.rows == 0 {
+            self.flush_group()?;
+        }
+        self.writer.into_inner()
     }
-    writer.into_inner()
 }

@@ -14,7 +14,6 @@
 use crate::engine::trial::TrialResult;
 use crate::io::atomic::write_atomic;
 use serde::{Deserialize, Serialize};
-use std::collections::BTreeMap;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
@@ -381,71 +380,116 @@ impl RunDir {
     }
 }
 
-/// Gathers the trials of shard directories into one complete, ordered set.
-///
-/// Every directory must hold a manifest of the same world, seed and trial count, the
-/// shards must not overlap, and together they must hold every trial `0..trials`.
-///
-/// # Errors
-/// A message naming the directory and what disagrees, or the missing trials.
-pub fn gather_shards(dirs: &[PathBuf]) -> Result<(Manifest, Vec<TrialResult>), StoreError> {
-    let mut first: Option<(PathBuf, Manifest)> = None;
-    let mut by_trial: BTreeMap<u64, (TrialResult, PathBuf)> = BTreeMap::new();
-    if dirs.is_empty() {
-        return Err(StoreError::Refused(
-            "merge: name at least one run directory".into(),
-        ));
-    }
-    for d in dirs {
-        let dir = RunDir::existing(d);
-        let m = dir.read_manifest()?.ok_or_else(|| {
-            StoreError::Refused(format!(
-                "{}: no run.json here; not the output directory of `hybridnav run`",
-                d.display()
-            ))
-        })?;
-        if let Some((p0, m0)) = &first {
-            if let Some(why) = m0.mismatch(&m, false) {
-                return Err(StoreError::Refused(format!(
-                    "cannot merge {} with {}: {why}",
-                    d.display(),
-                    p0.display()
-                )));
-            }
-        } else {
-            first = Some((d.clone(), m.clone()));
+/// Which shard directory holds each trial of a run to merge; the trials themselves are
+/// read one window at a time by [`crate::montecarlo::merge_into`].
+#[derive(Debug)]
+pub struct MergePlan {
+    /// The merged run's manifest (the shards', with the whole run as its shard).
+    pub manifest: Manifest,
+    dirs: Vec<RunDir>,
+    /// `owner[i]`: the index in `dirs` of the directory holding trial `i`.
+    owner: Vec<u32>,
+}
+
+impl MergePlan {
+    /// Checks shard directories: every one must hold a manifest of the same world, seed
+    /// and trial count, the shards must not overlap, and together they must hold every
+    /// trial `0..trials`. Only file names are looked at here; contents are read (and
+    /// checked) when merged.
+    ///
+    /// # Errors
+    /// A message naming the directory and what disagrees, or the missing trials.
+    pub fn new(dirs: &[PathBuf]) -> Result<Self, StoreError> {
+        let mut first: Option<(PathBuf, Manifest)> = None;
+        if dirs.is_empty() {
+            return Err(StoreError::Refused(
+                "merge: name at least one run directory".into(),
+            ));
         }
-        for i in m.shard.trials(m.trials) {
-            if let Some(r) = dir.read_trial(i)? {
-                if let Some((_, other)) = by_trial.get(&i) {
+        let mut owner: Vec<u32> = Vec::new();
+        for (k, d) in dirs.iter().enumerate() {
+            let dir = RunDir::existing(d);
+            let m = dir.read_manifest()?.ok_or_else(|| {
+                StoreError::Refused(format!(
+                    "{}: no run.json here; not the output directory of `hybridnav run`",
+                    d.display()
+                ))
+            })?;
+            if let Some((p0, m0)) = &first {
+                if let Some(why) = m0.mismatch(&m, false) {
+                    return Err(StoreError::Refused(format!(
+                        "cannot merge {} with {}: {why}",
+                        d.display(),
+                        p0.display()
+                    )));
+                }
+            } else {
+                let n = usize::try_from(m.trials)
+                    .ok()
+                    .filter(|&n| n <= MAX_MERGE_TRIALS);
+                let Some(n) = n else {
+                    return Err(StoreError::Refused(format!(
+                        "{}: run.json says {} trials; merge handles at most {MAX_MERGE_TRIALS}",
+                        d.display(),
+                        m.trials
+                    )));
+                };
+                owner = vec![u32::MAX; n];
+                first = Some((d.clone(), m.clone()));
+            }
+            for i in m.shard.trials(m.trials) {
+                if !dir.trial_path(i).is_file() {
+                    continue;
+                }
+                let slot = &mut owner[i as usize];
+                if *slot != u32::MAX {
                     return Err(StoreError::Refused(format!(
                         "trial {i} is in both {} and {}: the same shard given twice?",
-                        other.display(),
+                        dirs[*slot as usize].display(),
                         d.display()
                     )));
                 }
-                by_trial.insert(i, (r, d.clone()));
+                *slot = k as u32;
             }
         }
+        let (_, mut manifest) = first.expect("at least one directory was read");
+        let missing: Vec<u64> = (0..manifest.trials)
+            .filter(|&i| owner[i as usize] == u32::MAX)
+            .take(11)
+            .collect();
+        if !missing.is_empty() {
+            let count = owner.iter().filter(|&&o| o == u32::MAX).count();
+            let list: Vec<String> = missing.iter().take(10).map(u64::to_string).collect();
+            return Err(StoreError::Refused(format!(
+                "merge: {count} of {} trials are missing (e.g. {}{}); merge every shard, and \
+                 resume unfinished ones with `hybridnav run … --shard K/N --resume`",
+                manifest.trials,
+                list.join(", "),
+                if count > 10 { ", …" } else { "" }
+            )));
+        }
+        manifest.shard = Shard::WHOLE;
+        Ok(Self {
+            manifest,
+            dirs: dirs.iter().map(|d| RunDir::existing(d)).collect(),
+            owner,
+        })
     }
-    let (_, mut manifest) = first.expect("at least one directory was read");
-    let missing: Vec<u64> = (0..manifest.trials)
-        .filter(|i| !by_trial.contains_key(i))
-        .collect();
-    if !missing.is_empty() {
-        let list: Vec<String> = missing.iter().take(10).map(u64::to_string).collect();
-        return Err(StoreError::Refused(format!(
-            "merge: {} of {} trials are missing (e.g. {}{}); merge every shard, and resume \
-             unfinished ones with `hybridnav run … --shard K/N --resume`",
-            missing.len(),
-            manifest.trials,
-            list.join(", "),
-            if missing.len() > 10 { ", …" } else { "" }
-        )));
+
+    /// Reads trial `i` from the directory that holds it.
+    ///
+    /// # Errors
+    /// When the file cannot be read or parsed, or vanished since the plan was made.
+    pub fn read(&self, i: u64) -> Result<TrialResult, String> {
+        let dir = &self.dirs[self.owner[i as usize] as usize];
+        dir.read_trial(i)
+            .map_err(|e| e.to_string())?
+            .ok_or_else(|| format!("{} vanished during the merge", dir.trial_path(i).display()))
     }
-    manifest.shard = Shard::WHOLE;
-    Ok((manifest, by_trial.into_values().map(|(r, _)| r).collect()))
 }
+
+/// The most trials a merge accepts (its plan keeps 4 bytes per trial).
+pub const MAX_MERGE_TRIALS: usize = 1 << 28;
 
 #[cfg(test)]
 mod tests {

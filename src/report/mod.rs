@@ -16,20 +16,24 @@ use crate::world::World;
 use std::fmt::Write;
 use svg::{colour, escape, Chart, ModeRow, Scale, Series, SkyTrack};
 
-/// Points of each CDF curve (evenly spaced in probability).
-const CDF_POINTS: usize = 400;
-
 const STYLE: &str = "body{font-family:sans-serif;max-width:1100px;margin:1.5em auto;padding:0 1em;color:#222}
 h1{font-size:1.5em}h2{font-size:1.15em;margin-top:1.8em;border-bottom:1px solid #ccc}
 table{border-collapse:collapse;font-size:0.9em}th,td{padding:3px 8px;border-bottom:1px solid #e3e3e3;text-align:right}
 th:first-child,td:first-child{text-align:left}th{background:#f3f3f3}.meta{color:#555;font-size:0.9em}
 figure{margin:0.8em 0}.wide{overflow-x:auto}figcaption{color:#555;font-size:0.85em;max-width:860px}svg{max-width:100%;height:auto}";
 
-/// Renders the report of a run.
+/// Renders the report of a run from its summary, its first trial (whose trajectories are
+/// drawn) and each estimator's thinned error CDF
+/// ([`crate::montecarlo::reduce::Reduced::cdfs`]).
 ///
 /// # Errors
 /// When the world's trajectory or map cannot be built.
-pub fn html(world: &World, summary: &Summary, trials: &[TrialResult]) -> Result<String, String> {
+pub fn html(
+    world: &World,
+    summary: &Summary,
+    first: Option<&TrialResult>,
+    cdfs: &[Vec<(f64, f64)>],
+) -> Result<String, String> {
     let mut h = String::new();
     let title = format!("{} — hybridnav report", summary.world);
     let _ = write!(
@@ -54,8 +58,8 @@ pub fn html(world: &World, summary: &Summary, trials: &[TrialResult]) -> Result<
         escape(&summary.hybridnav_version)
     );
     table(&mut h, summary);
-    cdf(&mut h, summary, trials);
-    if let Some(t0) = trials.first() {
+    cdf(&mut h, summary, cdfs);
+    if let Some(t0) = first {
         trajectories(&mut h, world, t0)?;
         error_vs_time(&mut h, t0);
         modes(&mut h, t0);
@@ -154,31 +158,16 @@ fn across(h: &mut String, s: &Summary) {
     h.push_str("</table>\n<p class=\"meta\">95 % confidence interval (Student t) of the mean over trials of each trial's own statistic: how much the figures above would move with another set of trials. The interval is symmetric: with few trials and a skewed statistic its lower end can fall below zero.</p>\n");
 }
 
-fn cdf(h: &mut String, s: &Summary, trials: &[TrialResult]) {
+fn cdf(h: &mut String, s: &Summary, cdfs: &[Vec<(f64, f64)>]) {
     let mut series = Vec::new();
-    for (k, e) in s.estimators.iter().enumerate() {
-        let mut errs: Vec<f64> = trials
-            .iter()
-            .filter_map(|t| t.estimators.get(k))
-            .flat_map(|t| t.epochs.iter().filter_map(|ep| ep.err_3d_m))
-            .filter(|v| v.is_finite())
-            .collect();
-        if errs.is_empty() {
+    for (k, (e, points)) in s.estimators.iter().zip(cdfs).enumerate() {
+        if points.is_empty() {
             continue;
         }
-        errs.sort_by(f64::total_cmp);
-        let n = errs.len();
-        let m = CDF_POINTS.min(n);
-        let points = (0..m)
-            .map(|i| {
-                let j = ((i + 1) * n).div_ceil(m) - 1;
-                (errs[j], (j + 1) as f64 / n as f64)
-            })
-            .collect();
         series.push(Series {
             label: &e.name,
             colour: colour(k),
-            points,
+            points: points.clone(),
         });
     }
     let x_scale_note = "error axis logarithmic";

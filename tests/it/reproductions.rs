@@ -16,7 +16,7 @@ fn run(world: &str, trials: u64, seed: u64) -> Summary {
         shard: Shard::WHOLE,
     };
     let r = run_trials(&w, &opts).expect("trials run");
-    summarise(&w, &opts, &r)
+    summarise(&w, &opts, &r).expect("summary")
 }
 
 fn get<'a>(s: &'a Summary, name: &str) -> &'a hybridnav::montecarlo::EstimatorSummary {

@@ -1,0 +1,361 @@
+//! The reduction of a run's trials to its summary, one trial at a time.
+//!
+//! A run of 10 000 trials must not hold 10 000 trials: [`RunReducer`] takes them in trial
+//! order and keeps only what the summary needs. Sums and counts are accumulated in trial
+//! order (so the result does not depend on how many trials were in memory at once); the
+//! errors whose exact percentiles the summary reports go to a [`SortedSpill`], which keeps
+//! a bounded number of them in memory and sorts the rest on disk; per-epoch NEES and NIS
+//! keep one running sum per epoch time. What grows with the number of trials is a handful
+//! of numbers per trial (the across-trial confidence intervals need each trial's own
+//! statistics): 64 bytes per trial and estimator.
+
+use super::{AcrossTrials, EstimatorSummary, FailureEpoch, RunOptions, Summary};
+use crate::engine::trial::{EstimatorTrace, TrialResult};
+use crate::io::spill::SortedSpill;
+use crate::metrics::{
+    ate_errors, ecdf_of, mean_ci95, rpe_errors, summary_of_samples, Alignment, EpochSamples,
+    ErrorStats, TrajectoryStats,
+};
+use crate::world::World;
+use nalgebra::Vector3;
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+
+/// Numerical-failure epochs listed per estimator in the summary (all are counted).
+pub const FAILURES_LISTED: usize = 20;
+
+/// Points of each error CDF kept for the report.
+pub const CDF_POINTS: usize = 400;
+
+/// What a finished reduction gives: the summary, and what the report draws besides it.
+pub struct Reduced {
+    pub summary: Summary,
+    /// The first trial reduced (trial 0 of a whole run): the report draws its trajectories.
+    pub first: Option<TrialResult>,
+    /// Each estimator's empirical CDF of the 3-D error, `(error_m, share)`, thinned to
+    /// [`CDF_POINTS`] (empty without an estimate).
+    pub cdfs: Vec<Vec<(f64, f64)>>,
+}
+
+/// Accumulates trials, in trial order, into a [`Summary`].
+pub struct RunReducer {
+    estimators: Vec<EstimatorAcc>,
+    warnings: BTreeSet<String>,
+    first: Option<TrialResult>,
+    last_trial: Option<u64>,
+}
+
+impl RunReducer {
+    /// A reducer for `world`'s estimators whose spilled errors go to `spill_dir`.
+    pub fn new(world: &World, spill_dir: &Path) -> Self {
+        Self {
+            estimators: world
+                .file
+                .estimators
+                .iter()
+                .map(|e| EstimatorAcc::new(&e.name, spill_dir))
+                .collect(),
+            warnings: BTreeSet::new(),
+            first: None,
+            last_trial: None,
+        }
+    }
+
+    /// Adds the next trial.
+    ///
+    /// # Errors
+    /// When trials come out of order (a bug), or spilled errors cannot be written (a
+    /// full disk: the message names the file).
+    pub fn push(&mut self, t: &TrialResult) -> Result<(), String> {
+        if self.last_trial.is_some_and(|l| t.trial <= l) {
+            return Err(format!(
+                "internal: trial {} reduced after trial {:?}; trials must come in order",
+                t.trial, self.last_trial
+            ));
+        }
+        self.last_trial = Some(t.trial);
+        for (k, acc) in self.estimators.iter_mut().enumerate() {
+            if let Some(trace) = t.estimators.get(k) {
+                acc.push(t.trial, trace).map_err(|e| e.to_string())?;
+            }
+        }
+        self.warnings.extend(t.warnings.iter().cloned());
+        if self.first.is_none() {
+            self.first = Some(t.clone());
+        }
+        Ok(())
+    }
+
+    /// The summary of every trial pushed.
+    ///
+    /// # Errors
+    /// When spilled errors cannot be read back.
+    pub fn finish(self, world: &World, opts: &RunOptions) -> Result<Reduced, String> {
+        let mut estimators = Vec::with_capacity(self.estimators.len());
+        let mut cdfs = Vec::with_capacity(self.estimators.len());
+        for acc in self.estimators {
+            let (s, cdf) = acc.finish().map_err(|e| e.to_string())?;
+            estimators.push(s);
+            cdfs.push(cdf);
+        }
+        Ok(Reduced {
+            summary: Summary {
+                hybridnav_version: env!("CARGO_PKG_VERSION").to_string(),
+                world: world.file.world.name.clone(),
+                world_file: world.path.display().to_string(),
+                world_hash: world.hash.clone(),
+                seed: opts.seed,
+                trials: opts.trials,
+                shard: (!opts.shard.is_whole()).then(|| opts.shard.to_string()),
+                duration_s: world.duration_s,
+                estimators,
+                warnings: self.warnings.into_iter().collect(),
+            },
+            first: self.first,
+            cdfs,
+        })
+    }
+}
+
+/// One estimator's running reduction.
+struct EstimatorAcc {
+    name: String,
+    e3: SortedSpill,
+    eh: SortedSpill,
+    ate: SortedSpill,
+    ate_al: SortedSpill,
+    rpe: SortedSpill,
+    rpe_al: SortedSpill,
+    epochs: usize,
+    without: usize,
+    failures: usize,
+    first_failures: Vec<FailureEpoch>,
+    nees_sum: f64,
+    nees_n: usize,
+    modes: BTreeMap<String, usize>,
+    moded: usize,
+    /// Per epoch time (its bits: positive times order as their bits do), across trials.
+    nees_by_t: BTreeMap<u64, EpochSamples>,
+    nis_by_t: BTreeMap<u64, EpochSamples>,
+    per_trial: PerTrial,
+    /// Scratch of one trial, reused.
+    trial_errs: Vec<f64>,
+}
+
+impl EstimatorAcc {
+    fn new(name: &str, dir: &Path) -> Self {
+        Self {
+            name: name.to_string(),
+            e3: SortedSpill::new(dir),
+            eh: SortedSpill::new(dir),
+            ate: SortedSpill::new(dir),
+            ate_al: SortedSpill::new(dir),
+            rpe: SortedSpill::new(dir),
+            rpe_al: SortedSpill::new(dir),
+            epochs: 0,
+            without: 0,
+            failures: 0,
+            first_failures: Vec::new(),
+            nees_sum: 0.0,
+            nees_n: 0,
+            modes: BTreeMap::new(),
+            moded: 0,
+            nees_by_t: BTreeMap::new(),
+            nis_by_t: BTreeMap::new(),
+            per_trial: PerTrial::default(),
+            trial_errs: Vec::new(),
+        }
+    }
+
+    fn push(&mut self, trial: u64, trace: &EstimatorTrace) -> std::io::Result<()> {
+        self.trial_errs.clear();
+        // One NEES per time per trial: the last record of an instant with several batches
+        // (GNSS and FM at the same second), as the TUM tracks below keep.
+        let mut trial_nees: BTreeMap<u64, f64> = BTreeMap::new();
+        let mut trial_nis: BTreeMap<u64, (f64, usize)> = BTreeMap::new();
+        for ep in &trace.epochs {
+            self.epochs += 1;
+            if ep.numerical_failure {
+                self.failures += 1;
+                if self.first_failures.len() < FAILURES_LISTED {
+                    self.first_failures
+                        .push(FailureEpoch { trial, t_s: ep.t_s });
+                }
+            }
+            match (ep.err_3d_m, ep.err_h_m) {
+                (Some(a), Some(b)) => {
+                    self.e3.push(a)?;
+                    self.eh.push(b)?;
+                    self.trial_errs.push(a);
+                }
+                _ => self.without += 1,
+            }
+            if let Some(n) = ep.nees_pos {
+                self.nees_sum += n;
+                self.nees_n += 1;
+                trial_nees.insert(ep.t_s.to_bits(), n);
+            }
+            if let Some(n) = ep.nis {
+                // Several batches at one instant: their NIS add, as do their dimensions.
+                let slot = trial_nis.entry(ep.t_s.to_bits()).or_insert((0.0, 0));
+                slot.0 += n;
+                slot.1 += ep.nis_dof as usize;
+            }
+            if let Some(m) = &ep.mode {
+                *self.modes.entry(m.to_string()).or_default() += 1;
+                self.moded += 1;
+            }
+        }
+        for (t, n) in trial_nees {
+            self.nees_by_t.entry(t).or_default().push(n, 3.0);
+        }
+        for (t, (n, dof)) in trial_nis {
+            self.nis_by_t.entry(t).or_default().push(n, dof as f64);
+        }
+        let tr = track(trace);
+        let a = ate_errors(&tr.truth, &tr.est, Alignment::None);
+        let r = rpe_errors(&tr.t_s, &tr.truth, &tr.est, 1.0, Alignment::None);
+        if let Some(v) = &a {
+            self.ate.extend(v)?;
+        }
+        if let Some(v) = &r {
+            self.rpe.extend(v)?;
+        }
+        if let Some(v) = ate_errors(&tr.truth, &tr.est, Alignment::Rigid) {
+            self.ate_al.extend(&v)?;
+        }
+        if let Some(v) = rpe_errors(&tr.t_s, &tr.truth, &tr.est, 1.0, Alignment::Rigid) {
+            self.rpe_al.extend(&v)?;
+        }
+        let pt = &mut self.per_trial;
+        if let Some(st) = ErrorStats::from_errors(&mut self.trial_errs) {
+            pt.sigma1.push(st.sigma1);
+            pt.sigma2.push(st.sigma2);
+            pt.sigma3.push(st.sigma3);
+            pt.mean.push(st.mean);
+            pt.rmse.push(st.rmse);
+            if let Some(v) = a.and_then(|mut v| TrajectoryStats::from_errors(&mut v)) {
+                pt.ate_rmse.push(v.rmse);
+            }
+            if let Some(v) = r.and_then(|mut v| TrajectoryStats::from_errors(&mut v)) {
+                pt.rpe_rmse.push(v.rmse);
+            }
+        }
+        let n_ep = trace.epochs.len();
+        if n_ep > 0 {
+            let with = trace.epochs.iter().filter(|e| e.err_3d_m.is_some()).count();
+            pt.availability.push(with as f64 / n_ep as f64);
+        }
+        Ok(())
+    }
+
+    fn finish(mut self) -> std::io::Result<(EstimatorSummary, Vec<(f64, f64)>)> {
+        // A diverged estimate (non-finite error) withholds the statistics rather than
+        // averaging NaN; the failure count and epochs say what happened.
+        fn error_stats(s: &mut SortedSpill) -> std::io::Result<Option<ErrorStats>> {
+            if s.non_finite() > 0 {
+                return Ok(None);
+            }
+            ErrorStats::from_sorted(s)
+        }
+        fn traj_stats(s: &mut SortedSpill) -> std::io::Result<Option<TrajectoryStats>> {
+            if s.non_finite() > 0 {
+                return Ok(None);
+            }
+            TrajectoryStats::from_sorted(s)
+        }
+        let cdf = ecdf_of(&mut self.e3, CDF_POINTS)?;
+        let summary = EstimatorSummary {
+            error_3d_m: error_stats(&mut self.e3)?,
+            error_h_m: error_stats(&mut self.eh)?,
+            availability: if self.epochs > 0 {
+                (self.epochs - self.without) as f64 / self.epochs as f64
+            } else {
+                0.0
+            },
+            epochs: self.epochs,
+            epochs_without_fix: self.without,
+            mean_nees_pos: (self.nees_n > 0).then(|| self.nees_sum / self.nees_n as f64),
+            numerical_failures: self.failures,
+            first_failures: self.first_failures,
+            ate_m: traj_stats(&mut self.ate)?,
+            ate_aligned_m: traj_stats(&mut self.ate_al)?,
+            rpe_m: traj_stats(&mut self.rpe)?,
+            rpe_aligned_m: traj_stats(&mut self.rpe_al)?,
+            nees: summary_of_samples(self.nees_by_t.values()),
+            nis: summary_of_samples(self.nis_by_t.values()),
+            modes: self
+                .modes
+                .into_iter()
+                .map(|(m, n)| (m, n as f64 / self.moded.max(1) as f64))
+                .collect(),
+            across_trials: self.per_trial.intervals(),
+            name: self.name,
+        };
+        Ok((summary, cdf))
+    }
+}
+
+/// The trajectory of one trial's estimator: times, truth and estimate of the epochs with
+/// an estimate.
+struct Track {
+    t_s: Vec<f64>,
+    truth: Vec<Vector3<f64>>,
+    est: Vec<Vector3<f64>>,
+}
+
+fn track(trace: &EstimatorTrace) -> Track {
+    let mut tr = Track {
+        t_s: Vec::new(),
+        truth: Vec::new(),
+        est: Vec::new(),
+    };
+    for ep in &trace.epochs {
+        if let Some(e) = ep.est_ecef_m {
+            // Two batches at one instant (e.g. GNSS and FM) give two records with the
+            // same time; the TUM metrics need one pose per time, the last one.
+            if tr.t_s.last() == Some(&ep.t_s) {
+                tr.t_s.pop();
+                tr.truth.pop();
+                tr.est.pop();
+            }
+            tr.t_s.push(ep.t_s);
+            tr.truth.push(Vector3::from(ep.truth_ecef_m));
+            tr.est.push(Vector3::from(e));
+        }
+    }
+    tr
+}
+
+fn ci(values: &[f64]) -> Option<[f64; 2]> {
+    mean_ci95(values).map(|(a, b)| [a, b])
+}
+
+/// Each trial's own value of the statistics [`AcrossTrials`] gives intervals of.
+#[derive(Default)]
+struct PerTrial {
+    sigma1: Vec<f64>,
+    sigma2: Vec<f64>,
+    sigma3: Vec<f64>,
+    mean: Vec<f64>,
+    rmse: Vec<f64>,
+    ate_rmse: Vec<f64>,
+    rpe_rmse: Vec<f64>,
+    availability: Vec<f64>,
+}
+
+impl PerTrial {
+    fn intervals(&self) -> AcrossTrials {
+        AcrossTrials {
+            trials: self.sigma1.len(),
+            sigma1_ci95_m: ci(&self.sigma1),
+            sigma2_ci95_m: ci(&self.sigma2),
+            sigma3_ci95_m: ci(&self.sigma3),
+            mean_ci95_m: ci(&self.mean),
+            rmse_ci95_m: ci(&self.rmse),
+            ate_rmse_ci95_m: ci(&self.ate_rmse),
+            rpe_rmse_ci95_m: ci(&self.rpe_rmse),
+            availability_ci95: ci(&self.availability),
+        }
+    }
+}
