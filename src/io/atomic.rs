@@ -104,6 +104,48 @@ impl Drop for AtomicFile {
     }
 }
 
+/// Removes the temporary files that processes killed mid-write left in `dir`: this
+/// module's `.NAME.PID.tmp` files and the external sort's `.hybridnav-spill-PID-…` runs,
+/// when process PID is no longer alive. A live process's files (another shard writing
+/// into the same directory) are left alone. Only where `/proc` tells which processes are
+/// alive (Linux); elsewhere nothing is removed. Returns how many files were removed.
+///
+/// # Errors
+/// When `dir` cannot be listed or a stale file cannot be removed.
+pub fn remove_stale_temporaries(dir: &Path) -> io::Result<usize> {
+    let proc = Path::new("/proc");
+    if !proc.join("self").exists() {
+        return Ok(0);
+    }
+    let own = std::process::id();
+    let mut removed = 0;
+    let entries = match fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(0),
+        Err(e) => return Err(named(dir, e)),
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(name) = name.to_str() else { continue };
+        let pid = if let Some(rest) = name.strip_prefix(".hybridnav-spill-") {
+            rest.split('-').next()
+        } else if let Some(rest) = name.strip_prefix('.').and_then(|n| n.strip_suffix(".tmp")) {
+            rest.rsplit_once('.').map(|(_, pid)| pid)
+        } else {
+            None
+        };
+        let Some(pid) = pid.and_then(|p| p.parse::<u32>().ok()) else {
+            continue;
+        };
+        if pid != own && !proc.join(pid.to_string()).exists() {
+            let path = entry.path();
+            fs::remove_file(&path).map_err(|e| named(&path, e))?;
+            removed += 1;
+        }
+    }
+    Ok(removed)
+}
+
 fn named(path: &Path, e: io::Error) -> io::Error {
     if e.to_string().contains(&path.display().to_string()) {
         return e;
@@ -135,6 +177,46 @@ mod tests {
         f.write_all(b"four").unwrap();
         f.commit().unwrap();
         assert_eq!(fs::read(&p).unwrap(), b"four");
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn stale_temporaries_of_dead_processes_are_removed() {
+        let dir = std::env::temp_dir().join(format!("hybridnav-stale-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        // PID 0x7fff_fff0 is above Linux's pid_max, so no process has it.
+        let dead = 0x7fff_fff0u32;
+        let own = std::process::id();
+        for n in [
+            format!(".epochs.csv.{dead}.tmp"),
+            format!(".hybridnav-spill-{dead}-3-0.f64"),
+            format!(".epochs.csv.{own}.tmp"),
+            format!(".hybridnav-spill-{own}-0-0.f64"),
+            "summary.json".to_string(),
+            ".hidden.tmp".to_string(),
+        ] {
+            fs::write(dir.join(n), b"x").unwrap();
+        }
+        let removed = remove_stale_temporaries(&dir).unwrap();
+        let mut left: Vec<String> = fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        if Path::new("/proc/self").exists() {
+            assert_eq!(removed, 2);
+            assert_eq!(
+                left,
+                [
+                    format!(".epochs.csv.{own}.tmp"),
+                    ".hidden.tmp".to_string(),
+                    format!(".hybridnav-spill-{own}-0-0.f64"),
+                    "summary.json".to_string()
+                ]
+            );
+        } else {
+            assert_eq!(removed, 0);
+        }
         fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -203,6 +203,45 @@ pub fn run_into(
     out.finish(world, opts)
 }
 
+/// Where trials go, in trial order.
+type Sink<'a> = dyn FnMut(TrialResult) -> Result<(), String> + Send + 'a;
+
+/// Produces the trials `ids` on `pool` a window ([`WINDOW_PER_THREAD`] per thread) at a
+/// time, in parallel within a window, and hands them to `sink` in the order of `ids`. The
+/// sink consumes one window while the pool produces the next, so its serial work (the
+/// streamed outputs) overlaps the trials; at most two windows are in memory.
+fn in_windows(
+    pool: &rayon::ThreadPool,
+    mut ids: impl Iterator<Item = u64>,
+    produce: &(dyn Fn(u64) -> Result<TrialResult, String> + Sync),
+    sink: &mut Sink<'_>,
+) -> Result<(), String> {
+    let size = pool.current_num_threads().max(1) * WINDOW_PER_THREAD;
+    let mut window: Vec<u64> = Vec::with_capacity(size);
+    let mut pending: Vec<Result<TrialResult, String>> = Vec::new();
+    loop {
+        window.clear();
+        window.extend(ids.by_ref().take(size));
+        if window.is_empty() && pending.is_empty() {
+            return Ok(());
+        }
+        let consume = std::mem::take(&mut pending);
+        let (done, consumed) = pool.install(|| {
+            rayon::join(
+                || window.par_iter().map(|&i| produce(i)).collect::<Vec<_>>(),
+                || -> Result<(), String> {
+                    for r in consume {
+                        sink(r?)?;
+                    }
+                    Ok(())
+                },
+            )
+        });
+        consumed?;
+        pending = done;
+    }
+}
+
 /// The common loop: runs the shard's trials in windows of [`WINDOW_PER_THREAD`] per
 /// thread, in parallel within a window, and hands each to `sink` in trial order. A trial
 /// with `stored(i)` is read back from `dir` instead of run; a trial that is run is written
@@ -212,7 +251,7 @@ fn execute(
     opts: &RunOptions,
     dir: Option<&RunDir>,
     stored: &(dyn Fn(u64) -> bool + Sync),
-    sink: &mut dyn FnMut(TrialResult) -> Result<(), String>,
+    sink: &mut Sink<'_>,
 ) -> Result<(), String> {
     let threads = opts.threads.max(1);
     let pool = rayon::ThreadPoolBuilder::new()
@@ -244,28 +283,12 @@ fn execute(
         }
         Ok(r)
     };
-    let mut trials = opts.shard.trials(opts.trials);
-    let mut window: Vec<u64> = Vec::with_capacity(threads * WINDOW_PER_THREAD);
-    loop {
-        window.clear();
-        window.extend(trials.by_ref().take(threads * WINDOW_PER_THREAD));
-        if window.is_empty() {
-            break;
-        }
-        let done: Vec<Result<TrialResult, String>> = pool.install(|| {
-            window
-                .par_iter()
-                .map(|&i| {
-                    let r = one(i);
-                    bar.inc(1);
-                    r
-                })
-                .collect()
-        });
-        for r in done {
-            sink(r?)?;
-        }
-    }
+    let produce = |i: u64| {
+        let r = one(i);
+        bar.inc(1);
+        r
+    };
+    in_windows(&pool, opts.shard.trials(opts.trials), &produce, sink)?;
     bar.finish_and_clear();
     Ok(())
 }
@@ -364,30 +387,16 @@ pub fn merge_into(world: &World, plan: &store::MergePlan, out: &RunDir) -> Resul
     out.write_manifest(&opts.manifest(world))
         .map_err(|e| e.to_string())?;
     let mut outputs = Outputs::create(world, &out.root)?;
-    let mut trials = 0..opts.trials;
-    let window = opts.threads * WINDOW_PER_THREAD;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.threads)
         .build()
         .map_err(|e| format!("cannot start worker threads: {e}"))?;
-    loop {
-        let ids: Vec<u64> = trials.by_ref().take(window).collect();
-        if ids.is_empty() {
-            break;
-        }
-        let done: Vec<Result<TrialResult, String>> = pool.install(|| {
-            ids.par_iter()
-                .map(|&i| {
-                    let r = plan.read(i)?;
-                    out.write_trial(&r).map_err(|e| e.to_string())?;
-                    Ok(r)
-                })
-                .collect()
-        });
-        for r in done {
-            outputs.push(&r?)?;
-        }
-    }
+    let copy = |i: u64| {
+        let r = plan.read(i)?;
+        out.write_trial(&r).map_err(|e| e.to_string())?;
+        Ok(r)
+    };
+    in_windows(&pool, 0..opts.trials, &copy, &mut |t| outputs.push(&t))?;
     outputs.finish(world, &opts)
 }
 

@@ -48,12 +48,18 @@ pub struct RunReducer {
 impl RunReducer {
     /// A reducer for `world`'s estimators whose spilled errors go to `spill_dir`.
     pub fn new(world: &World, spill_dir: &Path) -> Self {
+        Self::with_chunk(world, spill_dir, crate::io::spill::DEFAULT_CHUNK)
+    }
+
+    /// As [`RunReducer::new`], keeping `chunk` errors per metric in memory before a
+    /// sorted run is spilled to disk (tests use tiny chunks).
+    pub fn with_chunk(world: &World, spill_dir: &Path, chunk: usize) -> Self {
         Self {
             estimators: world
                 .file
                 .estimators
                 .iter()
-                .map(|e| EstimatorAcc::new(&e.name, spill_dir))
+                .map(|e| EstimatorAcc::new(&e.name, spill_dir, chunk))
                 .collect(),
             warnings: BTreeSet::new(),
             first: None,
@@ -143,15 +149,16 @@ struct EstimatorAcc {
 }
 
 impl EstimatorAcc {
-    fn new(name: &str, dir: &Path) -> Self {
+    fn new(name: &str, dir: &Path, chunk: usize) -> Self {
+        let spill = || SortedSpill::with_chunk(dir, chunk);
         Self {
             name: name.to_string(),
-            e3: SortedSpill::new(dir),
-            eh: SortedSpill::new(dir),
-            ate: SortedSpill::new(dir),
-            ate_al: SortedSpill::new(dir),
-            rpe: SortedSpill::new(dir),
-            rpe_al: SortedSpill::new(dir),
+            e3: spill(),
+            eh: spill(),
+            ate: spill(),
+            ate_al: spill(),
+            rpe: spill(),
+            rpe_al: spill(),
             epochs: 0,
             without: 0,
             failures: 0,
@@ -357,5 +364,51 @@ impl PerTrial {
             rpe_rmse_ci95_m: ci(&self.rpe_rmse),
             availability_ci95: ci(&self.availability),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::montecarlo::{run_trials, store::Shard};
+
+    /// The spilled reduction (errors sorted on disk in runs of 7) gives the summary and
+    /// CDFs of the in-memory one to the bit, and leaves no file behind.
+    #[test]
+    fn spilling_to_disk_changes_nothing() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/default.toml");
+        let world = crate::world::load_world(&path).unwrap();
+        let opts = RunOptions {
+            trials: 3,
+            seed: 5,
+            threads: 1,
+            progress: false,
+            shard: Shard::WHOLE,
+        };
+        let trials = run_trials(&world, &opts).unwrap();
+        let dir = std::env::temp_dir().join(format!("hybridnav-reduce-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let reduce = |chunk| {
+            let mut r = RunReducer::with_chunk(&world, &dir, chunk);
+            for t in &trials {
+                r.push(t).unwrap();
+            }
+            r.finish(&world, &opts).unwrap()
+        };
+        let in_memory = reduce(usize::MAX);
+        let spilled = reduce(7);
+        assert_eq!(in_memory.summary, spilled.summary);
+        assert_eq!(in_memory.cdfs, spilled.cdfs);
+        let e = &in_memory.summary.estimators[0];
+        assert!(
+            e.error_3d_m.unwrap().count > 7 * 10,
+            "the spill had many runs"
+        );
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
+        // Trials out of order are refused rather than reduced wrongly.
+        let mut r = RunReducer::new(&world, &dir);
+        r.push(&trials[1]).unwrap();
+        assert!(r.push(&trials[0]).unwrap_err().contains("in order"));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

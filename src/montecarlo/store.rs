@@ -233,6 +233,11 @@ impl RunDir {
         };
         let trials = root.join("trials");
         std::fs::create_dir_all(&trials).map_err(io(&trials))?;
+        // A process killed mid-write leaves hidden temporary files; the run that takes
+        // the directory over removes them (never a live process's).
+        for d in [root, trials.as_path()] {
+            crate::io::atomic::remove_stale_temporaries(d).map_err(io(d))?;
+        }
         let probe = root.join(".hybridnav-write-probe");
         write_atomic(&probe, b"").map_err(io(&probe))?;
         let _ = std::fs::remove_file(&probe);

@@ -20,6 +20,7 @@ mod metrics;
 mod montecarlo;
 mod motion_models;
 mod propagation;
+mod reliability;
 mod report;
 mod reproductions;
 mod reproductions_abstract;

@@ -1,0 +1,450 @@
+//! Nothing lost, and the same bytes whatever happens: runs killed at random moments and
+//! resumed, a disk that fills up mid-run, and the determinism matrix over threads, shard
+//! splits and estimator subsets.
+
+use crate::common::{hybridnav, repo, stderr, tmp_dir, write};
+use crate::montecarlo::assert_same_run;
+use rand::{Rng, SeedableRng};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn s(p: &Path) -> String {
+    p.to_str().expect("UTF-8 path").to_string()
+}
+
+fn ok(args: &[&str]) {
+    let o = hybridnav(args);
+    assert!(o.status.success(), "hybridnav {args:?}: {}", stderr(&o));
+}
+
+fn trial_count(dir: &Path) -> usize {
+    std::fs::read_dir(dir.join("trials")).map_or(0, |rd| {
+        rd.flatten()
+            .filter(|e| {
+                let n = e.file_name();
+                let n = n.to_string_lossy();
+                n.starts_with("trial-") && n.ends_with(".json.gz")
+            })
+            .count()
+    })
+}
+
+/// Hidden temporary files (atomic writes, spilled sort runs) anywhere in a run directory.
+fn temporaries(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for d in [dir.to_path_buf(), dir.join("trials")] {
+        if let Ok(rd) = std::fs::read_dir(&d) {
+            for e in rd.flatten() {
+                let n = e.file_name().to_string_lossy().into_owned();
+                if n.ends_with(".tmp") || n.starts_with(".hybridnav-spill-") {
+                    out.push(e.path());
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The arguments of one attempt of a run into `out`, resuming when an earlier attempt left
+/// a manifest (as `docs/cluster/shard.sh` does).
+fn attempt_args(world: &str, trials: &str, threads: &str, out: &Path) -> Vec<String> {
+    let mut a: Vec<String> = [
+        "run",
+        world,
+        "--trials",
+        trials,
+        "--threads",
+        threads,
+        "--quiet",
+        "--out",
+    ]
+    .iter()
+    .map(|x| x.to_string())
+    .collect();
+    a.push(s(out));
+    if out.join("run.json").exists() {
+        a.push("--resume".into());
+    }
+    a
+}
+
+/// Kills a run with SIGKILL at random moments, several times over, resuming after each
+/// kill with a random thread count; the finished directory must equal an uninterrupted
+/// run's byte for byte, with no temporary file left behind. The moments are drawn from a
+/// fixed seed (after 1–3 more trials, plus 0–250 ms, so that a slow machine cannot turn
+/// every kill into one before the first trial), and a last kill aims at the window after
+/// the last trial file and before `summary.json`, where the outputs are published.
+#[test]
+fn runs_killed_at_random_moments_resume_to_the_uninterrupted_result() {
+    let d = tmp_dir("rel-kills");
+    // ~0.3 s per trial on one thread: a 12-trial run lasts a few seconds.
+    let world = "worlds/seed004-bupt.toml";
+    let trials = "12";
+    let whole = d.join("whole");
+    ok(&[
+        "run",
+        world,
+        "--trials",
+        trials,
+        "--quiet",
+        "--out",
+        &s(&whole),
+    ]);
+
+    let out = d.join("killed");
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(20261122);
+    let mut kills = Vec::new();
+    for attempt in 0..5 {
+        let threads = if rng.random_bool(0.5) { "1" } else { "2" };
+        let args = attempt_args(world, trials, threads, &out);
+        let mut child = Command::new(env!("CARGO_BIN_EXE_hybridnav"))
+            .args(&args)
+            .current_dir(repo())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("start hybridnav");
+        let before = trial_count(&out);
+        let start = Instant::now();
+        let finished = if attempt == 4 {
+            // Aim at the output phase: kill as soon as every trial file exists.
+            while trial_count(&out) < 12 && start.elapsed() < Duration::from_secs(120) {
+                if child.try_wait().expect("poll").is_some() {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            child.try_wait().expect("poll").is_some()
+        } else {
+            // A random moment that is sure to fall after some progress, however fast the
+            // machine: once 1–3 more trials are written, a further 0–250 ms.
+            let target = (before + rng.random_range(1..=3)).min(11);
+            while trial_count(&out) < target && start.elapsed() < Duration::from_secs(120) {
+                if child.try_wait().expect("poll").is_some() {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            let wait = start.elapsed() + Duration::from_millis(rng.random_range(0..250));
+            while start.elapsed() < wait {
+                if child.try_wait().expect("poll").is_some() {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            child.try_wait().expect("poll").is_some()
+        };
+        if finished {
+            kills.push(format!("attempt {attempt}: finished by itself"));
+            break;
+        }
+        child.kill().expect("kill");
+        let _ = child.wait();
+        kills.push(format!(
+            "attempt {attempt} ({threads} thread(s)): killed after {:?} with {} → {} trial files, summary {}",
+            start.elapsed(),
+            before,
+            trial_count(&out),
+            if out.join("summary.json").exists() { "written" } else { "absent" }
+        ));
+    }
+    eprintln!("{}", kills.join("\n"));
+    assert!(
+        kills.iter().filter(|k| k.contains("killed")).count() >= 3,
+        "too few kills landed: {kills:?}"
+    );
+    // At least one kill interrupted the run between its first and its last trial.
+    assert!(
+        kills
+            .iter()
+            .any(|k| k.contains("killed") && !k.contains("→ 0 ") && !k.contains("→ 12 ")),
+        "no kill landed mid-run: {kills:?}"
+    );
+    let last = attempt_args(world, trials, "2", &out);
+    let last: Vec<&str> = last.iter().map(String::as_str).collect();
+    ok(&last);
+    assert_same_run(&whole, &out);
+    assert!(
+        temporaries(&out).is_empty(),
+        "temporary files of killed processes were left: {:?}",
+        temporaries(&out)
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// Runs into a 600 KiB file system (a tmpfs in a private mount namespace) that fills up
+/// mid-run: the run must stop with a message naming the file and the cause, every trial
+/// file it finished must be complete, and the directory, moved to a disk with room and
+/// resumed, must finish as the uninterrupted run. Skipped (with the reason) where a mount
+/// namespace cannot be made.
+#[test]
+fn a_full_disk_is_a_clear_error_and_the_finished_trials_resume() {
+    let d = tmp_dir("rel-disk");
+    let world = repo().join("worlds/default.toml");
+    let whole = d.join("whole");
+    ok(&[
+        "run",
+        &s(&world),
+        "--trials",
+        "40",
+        "--quiet",
+        "--out",
+        &s(&whole),
+    ]);
+    let mnt = d.join("small");
+    let rescued = d.join("rescued");
+    std::fs::create_dir_all(&mnt).unwrap();
+    // The script runs hybridnav on the small file system, then copies what it left to
+    // `rescued` before the namespace (and the tmpfs with it) goes away.
+    let script = format!(
+        "set -u; mount -t tmpfs -o size=600k tmpfs '{mnt}' || exit 77; \
+         '{bin}' run '{world}' --trials 40 --threads 2 --quiet --out '{mnt}/run'; \
+         echo \"exit=$?\" >&2; cp -a '{mnt}/run' '{rescued}'",
+        mnt = s(&mnt),
+        bin = env!("CARGO_BIN_EXE_hybridnav"),
+        world = s(&world),
+        rescued = s(&rescued),
+    );
+    let o = Command::new("unshare")
+        .args(["--mount", "--map-root-user", "sh", "-c", &script])
+        .output();
+    let o = match o {
+        Ok(o) if o.status.code() != Some(77) && rescued.exists() => o,
+        Ok(o) => {
+            eprintln!(
+                "skipped: cannot mount a small tmpfs in a private namespace here: {}",
+                stderr(&o).trim()
+            );
+            return;
+        }
+        Err(e) => {
+            eprintln!("skipped: unshare is not available: {e}");
+            return;
+        }
+    };
+    let err = stderr(&o);
+    eprintln!("{err}");
+    assert!(
+        err.contains("exit=") && !err.contains("exit=0"),
+        "the run should fail: {err}"
+    );
+    assert!(
+        err.contains("No space left on device") && err.contains("writing /"),
+        "the error should name the file and the cause: {err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    let kept = trial_count(&rescued);
+    assert!(
+        (1..40).contains(&kept),
+        "the disk should fill midway; {kept} trial files were written"
+    );
+    assert!(!rescued.join("summary.json").exists());
+    // Every trial file that exists is whole: resuming reads each one back.
+    ok(&[
+        "run",
+        &s(&world),
+        "--trials",
+        "40",
+        "--quiet",
+        "--resume",
+        "--out",
+        &s(&rescued),
+    ]);
+    assert_same_run(&whole, &rescued);
+    assert!(
+        temporaries(&rescued).is_empty(),
+        "{:?}",
+        temporaries(&rescued)
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// The determinism matrix: one thread or two, the whole run or shards of it (2 and 3,
+/// merged, with different thread counts per shard) give byte-identical run directories.
+#[test]
+fn threads_and_shard_splits_give_identical_bytes() {
+    let d = tmp_dir("rel-matrix");
+    let world = "worlds/default.toml";
+    let base = d.join("t1");
+    ok(&[
+        "run",
+        world,
+        "--trials",
+        "7",
+        "--seed",
+        "9",
+        "--threads",
+        "1",
+        "--quiet",
+        "--out",
+        &s(&base),
+    ]);
+    let t2 = d.join("t2");
+    ok(&[
+        "run",
+        world,
+        "--trials",
+        "7",
+        "--seed",
+        "9",
+        "--threads",
+        "2",
+        "--quiet",
+        "--out",
+        &s(&t2),
+    ]);
+    assert_same_run(&base, &t2);
+    for n in [2u32, 3] {
+        let mut dirs = Vec::new();
+        for k in 1..=n {
+            let dir = d.join(format!("s{k}of{n}"));
+            let threads = if k % 2 == 0 { "2" } else { "1" };
+            ok(&[
+                "run",
+                world,
+                "--trials",
+                "7",
+                "--seed",
+                "9",
+                "--threads",
+                threads,
+                "--shard",
+                &format!("{k}/{n}"),
+                "--quiet",
+                "--out",
+                &s(&dir),
+            ]);
+            dirs.push(s(&dir));
+        }
+        let merged = d.join(format!("merged{n}"));
+        let mut args = vec!["merge"];
+        args.extend(dirs.iter().map(String::as_str));
+        let m = s(&merged);
+        args.extend(["--out", &m, "--quiet"]);
+        ok(&args);
+        assert_same_run(&base, &merged);
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// The rows of `epochs.csv` of estimator `name`.
+fn rows_of(dir: &Path, name: &str) -> Vec<String> {
+    let text = std::fs::read_to_string(dir.join("epochs.csv")).unwrap();
+    let quoted = format!(",\"{name}\",");
+    text.lines()
+        .filter(|l| l.contains(&quoted))
+        .map(str::to_string)
+        .collect()
+}
+
+/// The summary entry of estimator `name`.
+fn summary_of(dir: &Path, name: &str) -> serde_json::Value {
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    v["estimators"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["name"] == name)
+        .unwrap_or_else(|| panic!("{name} in the summary"))
+        .clone()
+}
+
+/// An estimator's results do not depend on which other estimators run beside it or in
+/// what order: each draws from its own named random streams and sees the same
+/// measurements. Checked on the default world (WLS and two EKFs) and on seed 001's world,
+/// whose particle filters draw random numbers of their own.
+#[test]
+fn estimator_subsets_and_orders_give_identical_estimator_results() {
+    let d = tmp_dir("rel-subsets");
+    for (world, keep) in [("default.toml", 1usize), ("seed001-pf2d.toml", 1)] {
+        let text = std::fs::read_to_string(repo().join("worlds").join(world)).unwrap();
+        let (head, tables) = split_estimators(&text);
+        assert!(tables.len() >= 2, "{world} has several estimators");
+        let full = d.join(format!("{world}-all"));
+        ok(&[
+            "run",
+            &s(&repo().join("worlds").join(world)),
+            "--trials",
+            "3",
+            "--quiet",
+            "--out",
+            &s(&full),
+        ]);
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(full.join("summary.json")).unwrap())
+                .unwrap();
+        let names: Vec<String> = summary["estimators"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|e| e["name"].as_str().unwrap().to_string())
+            .collect();
+        assert_eq!(names.len(), tables.len());
+        // Only one estimator; then all of them in reverse order.
+        let only = write(
+            &d,
+            &format!("only-{world}"),
+            &format!("{head}{}", tables[keep]),
+        );
+        let mut rev = tables.clone();
+        rev.reverse();
+        let reversed = write(
+            &d,
+            &format!("rev-{world}"),
+            &format!("{head}{}", rev.concat()),
+        );
+        for (file, out, which) in [
+            (
+                &only,
+                d.join(format!("{world}-only")),
+                vec![names[keep].clone()],
+            ),
+            (&reversed, d.join(format!("{world}-rev")), names.clone()),
+        ] {
+            ok(&[
+                "run",
+                &s(file),
+                "--trials",
+                "3",
+                "--quiet",
+                "--out",
+                &s(&out),
+            ]);
+            for n in &which {
+                let rows = rows_of(&full, n);
+                assert!(!rows.is_empty());
+                assert_eq!(rows, rows_of(&out, n), "{world}: {n}'s epochs differ");
+                assert_eq!(summary_of(&full, n), summary_of(&out, n), "{world}: {n}");
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// Splits a world file into what precedes its `[[estimator]]` tables (and follows them,
+/// moved to the front) and the tables themselves, each with its lines.
+fn split_estimators(text: &str) -> (String, Vec<String>) {
+    let mut head = String::new();
+    let mut tables: Vec<String> = Vec::new();
+    let mut in_estimator = false;
+    for line in text.lines() {
+        let t = line.trim_start();
+        if t.starts_with("[[estimator]]") {
+            in_estimator = true;
+            tables.push(String::new());
+        } else if t.starts_with('[') {
+            in_estimator = false;
+        }
+        if in_estimator {
+            let last = tables.last_mut().expect("a table was opened");
+            last.push_str(line);
+            last.push('\n');
+        } else {
+            head.push_str(line);
+            head.push('\n');
+        }
+    }
+    (head, tables)
+}
