@@ -347,8 +347,11 @@ fn cmd_run(a: RunArgs) -> Result<()> {
     };
     let world = load_world(&path)?;
     let trials = a.trials.unwrap_or(world.file.montecarlo.trials);
-    if trials == 0 {
-        bail!("--trials must be at least 1");
+    if !(1..=crate::montecarlo::MAX_TRIALS).contains(&trials) {
+        bail!(
+            "--trials {trials}: expected 1 to {} (run more as several runs with different --seed)",
+            crate::montecarlo::MAX_TRIALS
+        );
     }
     let shard = match &a.shard {
         Some(s) => {
@@ -357,7 +360,10 @@ fn cmd_run(a: RunArgs) -> Result<()> {
         None => Shard::WHOLE,
     };
     let threads = match a.threads {
-        Some(0) => bail!("--threads must be at least 1"),
+        Some(t) if !(1..=crate::montecarlo::MAX_THREADS).contains(&t) => bail!(
+            "--threads {t}: expected 1 to {}",
+            crate::montecarlo::MAX_THREADS
+        ),
         Some(t) => t,
         None => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };

@@ -125,6 +125,24 @@ impl FmSurveySpec {
                     format!("expected [[e_min, n_min], [e_max, n_max]] with max > min, got {lo:?}, {hi:?}")
                 },
             )?;
+            // The survey and its kriged grid are allocated from these counts: refuse an
+            // area that would need more than the grid builder's 10 million points here,
+            // with the key's line, rather than when the first trial builds it.
+            for (k, spacing) in [
+                ("rp_spacing_m", self.rp_spacing_m),
+                ("grid_spacing_m", self.grid_spacing_m),
+            ] {
+                let ne = ((hi[0] - lo[0]) / spacing).floor() + 1.0;
+                let nn = ((hi[1] - lo[1]) / spacing).floor() + 1.0;
+                check("area_enu_m", ne * nn <= 1e7, || {
+                    format!(
+                        "{:.0} × {:.0} m at {k} = {spacing} m is {:.3e} points; expected at most 10 million (a smaller area or a coarser spacing)",
+                        hi[0] - lo[0],
+                        hi[1] - lo[1],
+                        ne * nn
+                    )
+                })?;
+            }
         }
         self.scan().validate()
     }

@@ -139,14 +139,53 @@ pub fn student_t_quantile(p: f64, dof: f64) -> f64 {
 ///
 /// `None` with fewer than two values or a non-finite one.
 pub fn mean_ci95(values: &[f64]) -> Option<(f64, f64)> {
-    if values.len() < 2 || values.iter().any(|v| !v.is_finite()) {
-        return None;
+    let mut acc = MeanCi95::default();
+    for &v in values {
+        acc.push(v);
     }
-    let n = values.len() as f64;
-    let mean = values.iter().sum::<f64>() / n;
-    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
-    let half = student_t_quantile(0.5 + 0.5 * CONFIDENCE, n - 1.0) * (var / n).sqrt();
-    Some((mean - half, mean + half))
+    acc.interval()
+}
+
+/// [`mean_ci95`] of values that arrive one at a time (one per Monte Carlo trial), in
+/// constant memory: Welford's running mean and sum of squared deviations (Welford 1962,
+/// "Note on a method for calculating corrected sums of squares and products",
+/// Technometrics 4(3); Knuth, TAOCP vol. 2, §4.2.2), stable where the textbook
+/// Σx² − n x̄² loses digits.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct MeanCi95 {
+    n: usize,
+    mean: f64,
+    m2: f64,
+    non_finite: bool,
+}
+
+impl MeanCi95 {
+    pub fn push(&mut self, v: f64) {
+        if !v.is_finite() {
+            self.non_finite = true;
+            return;
+        }
+        self.n += 1;
+        let d = v - self.mean;
+        self.mean += d / self.n as f64;
+        self.m2 += d * (v - self.mean);
+    }
+
+    /// Values pushed (finite ones).
+    pub fn count(&self) -> usize {
+        self.n
+    }
+
+    /// The interval; `None` with fewer than two values or after a non-finite one.
+    pub fn interval(&self) -> Option<(f64, f64)> {
+        if self.n < 2 || self.non_finite {
+            return None;
+        }
+        let n = self.n as f64;
+        let var = self.m2 / (n - 1.0);
+        let half = student_t_quantile(0.5 + 0.5 * CONFIDENCE, n - 1.0) * (var / n).sqrt();
+        Some((self.mean - half, self.mean + half))
+    }
 }
 
 /// The 95 % percentile bootstrap interval (Efron & Tibshirani, "An Introduction to the

@@ -19,7 +19,7 @@ pub use consistency::{
     ConsistencySummary, EpochConsistency, EpochSamples,
 };
 pub use ecdf::{ecdf, ecdf_of};
-pub use interval::{bootstrap_ci, mean_ci95, student_t_cdf, student_t_quantile};
+pub use interval::{bootstrap_ci, mean_ci95, student_t_cdf, student_t_quantile, MeanCi95};
 pub use trajectory::{
     ate, ate_errors, rigid_alignment, rpe, rpe_errors, write_tum, Alignment, TrajectoryStats,
 };

@@ -138,6 +138,14 @@ pub struct Summary {
     pub warnings: Vec<String>,
 }
 
+/// The most trials one run takes (world file or `--trials`). Memory does not grow with
+/// the count, as the outputs are streamed (a merge's plan keeps 4 bytes per trial); the
+/// bound stops a typo of a few extra digits from starting a run of centuries.
+pub const MAX_TRIALS: u64 = 100_000_000;
+
+/// The most worker threads `--threads` starts.
+pub const MAX_THREADS: usize = 4096;
+
 /// Trials in memory at once per worker thread: enough to keep every thread busy while
 /// the slowest trial of a window finishes, few enough that memory stays flat.
 const WINDOW_PER_THREAD: usize = 8;
@@ -258,7 +266,7 @@ fn execute(
         .num_threads(threads)
         .build()
         .map_err(|e| format!("cannot start {} worker threads: {e}", opts.threads))?;
-    let total = opts.shard.trials(opts.trials).count() as u64;
+    let total = opts.shard.count(opts.trials);
     let bar = if opts.progress {
         ProgressBar::new(total)
     } else {

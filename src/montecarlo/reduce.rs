@@ -5,16 +5,15 @@
 //! order (so the result does not depend on how many trials were in memory at once); the
 //! errors whose exact percentiles the summary reports go to a [`SortedSpill`], which keeps
 //! a bounded number of them in memory and sorts the rest on disk; per-epoch NEES and NIS
-//! keep one running sum per epoch time. What grows with the number of trials is a handful
-//! of numbers per trial (the across-trial confidence intervals need each trial's own
-//! statistics): 64 bytes per trial and estimator.
+//! keep one running sum per epoch time; the across-trial confidence intervals keep a
+//! running mean and variance (Welford). Nothing grows with the number of trials.
 
 use super::{AcrossTrials, EstimatorSummary, FailureEpoch, RunOptions, Summary};
 use crate::engine::trial::{EstimatorTrace, TrialResult};
 use crate::io::spill::SortedSpill;
 use crate::metrics::{
-    ate_errors, ecdf_of, mean_ci95, rpe_errors, summary_of_samples, Alignment, EpochSamples,
-    ErrorStats, TrajectoryStats,
+    ate_errors, ecdf_of, rpe_errors, summary_of_samples, Alignment, EpochSamples, ErrorStats,
+    MeanCi95, TrajectoryStats,
 };
 use crate::world::World;
 use nalgebra::Vector3;
@@ -334,27 +333,25 @@ fn track(trace: &EstimatorTrace) -> Track {
     tr
 }
 
-fn ci(values: &[f64]) -> Option<[f64; 2]> {
-    mean_ci95(values).map(|(a, b)| [a, b])
-}
-
-/// Each trial's own value of the statistics [`AcrossTrials`] gives intervals of.
+/// Each trial's own value of the statistics [`AcrossTrials`] gives intervals of, reduced
+/// as they come.
 #[derive(Default)]
 struct PerTrial {
-    sigma1: Vec<f64>,
-    sigma2: Vec<f64>,
-    sigma3: Vec<f64>,
-    mean: Vec<f64>,
-    rmse: Vec<f64>,
-    ate_rmse: Vec<f64>,
-    rpe_rmse: Vec<f64>,
-    availability: Vec<f64>,
+    sigma1: MeanCi95,
+    sigma2: MeanCi95,
+    sigma3: MeanCi95,
+    mean: MeanCi95,
+    rmse: MeanCi95,
+    ate_rmse: MeanCi95,
+    rpe_rmse: MeanCi95,
+    availability: MeanCi95,
 }
 
 impl PerTrial {
     fn intervals(&self) -> AcrossTrials {
+        let ci = |m: &MeanCi95| m.interval().map(|(a, b)| [a, b]);
         AcrossTrials {
-            trials: self.sigma1.len(),
+            trials: self.sigma1.count(),
             sigma1_ci95_m: ci(&self.sigma1),
             sigma2_ci95_m: ci(&self.sigma2),
             sigma3_ci95_m: ci(&self.sigma3),
@@ -364,51 +361,5 @@ impl PerTrial {
             rpe_rmse_ci95_m: ci(&self.rpe_rmse),
             availability_ci95: ci(&self.availability),
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::montecarlo::{run_trials, store::Shard};
-
-    /// The spilled reduction (errors sorted on disk in runs of 7) gives the summary and
-    /// CDFs of the in-memory one to the bit, and leaves no file behind.
-    #[test]
-    fn spilling_to_disk_changes_nothing() {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/default.toml");
-        let world = crate::world::load_world(&path).unwrap();
-        let opts = RunOptions {
-            trials: 3,
-            seed: 5,
-            threads: 1,
-            progress: false,
-            shard: Shard::WHOLE,
-        };
-        let trials = run_trials(&world, &opts).unwrap();
-        let dir = std::env::temp_dir().join(format!("hybridnav-reduce-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let reduce = |chunk| {
-            let mut r = RunReducer::with_chunk(&world, &dir, chunk);
-            for t in &trials {
-                r.push(t).unwrap();
-            }
-            r.finish(&world, &opts).unwrap()
-        };
-        let in_memory = reduce(usize::MAX);
-        let spilled = reduce(7);
-        assert_eq!(in_memory.summary, spilled.summary);
-        assert_eq!(in_memory.cdfs, spilled.cdfs);
-        let e = &in_memory.summary.estimators[0];
-        assert!(
-            e.error_3d_m.unwrap().count > 7 * 10,
-            "the spill had many runs"
-        );
-        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
-        // Trials out of order are refused rather than reduced wrongly.
-        let mut r = RunReducer::new(&world, &dir);
-        r.push(&trials[1]).unwrap();
-        assert!(r.push(&trials[0]).unwrap_err().contains("in order"));
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -134,6 +134,15 @@ impl Shard {
         (self.index..trials).step_by(self.count as usize)
     }
 
+    /// How many of `trials` trials are this shard's (computed, not counted).
+    pub fn count(&self, trials: u64) -> u64 {
+        if self.index >= trials {
+            0
+        } else {
+            (trials - self.index - 1) / self.count + 1
+        }
+    }
+
     pub fn is_whole(&self) -> bool {
         self.count == 1
     }
@@ -429,12 +438,11 @@ impl MergePlan {
                     )));
                 }
             } else {
-                let n = usize::try_from(m.trials)
-                    .ok()
-                    .filter(|&n| n <= MAX_MERGE_TRIALS);
+                let max = crate::montecarlo::MAX_TRIALS;
+                let n = usize::try_from(m.trials).ok().filter(|_| m.trials <= max);
                 let Some(n) = n else {
                     return Err(StoreError::Refused(format!(
-                        "{}: run.json says {} trials; merge handles at most {MAX_MERGE_TRIALS}",
+                        "{}: run.json says {} trials; expected at most {max}",
                         d.display(),
                         m.trials
                     )));
@@ -493,9 +501,6 @@ impl MergePlan {
     }
 }
 
-/// The most trials a merge accepts (its plan keeps 4 bytes per trial).
-pub const MAX_MERGE_TRIALS: usize = 1 << 28;
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -547,6 +552,21 @@ mod tests {
         assert_eq!(s.to_string(), "2/4");
         assert_eq!(s.trials(10).collect::<Vec<_>>(), [1, 5, 9]);
         assert!(s.contains(5) && !s.contains(4));
+        for (k, n, trials) in [
+            (1, 1, 0),
+            (1, 1, 7),
+            (2, 4, 10),
+            (4, 4, 3),
+            (3, 3, 2),
+            (5, 7, 100),
+        ] {
+            let s = Shard::parse(&format!("{k}/{n}")).unwrap();
+            assert_eq!(
+                s.count(trials),
+                s.trials(trials).count() as u64,
+                "{k}/{n} of {trials}"
+            );
+        }
         for bad in ["0/4", "5/4", "1/0", "x/2", "3", ""] {
             let e = Shard::parse(bad).unwrap_err();
             assert!(e.contains("expected K/N"), "{e}");

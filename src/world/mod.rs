@@ -242,8 +242,15 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
         .map_err(|i| ctx.issue("receiver.clock", i))?;
     let shielding = check_shielding(&ctx, &file.shielding, &nav, &nav_source)?;
 
-    if file.montecarlo.trials == 0 {
-        return Err(ctx.err("montecarlo.trials", "expected at least 1 trial"));
+    if !(1..=crate::montecarlo::MAX_TRIALS).contains(&file.montecarlo.trials) {
+        return Err(ctx.err(
+            "montecarlo.trials",
+            format!(
+                "expected 1 to {} trials, got {}",
+                crate::montecarlo::MAX_TRIALS,
+                file.montecarlo.trials
+            ),
+        ));
     }
 
     // The scenario length is the world's, or the trajectory's. Building the trajectory

@@ -13,6 +13,7 @@ mod fusion_engine;
 mod fusion_family;
 mod fusion_filters;
 mod gnss_orbits;
+mod hostile;
 mod inertial;
 mod landmark;
 mod layout;
