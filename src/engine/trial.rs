@@ -4,6 +4,7 @@ use super::queue::{EventKind, EventQueue};
 use super::{SampleContext, Truth};
 use crate::core::{EnuFrame, GpsTime, SimTime, System, TrialRng};
 use crate::fusion::estimator::Estimate;
+use crate::fusion::health::{HealthConfig, HealthMonitor, Verdict};
 use crate::fusion::measurement::MeasurementBatch;
 use crate::motion::Trajectory;
 use crate::world::{TrialSetup, World};
@@ -158,6 +159,11 @@ pub fn simulate_observed(
     queue.schedule(setup.end, EventKind::End);
 
     let mut latest: Vec<Option<Estimate>> = vec![None; setup.estimators.len()];
+    let mut health: Vec<HealthMonitor> = setup
+        .estimators
+        .iter()
+        .map(|_| HealthMonitor::new(HealthConfig::default()))
+        .collect();
     let mut traces: Vec<EstimatorTrace> = setup
         .estimators
         .iter()
@@ -204,7 +210,18 @@ pub fn simulate_observed(
             if !est.consumes(source_name) {
                 continue;
             }
-            let out = est.process(&batch);
+            let mut out = est.process(&batch);
+            // A diverged estimator is reported at this epoch and reset; it never hands
+            // a non-finite estimate on (see `fusion::health`).
+            let verdict = health[k].check(&out);
+            if verdict != Verdict::Healthy {
+                out.numerical_failure = true;
+                out.estimate = None;
+                if verdict == Verdict::NonFinite {
+                    (out.nis_sum, out.nis_count, out.nis_dof) = (0.0, 0, 0);
+                }
+                est.reset();
+            }
             latest[k] = est.latest();
             if batch.unscored {
                 continue;
@@ -318,6 +335,7 @@ mod tests {
         fn latest(&self) -> Option<Estimate> {
             self.0
         }
+        fn reset(&mut self) {}
     }
 
     #[test]
@@ -348,5 +366,116 @@ mod tests {
         assert!(traces[0].epochs.iter().all(|e| e.err_3d_m == Some(0.0)));
         // At each event the source sees the estimate made from its previous sample.
         assert_eq!(*seen.lock().unwrap(), vec![None, Some(0.0), Some(1.0)]);
+    }
+
+    /// An estimator that goes wrong on purpose: a NaN estimate at 2 s, then innovations far
+    /// outside their χ² bound from 4 s on, until its second reset.
+    struct Faulty {
+        resets: Arc<Mutex<Vec<f64>>>,
+        t0: GpsTime,
+        healthy_again: bool,
+    }
+
+    impl Estimator for Faulty {
+        fn name(&self) -> &str {
+            "faulty"
+        }
+        fn consumes(&self, source: &str) -> bool {
+            source == "probe"
+        }
+        fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
+            let t = batch.t.seconds_since(self.t0);
+            let Some(Measurement::Position(f)) = batch.items.first() else {
+                return EpochOutcome::default();
+            };
+            let nan = t == 2.0;
+            let nis = if t >= 4.0 && !self.healthy_again {
+                1e6
+            } else {
+                2.0
+            };
+            EpochOutcome {
+                estimate: Some(Estimate {
+                    t: batch.t,
+                    pos_ecef_m: if nan {
+                        Vector3::repeat(f64::NAN)
+                    } else {
+                        f.pos_ecef_m
+                    },
+                    vel_ecef_mps: None,
+                    cov_pos_m2: f.cov_m2,
+                }),
+                used: 3,
+                nis_sum: nis,
+                nis_count: 1,
+                nis_dof: 3,
+                ..EpochOutcome::default()
+            }
+        }
+        fn latest(&self) -> Option<Estimate> {
+            None
+        }
+        fn reset(&mut self) {
+            // The first reset answers the NaN; the second, the NIS run, cures it.
+            let mut r = self.resets.lock().unwrap();
+            r.push(0.0);
+            self.healthy_again = r.len() >= 2;
+        }
+    }
+
+    /// The engine's divergence watch: a NaN estimate and an NIS persistently beyond its
+    /// bound are each reported at their epoch (no estimate, `numerical_failure`), the
+    /// estimator is reset, and no record carries a non-finite number.
+    #[test]
+    fn a_nan_estimate_and_a_persistent_nis_are_reported_at_their_epochs_and_reset() {
+        let resets = Arc::new(Mutex::new(Vec::new()));
+        let start = GpsTime::from_ns(0);
+        let traj = TrajectoryConfig::Static {
+            position_enu_m: [0.0, 0.0, 0.0],
+            duration_s: 30.0,
+        };
+        let mut setup = TrialSetup {
+            trajectory: traj.build(&mut TrialRng::new(0, 0).stream("t")).unwrap(),
+            sources: vec![Box::new(Probe {
+                seen: Arc::new(Mutex::new(Vec::new())),
+                period: 1_000_000_000,
+            })],
+            estimators: vec![Box::new(Faulty {
+                resets: Arc::clone(&resets),
+                t0: start,
+                healthy_again: false,
+            })],
+            end: SimTime::from_seconds(30.0),
+        };
+        let traces = simulate(
+            &EnuFrame::new(Geodetic::from_deg(40.0, 116.0, 0.0)),
+            start,
+            &mut setup,
+        );
+        let failures: Vec<f64> = traces[0]
+            .epochs
+            .iter()
+            .filter(|e| e.numerical_failure)
+            .map(|e| e.t_s)
+            .collect();
+        // The NaN at 2 s at once; the NIS run from 4 s after its 10th epoch, 13 s.
+        assert_eq!(failures, [2.0, 13.0]);
+        assert_eq!(resets.lock().unwrap().len(), 2);
+        for e in &traces[0].epochs {
+            assert_eq!(e.est_ecef_m.is_none(), e.numerical_failure, "t = {}", e.t_s);
+            for v in [
+                e.err_3d_m,
+                e.err_h_m,
+                e.nees_pos,
+                e.pos_sigma_m,
+                e.mean_nis,
+                e.nis,
+            ]
+            .into_iter()
+            .flatten()
+            {
+                assert!(v.is_finite(), "t = {}", e.t_s);
+            }
+        }
     }
 }

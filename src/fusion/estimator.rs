@@ -52,6 +52,11 @@ pub trait Estimator: Send {
     fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome;
     /// The latest estimate.
     fn latest(&self) -> Option<Estimate>;
+    /// Forgets a diverged state, after the engine's divergence watch
+    /// ([`crate::fusion::health`]) caught it: the estimator re-initialises as at its start
+    /// (from the next fix, or from its prior around its last finite estimate) and reports
+    /// no estimate until then.
+    fn reset(&mut self);
 }
 
 use crate::core::System;
@@ -255,6 +260,13 @@ impl Estimator for EkfEstimator {
     fn latest(&self) -> Option<Estimate> {
         self.last_t.and_then(|t| self.estimate(t))
     }
+
+    /// The next epoch re-initialises from least squares, as the first one did.
+    fn reset(&mut self) {
+        self.ekf = Ekf11::new(*self.ekf.config())
+            .unwrap_or_else(|_| unreachable!("config validated at build"));
+        self.last_t = None;
+    }
 }
 
 /// Epoch-by-epoch weighted least squares: no memory, no fix with too few satellites.
@@ -315,5 +327,10 @@ impl Estimator for WlsEstimator {
 
     fn latest(&self) -> Option<Estimate> {
         self.latest
+    }
+
+    /// Least squares keeps no state between epochs but its last fix, forgotten here.
+    fn reset(&mut self) {
+        self.latest = None;
     }
 }

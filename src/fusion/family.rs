@@ -869,4 +869,8 @@ impl Estimator for FamilyEstimator {
     fn latest(&self) -> Option<Estimate> {
         self.last_t.and_then(|t| self.estimate(t))
     }
+
+    fn reset(&mut self) {
+        self.reset(&mut EpochOutcome::default());
+    }
 }

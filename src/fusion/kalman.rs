@@ -326,6 +326,21 @@ impl<const N: usize> Ekf<N> {
         })
     }
 
+    /// Restarts the filter from `x0`, `p0` (keeping its gating), as after a divergence.
+    ///
+    /// # Errors
+    /// When `x0` or `p0` is not finite or `p0` is not a covariance.
+    pub fn restart(
+        &mut self,
+        x0: SVector<f64, N>,
+        p0: SMatrix<f64, N, N>,
+    ) -> Result<(), FilterError> {
+        check_prior(&x0, &p0)?;
+        self.x = x0;
+        self.p = p0;
+        Ok(())
+    }
+
     /// The same filter with `gating`.
     ///
     /// # Errors

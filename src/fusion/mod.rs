@@ -6,6 +6,7 @@
 pub mod ekf11;
 pub mod estimator;
 pub mod family;
+pub mod health;
 pub mod kalman;
 pub mod linear_kf;
 pub mod measurement;

@@ -262,8 +262,9 @@ pub struct PaperEstimator<P, const NM: usize, const N: usize> {
     lik: PseudorangeLikelihood,
     rows: Vec<(RangeRow, f64)>,
     geometry: Vec<(Vector3<f64>, usize)>,
-    /// True once the filter produced a non-finite state; it then reports nothing.
-    failed: bool,
+    /// The prior the filter started from, to restart it after a divergence.
+    x0: SVector<f64, N>,
+    p0: SMatrix<f64, N, N>,
 }
 
 /// Builds the estimator for a paper `spec` (not [`ProcessSpec::PvaClock`]).
@@ -450,7 +451,8 @@ where
             lik: PseudorangeLikelihood::with_capacity(64),
             rows: Vec::with_capacity(64),
             geometry: Vec::with_capacity(64),
-            failed: false,
+            x0,
+            p0,
         })
     }
 
@@ -470,9 +472,6 @@ where
     }
 
     fn estimate(&self, t: GpsTime) -> Option<Estimate> {
-        if self.failed {
-            return None;
-        }
         let (x, p) = self.moments();
         let pos = self.position_enu(&x);
         let vel = Vector3::from_fn(|a, _| self.layout.vel[a].map_or(0.0, |k| x[k]));
@@ -607,9 +606,6 @@ where
 
     fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
         let mut out = EpochOutcome::default();
-        if self.failed {
-            return out;
-        }
         let rx = self.estimate(self.last_t).map(|e| e.pos_ecef_m);
         self.front.admit(batch, rx.as_ref(), &mut out);
         let dt = batch.t.seconds_since(self.last_t).max(0.0);
@@ -619,7 +615,7 @@ where
             Core::Pf(p) => p.predict(&self.model, dt, &mut self.rng).is_ok(),
         };
         if !predicted {
-            self.failed = true;
+            Estimator::reset(self);
             out.numerical_failure = true;
             return out;
         }
@@ -661,7 +657,7 @@ where
         }
         let (x, p) = self.moments();
         if !(x.iter().all(|v| v.is_finite()) && p.iter().all(|v| v.is_finite())) {
-            self.failed = true;
+            Estimator::reset(self);
             out.numerical_failure = true;
             return out;
         }
@@ -678,6 +674,31 @@ where
 
     fn latest(&self) -> Option<Estimate> {
         self.estimate(self.last_t)
+    }
+
+    /// Restarts the filter from its initial covariance around its last finite state (the
+    /// initial state when that is not finite): the paper models have no least-squares
+    /// start, so the prior's spread is what lets the measurements pull the filter back.
+    fn reset(&mut self) {
+        let (x, _) = self.moments();
+        let mut centre = if x.iter().all(|v| v.is_finite()) {
+            x
+        } else {
+            self.x0
+        };
+        // Clocks go back to their prior: a diverged clock estimate is as suspect as the
+        // position it was fitted with.
+        for s in 0..N_CLOCKS {
+            centre[N - N_CLOCKS + s] = self.x0[N - N_CLOCKS + s];
+        }
+        if matches!(self.clocks, ClockMode::Estimated) {
+            self.clock_ready = [false; N_CLOCKS];
+        }
+        let restarted = match &mut self.core {
+            Core::Ekf(f) => f.restart(centre, self.p0).is_ok(),
+            Core::Pf(p) => p.init_gaussian(&centre, &self.p0, &mut self.rng).is_ok(),
+        };
+        debug_assert!(restarted, "the prior was valid at build time");
     }
 }
 

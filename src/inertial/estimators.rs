@@ -696,6 +696,10 @@ impl Estimator for InsEstimator {
     fn latest(&self) -> Option<Estimate> {
         self.latest
     }
+
+    fn reset(&mut self) {
+        self.reset(&mut EpochOutcome::default());
+    }
 }
 
 fn d_start_sigma() -> f64 {
@@ -983,6 +987,13 @@ impl Estimator for PdrEstimator {
 
     fn latest(&self) -> Option<Estimate> {
         self.latest
+    }
+
+    /// Dead reckoning restarts from the next fix, with the start's uncertainty.
+    fn reset(&mut self) {
+        self.pos_en_m = None;
+        self.p = Matrix2::identity() * self.start_sigma_m * self.start_sigma_m;
+        self.latest = None;
     }
 }
 

@@ -733,6 +733,8 @@ impl Estimator for Integrator {
     fn latest(&self) -> Option<Estimate> {
         self.latest
     }
+    /// Pure integration has nothing to reset to; the test watches its drift.
+    fn reset(&mut self) {}
 }
 
 fn max_err(trace: &EstimatorTrace) -> f64 {
@@ -943,6 +945,9 @@ impl<E: Estimator> Estimator for Recorder<E> {
     }
     fn latest(&self) -> Option<Estimate> {
         self.inner.latest()
+    }
+    fn reset(&mut self) {
+        self.inner.reset();
     }
 }
 

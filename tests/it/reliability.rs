@@ -448,3 +448,89 @@ fn split_estimators(text: &str) -> (String, Vec<String>) {
     }
     (head, tables)
 }
+
+/// A filter whose model cannot follow the platform (an EKF that believes the car never
+/// accelerates, on the default world's U-turns) diverges: the engine's watch reports it at
+/// its epoch with the estimator's name — in `epochs.csv`, in `summary.json`'s
+/// `first_failures` and on stderr — resets it, and writes no NaN anywhere; the correctly
+/// tuned EKF beside it reports no failure.
+#[test]
+fn a_diverging_filter_is_reported_at_its_epoch_and_reset() {
+    let d = tmp_dir("rel-diverge");
+    let text = std::fs::read_to_string(repo().join("worlds/default.toml")).unwrap();
+    let head = &text[..text.find("[[estimator]]").unwrap()];
+    let world = write(
+        &d,
+        "stiff.toml",
+        &format!(
+            "{head}
+[[estimator]]
+name = \"GPS\"
+sources = [\"gps\"]
+filter = \"ekf11\"
+
+[[estimator]]
+name = \"stiff\"
+sources = [\"gps\"]
+filter = \"ekf11\"
+[estimator.ekf]
+accel_psd_m2ps5 = [1e-9, 1e-9, 1e-9]
+init_vel_sigma_mps = 0.01
+init_acc_sigma_mps2 = 0.001
+
+[montecarlo]
+trials = 2
+seed = 1
+"
+        ),
+    );
+    let out = d.join("out");
+    let o = hybridnav(&["run", &s(&world), "--out", &s(&out), "--quiet"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(
+        err.contains("estimator \"stiff\" reported") && err.contains("first in trial 0 at t ="),
+        "{err}"
+    );
+    assert!(!err.contains("\"GPS\" reported"), "{err}");
+    let csv = std::fs::read_to_string(out.join("epochs.csv")).unwrap();
+    let mut failures = Vec::new();
+    let mut previous: Option<Vec<String>> = None;
+    for line in csv.lines().skip(1) {
+        let f: Vec<String> = line.split(',').map(str::to_string).collect();
+        assert!(
+            !line.contains("NaN") && !line.contains("inf"),
+            "a non-finite number: {line}"
+        );
+        if f[13] == "1" {
+            assert_eq!(f[1], "\"stiff\"", "{line}");
+            assert!(f[3].is_empty(), "a failure epoch has no estimate: {line}");
+            // The epoch before it had every measurement refused by the gate.
+            let p = previous.as_ref().expect("not the first row");
+            assert_eq!((p[1].as_str(), p[7].as_str()), ("\"stiff\"", "0"), "{p:?}");
+            assert_ne!(p[9], "0", "{p:?}");
+            failures.push((f[0].clone(), f[2].clone()));
+        }
+        previous = Some(f);
+    }
+    assert!(!failures.is_empty(), "the stiff filter should diverge");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let stiff = &summary["estimators"][1];
+    assert_eq!(stiff["name"], "stiff");
+    assert_eq!(stiff["numerical_failures"], failures.len());
+    let listed: Vec<(String, String)> = stiff["first_failures"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| {
+            (
+                f["trial"].to_string(),
+                format!("{:.3}", f["t_s"].as_f64().unwrap()),
+            )
+        })
+        .collect();
+    assert_eq!(listed, failures);
+    assert_eq!(summary["estimators"][0]["numerical_failures"], 0);
+    let _ = std::fs::remove_dir_all(&d);
+}

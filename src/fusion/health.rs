@@ -1,0 +1,183 @@
+//! Divergence supervision shared by every estimator: the engine checks each epoch's
+//! outcome, and an estimator that has diverged is reported and reset instead of writing
+//! NaN or drifting on unnoticed.
+//!
+//! Two symptoms are watched (Bar-Shalom, Li & Kirubarajan 2001, "Estimation with
+//! Applications to Tracking and Navigation", §5.4: a consistent filter's normalised
+//! innovation squared, NIS = νᵀS⁻¹ν, is χ²-distributed with the innovation's dimension as
+//! degrees of freedom):
+//!
+//! - **a non-finite number**: an estimate whose position, velocity or covariance, or an
+//!   epoch whose NIS, is NaN or infinite;
+//! - **an NIS persistently outside its bound**: [`HealthConfig::window_epochs`]
+//!   consecutive epochs, each either with its NIS above the χ²_dof quantile at
+//!   1 − [`HealthConfig::false_alarm`] or with every measurement refused by the filter's
+//!   innovation gate (a gated filter that has diverged refuses everything, so its NIS
+//!   alone would never show it). Epochs without measurements neither count nor break the
+//!   run. For a consistent filter, the chance of a false alarm at a given epoch is
+//!   `false_alarm^window_epochs` = 10⁻⁴⁰ with the defaults; a filter whose noise model is
+//!   merely optimistic by a factor of a few stays well below the bound.
+//!
+//! On either, the engine sets `numerical_failure` on the epoch record (with its time and
+//! the estimator's name), drops the epoch's estimate and calls
+//! [`crate::fusion::estimator::Estimator::reset`].
+
+use crate::fusion::ekf11::chi2;
+use crate::fusion::estimator::EpochOutcome;
+
+/// The divergence test's settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HealthConfig {
+    /// Consecutive epochs out of bounds that declare a divergence.
+    pub window_epochs: u32,
+    /// The per-epoch tail probability of the NIS bound.
+    pub false_alarm: f64,
+}
+
+impl Default for HealthConfig {
+    fn default() -> Self {
+        Self {
+            window_epochs: 10,
+            false_alarm: 1e-4,
+        }
+    }
+}
+
+/// The most NIS degrees of freedom whose bound is cached; larger ones are computed.
+const CACHED_DOF: usize = 128;
+
+/// What [`HealthMonitor::check`] found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Verdict {
+    Healthy,
+    /// A non-finite estimate or NIS.
+    NonFinite,
+    /// The NIS was out of bounds (or every measurement gated out) for the whole window.
+    Diverged,
+}
+
+/// One estimator's divergence watch over a trial.
+#[derive(Clone, Debug)]
+pub struct HealthMonitor {
+    cfg: HealthConfig,
+    run: u32,
+    /// χ²_dof(1 − false_alarm) for dof = index, NaN until first needed.
+    bound: [f64; CACHED_DOF + 1],
+}
+
+impl HealthMonitor {
+    pub fn new(cfg: HealthConfig) -> Self {
+        Self {
+            cfg,
+            run: 0,
+            bound: [f64::NAN; CACHED_DOF + 1],
+        }
+    }
+
+    fn bound(&mut self, dof: u32) -> f64 {
+        let p = 1.0 - self.cfg.false_alarm;
+        match self.bound.get_mut(dof as usize) {
+            Some(b) => {
+                if b.is_nan() {
+                    *b = chi2::quantile(p, f64::from(dof));
+                }
+                *b
+            }
+            None => chi2::quantile(p, f64::from(dof)),
+        }
+    }
+
+    /// Checks one epoch's outcome; after a verdict other than `Healthy` the watch starts
+    /// afresh (the estimator is reset).
+    pub fn check(&mut self, out: &EpochOutcome) -> Verdict {
+        let finite_estimate = out.estimate.is_none_or(|e| {
+            e.pos_ecef_m.iter().all(|v| v.is_finite())
+                && e.cov_pos_m2.iter().all(|v| v.is_finite())
+                && e.vel_ecef_mps
+                    .is_none_or(|v| v.iter().all(|x| x.is_finite()))
+        });
+        if !finite_estimate || !out.nis_sum.is_finite() {
+            self.run = 0;
+            return Verdict::NonFinite;
+        }
+        let all_gated = out.used == 0 && out.rejected_gate > 0;
+        let outside = if out.nis_dof > 0 {
+            out.nis_sum > self.bound(out.nis_dof)
+        } else {
+            all_gated
+        };
+        let informative = out.nis_dof > 0 || all_gated;
+        if outside {
+            self.run += 1;
+        } else if informative {
+            self.run = 0;
+        }
+        if self.run >= self.cfg.window_epochs.max(1) {
+            self.run = 0;
+            return Verdict::Diverged;
+        }
+        Verdict::Healthy
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::TrialRng;
+    use rand_distr::{ChiSquared, Distribution};
+
+    fn epoch(nis: f64, dof: u32) -> EpochOutcome {
+        EpochOutcome {
+            used: dof,
+            nis_sum: nis,
+            nis_count: dof,
+            nis_dof: dof,
+            ..EpochOutcome::default()
+        }
+    }
+
+    /// A consistent filter (NIS drawn from χ²_dof) over 10⁵ epochs raises no alarm; an
+    /// optimistic one (NIS 3× too large) neither; a diverged one (NIS 1000× too large) is
+    /// caught after exactly the window.
+    #[test]
+    fn consistent_and_mildly_optimistic_filters_pass_and_a_diverged_one_is_caught() {
+        let mut rng = TrialRng::new(3, 0).stream("test/health");
+        for scale in [1.0, 3.0] {
+            let mut m = HealthMonitor::new(HealthConfig::default());
+            for k in 0..100_000u32 {
+                let dof = 1 + k % 12;
+                let nis = scale * ChiSquared::new(f64::from(dof)).unwrap().sample(&mut rng);
+                assert_eq!(m.check(&epoch(nis, dof)), Verdict::Healthy, "scale {scale}");
+            }
+        }
+        let mut m = HealthMonitor::new(HealthConfig::default());
+        for k in 1..=10 {
+            let nis = 1000.0 * ChiSquared::new(8.0).unwrap().sample(&mut rng);
+            let v = m.check(&epoch(nis, 8));
+            assert_eq!(v == Verdict::Diverged, k == 10, "epoch {k}");
+        }
+    }
+
+    #[test]
+    fn gated_out_epochs_count_and_empty_epochs_do_not_break_the_run() {
+        let mut m = HealthMonitor::new(HealthConfig {
+            window_epochs: 3,
+            false_alarm: 1e-4,
+        });
+        let gated = EpochOutcome {
+            rejected: 7,
+            rejected_gate: 7,
+            ..EpochOutcome::default()
+        };
+        assert_eq!(m.check(&gated), Verdict::Healthy);
+        assert_eq!(m.check(&EpochOutcome::default()), Verdict::Healthy);
+        assert_eq!(m.check(&gated), Verdict::Healthy);
+        assert_eq!(m.check(&gated), Verdict::Diverged);
+        // A healthy update in between breaks the run.
+        assert_eq!(m.check(&gated), Verdict::Healthy);
+        assert_eq!(m.check(&epoch(1.0, 4)), Verdict::Healthy);
+        assert_eq!(m.check(&gated), Verdict::Healthy);
+        assert_eq!(m.check(&gated), Verdict::Healthy);
+        assert_eq!(m.check(&epoch(f64::NAN, 4)), Verdict::NonFinite);
+    }
+}
