@@ -258,7 +258,7 @@ fn bad_run_arguments_are_refused() {
     let o = hybridnav(&["run", "--trials", "0", "--quiet"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(
-        stderr(&o).contains("--trials must be at least 1"),
+        stderr(&o).contains("--trials 0: expected 1 to 100000000"),
         "{}",
         stderr(&o)
     );
