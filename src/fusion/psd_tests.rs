@@ -9,7 +9,9 @@
 //! every step the covariance must be symmetric (‖P − Pᵀ‖ ≤ 1e-9 ‖P‖) and have no
 //! eigenvalue below −1e-9 · trace P. The conventional update `P⁺ = (I − KH) P⁻` with the
 //! same data breaks the property in some of these cases (counted below), which is why the
-//! filters use the Joseph form and symmetrise.
+//! filters use the Joseph form and symmetrise. The seed-000 EKF (nonlinear pseudoranges and
+//! rates) and the 15-state INS error-state filter get random models of their own kind:
+//! random geometry, noise spanning decades, random intervals and motions.
 
 use crate::core::TrialRng;
 use crate::fusion::kalman::{Ekf, RelativeEntropyKf, SigmaPointKf, StrongTrackingFilter};
@@ -126,13 +128,16 @@ fn case(k: u64) -> Case {
 }
 
 /// Why `p` is not a symmetric PSD covariance, if it is not.
-fn not_psd(p: &SMatrix<f64, N, N>) -> Option<String> {
+fn not_psd<const D: usize>(p: &SMatrix<f64, D, D>) -> Option<String> {
     let norm = p.norm();
     let asym = (p - p.transpose()).norm();
     if !(norm.is_finite() && asym <= 1e-9 * norm) {
         return Some(format!("asymmetry {asym:e} of norm {norm:e}"));
     }
-    let min = p.symmetric_eigen().eigenvalues.min();
+    let min = nalgebra::DMatrix::from_iterator(D, D, p.iter().copied())
+        .symmetric_eigen()
+        .eigenvalues
+        .min();
     if min < -1e-9 * p.trace() {
         return Some(format!("eigenvalue {min:e} of trace {:e}", p.trace()));
     }
@@ -154,21 +159,25 @@ fn check_all(name: &str, mut step: impl FnMut(&Case, usize) -> SMatrix<f64, N, N
 #[test]
 fn kalman_filter_covariances_stay_symmetric_psd() {
     let mut f = None;
+    let mut used = 0u64;
     check_all("EKF (Joseph)", |c, s| {
         if s == 0 {
             f = Some(Ekf::new(SVector::zeros(), c.p0).unwrap());
         }
         let kf = f.as_mut().unwrap();
         kf.predict(&c.proc, 1.0).unwrap();
-        let _ = kf.update(&c.obs, &c.z[s]);
+        used += u64::from(kf.update(&c.obs, &c.z[s]).used);
         *kf.covariance()
     });
+    // Every update was used: the property is tested on real updates.
+    assert_eq!(used, CASES * STEPS as u64 * M as u64);
 }
 
 #[test]
 fn sigma_point_filter_covariances_stay_symmetric_psd() {
     for cubature in [false, true] {
         let mut f = None;
+        let mut used = 0u64;
         check_all(if cubature { "CKF" } else { "UKF" }, |c, s| {
             if s == 0 {
                 f = Some(if cubature {
@@ -179,9 +188,10 @@ fn sigma_point_filter_covariances_stay_symmetric_psd() {
             }
             let kf = f.as_mut().unwrap();
             kf.predict(&c.proc, 1.0).unwrap();
-            let _ = kf.update(&c.obs, &c.z[s]);
+            used += u64::from(kf.update(&c.obs, &c.z[s]).used);
             *kf.covariance()
         });
+        assert_eq!(used, CASES * STEPS as u64 * M as u64);
     }
 }
 
@@ -265,4 +275,155 @@ fn the_conventional_update_fails_where_the_joseph_form_holds() {
         broken > 0,
         "the random models are too benign to test anything"
     );
+}
+
+/// A random unit vector in the upper half-space of `up`.
+fn above<R: Rng>(rng: &mut R, up: &nalgebra::Vector3<f64>) -> nalgebra::Vector3<f64> {
+    loop {
+        let v = nalgebra::Vector3::from_fn(|_, _| gauss(rng)).normalize();
+        if v.dot(up) > 0.05 {
+            return v;
+        }
+    }
+}
+
+/// The seed-000 EKF (12 states: position, velocity, acceleration, clock bias and drift,
+/// BeiDou inter-system bias) over 200 random cases: random jerk and clock PSDs over six
+/// decades, random receiver site, 4–12 satellites of both systems in random directions,
+/// pseudorange σ from 0.1 m to 1 km and rate σ from 1 mm/s to 10 m/s, random intervals
+/// from 10 ms to 30 s, occasional position fixes with random covariances, no gates.
+#[test]
+fn the_seed000_ekf_covariance_stays_symmetric_psd() {
+    use crate::core::{EmitterId, System};
+    use crate::fusion::ekf11::{Ekf11, Ekf11Config, IsbConfig};
+    use crate::fusion::measurement::{PositionFix, RangeMeasurement};
+    use nalgebra::Vector3;
+    let (mut total, mut accepted) = (0usize, 0usize);
+    for k in 0..200u64 {
+        let mut rng = TrialRng::new(77, k).stream("test/psd/ekf11");
+        let decade = |rng: &mut crate::core::rng::StreamRng, lo: f64, hi: f64| {
+            10f64.powf(lo + (hi - lo) * rng.random::<f64>())
+        };
+        let cfg = Ekf11Config {
+            accel_psd_m2ps5: [0; 3].map(|_| decade(&mut rng, -4.0, 2.0)),
+            clock_bias_psd_m2ps: decade(&mut rng, -3.0, 3.0),
+            clock_drift_psd_m2ps3: decade(&mut rng, -3.0, 3.0),
+            isb_bds: Some(IsbConfig::default()),
+            gate_chi2: None,
+            gate_chi2_position: None,
+            ..Ekf11Config::default()
+        };
+        let mut f = Ekf11::new(cfg).unwrap();
+        let up = Vector3::from_fn(|_, _| gauss(&mut rng)).normalize();
+        let mut pos = up * 6.37e6;
+        let vel = Vector3::from_fn(|_, _| 10.0 * gauss(&mut rng));
+        f.initialise(pos, 3e4, decade(&mut rng, 0.0, 4.0), 1e5)
+            .unwrap();
+        for step in 0..40 {
+            let dt = decade(&mut rng, -2.0, 1.5);
+            pos += vel * dt;
+            f.predict(dt).unwrap();
+            if let Some(why) = not_psd(f.covariance()) {
+                panic!("EKF11, case {k}, step {step}, predict: {why}");
+            }
+            let n = rng.random_range(4..=12);
+            for j in 0..n {
+                let los = above(&mut rng, &up);
+                let sat = pos + 2.0e7 * los;
+                let system = if j % 2 == 0 { System::Gps } else { System::Bds };
+                let sigma_m = decade(&mut rng, -1.0, 3.0);
+                let m = RangeMeasurement {
+                    emitter: EmitterId::new(system, j as u16 + 1),
+                    emitter_pos_ecef_m: sat,
+                    emitter_vel_ecef_mps: Vector3::from_fn(|_, _| 3000.0 * gauss(&mut rng)),
+                    pseudorange_m: (sat - pos).norm() + 3e4 + sigma_m * gauss(&mut rng),
+                    sigma_m,
+                    range_rate_mps: rng.random_bool(0.5).then(|| gauss(&mut rng)),
+                    sigma_rate_mps: decade(&mut rng, -3.0, 1.0),
+                    cn0_dbhz: 40.0,
+                    elevation_rad: 0.5,
+                };
+                let out = f.update_range(&m);
+                total += 1;
+                accepted += usize::from(out.range.is_accepted());
+                if let Some(why) = not_psd(f.covariance()) {
+                    panic!("EKF11, case {k}, step {step}, range {j}: {why}");
+                }
+            }
+            if rng.random_bool(0.3) {
+                let fix = PositionFix {
+                    pos_ecef_m: pos + Vector3::from_fn(|_, _| 5.0 * gauss(&mut rng)),
+                    cov_m2: spd::<3, _>(&mut rng, 25.0, 6.0),
+                    support: 0,
+                };
+                let _ = f.update_position(&fix);
+                if let Some(why) = not_psd(f.covariance()) {
+                    panic!("EKF11, case {k}, step {step}, fix: {why}");
+                }
+            }
+        }
+    }
+    // The property is only tested if the updates happen.
+    assert!(
+        accepted * 10 > total * 9,
+        "{accepted} of {total} ranges used"
+    );
+}
+
+/// The INS error-state filter (15 states) over 100 random cases: an IMU grade from phone
+/// to navigation grade, 20 s of random rotation (up to 2 rad/s) and specific force (up to
+/// 3 g) at 100 Hz, a position, velocity or joint fix every second with a random SPD
+/// covariance whose eigenvalues span four decades.
+#[test]
+fn the_ins_error_state_covariance_stays_symmetric_psd() {
+    use crate::inertial::imu::{ImuConfig, ImuGrade, ImuSample};
+    use crate::inertial::ins_ekf::{InsEkf, InsEkfConfig};
+    use crate::inertial::strapdown::NavState;
+    use crate::inertial::LocalEarth;
+    use nalgebra::{UnitQuaternion, Vector3};
+    for k in 0..100u64 {
+        let mut rng = TrialRng::new(78, k).stream("test/psd/ins");
+        let grade = [ImuGrade::Low, ImuGrade::Mid, ImuGrade::High][(k % 3) as usize];
+        let cfg = InsEkfConfig::from_imu(&ImuConfig::grade(grade).resolve().unwrap());
+        let earth = LocalEarth::new(rng.random::<f64>() * 1.4 - 0.7, 0.0);
+        let start = NavState {
+            t_s: 0.0,
+            pos_enu_m: Vector3::zeros(),
+            vel_enu_mps: Vector3::from_fn(|_, _| 5.0 * gauss(&mut rng)),
+            q_nb: UnitQuaternion::from_euler_angles(
+                0.2 * gauss(&mut rng),
+                0.2 * gauss(&mut rng),
+                3.0 * gauss(&mut rng),
+            ),
+        };
+        let mut f = InsEkf::new(start, earth, &cfg);
+        for step in 1..=2000 {
+            let s = ImuSample {
+                t_s: step as f64 * 0.01,
+                gyro_rps: Vector3::from_fn(|_, _| 2.0 * (rng.random::<f64>() - 0.5) * 2.0),
+                accel_mps2: Vector3::new(0.0, 0.0, 9.8)
+                    + Vector3::from_fn(|_, _| 30.0 * (rng.random::<f64>() - 0.5)),
+            };
+            f.propagate(&s);
+            if step % 100 != 0 {
+                continue;
+            }
+            let cov = spd::<3, _>(&mut rng, 4.0, 4.0);
+            let z = Vector3::from_fn(|_, _| 3.0 * gauss(&mut rng));
+            let out = match step / 100 % 3 {
+                0 => f.update_position(&(f.state().pos_enu_m + z), &cov),
+                1 => f.update_velocity(&(f.state().vel_enu_mps + 0.1 * z), &(0.01 * cov)),
+                _ => f.update_position_velocity(
+                    &(f.state().pos_enu_m + z),
+                    &cov,
+                    &(f.state().vel_enu_mps + 0.1 * z),
+                    &(0.01 * cov),
+                ),
+            };
+            assert!(out.is_ok_and(|o| o.accepted), "case {k}, step {step}");
+            if let Some(why) = not_psd(f.covariance()) {
+                panic!("INS, case {k}, step {step}: {why}");
+            }
+        }
+    }
 }
