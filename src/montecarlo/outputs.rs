@@ -204,8 +204,13 @@ impl<W: Write + Send> TrialsParquet<W> {
         use std::sync::Arc;
         let schema = Arc::new(parquet::schema::parser::parse_message_type(PARQUET_SCHEMA)?);
         let props = Arc::new(
+            // Statistics per column chunk (in the footer, for readers' predicate pushdown)
+            // but no page index: the writer keeps every page's index entries until the
+            // footer, which made its memory grow with the trials of a long run.
             WriterProperties::builder()
                 .set_compression(parquet::basic::Compression::SNAPPY)
+                .set_statistics_enabled(parquet::file::properties::EnabledStatistics::Chunk)
+                .set_offset_index_disabled(true)
                 .set_created_by(format!("hybridnav {}", env!("CARGO_PKG_VERSION")))
                 .build(),
         );
