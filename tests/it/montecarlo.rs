@@ -14,7 +14,7 @@ fn ok(o: std::process::Output) -> std::process::Output {
     o
 }
 
-fn trial_files(dir: &Path) -> Vec<String> {
+pub(crate) fn trial_files(dir: &Path) -> Vec<String> {
     let mut v: Vec<String> = std::fs::read_dir(dir.join("trials"))
         .map(|rd| {
             rd.flatten()

@@ -3,7 +3,7 @@
 //! splits and estimator subsets.
 
 use crate::common::{hybridnav, repo, stderr, tmp_dir, write};
-use crate::montecarlo::assert_same_run;
+use crate::montecarlo::{assert_same_run, trial_files};
 use rand::{Rng, SeedableRng};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -19,15 +19,7 @@ fn ok(args: &[&str]) {
 }
 
 fn trial_count(dir: &Path) -> usize {
-    std::fs::read_dir(dir.join("trials")).map_or(0, |rd| {
-        rd.flatten()
-            .filter(|e| {
-                let n = e.file_name();
-                let n = n.to_string_lossy();
-                n.starts_with("trial-") && n.ends_with(".json.gz")
-            })
-            .count()
-    })
+    trial_files(dir).len()
 }
 
 /// Hidden temporary files (atomic writes, spilled sort runs) anywhere in a run directory.
@@ -107,33 +99,27 @@ fn runs_killed_at_random_moments_resume_to_the_uninterrupted_result() {
             .expect("start hybridnav");
         let before = trial_count(&out);
         let start = Instant::now();
-        let finished = if attempt == 4 {
-            // Aim at the output phase: kill as soon as every trial file exists.
-            while trial_count(&out) < 12 && start.elapsed() < Duration::from_secs(120) {
+        // Polls until `ready` holds (or two minutes pass); true when the run exited first.
+        let mut wait_until = |ready: &dyn Fn() -> bool| {
+            while !ready() && start.elapsed() < Duration::from_secs(120) {
                 if child.try_wait().expect("poll").is_some() {
-                    break;
+                    return true;
                 }
                 std::thread::sleep(Duration::from_millis(1));
             }
             child.try_wait().expect("poll").is_some()
+        };
+        let finished = if attempt == 4 {
+            // Aim at the output phase: kill as soon as every trial file exists.
+            wait_until(&|| trial_count(&out) >= 12)
         } else {
             // A random moment that is sure to fall after some progress, however fast the
             // machine: once 1–3 more trials are written, a further 0–250 ms.
             let target = (before + rng.random_range(1..=3)).min(11);
-            while trial_count(&out) < target && start.elapsed() < Duration::from_secs(120) {
-                if child.try_wait().expect("poll").is_some() {
-                    break;
-                }
-                std::thread::sleep(Duration::from_millis(1));
+            wait_until(&|| trial_count(&out) >= target) || {
+                let wait = start.elapsed() + Duration::from_millis(rng.random_range(0..250));
+                wait_until(&|| start.elapsed() >= wait)
             }
-            let wait = start.elapsed() + Duration::from_millis(rng.random_range(0..250));
-            while start.elapsed() < wait {
-                if child.try_wait().expect("poll").is_some() {
-                    break;
-                }
-                std::thread::sleep(Duration::from_millis(1));
-            }
-            child.try_wait().expect("poll").is_some()
         };
         if finished {
             kills.push(format!("attempt {attempt}: finished by itself"));
