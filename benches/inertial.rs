@@ -53,6 +53,8 @@ fn bench(c: &mut Criterion) {
         accel_mps2: Some(0.5),
         lateral_accel_mps2: Some(0.4),
         dwell_s: None,
+        leg_speeds_mps: None,
+        stops: None,
         laps: Some(2),
         height_m: None,
     }
@@ -111,6 +113,8 @@ fn car_config() -> TrajectoryConfig {
         accel_mps2: Some(1.5),
         lateral_accel_mps2: Some(2.0),
         dwell_s: None,
+        leg_speeds_mps: None,
+        stops: None,
         laps: Some(20),
         height_m: None,
     }
@@ -128,6 +132,8 @@ fn walk_config() -> TrajectoryConfig {
         accel_mps2: Some(0.5),
         lateral_accel_mps2: Some(0.4),
         dwell_s: None,
+        leg_speeds_mps: None,
+        stops: None,
         laps: Some(20),
         height_m: None,
     }

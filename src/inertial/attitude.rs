@@ -518,6 +518,8 @@ mod tests {
             accel_mps2: Some(0.5),
             lateral_accel_mps2: Some(0.5),
             dwell_s: None,
+            leg_speeds_mps: None,
+            stops: None,
             laps: None,
             height_m: None,
         }
@@ -582,6 +584,8 @@ mod tests {
             accel_mps2: None,
             lateral_accel_mps2: None,
             dwell_s: None,
+            leg_speeds_mps: None,
+            stops: None,
             laps: None,
             height_m: None,
         }

@@ -549,6 +549,8 @@ mod tests {
             accel_mps2: Some(0.5),
             lateral_accel_mps2: Some(0.4),
             dwell_s: None,
+            leg_speeds_mps: None,
+            stops: None,
             laps: None,
             height_m: None,
         }

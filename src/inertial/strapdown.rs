@@ -133,6 +133,8 @@ mod tests {
             accel_mps2: Some(2.0),
             lateral_accel_mps2: Some(3.0),
             dwell_s: None,
+            leg_speeds_mps: None,
+            stops: None,
             laps: Some(1),
             height_m: None,
         }

@@ -216,6 +216,16 @@ fn default_turning_noise() -> f64 {
 /// Every field of the two paper models defaults to the paper's value, so
 /// `trajectory = { kind = "singer" }` is seed 001's target and
 /// `trajectory = { kind = "plane_turning" }` is seed 003's.
+/// A stop at one waypoint of a [`TrajectoryConfig::Waypoints`] path.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WaypointStop {
+    /// Index of the waypoint in `points_enu_m`.
+    pub at: usize,
+    /// Time at rest there (s).
+    pub dwell_s: f64,
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum TrajectoryConfig {
@@ -241,6 +251,18 @@ pub enum TrajectoryConfig {
         /// With a dwell the platform stops at every waypoint, so corners are not rounded.
         #[serde(default)]
         dwell_s: Option<f64>,
+        /// Speed cap of each leg (m/s), in the order of `points_enu_m`: one per leg (one
+        /// fewer than the points, or as many as the points with `laps`, whose closing leg
+        /// is the last), each overriding `speed_mps` on its leg, which stays the cap of
+        /// everything else (corner radii are sized for the faster adjacent leg). Traffic:
+        /// split a street into collinear legs to slow down and speed up along it.
+        #[serde(default)]
+        leg_speeds_mps: Option<Vec<f64>>,
+        /// Stops at single waypoints (a traffic light, a junction): the platform brakes to
+        /// rest at waypoint `at` (an index into `points_enu_m`, neither the first nor, without
+        /// `laps`, the last) and waits `dwell_s` there, on every lap.
+        #[serde(default)]
+        stops: Option<Vec<WaypointStop>>,
         /// When given, the polygon is closed (last point back to the first) and driven this
         /// many times; when absent the polyline is driven once, first point to last.
         #[serde(default)]
@@ -562,6 +584,8 @@ mod tests {
             accel_mps2: None,
             lateral_accel_mps2: None,
             dwell_s: None,
+            leg_speeds_mps: None,
+            stops: None,
             laps: None,
             height_m: None,
         };

@@ -39,6 +39,14 @@
 //! With `dwell_s` the platform stops at every waypoint after the first and before the last
 //! (braking to rest when `accel_mps2` is given, instantly otherwise) and waits `dwell_s`.
 //!
+//! Traffic: `leg_speeds_mps` caps each leg at its own speed (the `v_max` of its pieces in
+//! the pass above, so the platform brakes before a slower leg and enters it at that leg's
+//! speed; a corner arc takes the lower of its two legs' caps, its radius is sized for the
+//! higher), and `stops` halts the platform at single waypoints (a traffic light): the run
+//! of pieces ends there at rest, waits `dwell_s`, and a new run starts from rest. Without
+//! `accel_mps2` the speed changes instantly from leg to leg, and stops are refused (a stop
+//! needs braking). Both are deterministic, so a world's trials share one truth.
+//!
 //! Velocity is speed times the unit tangent; acceleration is the tangential acceleration
 //! along the tangent plus v²/R towards the centre on arcs, so acceleration is the time
 //! derivative of velocity everywhere except at the instants where the tangential
@@ -147,7 +155,6 @@ enum Corner {
 }
 
 struct Limits {
-    speed: f64,
     accel: Option<f64>,
     lateral: Option<f64>,
     dwell: f64,
@@ -169,6 +176,8 @@ impl WaypointPlan {
             accel_mps2,
             lateral_accel_mps2,
             dwell_s,
+            leg_speeds_mps,
+            stops,
             laps,
             height_m,
         } = cfg
@@ -232,6 +241,7 @@ impl WaypointPlan {
         }
         let up = height_m.unwrap_or(0.0);
         let mut pts: Vec<Vector3<f64>> = Vec::with_capacity(points_enu_m.len());
+        let mut dropped_repeat = false;
         for (i, p) in points_enu_m.iter().enumerate() {
             let v = match p.as_slice() {
                 [e, n] => Vector3::new(*e, *n, up),
@@ -253,6 +263,8 @@ impl WaypointPlan {
                 .is_none_or(|q: &Vector3<f64>| (v - q).norm() > MIN_PIECE_M)
             {
                 pts.push(v);
+            } else {
+                dropped_repeat = true;
             }
         }
         if height_m.is_some() && points_enu_m.iter().all(|p| p.len() == 3) {
@@ -261,8 +273,10 @@ impl WaypointPlan {
                 "height_m sets the up coordinate of [e, n] points, but every point has three coordinates; remove height_m",
             ));
         }
+        let mut closed_explicitly = false;
         if laps.is_some() && pts.len() > 2 && (pts[0] - pts[pts.len() - 1]).norm() <= MIN_PIECE_M {
             pts.pop();
+            closed_explicitly = true;
         }
         if pts.len() < 2 {
             return Err(points_issue(
@@ -292,9 +306,99 @@ impl WaypointPlan {
                 v
             }
         };
-        let length_m: f64 = vertices.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
-        let lower_bound_s =
-            length_m / speed_mps + dwell_s.unwrap_or(0.0) * (vertices.len() as f64 - 2.0);
+        // Per-leg speed caps and per-waypoint stops, mapped onto the driven vertices: with
+        // laps, vertex j is point j mod n and segment j is leg j mod n.
+        let n_legs = if laps.is_some() {
+            pts.len()
+        } else {
+            pts.len() - 1
+        };
+        let per_leg = |what: &str| {
+            if dropped_repeat || closed_explicitly {
+                Err(ConfigIssue::new(
+                    what,
+                    "cannot be matched to the legs: points_enu_m repeats a point (consecutively, or the first as the last with laps); remove the repeat",
+                ))
+            } else {
+                Ok(())
+            }
+        };
+        let leg_speeds: Vec<f64> = match leg_speeds_mps {
+            None => vec![*speed_mps; n_legs],
+            Some(v) => {
+                per_leg("leg_speeds_mps")?;
+                if v.len() != n_legs {
+                    return Err(ConfigIssue::new(
+                        "leg_speeds_mps",
+                        format!(
+                            "expected {n_legs} leg speeds (one per leg of the {} waypoints{}), got {}",
+                            pts.len(),
+                            if laps.is_some() { ", the closing leg last" } else { "" },
+                            v.len()
+                        ),
+                    ));
+                }
+                for (i, &v) in v.iter().enumerate() {
+                    check_range(
+                        "leg_speeds_mps",
+                        v,
+                        0.0,
+                        MAX_SPEED_MPS,
+                        true,
+                        &format!("a positive speed in m/s for leg {i}"),
+                    )?;
+                }
+                v.clone()
+            }
+        };
+        let mut point_dwell: Vec<Option<f64>> = vec![None; pts.len()];
+        for stop in stops.iter().flatten() {
+            per_leg("stops")?;
+            let last = if laps.is_some() {
+                pts.len()
+            } else {
+                pts.len() - 1
+            };
+            if stop.at == 0 && laps.is_none() || stop.at >= last {
+                return Err(ConfigIssue::new(
+                    "stops",
+                    format!(
+                        "a stop at waypoint {}: expected an index in {}..{last} (not the path's ends)",
+                        stop.at,
+                        if laps.is_some() { 0 } else { 1 },
+                    ),
+                ));
+            }
+            check_range(
+                "stops",
+                stop.dwell_s,
+                0.0,
+                86_400.0,
+                false,
+                "a dwell time in seconds",
+            )?;
+            point_dwell[stop.at] = Some(stop.dwell_s);
+        }
+        if point_dwell.iter().any(Option::is_some) && accel_mps2.is_none() {
+            return Err(ConfigIssue::new(
+                "stops",
+                "a stop needs accel_mps2 (the platform brakes to rest and starts again)",
+            ));
+        }
+        let seg_speed: Vec<f64> = (0..vertices.len() - 1)
+            .map(|j| leg_speeds[j % n_legs])
+            .collect();
+        let vertex_dwell: Vec<Option<f64>> = (0..vertices.len())
+            .map(|j| point_dwell[j % pts.len()])
+            .collect();
+
+        let lower_bound_s = vertices
+            .windows(2)
+            .zip(&seg_speed)
+            .map(|(w, v)| (w[1] - w[0]).norm() / v)
+            .sum::<f64>()
+            + dwell_s.unwrap_or(0.0) * (vertices.len() as f64 - 2.0)
+            + vertex_dwell.iter().flatten().sum::<f64>();
         if lower_bound_s > MAX_DURATION_S {
             let key = if laps.is_some_and(|n| n > 1) {
                 "laps"
@@ -308,12 +412,17 @@ impl WaypointPlan {
         }
 
         let lim = Limits {
-            speed: *speed_mps,
             accel: *accel_mps2,
             lateral: *lateral_accel_mps2,
             dwell: dwell_s.unwrap_or(0.0),
         };
-        let plan = Self::plan(&vertices, &lim, dwell_s.is_some_and(|d| d > 0.0));
+        let plan = Self::plan(
+            &vertices,
+            &seg_speed,
+            &vertex_dwell,
+            &lim,
+            dwell_s.is_some_and(|d| d > 0.0),
+        );
         if !(plan.duration_s.is_finite() && plan.duration_s <= MAX_DURATION_S) {
             return Err(ConfigIssue::new(
                 "speed_mps",
@@ -336,9 +445,12 @@ impl WaypointPlan {
         self.pieces.iter().map(|p| p.length_m).sum()
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn corner(
         lim: &Limits,
         stop_at_waypoints: bool,
+        stop_dwell: Option<f64>,
+        speed_mps: f64,
         l_in: f64,
         l_out: f64,
         d_in: &Vector3<f64>,
@@ -346,6 +458,9 @@ impl WaypointPlan {
     ) -> Corner {
         if stop_at_waypoints {
             return Corner::Stop { dwell: lim.dwell };
+        }
+        if let Some(dwell) = stop_dwell {
+            return Corner::Stop { dwell };
         }
         let theta = d_in.dot(d_out).clamp(-1.0, 1.0).acos();
         if theta < STRAIGHT_RAD {
@@ -363,7 +478,7 @@ impl WaypointPlan {
             return stop_or_pass;
         }
         let tan_half = (0.5 * theta).tan();
-        let radius = (lim.speed * lim.speed / a_lat).min(0.5 * l_in.min(l_out) / tan_half);
+        let radius = (speed_mps * speed_mps / a_lat).min(0.5 * l_in.min(l_out) / tan_half);
         if radius < 1e-6 {
             return stop_or_pass;
         }
@@ -373,7 +488,15 @@ impl WaypointPlan {
         }
     }
 
-    fn plan(vertices: &[Vector3<f64>], lim: &Limits, stop_at_waypoints: bool) -> Self {
+    /// Plans the path through `vertices`; `seg_speed[j]` caps segment j and
+    /// `vertex_dwell[j]` stops the platform at vertex j.
+    fn plan(
+        vertices: &[Vector3<f64>],
+        seg_speed: &[f64],
+        vertex_dwell: &[Option<f64>],
+        lim: &Limits,
+        stop_at_waypoints: bool,
+    ) -> Self {
         let n_seg = vertices.len() - 1;
         let lens: Vec<f64> = vertices.windows(2).map(|w| (w[1] - w[0]).norm()).collect();
         let dirs: Vec<Vector3<f64>> = vertices
@@ -390,6 +513,8 @@ impl WaypointPlan {
                     Self::corner(
                         lim,
                         stop_at_waypoints,
+                        vertex_dwell[j],
+                        seg_speed[j - 1].max(seg_speed[j]),
                         lens[j - 1],
                         lens[j],
                         &dirs[j - 1],
@@ -445,7 +570,7 @@ impl WaypointPlan {
                     dir: dirs[i],
                 },
                 lens[i] - t0 - t1,
-                lim.speed,
+                seg_speed[i],
             );
             if i + 1 < n_seg {
                 match corners[i + 1] {
@@ -456,9 +581,10 @@ impl WaypointPlan {
                         let n1 = (d2 - d1 * d1.dot(&d2)).normalize();
                         let theta = d1.dot(&d2).clamp(-1.0, 1.0).acos();
                         let a_start = vertices[i + 1] - d1 * trim;
+                        let leg_cap = seg_speed[i].min(seg_speed[i + 1]);
                         let vmax = match (lim.accel, lim.lateral) {
-                            (Some(_), Some(a_lat)) => lim.speed.min((a_lat * radius).sqrt()),
-                            _ => lim.speed,
+                            (Some(_), Some(a_lat)) => leg_cap.min((a_lat * radius).sqrt()),
+                            _ => leg_cap,
                         };
                         push(
                             &mut pieces,
@@ -494,14 +620,15 @@ impl WaypointPlan {
             match lim.accel {
                 None => {
                     for &p in run {
-                        let dur = pieces[p].length_m / lim.speed;
+                        let v = pieces[p].vmax_mps;
+                        let dur = pieces[p].length_m / v;
                         phases.push(Phase {
                             t0: t,
                             dur,
                             kind: PhaseKind::Move {
                                 piece: p,
                                 s0: 0.0,
-                                v0: lim.speed,
+                                v0: v,
                                 a: 0.0,
                             },
                         });
@@ -657,6 +784,7 @@ impl Trajectory for WaypointPlan {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::motion::WaypointStop;
     use std::f64::consts::FRAC_PI_2;
 
     fn cfg(
@@ -673,6 +801,8 @@ mod tests {
             accel_mps2: accel,
             lateral_accel_mps2: lateral,
             dwell_s: dwell,
+            leg_speeds_mps: None,
+            stops: None,
             laps,
             height_m: None,
         }
@@ -734,6 +864,107 @@ mod tests {
         assert_eq!(s.vel_enu_mps, Vector3::zeros());
         assert!((s.pos_enu_m - Vector3::new(100.0, 0.0, 0.0)).norm() < 1e-9);
         assert!((s.heading_rad - FRAC_PI_2).abs() < 1e-12);
+    }
+
+    /// A straight 200 m street in two legs of 100 m with the given leg speeds and stops.
+    fn street(
+        accel: Option<f64>,
+        leg_speeds: Option<Vec<f64>>,
+        stops: Option<Vec<WaypointStop>>,
+    ) -> TrajectoryConfig {
+        let mut c = cfg(
+            &[&[0.0, 0.0], &[100.0, 0.0], &[200.0, 0.0]],
+            10.0,
+            accel,
+            None,
+            None,
+            None,
+        );
+        if let TrajectoryConfig::Waypoints {
+            leg_speeds_mps,
+            stops: s,
+            ..
+        } = &mut c
+        {
+            *leg_speeds_mps = leg_speeds;
+            *s = stops;
+        }
+        c
+    }
+
+    #[test]
+    fn leg_speeds_slow_one_leg() {
+        // Without ramps: 100 m at 10 m/s, then 100 m at 5 m/s.
+        let p = plan(&street(None, Some(vec![10.0, 5.0]), None));
+        assert!((p.duration_s() - 30.0).abs() < 1e-12, "{}", p.duration_s());
+        let s = p.state_at(15.0);
+        assert!((s.pos_enu_m.x - 125.0).abs() < 1e-9);
+        assert!((s.vel_enu_mps.x - 5.0).abs() < 1e-12);
+        // With a = 2 m/s²: 0→10 in 5 s (25 m), brake 10→5 in 2.5 s over 18.75 m so that the
+        // slow leg is entered at 5 m/s, cruise 56.25 m (5.625 s); then 93.75 m at 5 m/s
+        // (18.75 s) and 5→0 in 2.5 s (6.25 m): 34.375 s in all.
+        let p = plan(&street(Some(2.0), Some(vec![10.0, 5.0]), None));
+        assert!((p.duration_s() - 34.375).abs() < 1e-9, "{}", p.duration_s());
+        let at_junction = p.state_at(5.0 + 5.625 + 2.5);
+        assert!((at_junction.pos_enu_m.x - 100.0).abs() < 1e-9);
+        assert!((at_junction.vel_enu_mps.x - 5.0).abs() < 1e-9);
+        // The default (no leg speeds) equals every leg at speed_mps.
+        assert_eq!(
+            plan(&street(Some(2.0), None, None)),
+            plan(&street(Some(2.0), Some(vec![10.0, 10.0]), None))
+        );
+    }
+
+    #[test]
+    fn a_stop_waits_at_its_waypoint() {
+        // Two trapezoids of 15 s (5 s up, 5 s cruise, 5 s down) and a 10 s stop between.
+        let stop = WaypointStop {
+            at: 1,
+            dwell_s: 10.0,
+        };
+        let p = plan(&street(Some(2.0), None, Some(vec![stop])));
+        assert!((p.duration_s() - 40.0).abs() < 1e-9, "{}", p.duration_s());
+        for t in [15.0, 20.0, 25.0] {
+            let s = p.state_at(t);
+            assert!((s.pos_enu_m.x - 100.0).abs() < 1e-9, "t = {t}");
+            assert!(s.vel_enu_mps.norm() < 1e-9, "t = {t}");
+        }
+        assert!(p.state_at(30.0).vel_enu_mps.x > 9.99);
+    }
+
+    #[test]
+    fn bad_leg_speeds_and_stops_name_their_key() {
+        let key = |c: TrajectoryConfig| WaypointPlan::from_config(&c).unwrap_err();
+        let e = key(street(None, Some(vec![10.0]), None));
+        assert_eq!(e.key, "leg_speeds_mps");
+        assert!(e.message.contains("expected 2 leg speeds"), "{}", e.message);
+        assert_eq!(
+            key(street(None, Some(vec![10.0, f64::NAN]), None)).key,
+            "leg_speeds_mps"
+        );
+        assert_eq!(
+            key(street(None, Some(vec![10.0, 0.0]), None)).key,
+            "leg_speeds_mps"
+        );
+        let stop = |at: usize, dwell_s: f64| Some(vec![WaypointStop { at, dwell_s }]);
+        for (at, dwell) in [(0, 5.0), (2, 5.0), (7, 5.0), (1, -1.0)] {
+            assert_eq!(key(street(Some(2.0), None, stop(at, dwell))).key, "stops");
+        }
+        let e = key(street(None, None, stop(1, 5.0)));
+        assert!(e.message.contains("accel_mps2"), "{}", e.message);
+        // A repeated point cannot be matched to the legs.
+        let mut c = cfg(
+            &[&[0.0, 0.0], &[100.0, 0.0], &[100.0, 0.0], &[200.0, 0.0]],
+            10.0,
+            None,
+            None,
+            None,
+            None,
+        );
+        if let TrajectoryConfig::Waypoints { leg_speeds_mps, .. } = &mut c {
+            *leg_speeds_mps = Some(vec![1.0, 1.0, 1.0]);
+        }
+        assert!(key(c).message.contains("repeats a point"));
     }
 
     #[test]

@@ -310,6 +310,8 @@ fn car_truth(laps: u32) -> PlatformTruth {
         accel_mps2: Some(1.5),
         lateral_accel_mps2: Some(2.0),
         dwell_s: None,
+        leg_speeds_mps: None,
+        stops: None,
         laps: Some(laps),
         height_m: None,
     }
@@ -447,6 +449,8 @@ fn walk_truth(platform: Platform, seed: u64) -> PlatformTruth {
         accel_mps2: Some(0.5),
         lateral_accel_mps2: Some(0.4),
         dwell_s: None,
+        leg_speeds_mps: None,
+        stops: None,
         laps: Some(2),
         height_m: None,
     }
@@ -773,6 +777,8 @@ fn imu_source_is_consistent_with_the_engine_truth() {
                 accel_mps2: Some(2.0),
                 lateral_accel_mps2: Some(3.0),
                 dwell_s: None,
+                leg_speeds_mps: None,
+                stops: None,
                 laps: Some(1),
                 height_m: None,
             },
@@ -843,6 +849,8 @@ fn walk_config() -> TrajectoryConfig {
         accel_mps2: Some(0.5),
         lateral_accel_mps2: Some(0.4),
         dwell_s: None,
+        leg_speeds_mps: None,
+        stops: None,
         laps: Some(2),
         height_m: None,
     }
@@ -914,6 +922,8 @@ fn car_rectangle(laps: u32) -> TrajectoryConfig {
         accel_mps2: Some(1.5),
         lateral_accel_mps2: Some(2.0),
         dwell_s: None,
+        leg_speeds_mps: None,
+        stops: None,
         laps: Some(laps),
         height_m: None,
     }

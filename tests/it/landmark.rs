@@ -313,6 +313,8 @@ fn walk(
         accel_mps2: Some(0.5),
         lateral_accel_mps2: None,
         dwell_s: None,
+        leg_speeds_mps: None,
+        stops: None,
         laps: None,
         height_m: Some(1.2),
     }

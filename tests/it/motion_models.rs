@@ -37,6 +37,8 @@ fn waypoints(
         accel_mps2: accel,
         lateral_accel_mps2: lateral,
         dwell_s: dwell,
+        leg_speeds_mps: None,
+        stops: None,
         laps,
         height_m: None,
     }
