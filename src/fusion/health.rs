@@ -11,9 +11,10 @@
 //!   epoch whose NIS, is NaN or infinite;
 //! - **an NIS persistently outside its bound**: [`HealthConfig::window_epochs`]
 //!   consecutive epochs, each either with its NIS above the χ²_dof quantile at
-//!   1 − [`HealthConfig::false_alarm`] or with every measurement refused by the filter's
-//!   innovation gate (a gated filter that has diverged refuses everything, so its NIS
-//!   alone would never show it). Epochs without measurements neither count nor break the
+//!   1 − [`HealthConfig::false_alarm`] or with at least half of the measurements offered
+//!   refused by the filter's innovation gate (a gated filter that has diverged refuses
+//!   everything, or keeps only the few lines of sight its error is blind to, so the NIS
+//!   of what it accepts would never show it). Epochs without measurements neither count nor break the
 //!   run. For a consistent filter, the chance of a false alarm at a given epoch is
 //!   `false_alarm^window_epochs` = 10⁻⁴⁰ with the defaults; a filter whose noise model is
 //!   merely optimistic by a factor of a few stays well below the bound.
@@ -52,7 +53,7 @@ pub enum Verdict {
     Healthy,
     /// A non-finite estimate or NIS.
     NonFinite,
-    /// The NIS was out of bounds (or every measurement gated out) for the whole window.
+    /// The NIS was out of bounds (or at least half of the measurements gated out) for the whole window.
     Diverged,
 }
 
@@ -100,13 +101,15 @@ impl HealthMonitor {
             self.run = 0;
             return Verdict::NonFinite;
         }
-        let all_gated = out.used == 0 && out.rejected_gate > 0;
-        let outside = if out.nis_dof > 0 {
-            out.nis_sum > self.bound(out.nis_dof)
-        } else {
-            all_gated
-        };
-        let informative = out.nis_dof > 0 || all_gated;
+        // A filter that has drifted far enough can still fit a few of the measurements it
+        // is given (those whose lines of sight are blind to its error) and refuse the
+        // rest: the NIS of what it accepts looks normal. So an epoch in which the gate
+        // refused at least half of the measurements offered counts as out of bounds too.
+        let offered = out.used + out.rejected_gate;
+        let mostly_gated = out.rejected_gate > 0 && 2 * out.rejected_gate >= offered;
+        let nis_outside = out.nis_dof > 0 && out.nis_sum > self.bound(out.nis_dof);
+        let outside = nis_outside || mostly_gated;
+        let informative = out.nis_dof > 0 || out.rejected_gate > 0;
         if outside {
             self.run += 1;
         } else if informative {
@@ -179,5 +182,37 @@ mod tests {
         assert_eq!(m.check(&gated), Verdict::Healthy);
         assert_eq!(m.check(&gated), Verdict::Healthy);
         assert_eq!(m.check(&epoch(f64::NAN, 4)), Verdict::NonFinite);
+    }
+
+    /// A filter that fits three of its eight ranges and gates the other five has an NIS
+    /// that looks normal; the epochs count against it all the same. One that gates a
+    /// minority (a few NLOS ranges in a canyon) does not.
+    #[test]
+    fn epochs_with_half_the_measurements_gated_count() {
+        let mut m = HealthMonitor::new(HealthConfig {
+            window_epochs: 3,
+            false_alarm: 1e-4,
+        });
+        let fits_few = EpochOutcome {
+            rejected: 5,
+            rejected_gate: 5,
+            ..epoch(2.5, 3)
+        };
+        let half = EpochOutcome {
+            rejected: 4,
+            rejected_gate: 4,
+            ..epoch(3.0, 4)
+        };
+        let minority = EpochOutcome {
+            rejected: 3,
+            rejected_gate: 3,
+            ..epoch(5.0, 5)
+        };
+        assert_eq!(m.check(&fits_few), Verdict::Healthy);
+        assert_eq!(m.check(&half), Verdict::Healthy);
+        assert_eq!(m.check(&fits_few), Verdict::Diverged);
+        for _ in 0..100 {
+            assert_eq!(m.check(&minority), Verdict::Healthy);
+        }
     }
 }
