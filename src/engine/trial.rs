@@ -213,7 +213,7 @@ pub fn simulate_observed(
             let mut out = est.process(&batch);
             // A diverged estimator is reported at this epoch and reset; it never hands
             // a non-finite estimate on (see `fusion::health`).
-            let verdict = health[k].check(&out);
+            let verdict = health[k].check_source(source_idx, &out);
             if verdict != Verdict::Healthy {
                 out.numerical_failure = true;
                 out.estimate = None;

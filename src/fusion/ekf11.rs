@@ -45,10 +45,15 @@
 //! range rate as `e·(v_s − v) + Δf`; differentiating eq. 9 gives `−e·(v_s − v) + Δf`
 //! instead (the range shrinks when the receiver moves towards the emitter), which is the
 //! sign used here and in [`crate::fusion::measurement::RangeMeasurement`]. Eq. 17 also drops
-//! the position derivative of the range rate; it is kept here because it costs nothing
-//! and is the exact Jacobian. For satellites it is below |v_s − v|/‖r_s − r‖ ≈ 4·10⁻⁵ per
-//! metre and changes nothing; for a nearby tower seen from a moving car it is the correct
-//! linearisation.
+//! the position derivative of the range rate; it is kept here by default because it costs
+//! nothing and is the exact Jacobian, and dropped with
+//! [`Ekf11Config::rate_position_jacobian`] = false, as seed 000's presets do to run the
+//! paper's filter. For satellites it is the transverse velocity over the range, about
+//! 3.9 km/s / 20 000 km ≈ 2·10⁻⁴ (m/s) per metre: small beside the ranges when four or
+//! more satellites fix the position, but at a range-rate σ of a few cm/s each Doppler
+//! then weighs like a ~150 m position observation, enough to hold a filter through a
+//! two-satellite outage (Doppler positioning). For a nearby tower seen from a moving car
+//! it is the correct linearisation.
 //!
 //! # Update
 //!
@@ -182,6 +187,13 @@ pub struct Ekf11Config {
     pub init_acc_sigma_mps2: f64,
     /// Initial 1-σ of the clock drift (m/s). Default 300 m/s, a 1 ppm frequency offset.
     pub init_clock_drift_sigma_mps: f64,
+    /// Whether the range-rate Jacobian keeps its position terms `∂ρ̇/∂r = −(w − u(u·w))/‖r_s −
+    /// r‖` (default true, the exact linearisation). The paper's eq. 17 drops them, and seed
+    /// 000's presets follow the paper: through them a satellite's transverse velocity
+    /// (≈ 3.9 km/s over 20 000 km, 2·10⁻⁴ (m/s) per metre) makes each Doppler a weak
+    /// observation of position, which keeps a GPS-only filter bounded through a
+    /// two-satellite outage that the paper's filter cannot coast through.
+    pub rate_position_jacobian: bool,
 }
 
 impl Default for Ekf11Config {
@@ -196,6 +208,7 @@ impl Default for Ekf11Config {
             init_vel_sigma_mps: 10.0,
             init_acc_sigma_mps2: 1.0,
             init_clock_drift_sigma_mps: 300.0,
+            rate_position_jacobian: true,
         }
     }
 }
@@ -628,8 +641,9 @@ impl Ekf11 {
         let w = m.emitter_vel_ecef_mps - self.velocity_ecef();
         let u_dot_w = u.dot(&w);
         let d_pos = -(w - u * u_dot_w) / dist_m;
-        // The non-zero entries of H in ascending state order (x, ẋ, y, ẏ, z, ż, ḃ).
-        let h = [
+        // The non-zero entries of H in ascending state order (x, ẋ, y, ẏ, z, ż, ḃ); without
+        // the position terms (eq. 17 as printed) only the velocity and drift entries.
+        let full = [
             (idx::POS[0], d_pos[0]),
             (idx::VEL[0], -u[0]),
             (idx::POS[1], d_pos[1]),
@@ -638,10 +652,21 @@ impl Ekf11 {
             (idx::VEL[2], -u[2]),
             (idx::CLOCK_DRIFT, 1.0),
         ];
+        let velocity_only = [
+            (idx::VEL[0], -u[0]),
+            (idx::VEL[1], -u[1]),
+            (idx::VEL[2], -u[2]),
+            (idx::CLOCK_DRIFT, 1.0),
+        ];
+        let h: &[(usize, f64)] = if self.cfg.rate_position_jacobian {
+            &full
+        } else {
+            &velocity_only
+        };
         let predicted_mps = u_dot_w + self.x[idx::CLOCK_DRIFT];
         let gate = self.cfg.gate_chi2;
         self.scalar_update(
-            &h,
+            h,
             rate_mps - predicted_mps,
             m.sigma_rate_mps * m.sigma_rate_mps,
             gate,
@@ -1420,6 +1445,60 @@ mod tests {
         // The ISB stays inert.
         assert_eq!(f.isb_bds_m(), 0.0);
         assert!(f.covariance().row(idx::ISB_BDS).iter().all(|&v| v == 0.0));
+    }
+
+    /// The position terms of the range-rate Jacobian: with them, a satellite's transverse
+    /// velocity turns a Doppler innovation into a position correction of the size the
+    /// finite-difference derivative of the predicted rate gives; without them (seed 000's
+    /// eq. 17) the position is untouched.
+    #[test]
+    fn range_rate_position_terms_follow_the_flag() {
+        let r = Geodetic::from_deg(40.0, 116.0, 50.0).to_ecef();
+        let sat = r * (26_560e3 / r.norm());
+        let u = (sat - r).normalize();
+        // 3.9 km/s across the line of sight, 300 m/s along it.
+        let across = u.cross(&Vector3::z()).normalize();
+        let v_sat = across * 3900.0 + u * 300.0;
+        let mut m = range_meas(System::Gps, sat, (sat - r).norm(), Some(300.0 + 0.05));
+        m.emitter_vel_ecef_mps = v_sat;
+        m.sigma_rate_mps = 0.02;
+        // The predicted rate u·(v_s − v) at r + δ, by finite differences along `across`.
+        let rate_at = |p: Vector3<f64>| (sat - p).normalize().dot(&v_sat);
+        let step = 10.0;
+        let fd = (rate_at(r + across * step) - rate_at(r - across * step)) / (2.0 * step);
+        let analytic = -(v_sat - u * u.dot(&v_sat)).dot(&across) / (sat - r).norm();
+        assert!(
+            (fd - analytic).abs() < 1e-9 * analytic.abs(),
+            "{fd} vs {analytic}"
+        );
+        assert!((analytic.abs() - 3900.0 / (sat - r).norm()).abs() < 1e-9);
+
+        // A position known to 1 km and a clock drift known to 1 cm/s, so that the rate
+        // innovation is shared between velocity and position.
+        let cfg = Ekf11Config {
+            init_clock_drift_sigma_mps: 0.01,
+            ..Default::default()
+        };
+        let start = |cfg: Ekf11Config| {
+            let mut f = Ekf11::new(cfg).unwrap();
+            f.initialise(r, 0.0, 1000.0, 100.0).unwrap();
+            f
+        };
+        let mut exact = start(cfg);
+        assert!(exact.update_range_rate(&m).is_accepted());
+        let moved = (exact.position_ecef() - r).dot(&across);
+        // K_pos ν ≈ σ_pos² |∂ρ̇/∂r| ν / (σ_v² + σ_pos² |∂ρ̇/∂r|²) ≈ 1e6 · 1.5e-4 · 0.05 / 100.
+        assert!(
+            (0.03..0.2).contains(&moved.abs()),
+            "the Doppler moved the position by {moved} m"
+        );
+        let mut paper = start(Ekf11Config {
+            rate_position_jacobian: false,
+            ..cfg
+        });
+        assert!(paper.update_range_rate(&m).is_accepted());
+        assert_eq!(paper.position_ecef(), r);
+        assert!((paper.velocity_ecef() - exact.velocity_ecef()).norm() < 1e-3);
     }
 
     #[test]

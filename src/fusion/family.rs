@@ -559,6 +559,14 @@ impl FamilyEstimator {
         rng: &TrialRng,
     ) -> Result<Self, String> {
         let mut ekf_cfg = ekf.unwrap_or_default();
+        if !ekf_cfg.rate_position_jacobian {
+            // The family's range-rate model is the exact one; dropping its position terms
+            // (seed 000's eq. 17 as printed) is an option of `ekf11` alone.
+            return Err(
+                "ekf.rate_position_jacobian = false is supported by filter = \"ekf11\" only; the filter family linearises range rates exactly"
+                    .into(),
+            );
+        }
         if systems.contains(&System::Bds)
             && systems.iter().any(|s| *s != System::Bds)
             && ekf_cfg.isb_bds.is_none()

@@ -57,11 +57,18 @@ pub enum Verdict {
     Diverged,
 }
 
+/// Sources whose runs of out-of-bound epochs are counted apart; more share the last.
+const SOURCE_SLOTS: usize = 8;
+
 /// One estimator's divergence watch over a trial.
+///
+/// The run of out-of-bound epochs is counted per source: an estimator that takes two
+/// sources (GNSS and a DTMB tower, say) may have diverged in what one of them sees while
+/// the other's single range still fits, and alternating batches must not hide it.
 #[derive(Clone, Debug)]
 pub struct HealthMonitor {
     cfg: HealthConfig,
-    run: u32,
+    runs: [u32; SOURCE_SLOTS],
     /// χ²_dof(1 − false_alarm) for dof = index, NaN until first needed.
     bound: [f64; CACHED_DOF + 1],
 }
@@ -70,7 +77,7 @@ impl HealthMonitor {
     pub fn new(cfg: HealthConfig) -> Self {
         Self {
             cfg,
-            run: 0,
+            runs: [0; SOURCE_SLOTS],
             bound: [f64::NAN; CACHED_DOF + 1],
         }
     }
@@ -88,9 +95,16 @@ impl HealthMonitor {
         }
     }
 
-    /// Checks one epoch's outcome; after a verdict other than `Healthy` the watch starts
-    /// afresh (the estimator is reset).
+    /// Checks one epoch's outcome of a single-source estimator; see [`Self::check_source`].
     pub fn check(&mut self, out: &EpochOutcome) -> Verdict {
+        self.check_source(0, out)
+    }
+
+    /// Checks one epoch's outcome, from the batch of source `source` (the engine's source
+    /// index); after a verdict other than `Healthy` the watch starts afresh (the estimator
+    /// is reset).
+    pub fn check_source(&mut self, source: usize, out: &EpochOutcome) -> Verdict {
+        let slot = source.min(SOURCE_SLOTS - 1);
         let finite_estimate = out.estimate.is_none_or(|e| {
             e.pos_ecef_m.iter().all(|v| v.is_finite())
                 && e.cov_pos_m2.iter().all(|v| v.is_finite())
@@ -98,25 +112,30 @@ impl HealthMonitor {
                     .is_none_or(|v| v.iter().all(|x| x.is_finite()))
         });
         if !finite_estimate || !out.nis_sum.is_finite() {
-            self.run = 0;
+            self.runs = [0; SOURCE_SLOTS];
             return Verdict::NonFinite;
         }
         // A filter that has drifted far enough can still fit a few of the measurements it
         // is given (those whose lines of sight are blind to its error) and refuse the
         // rest: the NIS of what it accepts looks normal. So an epoch in which the gate
-        // refused at least half of the measurements offered counts as out of bounds too.
+        // refused at least half of the measurements offered, or three or more and at
+        // least a quarter, counts as out of bounds too. A consistent filter gates 0.1 %
+        // of its measurements (the χ²(1) gate at 0.999); a run of ten such epochs is what
+        // a wrong state does, or an environment whose outliers persist for ten seconds on
+        // a quarter of the sky, which the shipped worlds do not have.
         let offered = out.used + out.rejected_gate;
-        let mostly_gated = out.rejected_gate > 0 && 2 * out.rejected_gate >= offered;
+        let mostly_gated = out.rejected_gate > 0 && 2 * out.rejected_gate >= offered
+            || out.rejected_gate >= 3 && 4 * out.rejected_gate >= offered;
         let nis_outside = out.nis_dof > 0 && out.nis_sum > self.bound(out.nis_dof);
         let outside = nis_outside || mostly_gated;
         let informative = out.nis_dof > 0 || out.rejected_gate > 0;
         if outside {
-            self.run += 1;
+            self.runs[slot] += 1;
         } else if informative {
-            self.run = 0;
+            self.runs[slot] = 0;
         }
-        if self.run >= self.cfg.window_epochs.max(1) {
-            self.run = 0;
+        if self.runs[slot] >= self.cfg.window_epochs.max(1) {
+            self.runs = [0; SOURCE_SLOTS];
             return Verdict::Diverged;
         }
         Verdict::Healthy
@@ -184,9 +203,40 @@ mod tests {
         assert_eq!(m.check(&epoch(f64::NAN, 4)), Verdict::NonFinite);
     }
 
+    /// Two sources: the out-of-bound GNSS epochs count up although each is followed by a
+    /// DTMB epoch that fits.
+    #[test]
+    fn runs_are_counted_per_source() {
+        let mut m = HealthMonitor::new(HealthConfig {
+            window_epochs: 3,
+            false_alarm: 1e-4,
+        });
+        let bad_gnss = EpochOutcome {
+            rejected: 4,
+            rejected_gate: 4,
+            ..epoch(2.0, 6)
+        };
+        let good_dtmb = epoch(0.5, 1);
+        assert_eq!(m.check_source(0, &bad_gnss), Verdict::Healthy);
+        assert_eq!(m.check_source(1, &good_dtmb), Verdict::Healthy);
+        assert_eq!(m.check_source(0, &bad_gnss), Verdict::Healthy);
+        assert_eq!(m.check_source(1, &good_dtmb), Verdict::Healthy);
+        assert_eq!(m.check_source(0, &bad_gnss), Verdict::Diverged);
+        // The same alternation through one stream never accumulates.
+        let mut one = HealthMonitor::new(HealthConfig {
+            window_epochs: 3,
+            false_alarm: 1e-4,
+        });
+        for _ in 0..10 {
+            assert_eq!(one.check(&bad_gnss), Verdict::Healthy);
+            assert_eq!(one.check(&good_dtmb), Verdict::Healthy);
+        }
+    }
+
     /// A filter that fits three of its eight ranges and gates the other five has an NIS
-    /// that looks normal; the epochs count against it all the same. One that gates a
-    /// minority (a few NLOS ranges in a canyon) does not.
+    /// that looks normal; the epochs count against it all the same, and so do epochs with
+    /// three of twelve gated. One that gates two of twelve (NLOS ranges in a canyon) does
+    /// not.
     #[test]
     fn epochs_with_half_the_measurements_gated_count() {
         let mut m = HealthMonitor::new(HealthConfig {
@@ -203,10 +253,11 @@ mod tests {
             rejected_gate: 4,
             ..epoch(3.0, 4)
         };
+        // Two NLOS ranges of twelve: healthy however long it lasts.
         let minority = EpochOutcome {
-            rejected: 3,
-            rejected_gate: 3,
-            ..epoch(5.0, 5)
+            rejected: 2,
+            rejected_gate: 2,
+            ..epoch(5.0, 10)
         };
         assert_eq!(m.check(&fits_few), Verdict::Healthy);
         assert_eq!(m.check(&half), Verdict::Healthy);
@@ -214,5 +265,14 @@ mod tests {
         for _ in 0..100 {
             assert_eq!(m.check(&minority), Verdict::Healthy);
         }
+        // Three of twelve, epoch after epoch: a state stuck off the truth.
+        let stuck = EpochOutcome {
+            rejected: 3,
+            rejected_gate: 3,
+            ..epoch(4.0, 9)
+        };
+        assert_eq!(m.check(&stuck), Verdict::Healthy);
+        assert_eq!(m.check(&stuck), Verdict::Healthy);
+        assert_eq!(m.check(&stuck), Verdict::Diverged);
     }
 }

@@ -18,28 +18,34 @@ pub struct Preset {
 pub const PRESETS: &[Preset] = &[
     Preset {
         name: "seed000-gps",
-        about: "seed 000 row 'GPS': the 11-state EKF (eqs. 4-8) on GPS pseudoranges and rates",
+        about: "seed 000 row 'GPS': the 11-state EKF (eqs. 4-8) on GPS pseudoranges and rates, range-rate Jacobian as eq. 17 prints it (no position terms)",
         toml: r#"name = "GPS"
 sources = ["gps"]
-filter = "ekf11""#,
+filter = "ekf11"
+[ekf]
+rate_position_jacobian = false"#,
     },
     Preset {
         name: "seed000-gps-dtmb",
-        about: "seed 000 row 'GPS + DTMB': GPS and DTMB pseudoranges sharing one clock",
+        about: "seed 000 row 'GPS + DTMB': GPS and DTMB pseudoranges sharing one clock, range-rate Jacobian as eq. 17",
         toml: r#"name = "GPS+DTMB"
 sources = ["gps", "dtmb"]
 filter = "ekf11"
-dtmb_clock_correction = {}"#,
+dtmb_clock_correction = {}
+[ekf]
+rate_position_jacobian = false"#,
     },
     Preset {
         name: "seed000-adaptive",
-        about: "seed 000 row 'Proposed': GPS + DTMB + FM fixes, modes A/B/C chosen by the fuzzy system",
+        about: "seed 000 row 'Proposed': GPS + DTMB + FM fixes, modes A/B/C chosen by the fuzzy system, range-rate Jacobian as eq. 17",
         toml: r#"name = "Proposed"
 sources = ["gps", "dtmb"]
 fixes = ["fm"]
 filter = "ekf11"
 selection = "fuzzy"
-dtmb_clock_correction = {}"#,
+dtmb_clock_correction = {}
+[ekf]
+rate_position_jacobian = false"#,
     },
     Preset {
         name: "seed001-pf",

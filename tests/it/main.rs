@@ -20,6 +20,7 @@ mod layout;
 mod metrics;
 mod montecarlo;
 mod motion_models;
+mod numerical_health;
 mod propagation;
 mod reliability;
 mod report;

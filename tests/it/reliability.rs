@@ -491,10 +491,12 @@ seed = 1
         if f[13] == "1" {
             assert_eq!(f[1], "\"stiff\"", "{line}");
             assert!(f[3].is_empty(), "a failure epoch has no estimate: {line}");
-            // The epoch before it had every measurement refused by the gate.
+            // The epoch before it had at least a quarter of its measurements (and three
+            // or more) refused by the gate.
             let p = previous.as_ref().expect("not the first row");
-            assert_eq!((p[1].as_str(), p[7].as_str()), ("\"stiff\"", "0"), "{p:?}");
-            assert_ne!(p[9], "0", "{p:?}");
+            assert_eq!(p[1], "\"stiff\"", "{p:?}");
+            let (used, gated): (u32, u32) = (p[7].parse().unwrap(), p[9].parse().unwrap());
+            assert!(gated >= 3 && 4 * gated >= used + gated, "{p:?}");
             failures.push((f[0].clone(), f[2].clone()));
         }
         previous = Some(f);
