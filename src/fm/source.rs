@@ -255,6 +255,11 @@ impl FmEpochTable {
         self.table.is_empty()
     }
 
+    /// Whether the byte bound stopped the table before the source's last epoch.
+    pub fn truncated(&self) -> bool {
+        self.table.truncated()
+    }
+
     /// Approximate heap bytes held.
     pub fn bytes(&self) -> usize {
         self.table.bytes() + self.warnings.iter().map(|w| w.len()).sum::<usize>()

@@ -800,3 +800,107 @@ impl Source for GnssSource {
         (next <= self.end).then_some(next)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::trial::truth_at;
+    use crate::gnss::receiver_clock::ReceiverClock;
+
+    /// The default world (Kehui Road's street, GNSS through its scene).
+    fn world() -> crate::world::World {
+        crate::world::load_world(
+            &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/default.toml"),
+        )
+        .unwrap()
+    }
+
+    fn source(w: &crate::world::World, rng: &TrialRng) -> GnssSource {
+        let cfg = w.file.sensors.gnss.clone().unwrap();
+        let clock = Arc::new(ClockTrack::record(
+            ReceiverClock::new(
+                &w.file.receiver.clock,
+                &mut rng.stream("receiver/clock/init"),
+            ),
+            w.duration_s,
+            0.1,
+            &mut rng.stream("receiver/clock"),
+        ));
+        GnssSource::new(
+            cfg,
+            Arc::clone(&w.nav),
+            w.shielding.clone(),
+            w.gnss_scene_view(),
+            clock,
+            rng,
+            SimTime::from_seconds(w.duration_s),
+        )
+    }
+
+    /// The run's table holds, at every epoch, the links the geometry computes at that
+    /// epoch's truth; a source serves an epoch from the table when the truth matches it
+    /// bit for bit, and computes it itself otherwise. The table used here is built with a
+    /// 40° mask instead of the receiver's 10°, so which one answered shows in the
+    /// elevations of the measurements.
+    #[test]
+    fn a_source_uses_the_table_exactly_at_the_truths_it_was_built_at() {
+        let w = world();
+        let traj = w.build_trajectory(&TrialRng::new(1, 0)).unwrap();
+        let mut truth_of = |t: SimTime| truth_at(&w.frame, w.start, traj.as_ref(), t);
+        let end = SimTime::from_seconds(w.duration_s);
+        let cfg = w.file.sensors.gnss.clone().unwrap();
+        let mut geometry = GnssGeometry::new(
+            &cfg,
+            Arc::clone(&w.nav),
+            w.shielding.clone(),
+            w.gnss_scene_view(),
+        );
+        let table = geometry.table(end, usize::MAX, &mut truth_of);
+        assert_eq!(table.len(), w.duration_s.floor() as usize + 1);
+        let mut links = Vec::new();
+        for k in [0, 1, 17, table.len() - 1] {
+            let truth = truth_of(SimTime(k as i64 * 1_000_000_000));
+            links.clear();
+            geometry.epoch(&truth, &mut links);
+            let (cached, ()) = table.epoch(&truth).unwrap();
+            assert!(!links.is_empty());
+            assert_eq!(cached, &links[..], "epoch {k}");
+        }
+
+        let high = GnssConfig {
+            elevation_mask_deg: 40.0,
+            ..cfg.clone()
+        };
+        let mut high_geometry = GnssGeometry::new(
+            &high,
+            Arc::clone(&w.nav),
+            w.shielding.clone(),
+            w.gnss_scene_view(),
+        );
+        let high_table = Arc::new(high_geometry.table(end, usize::MAX, &mut truth_of));
+        let rng = TrialRng::new(1, 0);
+        let mut src = source(&w, &rng).with_table(Some(high_table));
+        let lowest = |src: &mut GnssSource, truth: &Truth| {
+            let mut batch = MeasurementBatch::default();
+            src.sample(
+                &SampleContext {
+                    truth,
+                    estimates: &[],
+                },
+                &mut batch,
+            );
+            batch
+                .ranges()
+                .map(|r| r.elevation_rad.to_degrees())
+                .fold(90.0, f64::min)
+        };
+        let truth = truth_of(SimTime(0));
+        assert!(lowest(&mut src, &truth) >= 40.0, "served from the table");
+        let mut moved = truth_of(SimTime(1_000_000_000));
+        moved.pos_ecef_m.x += 1e-9;
+        assert!(
+            lowest(&mut src, &moved) < 40.0,
+            "computed at a truth the table lacks"
+        );
+    }
+}
