@@ -583,12 +583,12 @@ fn the_epoch_cache_changes_no_output_byte() {
             let part = world.epoch_cache(3).unwrap().unwrap();
             let g = part.gnss.as_ref().unwrap();
             assert!(
-                g.truncated() && g.len() > 0 && g.len() < gnss_epochs,
+                g.truncated() && !g.is_empty() && g.len() < gnss_epochs,
                 "{name}"
             );
             if let Some(f) = &part.fm {
                 assert!(
-                    f.truncated() && f.len() > 0 && f.len() < gnss_epochs,
+                    f.truncated() && !f.is_empty() && f.len() < gnss_epochs,
                     "{name}"
                 );
             }
