@@ -16,6 +16,10 @@
 //!
 //! An epoch whose search fails (no comparable RP, or no RP in the circle under the
 //! `error` policy) emits nothing; the failures are counted in [`FmSource::warnings`].
+//!
+//! The mean RSSI of step 1 depends only on the place and the master seed, so when the
+//! truth is the same in every trial of a run it is computed once per run
+//! ([`FmEpochTable`], see [`crate::engine::cache`]); the trial draws only the scan noise.
 
 use super::check;
 use super::database::FingerprintDb;
