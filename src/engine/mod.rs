@@ -5,6 +5,7 @@
 //! estimate is then visible to every source at its next event (the closed loop: DTMB search
 //! windows, FM reference-point circles and clock corrections use it in later issues).
 
+pub mod cache;
 pub mod queue;
 pub mod trial;
 

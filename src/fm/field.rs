@@ -435,10 +435,31 @@ impl FmField {
     /// station at `p_enu_m`, with the configured noise, quantisation and floor.
     pub fn scan(&mut self, p_enu_m: &Vector3<f64>, rng: &mut StreamRng, out: &mut [f64]) {
         self.mean_rssi_dbm(p_enu_m, out);
+        self.read_scan(rng, out);
+    }
+
+    /// The readings of a scan whose mean RSSI ([`FmField::mean_rssi_dbm`]) is in `out`:
+    /// noise, quantisation and floor, one draw per station in station order.
+    pub fn read_scan(&self, rng: &mut StreamRng, out: &mut [f64]) {
         let sigma = self.cfg.noise_sigma_db;
         for v in out.iter_mut() {
             *v = self.cfg.read(*v, sigma, rng);
         }
+    }
+
+    /// The validity log and the number of warnings so far: with the warnings themselves,
+    /// all the state [`FmField::mean_rssi_dbm`] carries from one call to the next.
+    pub fn log_state(&self) -> (ValidityLog, usize) {
+        (self.log, self.warnings.len())
+    }
+
+    /// Resumes from a state another field of the same stations reached
+    /// ([`FmField::log_state`] and its warnings), so that this field goes on warning
+    /// exactly as that one would have.
+    pub fn restore_log(&mut self, log: ValidityLog, warnings: &[String]) {
+        self.log = log;
+        self.warnings.clear();
+        self.warnings.extend_from_slice(warnings);
     }
 }
 

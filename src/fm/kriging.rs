@@ -391,6 +391,54 @@ fn max_pair_distance(xy: &[[f64; 2]], z: &[f64]) -> f64 {
     ((x1 - x0).powi(2) + (y1 - y0).powi(2)).sqrt()
 }
 
+/// The checks of [`OrdinaryKriging::new`] before it factorises: a valid model, at least two
+/// points, one value per point, every number finite.
+fn check_data(xy: &[[f64; 2]], z: &[f64], model: &VariogramModel) -> Result<(), FmError> {
+    model.validate()?;
+    let n = xy.len();
+    if n < 2 || z.len() != n {
+        return Err(FmError::Data(format!(
+            "expected at least 2 data points and one value per point, got {n} points and {} values",
+            z.len()
+        )));
+    }
+    if !xy.iter().flatten().chain(z).all(|v| v.is_finite()) {
+        return Err(FmError::Data(
+            "expected finite data positions and values for kriging".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// The error of a kriging system whose data points coincide (within [`ZERO_DISTANCE_M`]),
+/// found without factorising: points sorted by east, each compared with the next ones
+/// less than the tolerance further east.
+fn check_distinct(xy: &[[f64; 2]]) -> Result<(), FmError> {
+    let mut order: Vec<usize> = (0..xy.len()).collect();
+    order.sort_by(|&a, &b| xy[a][0].total_cmp(&xy[b][0]));
+    for (k, &i) in order.iter().enumerate() {
+        for &j in &order[k + 1..] {
+            if xy[j][0] - xy[i][0] > ZERO_DISTANCE_M {
+                break;
+            }
+            let h = ((xy[i][0] - xy[j][0]).powi(2) + (xy[i][1] - xy[j][1]).powi(2)).sqrt();
+            if h <= ZERO_DISTANCE_M {
+                return Err(FmError::Data("the kriging system is singular: two data points coincide (merge or remove duplicates)".into()));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// For each point of `grid`, the index of the datum of `xy` at exactly the same
+/// coordinates, if any.
+fn data_at(xy: &[[f64; 2]], grid: &[[f64; 2]]) -> Vec<Option<usize>> {
+    let key = |p: &[f64; 2]| (p[0].to_bits(), p[1].to_bits());
+    let index: std::collections::HashMap<(u64, u64), usize> =
+        xy.iter().enumerate().map(|(i, p)| (key(p), i)).collect();
+    grid.iter().map(|p| index.get(&key(p)).copied()).collect()
+}
+
 /// An ordinary kriging predictor: the system factorised once for a data set and model.
 pub struct OrdinaryKriging {
     xs: Vec<f64>,
@@ -405,19 +453,8 @@ impl OrdinaryKriging {
     /// Factorises the kriging system of the data `z` at `xy` under `model`. Errors for
     /// fewer than 2 points, non-finite values, or a singular system (repeated points).
     pub fn new(xy: &[[f64; 2]], z: &[f64], model: VariogramModel) -> Result<Self, FmError> {
-        model.validate()?;
+        check_data(xy, z, &model)?;
         let n = xy.len();
-        if n < 2 || z.len() != n {
-            return Err(FmError::Data(format!(
-                "expected at least 2 data points and one value per point, got {n} points and {} values",
-                z.len()
-            )));
-        }
-        if !xy.iter().flatten().chain(z).all(|v| v.is_finite()) {
-            return Err(FmError::Data(
-                "expected finite data positions and values for kriging".into(),
-            ));
-        }
         let mut a = DMatrix::<f64>::zeros(n + 1, n + 1);
         for i in 0..n {
             for j in i + 1..n {
@@ -500,6 +537,14 @@ pub struct ChannelKriging {
 /// that have a value on it. Channels with fewer than `min_points` values are left
 /// missing (NaN) on the grid. Returns the grid values (grid point × channel) and the
 /// fits.
+///
+/// Ordinary kriging is an exact interpolator (γ(0) = 0, see the module documentation):
+/// at a data point the predictor is the datum itself, λ = e_i. So a grid point that is a
+/// surveyed RP (same coordinates) takes the datum directly, and a channel whose grid
+/// points are all data points (seed 000's "without interpolation": the grid is the RPs)
+/// is not factorised at all. The factorised predictor gives the same value up to the
+/// rounding of the (n+1)² solve (about 1e-12 dB, tested); the variogram is fitted either
+/// way, for the report.
 pub fn krige_channels(
     rp_xy: &[[f64; 2]],
     rssi_dbm: &[f64],
@@ -533,10 +578,21 @@ pub fn krige_channels(
             continue;
         }
         let (fit, _) = fit_best(&xy, &z, opts)?;
-        let ok = OrdinaryKriging::new(&xy, &z, fit.model)?;
-        ok.predict_many(grid, &mut col);
+        let at = data_at(&xy, grid);
+        if at.iter().all(Option::is_some) {
+            // Every grid point is a datum: the checks of the factorisation, without it.
+            check_data(&xy, &z, &fit.model)?;
+            check_distinct(&xy)?;
+        } else {
+            let ok = OrdinaryKriging::new(&xy, &z, fit.model)?;
+            for ((v, p), a) in col.iter_mut().zip(grid).zip(&at) {
+                if a.is_none() {
+                    *v = ok.predict(*p);
+                }
+            }
+        }
         for (g, v) in col.iter().enumerate() {
-            out[g * channels + c] = *v;
+            out[g * channels + c] = at[g].map_or(*v, |i| z[i]);
         }
         report.push(ChannelKriging {
             fit: Some(fit),
@@ -602,6 +658,67 @@ mod tests {
         for p in [[10.0, 10.0], [500.0, -300.0], [150.0, 150.0]] {
             assert!((ok.predict(p) + 72.5).abs() < 1e-9);
         }
+    }
+
+    /// Kriging onto the surveyed points themselves: a complete channel is the survey, bit
+    /// for bit, and equals the factorised predictor to the rounding of the solve; a channel
+    /// with missing readings keeps its data and gets the factorised prediction (bit for
+    /// bit) at the RPs it lacks; a grid with one point between the RPs is predicted there.
+    #[test]
+    fn kriging_onto_the_data_points_returns_the_data() {
+        let (xy, z) = data(150);
+        let channels = 2;
+        let mut rssi = vec![0.0; xy.len() * channels];
+        for (i, v) in z.iter().enumerate() {
+            rssi[i * channels] = *v;
+            // Channel 1: the same field 3 dB weaker, missing at every seventh RP.
+            rssi[i * channels + 1] = if i % 7 == 3 { f64::NAN } else { v - 3.0 };
+        }
+        let opts = FitOptions::default();
+        let (grid_vals, report) = krige_channels(&xy, &rssi, channels, &xy, &opts, 10).unwrap();
+        // Channel 0: the data exactly, and the factorised predictor within 1e-9 dB.
+        let fit0 = report[0].fit.unwrap();
+        let ok0 = OrdinaryKriging::new(&xy, &z, fit0.model).unwrap();
+        let mut worst = 0.0f64;
+        for (i, p) in xy.iter().enumerate() {
+            assert_eq!(grid_vals[i * channels].to_bits(), z[i].to_bits());
+            worst = worst.max((ok0.predict(*p) - z[i]).abs());
+        }
+        assert!(
+            worst < 1e-9,
+            "factorised predictor at the data: {worst} dB off"
+        );
+        // Channel 1: data where surveyed, the factorised prediction where not.
+        let (xy1, z1): (Vec<[f64; 2]>, Vec<f64>) = xy
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| i % 7 != 3)
+            .map(|(i, p)| (*p, z[i] - 3.0))
+            .unzip();
+        let ok1 = OrdinaryKriging::new(&xy1, &z1, report[1].fit.unwrap().model).unwrap();
+        for (i, p) in xy.iter().enumerate() {
+            let got = grid_vals[i * channels + 1];
+            let want = if i % 7 == 3 {
+                ok1.predict(*p)
+            } else {
+                z[i] - 3.0
+            };
+            assert_eq!(got.to_bits(), want.to_bits(), "RP {i}");
+        }
+        // A grid point between the RPs is predicted, the others are the data.
+        let mut grid = xy[..5].to_vec();
+        grid.push([151.3, 77.7]);
+        let (vals, _) = krige_channels(&xy, &rssi, channels, &grid, &opts, 10).unwrap();
+        assert_eq!(
+            vals[5 * channels].to_bits(),
+            ok0.predict([151.3, 77.7]).to_bits()
+        );
+        assert_eq!(vals[2 * channels].to_bits(), z[2].to_bits());
+        // Coinciding RPs stay an error without a factorisation too.
+        let mut dup = xy.clone();
+        dup[9] = dup[4];
+        let e = krige_channels(&dup, &rssi, channels, &dup, &opts, 10).unwrap_err();
+        assert!(e.to_string().contains("coincide"), "{e}");
     }
 
     #[test]

@@ -16,6 +16,10 @@
 //!
 //! An epoch whose search fails (no comparable RP, or no RP in the circle under the
 //! `error` policy) emits nothing; the failures are counted in [`FmSource::warnings`].
+//!
+//! The mean RSSI of step 1 depends only on the place and the master seed, so when the
+//! truth is the same in every trial of a run it is computed once per run
+//! ([`FmEpochTable`], see [`crate::engine::cache`]); the trial draws only the scan noise.
 
 use super::check;
 use super::database::FingerprintDb;
@@ -24,9 +28,11 @@ use super::survey::SurveyConfig;
 use super::wknn::{locate, Constraint, ConstraintConfig, WknnConfig, WknnScratch};
 use crate::core::rng::StreamRng;
 use crate::core::{EnuFrame, SimTime, TrialRng};
-use crate::engine::{SampleContext, Source};
+use crate::engine::cache::EpochTable;
+use crate::engine::{SampleContext, Source, Truth};
 use crate::fusion::measurement::{Measurement, MeasurementBatch, PositionFix};
 use crate::motion::ConfigIssue;
+use crate::propagation::pathloss::ValidityLog;
 use crate::propagation::Scene;
 use serde::Deserialize;
 use std::sync::Arc;
@@ -193,10 +199,103 @@ fn prefixed(table: &str, c: ConfigIssue) -> ConfigIssue {
     ConfigIssue::new(format!("{table}.{}", c.key), c.message)
 }
 
+/// The mean RSSI of every station at every epoch of a run whose truth is the same in every
+/// trial (see [`crate::engine::cache`]), with the field's warning state after each epoch.
+#[derive(Debug)]
+pub struct FmEpochTable {
+    /// Per epoch: one mean RSSI (dBm) per station, and the field's validity log and
+    /// warning count after it.
+    table: EpochTable<f64, (ValidityLog, u32)>,
+    /// The field's warnings, in the order it gave them.
+    warnings: Vec<String>,
+}
+
+impl FmEpochTable {
+    /// Fills the table for the receiver `cfg` with the world's declared `stations`
+    /// (completed as [`FmSource::new`] completes them), `scene` and `master_seed`, at every
+    /// epoch `0, 1/rate, …, end`, `truth_of` giving the engine's truth at each; at most
+    /// `max_bytes`.
+    ///
+    /// # Errors
+    /// As [`FmSource::new`], for an invalid configuration or station.
+    pub fn build(
+        cfg: &FmSensorConfig,
+        stations: &[FmStation],
+        scene: Option<Arc<Scene>>,
+        master_seed: u64,
+        end: SimTime,
+        max_bytes: usize,
+        truth_of: &mut dyn FnMut(SimTime) -> Truth,
+    ) -> Result<Self, ConfigIssue> {
+        cfg.validate()?;
+        let mut field = source_field(cfg, stations, scene, master_seed)?;
+        let n = field.stations().len();
+        let table = EpochTable::build(
+            period_ns(cfg.rate_hz),
+            end,
+            max_bytes,
+            truth_of,
+            |truth, out| {
+                let k = out.len();
+                out.resize(k + n, 0.0);
+                field.mean_rssi_dbm(&truth.enu.pos_enu_m, &mut out[k..]);
+                let (log, warned) = field.log_state();
+                (log, warned as u32)
+            },
+        );
+        Ok(Self {
+            table,
+            warnings: field.warnings().to_vec(),
+        })
+    }
+
+    /// Epochs held.
+    pub fn len(&self) -> usize {
+        self.table.len()
+    }
+
+    /// Whether the table holds no epoch.
+    pub fn is_empty(&self) -> bool {
+        self.table.is_empty()
+    }
+
+    /// Whether the byte bound stopped the table before the source's last epoch.
+    pub fn truncated(&self) -> bool {
+        self.table.truncated()
+    }
+
+    /// Approximate heap bytes held.
+    pub fn bytes(&self) -> usize {
+        self.table.bytes() + self.warnings.iter().map(|w| w.len()).sum::<usize>()
+    }
+}
+
+/// The field a source of `cfg` measures: the declared stations completed to
+/// `synthetic_stations_total` with the master seed, the same completion (same seed, same
+/// stream) as the survey that built the database, so the synthetic stations are the same.
+fn source_field(
+    cfg: &FmSensorConfig,
+    stations: &[FmStation],
+    scene: Option<Arc<Scene>>,
+    master_seed: u64,
+) -> Result<FmField, ConfigIssue> {
+    let stations =
+        super::field::synthesize_stations(stations, cfg.synthetic_stations_total, master_seed);
+    FmField::new(cfg.field.clone(), stations, scene, master_seed)
+}
+
+fn period_ns(rate_hz: f64) -> i64 {
+    ((1e9 / rate_hz).round() as i64).max(1)
+}
+
 /// The FM fingerprinting source.
 pub struct FmSource {
     cfg: FmSensorConfig,
     field: FmField,
+    /// The run's cached mean RSSI; dropped at the first epoch it does not hold.
+    table: Option<Arc<FmEpochTable>>,
+    /// The field's warning state after the last epoch served from the table.
+    table_state: Option<(ValidityLog, u32)>,
     frame: EnuFrame,
     db: Arc<FingerprintDb>,
     aid: Option<usize>,
@@ -236,14 +335,7 @@ impl FmSource {
         end: SimTime,
     ) -> Result<Self, ConfigIssue> {
         cfg.validate()?;
-        // The same completion (same seed, same stream) as the survey that built the
-        // database, so the synthetic stations are the same ones.
-        let stations = super::field::synthesize_stations(
-            &stations,
-            cfg.synthetic_stations_total,
-            rng.master_seed(),
-        );
-        let field = FmField::new(cfg.field.clone(), stations, scene, rng.master_seed())?;
+        let field = source_field(&cfg, &stations, scene, rng.master_seed())?;
         let channel_station: Vec<Option<usize>> = db
             .channels()
             .iter()
@@ -260,10 +352,12 @@ impl FmSource {
         let n_st = field.stations().len();
         let n_ch = db.channels().len();
         Ok(Self {
-            period_ns: ((1e9 / cfg.rate_hz).round() as i64).max(1),
+            period_ns: period_ns(cfg.rate_hz),
             scratch: WknnScratch::new(cfg.wknn.k),
             cfg,
             field,
+            table: None,
+            table_state: None,
             frame,
             db,
             aid,
@@ -276,6 +370,33 @@ impl FmSource {
             failures: 0,
             last_failure: None,
         })
+    }
+
+    /// Uses the run's cached mean RSSI at the epochs `table` holds (built by
+    /// [`FmEpochTable::build`] for this source's configuration, stations, scene and master
+    /// seed); the scans, fixes and warnings are the same with or without it.
+    pub fn with_table(mut self, table: Option<Arc<FmEpochTable>>) -> Self {
+        self.table = table;
+        self
+    }
+
+    /// The mean RSSI of every station at `truth` into the scan buffer: from the table while
+    /// it holds the epochs, then (for good) from the field, which takes over the warning
+    /// state the table had reached.
+    fn mean_rssi(&mut self, truth: &Truth) {
+        if let Some(t) = &self.table {
+            if let Some((means, state)) = t.table.epoch(truth) {
+                self.scan_buf.copy_from_slice(means);
+                self.table_state = Some(*state);
+                return;
+            }
+            if let Some((log, warned)) = self.table_state {
+                self.field.restore_log(log, &t.warnings[..warned as usize]);
+            }
+            self.table = None;
+        }
+        self.field
+            .mean_rssi_dbm(&truth.enu.pos_enu_m, &mut self.scan_buf);
     }
 
     /// The constraint for this epoch from the aiding estimate, updating the time of the
@@ -315,8 +436,8 @@ impl Source for FmSource {
         out.source.clear();
         out.source.push_str("fm");
         let t_s = truth.sim.seconds();
-        self.field
-            .scan(&truth.enu.pos_enu_m, &mut self.rng, &mut self.scan_buf);
+        self.mean_rssi(truth);
+        self.field.read_scan(&mut self.rng, &mut self.scan_buf);
         for (m, st) in self.meas_buf.iter_mut().zip(&self.channel_station) {
             *m = st.map_or(f64::NAN, |s| self.scan_buf[s]);
         }
@@ -353,7 +474,10 @@ impl Source for FmSource {
     }
 
     fn warnings(&self) -> Vec<String> {
-        let mut w = self.field.warnings().to_vec();
+        let mut w = match (&self.table, self.table_state) {
+            (Some(t), Some((_, warned))) => t.warnings[..warned as usize].to_vec(),
+            _ => self.field.warnings().to_vec(),
+        };
         if let Some(last) = &self.last_failure {
             w.push(format!(
                 "FM fingerprinting produced no fix at {} epochs (last: {last})",

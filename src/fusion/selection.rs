@@ -16,7 +16,9 @@
 
 use crate::core::System;
 use crate::fusion::measurement::{Measurement, MeasurementBatch};
-use crate::fusion::mode::{seamless_mode, FuzzyConfig, FuzzyInputs, Mode, SeamlessMode};
+use crate::fusion::mode::{
+    seamless_mode, FuzzyConfig, FuzzyInputs, FuzzySystem, Mode, SeamlessMode,
+};
 use crate::fusion::wls;
 use nalgebra::Vector3;
 use serde::Deserialize;
@@ -81,10 +83,17 @@ fn shared_clock_gdop(
     wls::dop(rx, geometry, 1).map_or(f64::INFINITY, |d| d.gdop)
 }
 
+/// A selection scheme ready to run (the fuzzy system tabulated).
+#[derive(Clone, Debug)]
+enum Scheme {
+    Fuzzy(Box<FuzzySystem>),
+    Seamless,
+}
+
 /// The running state of a selection scheme.
 #[derive(Clone, Debug)]
 pub struct ModeSelector {
-    scheme: ModeSelection,
+    scheme: Scheme,
     /// Emitter positions of the GPS ranges of the last GNSS batch.
     gps: Vec<Vector3<f64>>,
     /// Emitter positions of the last DTMB batch.
@@ -104,7 +113,10 @@ impl ModeSelector {
             f.validate().map_err(|(k, m)| format!("fuzzy.{k}: {m}"))?;
         }
         Ok(Self {
-            scheme: scheme.clone(),
+            scheme: match scheme {
+                ModeSelection::Fuzzy(f) => Scheme::Fuzzy(Box::new(FuzzySystem::new(f))),
+                ModeSelection::Seamless => Scheme::Seamless,
+            },
             gps: Vec::with_capacity(32),
             dtmb: Vec::with_capacity(8),
             rp_count: 0,
@@ -154,7 +166,7 @@ impl ModeSelector {
         }
         let idx = |s: System| wls::system_index(s);
         match &self.scheme {
-            ModeSelection::Seamless => {
+            Scheme::Seamless => {
                 let mut systems = [false; wls::MAX_CLOCKS];
                 let label = match seamless_mode(self.gps.len()) {
                     SeamlessMode::GpsBds => {
@@ -180,13 +192,13 @@ impl ModeSelector {
                     fixes: true,
                 }
             }
-            ModeSelection::Fuzzy(cfg) => {
+            Scheme::Fuzzy(fuzzy) => {
                 let inputs = FuzzyInputs {
                     gdop_gps: shared_clock_gdop(rx, &self.gps, &[], &mut self.geometry),
                     gdop_gps_dtmb: shared_clock_gdop(rx, &self.gps, &self.dtmb, &mut self.geometry),
                     rp_count: f64::from(self.rp_count),
                 };
-                let mode = cfg.decide(&inputs).mode;
+                let mode = fuzzy.decide(&inputs).mode;
                 let mut systems = [true; wls::MAX_CLOCKS];
                 systems[idx(System::Dtmb)] = mode != Mode::A;
                 Admission {

@@ -254,18 +254,24 @@ fn accumulate<'a>(
             return None;
         }
         let col = clock_col[system_index(m.system())]?;
-        let mut h = UnknownVector::zeros();
-        h.fixed_rows_mut::<3>(0).copy_from(&(-los / d));
-        h[col] = 1.0;
+        let u = -los / d;
         let residual = m.pseudorange_m - (d + est[col]);
         let w = 1.0 / (m.sigma_m * m.sigma_m);
-        // Rank-one updates of the 7×7 sums; the inactive corner stays zero until padded.
-        let outer = h * h.transpose();
-        acc.normal += outer * w;
-        if with_geometry {
-            acc.geometry += outer;
+        // Rank-one updates of the 7×7 sums, h hᵀ w and h w r, over the four non-zero
+        // entries of h = [−uᵀ, e_col]: the other products are exact zeros, which leave a
+        // sum unchanged (a sum started at +0 is never −0), so this is the full update bit
+        // for bit (tested against it) without the 45 zero terms.
+        let (idx, hv) = ([0, 1, 2, col], [u.x, u.y, u.z, 1.0]);
+        for a in 0..4 {
+            for b in 0..4 {
+                let o = hv[a] * hv[b];
+                acc.normal[(idx[a], idx[b])] += o * w;
+                if with_geometry {
+                    acc.geometry[(idx[a], idx[b])] += o;
+                }
+            }
+            acc.rhs[idx[a]] += hv[a] * (w * residual);
         }
-        acc.rhs += h * (w * residual);
         acc.sum_sq_residual_m2 += residual * residual;
     }
     for k in n_unknowns..MAX_UNKNOWNS {
@@ -376,15 +382,23 @@ pub fn dop(
         if !(d > 1e-3 && d.is_finite()) {
             return None;
         }
-        let mut h = UnknownVector::zeros();
-        h.fixed_rows_mut::<3>(0).copy_from(&(-los / d));
-        h[3 + clock] = 1.0;
-        geometry += h * h.transpose();
+        add_outer(&mut geometry, &(-los / d), 3 + clock);
     }
     for k in (3 + n_clocks)..MAX_UNKNOWNS {
         geometry[(k, k)] = 1.0;
     }
     dop_of_geometry(&geometry, 3 + n_clocks, receiver_ecef_m)
+}
+
+/// `geometry += h hᵀ` for `h = [uᵀ, e_col]`, over the non-zero entries of h only (as in
+/// [`accumulate`]: the same sums bit for bit).
+fn add_outer(geometry: &mut NormalMatrix, u: &Vector3<f64>, col: usize) {
+    let (idx, hv) = ([0, 1, 2, col], [u.x, u.y, u.z, 1.0]);
+    for a in 0..4 {
+        for b in 0..4 {
+            geometry[(idx[a], idx[b])] += hv[a] * hv[b];
+        }
+    }
 }
 
 /// GDOP of emitters whose ranges all carry one clock — the GPS-only and GPS + DTMB
@@ -400,10 +414,7 @@ pub fn gdop(receiver_ecef_m: &Vector3<f64>, emitters: &[Vector3<f64>]) -> Option
         if !(d > 1e-3 && d.is_finite()) {
             return None;
         }
-        let mut h = UnknownVector::zeros();
-        h.fixed_rows_mut::<3>(0).copy_from(&(-los / d));
-        h[3] = 1.0;
-        geometry += h * h.transpose();
+        add_outer(&mut geometry, &(-los / d), 3);
     }
     for k in 4..MAX_UNKNOWNS {
         geometry[(k, k)] = 1.0;
@@ -441,6 +452,134 @@ mod tests {
                 frame.ecef_of_enu(&(u * 20_000e3))
             })
             .collect()
+    }
+
+    /// The full 7×7 updates of the textbook form (h hᵀ w, h hᵀ, h w r with nalgebra's
+    /// products), as `accumulate` was first written: the reference of the sparse loop.
+    fn reference_accumulate(
+        ms: &[RangeMeasurement],
+        est: &UnknownVector,
+        clock_col: &[Option<usize>; MAX_CLOCKS],
+        n_unknowns: usize,
+    ) -> Accumulation {
+        let pos = Vector3::new(est[0], est[1], est[2]);
+        let mut acc = Accumulation {
+            normal: NormalMatrix::zeros(),
+            rhs: UnknownVector::zeros(),
+            geometry: NormalMatrix::zeros(),
+            sum_sq_residual_m2: 0.0,
+        };
+        for m in ms {
+            let los = m.emitter_pos_ecef_m - pos;
+            let d = los.norm();
+            let col = clock_col[system_index(m.system())].unwrap();
+            let mut h = UnknownVector::zeros();
+            h.fixed_rows_mut::<3>(0).copy_from(&(-los / d));
+            h[col] = 1.0;
+            let residual = m.pseudorange_m - (d + est[col]);
+            let w = 1.0 / (m.sigma_m * m.sigma_m);
+            let outer = h * h.transpose();
+            acc.normal += outer * w;
+            acc.geometry += outer;
+            acc.rhs += h * (w * residual);
+            acc.sum_sq_residual_m2 += residual * residual;
+        }
+        for k in n_unknowns..MAX_UNKNOWNS {
+            acc.normal[(k, k)] = 1.0;
+            acc.geometry[(k, k)] = 1.0;
+        }
+        acc
+    }
+
+    /// The rank-one updates over the non-zero entries of h (`accumulate`, and `dop`
+    /// through `add_outer`) equal the full products bit for bit, over random geometries,
+    /// sigmas, system mixes and receiver positions, emitters on the receiver's axes (exact
+    /// and negative zeros in h) included.
+    #[test]
+    fn sparse_rank_one_updates_equal_the_full_products() {
+        use rand::Rng;
+        let mut rng = crate::core::TrialRng::new(11, 0).stream("test/wls/outer");
+        let frame = EnuFrame::new(Geodetic::from_deg(39.9, 116.4, 60.0));
+        let systems = [System::Gps, System::Bds, System::Dtmb, System::Tcofdm];
+        for trial in 0..500 {
+            let rx = frame.origin_ecef()
+                + Vector3::new(
+                    rng.random::<f64>() * 100.0,
+                    rng.random::<f64>() * 100.0,
+                    0.0,
+                );
+            let ms: Vec<RangeMeasurement> = (0..(4 + trial % 12))
+                .map(|k| {
+                    let mut e = rx
+                        + Vector3::new(
+                            rng.random::<f64>() - 0.5,
+                            rng.random::<f64>() - 0.5,
+                            rng.random::<f64>(),
+                        ) * 2e7;
+                    if k % 5 == 1 {
+                        e.x = rx.x; // u.x = −0.0
+                    }
+                    let sys = systems[rng.random_range(0..4)];
+                    let mut m = meas(sys, e, (e - rx).norm() + 100.0 * rng.random::<f64>());
+                    m.sigma_m = 0.5 + 10.0 * rng.random::<f64>();
+                    m
+                })
+                .collect();
+            let mut present = [false; MAX_CLOCKS];
+            for m in &ms {
+                present[system_index(m.system())] = true;
+            }
+            let mut clock_col = [None; MAX_CLOCKS];
+            let mut n_clocks = 0;
+            for (c, here) in clock_col.iter_mut().zip(present) {
+                if here {
+                    *c = Some(3 + n_clocks);
+                    n_clocks += 1;
+                }
+            }
+            let mut est = UnknownVector::zeros();
+            est.fixed_rows_mut::<3>(0)
+                .copy_from(&(rx + Vector3::repeat(30.0)));
+            est[3] = 55.0;
+            let a = accumulate(ms.iter(), &est, &clock_col, 3 + n_clocks, true).unwrap();
+            let b = reference_accumulate(&ms, &est, &clock_col, 3 + n_clocks);
+            let bits = |m: &NormalMatrix| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&a.normal), bits(&b.normal), "trial {trial}");
+            assert_eq!(bits(&a.geometry), bits(&b.geometry), "trial {trial}");
+            let vb = |v: &UnknownVector| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(vb(&a.rhs), vb(&b.rhs), "trial {trial}");
+            assert_eq!(
+                a.sum_sq_residual_m2.to_bits(),
+                b.sum_sq_residual_m2.to_bits()
+            );
+            // dop() with one shared clock against the reference geometry.
+            let tagged: Vec<_> = ms.iter().map(|m| (m.emitter_pos_ecef_m, 0)).collect();
+            let shared = [Some(3); MAX_CLOCKS];
+            let got = dop(&rx, &tagged, 1);
+            let want = dop_of_geometry(
+                &reference_accumulate(
+                    &ms,
+                    &{
+                        let mut e = est;
+                        e.fixed_rows_mut::<3>(0).copy_from(&rx);
+                        e
+                    },
+                    &shared,
+                    4,
+                )
+                .geometry,
+                4,
+                &rx,
+            );
+            assert_eq!(got, want, "trial {trial}");
+            assert_eq!(
+                gdop(
+                    &rx,
+                    &ms.iter().map(|m| m.emitter_pos_ecef_m).collect::<Vec<_>>()
+                ),
+                want.map(|d| d.gdop)
+            );
+        }
     }
 
     #[test]

@@ -30,11 +30,19 @@
 //! The σ the receiver reports to estimators is its own error model, which knows the
 //! magnitudes but not the realisations:
 //! σ² = σ_dll² + σ_URE² + ((σ_iono² + σ_iono,sat²)^½·I_model)² + (σ_trop·T_model)².
+//!
+//! The receiver is split in two: [`GnssGeometry`] computes everything above that does not
+//! depend on the trial's draws (satellites in view after shielding, transmit-time orbits,
+//! the scene's effect, I_model, T_model, the σs) as a list of [`LinkGeometry`], and
+//! [`GnssSource`] adds the trial's clock, atmosphere residuals, URE and tracking noise.
+//! When the truth is the same in every trial of a run the links are computed once per run
+//! ([`GnssEpochTable`], see [`crate::engine::cache`]).
 
 use crate::core::geodesy::{azimuth_elevation_with, ecef_to_enu_rotation};
 use crate::core::rng::{StreamRng, TrialRng};
 use crate::core::{EmitterId, EnuFrame, Geodetic, SimTime, System, C_MPS};
-use crate::engine::{SampleContext, Source};
+use crate::engine::cache::EpochTable;
+use crate::engine::{SampleContext, Source, Truth};
 use crate::fusion::measurement::{Measurement, MeasurementBatch, RangeMeasurement};
 use crate::gnss::atmosphere::{saastamoinen_m, Klobuchar};
 use crate::gnss::ephemeris::sagnac_rotate;
@@ -210,17 +218,280 @@ impl SceneView {
     }
 }
 
-/// The GNSS receiver source.
-pub struct GnssSource {
+/// The deterministic part of one tracked satellite link at one epoch: what the orbits, the
+/// receiver's position, the scene and the broadcast models fix, and nothing a trial draws.
+///
+/// A link is listed only when the receiver tracks it (not lost in the scene, C/N0 above
+/// the lock threshold). With `u = (r_s − r_r)/‖r_s − r_r‖` the trial adds, per the module
+/// documentation,
+///
+/// ```text
+/// ρ_corr  = range_m + c(δt_r + ISB_sys) + iono_model_m·k + tropo_model_m·k_T + e_ure
+///           + scene_code_m + sigma_dll_m·n
+/// ρ̇_corr = geometric_rate_mps + c·δṫ_r + scene_rate_mps + sigma_rate_mps·n'
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LinkGeometry {
+    /// The satellite's index in the receiver's channel list ([`GnssGeometry::satellites`]).
+    pub channel: u32,
+    pub el_rad: f64,
+    /// Transmit-time position and velocity in the reception-time ECEF frame.
+    pub pos_ecef_m: Vector3<f64>,
+    pub vel_ecef_mps: Vector3<f64>,
+    /// ‖r_s − r_r‖ (m).
+    pub range_m: f64,
+    /// u·(v_s − v_r) (m/s).
+    pub geometric_rate_mps: f64,
+    /// C/N0 after the scene (dB-Hz).
+    pub cn0_dbhz: f64,
+    /// The scene's code (multipath, NLOS) and range-rate errors.
+    pub scene_code_m: f64,
+    pub scene_rate_mps: f64,
+    /// Tracking-noise σ of the code and of the range rate at this C/N0.
+    pub sigma_dll_m: f64,
+    pub sigma_rate_mps: f64,
+    /// Klobuchar (scaled to the signal's frequency) and Saastamoinen delays (m).
+    pub iono_model_m: f64,
+    pub tropo_model_m: f64,
+    /// The σ the receiver reports.
+    pub sigma_m: f64,
+}
+
+/// The geometry half of the receiver: which satellites it tracks at an epoch and the
+/// deterministic terms of each link ([`LinkGeometry`]). A trial's [`GnssSource`] runs it
+/// at every epoch the run's [`GnssEpochTable`] does not hold.
+pub struct GnssGeometry {
     cfg: GnssConfig,
     nav: Arc<NavData>,
     klobuchar: Option<Klobuchar>,
     shielding: Vec<Shielding>,
     scene: Option<SceneView>,
+    sats: Vec<EmitterId>,
+    candidates: Vec<Candidate>,
+}
+
+/// The links of every epoch of a run whose truth does not change between trials (see
+/// [`crate::engine::cache`]).
+pub type GnssEpochTable = EpochTable<LinkGeometry>;
+
+impl GnssGeometry {
+    /// The geometry of a receiver configured by `cfg` (its systems, mask, tracking loops,
+    /// error budget, whether the scene applies).
+    pub fn new(
+        cfg: &GnssConfig,
+        nav: Arc<NavData>,
+        shielding: Vec<Shielding>,
+        scene: Option<SceneView>,
+    ) -> Self {
+        let sats: Vec<EmitterId> = nav
+            .satellites()
+            .into_iter()
+            .filter(|s| cfg.systems.contains(&s.system))
+            .collect();
+        Self {
+            cfg: cfg.clone(),
+            klobuchar: nav.klobuchar,
+            nav,
+            shielding,
+            scene: scene.filter(|_| cfg.scene),
+            candidates: Vec::with_capacity(sats.len()),
+            sats,
+        }
+    }
+
+    /// The receiver's channels: the satellites of its systems in the navigation data, in
+    /// id order.
+    pub fn satellites(&self) -> &[EmitterId] {
+        &self.sats
+    }
+
+    /// The epoch between sample times of a receiver at `rate_hz` (ns).
+    pub fn step_ns(rate_hz: f64) -> i64 {
+        (1e9 / rate_hz).round() as i64
+    }
+
+    /// Fills a table with the links of every epoch `0, step, …, end`, `truth_of` giving the
+    /// engine's truth at each; at most `max_bytes`.
+    pub fn table(
+        &mut self,
+        end: SimTime,
+        max_bytes: usize,
+        truth_of: &mut dyn FnMut(SimTime) -> Truth,
+    ) -> GnssEpochTable {
+        EpochTable::build(
+            Self::step_ns(self.cfg.rate_hz),
+            end,
+            max_bytes,
+            truth_of,
+            |truth, out| self.epoch(truth, out),
+        )
+    }
+
+    fn sigma_ure(&self, sys: System) -> f64 {
+        match sys {
+            System::Bds => self.cfg.errors.ure_bds_m,
+            _ => self.cfg.errors.ure_gps_m,
+        }
+    }
+
+    /// Applies the shielding windows active at `t_s` to the candidates.
+    fn apply_shielding(&mut self, t_s: f64) {
+        for w in &self.shielding {
+            if t_s < w.from_s || t_s >= w.to_s {
+                continue;
+            }
+            let sats = &self.sats;
+            match &w.rule {
+                ShieldingRule::KeepHighest(n) => {
+                    // Keep the N highest satellites of each system. Sorting by system,
+                    // then elevation (highest first), then id makes the choice independent
+                    // of the order of the navigation file.
+                    self.candidates.sort_by(|a, b| {
+                        let (sa, sb) = (sats[a.channel], sats[b.channel]);
+                        sa.system
+                            .cmp(&sb.system)
+                            .then(b.el_rad.total_cmp(&a.el_rad))
+                            .then(sa.cmp(&sb))
+                    });
+                    let mut kept = 0usize;
+                    let mut current: Option<System> = None;
+                    self.candidates.retain(|c| {
+                        let sys = sats[c.channel].system;
+                        if current != Some(sys) {
+                            current = Some(sys);
+                            kept = 0;
+                        }
+                        kept += 1;
+                        kept <= *n
+                    });
+                }
+                ShieldingRule::Keep(list) => {
+                    self.candidates.retain(|c| list.contains(&sats[c.channel]))
+                }
+                ShieldingRule::Block(list) => {
+                    self.candidates.retain(|c| !list.contains(&sats[c.channel]))
+                }
+            }
+        }
+    }
+
+    /// Appends the links the receiver tracks at `truth` to `out`, in channel order after
+    /// shielding (the order in which a trial draws their noise).
+    pub fn epoch(&mut self, truth: &Truth, out: &mut Vec<LinkGeometry>) {
+        let rx = truth.pos_ecef_m;
+        let rx_geo = Geodetic::from_ecef(&rx);
+        let rot = ecef_to_enu_rotation(rx_geo.lat_rad, rx_geo.lon_rad);
+        let mask = self.cfg.elevation_mask_deg.to_radians();
+
+        self.candidates.clear();
+        for (i, &sat) in self.sats.iter().enumerate() {
+            let Some((pos_rot, vel_rot, az, el)) =
+                satellite_in_view(&self.nav, sat, truth.t, &rx, &rot, mask)
+            else {
+                continue;
+            };
+            self.candidates.push(Candidate {
+                channel: i,
+                el_rad: el,
+                az_rad: az,
+                pos_rot,
+                vel_rot,
+            });
+        }
+        self.apply_shielding(truth.sim.seconds());
+
+        for k in 0..self.candidates.len() {
+            let c = self.candidates[k];
+            let sat = self.sats[c.channel];
+            let mut cn0 = self.cfg.tracking.cn0_dbhz(sat.system, c.el_rad);
+            let (mut scene_code_m, mut scene_rate_mps) = (0.0, 0.0);
+            if let (Some(view), Some(signal)) = (self.scene.as_mut(), Signal::of_system(sat.system))
+            {
+                let u_enu = view.frame.enu_vector_of_ecef(&(c.pos_rot - rx)).normalize();
+                let effect = scene_effect(
+                    &view.scene,
+                    &self.cfg.tracking,
+                    signal,
+                    &truth.enu.pos_enu_m,
+                    &truth.enu.vel_enu_mps,
+                    &u_enu,
+                    cn0,
+                    &mut view.paths,
+                );
+                if let Some(e) = effect {
+                    if e.class == LinkClass::Lost {
+                        continue;
+                    }
+                    cn0 = e.cn0_dbhz;
+                    scene_code_m = e.code_error_m;
+                    scene_rate_mps = e.range_rate_error_mps;
+                }
+            }
+            if !self.cfg.tracking.in_lock(cn0) {
+                continue;
+            }
+            let sigma_dll = self.cfg.tracking.code_sigma_m(sat.system, cn0);
+            let sigma_rate = self.cfg.tracking.rate_sigma_mps(sat.system, cn0);
+            let sigma_ure = self.sigma_ure(sat.system);
+            let freq_scale = if sat.system == System::Bds {
+                (F_L1_HZ / F_B1I_HZ).powi(2)
+            } else {
+                1.0
+            };
+            let iono_model = self.klobuchar.map_or(0.0, |k| {
+                k.delay_l1_m(rx_geo.lat_rad, rx_geo.lon_rad, c.az_rad, c.el_rad, truth.t)
+            }) * freq_scale;
+            let tropo_model = saastamoinen_m(
+                rx_geo.lat_rad,
+                rx_geo.h_m,
+                c.el_rad,
+                self.cfg.errors.humidity,
+            );
+            let los = c.pos_rot - rx;
+            let range = los.norm();
+            let u = los / range;
+            let sigma_m = (sigma_dll.powi(2)
+                + sigma_ure.powi(2)
+                + (self
+                    .cfg
+                    .errors
+                    .iono_residual
+                    .hypot(self.cfg.errors.iono_residual_per_sat)
+                    * iono_model)
+                    .powi(2)
+                + (self.cfg.errors.tropo_residual * tropo_model).powi(2))
+            .sqrt();
+            out.push(LinkGeometry {
+                channel: c.channel as u32,
+                el_rad: c.el_rad,
+                pos_ecef_m: c.pos_rot,
+                vel_ecef_mps: c.vel_rot,
+                range_m: range,
+                geometric_rate_mps: u.dot(&(c.vel_rot - truth.vel_ecef_mps)),
+                cn0_dbhz: cn0,
+                scene_code_m,
+                scene_rate_mps,
+                sigma_dll_m: sigma_dll,
+                sigma_rate_mps: sigma_rate,
+                iono_model_m: iono_model,
+                tropo_model_m: tropo_model,
+                sigma_m,
+            });
+        }
+    }
+}
+
+/// The GNSS receiver source.
+pub struct GnssSource {
+    cfg: GnssConfig,
+    geometry: GnssGeometry,
+    /// The run's cached links, when its truth is the same in every trial.
+    table: Option<Arc<GnssEpochTable>>,
     clock: Arc<ClockTrack>,
     tropo_factor: f64,
     channels: Vec<Channel>,
-    candidates: Vec<Candidate>,
+    /// This epoch's links when the table does not hold it.
+    links: Vec<LinkGeometry>,
     step_ns: i64,
     end: SimTime,
     last_sim: Option<SimTime>,
@@ -247,16 +518,13 @@ impl GnssSource {
         let mut iono_rng = rng.stream("gnss/iono");
         let z: f64 = iono_rng.sample(StandardNormal);
         let iono_common = cfg.errors.iono_residual * z;
-        let channels = nav
+        let geometry = GnssGeometry::new(&cfg, nav, shielding, scene);
+        let channels = geometry
             .satellites()
-            .into_iter()
-            .filter(|s| cfg.systems.contains(&s.system))
-            .map(|sat| {
+            .iter()
+            .map(|&sat| {
                 let mut r = rng.stream(&format!("gnss/{sat}"));
-                let sigma_ure = match sat.system {
-                    System::Bds => cfg.errors.ure_bds_m,
-                    _ => cfg.errors.ure_gps_m,
-                };
+                let sigma_ure = geometry.sigma_ure(sat.system);
                 let z_ure: f64 = r.sample(StandardNormal);
                 let z_iono: f64 = r.sample(StandardNormal);
                 let ure_m = sigma_ure * z_ure;
@@ -270,71 +538,106 @@ impl GnssSource {
                 }
             })
             .collect::<Vec<_>>();
-        let step_ns = (1e9 / cfg.rate_hz).round() as i64;
-        let klobuchar = nav.klobuchar;
-        let use_scene = cfg.scene;
         Self {
-            candidates: Vec::with_capacity(channels.len()),
+            links: Vec::with_capacity(channels.len()),
             channels,
+            step_ns: GnssGeometry::step_ns(cfg.rate_hz),
+            geometry,
+            table: None,
             cfg,
-            nav,
-            klobuchar,
-            scene: scene.filter(|_| use_scene),
-            shielding,
             clock,
             tropo_factor,
-            step_ns,
             end,
             last_sim: None,
             trial_rng: *rng,
         }
     }
 
-    fn sigma_ure(&self, sys: System) -> f64 {
-        match sys {
-            System::Bds => self.cfg.errors.ure_bds_m,
-            _ => self.cfg.errors.ure_gps_m,
-        }
+    /// Uses the run's cached links at the epochs `table` holds (built by
+    /// [`GnssGeometry::table`] for this receiver's configuration, world and truth); the
+    /// measurements are the same with or without it.
+    pub fn with_table(mut self, table: Option<Arc<GnssEpochTable>>) -> Self {
+        self.table = table;
+        self
     }
 
-    /// Applies the shielding windows active at `t_s` to the candidates.
-    fn apply_shielding(&mut self, t_s: f64) {
-        for w in &self.shielding {
-            if t_s < w.from_s || t_s >= w.to_s {
-                continue;
+    /// Draws this trial's errors on `links` and emits the measurements.
+    fn measure(&mut self, links: &[LinkGeometry], truth: &Truth, out: &mut MeasurementBatch) {
+        let dt_s = self
+            .last_sim
+            .map_or(0.0, |l| (truth.sim.0 - l.0) as f64 * 1e-9);
+        self.last_sim = Some(truth.sim);
+        let t_s = truth.sim.seconds();
+        let rx_bias_s = self.clock.bias_s(t_s);
+        let rx_drift = self.clock.drift_s_per_s(t_s);
+        // The user range error evolves as a first-order Gauss–Markov process between
+        // epochs: e_k = φ e_{k−1} + σ√(1 − φ²) n_k, φ = exp(−Δt/τ).
+        let phi = (-dt_s / self.cfg.errors.ure_tau_s).exp();
+        let gm_scale = (1.0 - phi * phi).sqrt();
+        for l in links {
+            let ch = &mut self.channels[l.channel as usize];
+            let sat = ch.sat;
+            let sigma_ure = self.geometry.sigma_ure(sat.system);
+            if dt_s > 0.0 {
+                let n: f64 = ch.rng.sample(StandardNormal);
+                ch.ure_m = phi * ch.ure_m + sigma_ure * gm_scale * n;
             }
-            let channels = &self.channels;
-            match &w.rule {
-                ShieldingRule::KeepHighest(n) => {
-                    // Keep the N highest satellites of each system. Sorting by system,
-                    // then elevation (highest first), then id makes the choice independent
-                    // of the order of the navigation file.
-                    self.candidates.sort_by(|a, b| {
-                        let (sa, sb) = (channels[a.channel].sat, channels[b.channel].sat);
-                        sa.system
-                            .cmp(&sb.system)
-                            .then(b.el_rad.total_cmp(&a.el_rad))
-                            .then(sa.cmp(&sb))
-                    });
-                    let mut kept = 0usize;
-                    let mut current: Option<System> = None;
-                    self.candidates.retain(|c| {
-                        let sys = channels[c.channel].sat.system;
-                        if current != Some(sys) {
-                            current = Some(sys);
-                            kept = 0;
-                        }
-                        kept += 1;
-                        kept <= *n
-                    });
-                }
-                ShieldingRule::Keep(list) => self
-                    .candidates
-                    .retain(|c| list.contains(&channels[c.channel].sat)),
-                ShieldingRule::Block(list) => self
-                    .candidates
-                    .retain(|c| !list.contains(&channels[c.channel].sat)),
+            let n_code: f64 = ch.rng.sample(StandardNormal);
+            let n_rate: f64 = ch.rng.sample(StandardNormal);
+            let isb_s = self.clock.isb_s(sat.system, t_s);
+            let pseudorange_m = l.range_m
+                + C_MPS * (rx_bias_s + isb_s)
+                + l.iono_model_m * ch.iono_factor
+                + l.tropo_model_m * self.tropo_factor
+                + ch.ure_m
+                + l.scene_code_m
+                + l.sigma_dll_m * n_code;
+            let range_rate = l.geometric_rate_mps
+                + C_MPS * rx_drift
+                + l.scene_rate_mps
+                + l.sigma_rate_mps * n_rate;
+            if let Some(raw) = out.raw.as_mut() {
+                let eph = self.geometry.nav.select(sat, truth.t);
+                let (clock_s, drift) = eph.map_or((0.0, 0.0), |e| {
+                    let st = e.state(truth.t.add_seconds(-l.range_m / C_MPS));
+                    // IS-GPS-200 §20.3.3.3.3.2 (L1 C/A) and BDS-SIS-ICD §5.2.4.10 (B1I):
+                    // the single-frequency user's satellite clock is Δt_sv − T_GD.
+                    (st.clock_s - e.tgd_s, st.clock_drift_s_per_s)
+                });
+                let geometry = RawGeometry {
+                    range_m: l.range_m,
+                    rx_clock_m: C_MPS * (rx_bias_s + isb_s),
+                    iono_m: l.iono_model_m * (1.0 + ch.iono_factor),
+                    tropo_m: l.tropo_model_m * (1.0 + self.tropo_factor),
+                    ure_m: ch.ure_m,
+                    sat_clock_m: C_MPS * clock_s,
+                    sat_drift_mps: C_MPS * drift,
+                };
+                raw.gnss.push(raw_observation(
+                    ch,
+                    &self.trial_rng,
+                    truth.sim,
+                    self.step_ns,
+                    &geometry,
+                    // The receiver removes the broadcast models it knows; the raw code has
+                    // them back, and the satellite clock it never had.
+                    pseudorange_m + l.iono_model_m + l.tropo_model_m - geometry.sat_clock_m,
+                    range_rate,
+                    l.cn0_dbhz,
+                    rx_bias_s,
+                ));
             }
+            out.items.push(Measurement::Range(RangeMeasurement {
+                emitter: sat,
+                emitter_pos_ecef_m: l.pos_ecef_m,
+                emitter_vel_ecef_mps: l.vel_ecef_mps,
+                pseudorange_m,
+                sigma_m: l.sigma_m,
+                range_rate_mps: self.cfg.range_rates.then_some(range_rate),
+                sigma_rate_mps: l.sigma_rate_mps,
+                cn0_dbhz: l.cn0_dbhz,
+                elevation_rad: l.el_rad,
+            }));
         }
     }
 }
@@ -476,168 +779,128 @@ impl Source for GnssSource {
 
     fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
         let truth = ctx.truth;
-        let dt_s = self
-            .last_sim
-            .map_or(0.0, |l| (truth.sim.0 - l.0) as f64 * 1e-9);
-        self.last_sim = Some(truth.sim);
         out.t = truth.t;
         out.source.clear();
         out.source.push_str("gnss");
-
-        let rx = truth.pos_ecef_m;
-        let rx_geo = Geodetic::from_ecef(&rx);
-        let rot = ecef_to_enu_rotation(rx_geo.lat_rad, rx_geo.lon_rad);
-        let mask = self.cfg.elevation_mask_deg.to_radians();
-
-        self.candidates.clear();
-        for (i, ch) in self.channels.iter().enumerate() {
-            let Some((pos_rot, vel_rot, az, el)) =
-                satellite_in_view(&self.nav, ch.sat, truth.t, &rx, &rot, mask)
-            else {
-                continue;
-            };
-            self.candidates.push(Candidate {
-                channel: i,
-                el_rad: el,
-                az_rad: az,
-                pos_rot,
-                vel_rot,
-            });
+        // The run's table when it holds this epoch at this truth, else this epoch's own
+        // geometry: the same links either way.
+        let table = self.table.take();
+        match table.as_deref().and_then(|t| t.epoch(truth)) {
+            Some((links, ())) => self.measure(links, truth, out),
+            None => {
+                let mut links = std::mem::take(&mut self.links);
+                links.clear();
+                self.geometry.epoch(truth, &mut links);
+                self.measure(&links, truth, out);
+                self.links = links;
+            }
         }
-        self.apply_shielding(truth.sim.seconds());
-
-        let t_s = truth.sim.seconds();
-        let rx_bias_s = self.clock.bias_s(t_s);
-        let rx_drift = self.clock.drift_s_per_s(t_s);
-        for k in 0..self.candidates.len() {
-            let c = self.candidates[k];
-            let sat = self.channels[c.channel].sat;
-            let mut cn0 = self.cfg.tracking.cn0_dbhz(sat.system, c.el_rad);
-            let (mut scene_code_m, mut scene_rate_mps) = (0.0, 0.0);
-            if let (Some(view), Some(signal)) = (self.scene.as_mut(), Signal::of_system(sat.system))
-            {
-                let u_enu = view.frame.enu_vector_of_ecef(&(c.pos_rot - rx)).normalize();
-                let effect = scene_effect(
-                    &view.scene,
-                    &self.cfg.tracking,
-                    signal,
-                    &truth.enu.pos_enu_m,
-                    &truth.enu.vel_enu_mps,
-                    &u_enu,
-                    cn0,
-                    &mut view.paths,
-                );
-                if let Some(e) = effect {
-                    if e.class == LinkClass::Lost {
-                        continue;
-                    }
-                    cn0 = e.cn0_dbhz;
-                    scene_code_m = e.code_error_m;
-                    scene_rate_mps = e.range_rate_error_mps;
-                }
-            }
-            if !self.cfg.tracking.in_lock(cn0) {
-                continue;
-            }
-            let sigma_dll = self.cfg.tracking.code_sigma_m(sat.system, cn0);
-            let sigma_rate = self.cfg.tracking.rate_sigma_mps(sat.system, cn0);
-            let sigma_ure = self.sigma_ure(sat.system);
-            let freq_scale = if sat.system == System::Bds {
-                (F_L1_HZ / F_B1I_HZ).powi(2)
-            } else {
-                1.0
-            };
-            let iono_model = self.klobuchar.map_or(0.0, |k| {
-                k.delay_l1_m(rx_geo.lat_rad, rx_geo.lon_rad, c.az_rad, c.el_rad, truth.t)
-            }) * freq_scale;
-            let tropo_model = saastamoinen_m(
-                rx_geo.lat_rad,
-                rx_geo.h_m,
-                c.el_rad,
-                self.cfg.errors.humidity,
-            );
-
-            let ch = &mut self.channels[c.channel];
-            // The user range error evolves as a first-order Gauss–Markov process between
-            // epochs: e_k = φ e_{k−1} + σ√(1 − φ²) n_k, φ = exp(−Δt/τ).
-            if dt_s > 0.0 {
-                let phi = (-dt_s / self.cfg.errors.ure_tau_s).exp();
-                let n: f64 = ch.rng.sample(StandardNormal);
-                ch.ure_m = phi * ch.ure_m + sigma_ure * (1.0 - phi * phi).sqrt() * n;
-            }
-            let n_code: f64 = ch.rng.sample(StandardNormal);
-            let n_rate: f64 = ch.rng.sample(StandardNormal);
-
-            let los = c.pos_rot - rx;
-            let range = los.norm();
-            let u = los / range;
-            let isb_s = self.clock.isb_s(sat.system, t_s);
-            let pseudorange_m = range
-                + C_MPS * (rx_bias_s + isb_s)
-                + iono_model * ch.iono_factor
-                + tropo_model * self.tropo_factor
-                + ch.ure_m
-                + scene_code_m
-                + sigma_dll * n_code;
-            let range_rate = u.dot(&(c.vel_rot - truth.vel_ecef_mps))
-                + C_MPS * rx_drift
-                + scene_rate_mps
-                + sigma_rate * n_rate;
-            let sigma_m = (sigma_dll.powi(2)
-                + sigma_ure.powi(2)
-                + (self
-                    .cfg
-                    .errors
-                    .iono_residual
-                    .hypot(self.cfg.errors.iono_residual_per_sat)
-                    * iono_model)
-                    .powi(2)
-                + (self.cfg.errors.tropo_residual * tropo_model).powi(2))
-            .sqrt();
-            if let Some(raw) = out.raw.as_mut() {
-                let eph = self.nav.select(sat, truth.t);
-                let (clock_s, drift) = eph.map_or((0.0, 0.0), |e| {
-                    let st = e.state(truth.t.add_seconds(-range / C_MPS));
-                    // IS-GPS-200 §20.3.3.3.3.2 (L1 C/A) and BDS-SIS-ICD §5.2.4.10 (B1I):
-                    // the single-frequency user's satellite clock is Δt_sv − T_GD.
-                    (st.clock_s - e.tgd_s, st.clock_drift_s_per_s)
-                });
-                let geometry = RawGeometry {
-                    range_m: range,
-                    rx_clock_m: C_MPS * (rx_bias_s + isb_s),
-                    iono_m: iono_model * (1.0 + ch.iono_factor),
-                    tropo_m: tropo_model * (1.0 + self.tropo_factor),
-                    ure_m: ch.ure_m,
-                    sat_clock_m: C_MPS * clock_s,
-                    sat_drift_mps: C_MPS * drift,
-                };
-                raw.gnss.push(raw_observation(
-                    ch,
-                    &self.trial_rng,
-                    truth.sim,
-                    self.step_ns,
-                    &geometry,
-                    // The receiver removes the broadcast models it knows; the raw code has
-                    // them back, and the satellite clock it never had.
-                    pseudorange_m + iono_model + tropo_model - geometry.sat_clock_m,
-                    range_rate,
-                    cn0,
-                    rx_bias_s,
-                ));
-            }
-            out.items.push(Measurement::Range(RangeMeasurement {
-                emitter: sat,
-                emitter_pos_ecef_m: c.pos_rot,
-                emitter_vel_ecef_mps: c.vel_rot,
-                pseudorange_m,
-                sigma_m,
-                range_rate_mps: self.cfg.range_rates.then_some(range_rate),
-                sigma_rate_mps: sigma_rate,
-                cn0_dbhz: cn0,
-                elevation_rad: c.el_rad,
-            }));
-        }
+        self.table = table;
         let next = SimTime(truth.sim.0 + self.step_ns);
         (next <= self.end).then_some(next)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::trial::truth_at;
+    use crate::gnss::receiver_clock::ReceiverClock;
+
+    /// The default world (Kehui Road's street, GNSS through its scene).
+    fn world() -> crate::world::World {
+        crate::world::load_world(
+            &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/default.toml"),
+        )
+        .unwrap()
+    }
+
+    fn source(w: &crate::world::World, rng: &TrialRng) -> GnssSource {
+        let cfg = w.file.sensors.gnss.clone().unwrap();
+        let clock = Arc::new(ClockTrack::record(
+            ReceiverClock::new(
+                &w.file.receiver.clock,
+                &mut rng.stream("receiver/clock/init"),
+            ),
+            w.duration_s,
+            0.1,
+            &mut rng.stream("receiver/clock"),
+        ));
+        GnssSource::new(
+            cfg,
+            Arc::clone(&w.nav),
+            w.shielding.clone(),
+            w.gnss_scene_view(),
+            clock,
+            rng,
+            SimTime::from_seconds(w.duration_s),
+        )
+    }
+
+    /// The run's table holds, at every epoch, the links the geometry computes at that
+    /// epoch's truth; a source serves an epoch from the table when the truth matches it
+    /// bit for bit, and computes it itself otherwise. The table used here is built with a
+    /// 40° mask instead of the receiver's 10°, so which one answered shows in the
+    /// elevations of the measurements.
+    #[test]
+    fn a_source_uses_the_table_exactly_at_the_truths_it_was_built_at() {
+        let w = world();
+        let traj = w.build_trajectory(&TrialRng::new(1, 0)).unwrap();
+        let mut truth_of = |t: SimTime| truth_at(&w.frame, w.start, traj.as_ref(), t);
+        let end = SimTime::from_seconds(w.duration_s);
+        let cfg = w.file.sensors.gnss.clone().unwrap();
+        let mut geometry = GnssGeometry::new(
+            &cfg,
+            Arc::clone(&w.nav),
+            w.shielding.clone(),
+            w.gnss_scene_view(),
+        );
+        let table = geometry.table(end, usize::MAX, &mut truth_of);
+        assert_eq!(table.len(), w.duration_s.floor() as usize + 1);
+        let mut links = Vec::new();
+        for k in [0, 1, 17, table.len() - 1] {
+            let truth = truth_of(SimTime(k as i64 * 1_000_000_000));
+            links.clear();
+            geometry.epoch(&truth, &mut links);
+            let (cached, ()) = table.epoch(&truth).unwrap();
+            assert!(!links.is_empty());
+            assert_eq!(cached, &links[..], "epoch {k}");
+        }
+
+        let high = GnssConfig {
+            elevation_mask_deg: 40.0,
+            ..cfg.clone()
+        };
+        let mut high_geometry = GnssGeometry::new(
+            &high,
+            Arc::clone(&w.nav),
+            w.shielding.clone(),
+            w.gnss_scene_view(),
+        );
+        let high_table = Arc::new(high_geometry.table(end, usize::MAX, &mut truth_of));
+        let rng = TrialRng::new(1, 0);
+        let mut src = source(&w, &rng).with_table(Some(high_table));
+        let lowest = |src: &mut GnssSource, truth: &Truth| {
+            let mut batch = MeasurementBatch::default();
+            src.sample(
+                &SampleContext {
+                    truth,
+                    estimates: &[],
+                },
+                &mut batch,
+            );
+            batch
+                .ranges()
+                .map(|r| r.elevation_rad.to_degrees())
+                .fold(90.0, f64::min)
+        };
+        let truth = truth_of(SimTime(0));
+        assert!(lowest(&mut src, &truth) >= 40.0, "served from the table");
+        let mut moved = truth_of(SimTime(1_000_000_000));
+        moved.pos_ecef_m.x += 1e-9;
+        assert!(
+            lowest(&mut src, &moved) < 40.0,
+            "computed at a truth the table lacks"
+        );
     }
 }

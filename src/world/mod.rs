@@ -84,6 +84,8 @@ pub struct World {
     pub transmitters: Vec<Transmitter>,
     /// The FM fingerprint database (see [`fm`]).
     pub fm_db: fm::FmDatabase,
+    /// The deterministic epochs every trial shares (see [`crate::engine::cache`]).
+    pub epoch_cache: crate::engine::cache::CacheSlot,
 }
 
 /// Everything a trial needs, freshly built from the world and the trial's random streams.
@@ -363,6 +365,7 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
         scene,
         transmitters,
         fm_db,
+        epoch_cache: Default::default(),
         file,
     })
 }
@@ -843,6 +846,48 @@ impl World {
             .collect())
     }
 
+    /// Whether the platform truth is the same in every trial: a waypoint plan or a static
+    /// platform draws nothing from the `motion/trajectory` stream (the Singer and turning
+    /// models do).
+    pub fn truth_is_deterministic(&self) -> bool {
+        use crate::motion::TrajectoryConfig as T;
+        matches!(
+            self.file.platform.trajectory,
+            T::Waypoints { .. } | T::Static { .. }
+        )
+    }
+
+    /// The deterministic epochs the trials of `master_seed` share, built on first use
+    /// (see [`crate::engine::cache`]); `None` when the truth changes from trial to trial,
+    /// or when the cache is off ([`World::set_epoch_cache`]).
+    ///
+    /// # Errors
+    /// When the cache cannot be built (as the trial itself could not be).
+    pub fn epoch_cache(
+        &self,
+        master_seed: u64,
+    ) -> Result<Option<Arc<crate::engine::cache::EpochCache>>, String> {
+        if !self.truth_is_deterministic() {
+            return Ok(None);
+        }
+        self.epoch_cache.get_or_build(master_seed, |bound| {
+            crate::engine::cache::EpochCache::build(self, master_seed, bound)
+        })
+    }
+
+    /// Turns the per-run epoch cache on (the default) or off. Outputs are byte-identical
+    /// either way; off, every trial computes every epoch's geometry itself.
+    pub fn set_epoch_cache(&self, enabled: bool) {
+        self.epoch_cache.set_enabled(enabled);
+    }
+
+    /// The receiver's view of the scene, when the world has one.
+    pub fn gnss_scene_view(&self) -> Option<SceneView> {
+        self.scene
+            .as_ref()
+            .map(|s| SceneView::new(Arc::clone(s), self.frame.clone()))
+    }
+
     /// Builds the trajectory, sources and estimators of one trial.
     ///
     /// # Errors
@@ -864,20 +909,20 @@ impl World {
             &mut rng.stream("receiver/clock"),
         ));
         let err = |t: &str, i: crate::motion::ConfigIssue| format!("{t}.{}: {}", i.key, i.message);
+        let cache = self.epoch_cache(rng.master_seed())?;
         if let Some(g) = &sensors.gnss {
-            let view = self
-                .scene
-                .as_ref()
-                .map(|s| SceneView::new(Arc::clone(s), self.frame.clone()));
-            sources.push(Box::new(GnssSource::new(
-                g.clone(),
-                Arc::clone(&self.nav),
-                self.shielding.clone(),
-                view,
-                Arc::clone(&clock),
-                rng,
-                end,
-            )));
+            sources.push(Box::new(
+                GnssSource::new(
+                    g.clone(),
+                    Arc::clone(&self.nav),
+                    self.shielding.clone(),
+                    self.gnss_scene_view(),
+                    Arc::clone(&clock),
+                    rng,
+                    end,
+                )
+                .with_table(cache.as_ref().and_then(|c| c.gnss.clone())),
+            ));
         }
         // A terrestrial receiver aided in closed loop centres its search on the first
         // estimator that uses its system.
@@ -965,7 +1010,8 @@ impl World {
                     aid,
                     end,
                 )
-                .map_err(|i| err("sensors.fm", i))?,
+                .map_err(|i| err("sensors.fm", i))?
+                .with_table(cache.as_ref().and_then(|c| c.fm.clone())),
             ));
         }
         let attitude = self.file.platform.attitude();

@@ -522,3 +522,94 @@ seed = 1
     assert_eq!(summary["estimators"][0]["numerical_failures"], 0);
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// Runs `trials` trials of `world` (seed 3) on `threads` threads into `dir`, as `hybridnav
+/// run` does.
+fn run_library(world: &::hybridnav::world::World, trials: u64, threads: usize, dir: &Path) {
+    let opts = ::hybridnav::montecarlo::RunOptions {
+        trials,
+        seed: 3,
+        threads,
+        progress: false,
+        shard: ::hybridnav::montecarlo::store::Shard::WHOLE,
+    };
+    let run_dir = ::hybridnav::montecarlo::store::RunDir::create(dir).expect("run directory");
+    ::hybridnav::montecarlo::run_into(world, &opts, &run_dir, false).expect("run");
+}
+
+/// The per-run epoch cache (`engine::cache`) changes no output byte: a world whose truth
+/// is the same in every trial runs with its cache (2 threads), with its tables bounded to
+/// a third of their epochs so that the later epochs are computed by each trial (1 thread),
+/// and with the cache off (1 thread), and the three runs write the same `summary.json`,
+/// `epochs.csv`, `trials.parquet` and trial files. Checked on the default world (GNSS
+/// only), Kehui Road (GNSS through a scene with shielding windows, measurement-level
+/// DTMB and 21 FM stations: both tables), the Beihang campus (FM database kriged from
+/// sparse RPs) and a world with a random trajectory (seed 003, no cache is built).
+#[test]
+fn the_epoch_cache_changes_no_output_byte() {
+    let d = tmp_dir("rel-cache");
+    for (name, trials) in [
+        ("default", 4),
+        ("seed000-kehui", 3),
+        ("seed000-beihang", 2),
+        ("seed003-seamless", 3),
+    ] {
+        let world = ::hybridnav::world::load_world(&repo().join(format!("worlds/{name}.toml")))
+            .expect("world loads");
+        let cache = world.epoch_cache(3).expect("cache builds");
+        let gnss_epochs = if name == "seed003-seamless" {
+            assert!(cache.is_none(), "a random trajectory has no cache");
+            0
+        } else {
+            let c = cache.expect("a waypoint world has a cache");
+            let g = c.gnss.as_ref().expect("GNSS links cached");
+            // Every epoch of the run: 1 Hz from 0 to the end of the trajectory.
+            assert_eq!(g.len(), world.duration_s.floor() as usize + 1, "{name}");
+            assert!(!g.truncated());
+            if name.starts_with("seed000") {
+                let f = c.fm.as_ref().expect("FM means cached");
+                assert_eq!(f.len(), g.len(), "{name}");
+            }
+            g.len()
+        };
+        let cached = d.join(format!("{name}-cached"));
+        run_library(&world, trials, 2, &cached);
+
+        let bounded = d.join(format!("{name}-bounded"));
+        if gnss_epochs > 0 {
+            // A bound of a third of the smaller table: both tables stop early.
+            let full = world.epoch_cache(3).unwrap().unwrap();
+            let bytes = full.gnss.as_ref().unwrap().bytes();
+            let bytes = full.fm.as_ref().map_or(bytes, |f| f.bytes().min(bytes));
+            world.epoch_cache.set_max_table_bytes(bytes / 3);
+            let part = world.epoch_cache(3).unwrap().unwrap();
+            let g = part.gnss.as_ref().unwrap();
+            assert!(
+                g.truncated() && !g.is_empty() && g.len() < gnss_epochs,
+                "{name}"
+            );
+            if let Some(f) = &part.fm {
+                assert!(
+                    f.truncated() && !f.is_empty() && f.len() < gnss_epochs,
+                    "{name}"
+                );
+            }
+            run_library(&world, trials, 1, &bounded);
+            assert_same_run(&cached, &bounded);
+            world.epoch_cache.set_max_table_bytes(0);
+        }
+
+        world.set_epoch_cache(false);
+        assert!(world.epoch_cache(3).unwrap().is_none());
+        let uncached = d.join(format!("{name}-uncached"));
+        run_library(&world, trials, 1, &uncached);
+        assert_same_run(&cached, &uncached);
+        // The report too (it is drawn from the same trials).
+        assert_eq!(
+            std::fs::read(cached.join("report.html")).unwrap(),
+            std::fs::read(uncached.join("report.html")).unwrap(),
+            "{name}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
