@@ -9,6 +9,7 @@
 
 use super::imu::{ImuConfig, ImuSample};
 use super::ins_ekf::{InsEkf, InsEkfConfig};
+use super::ins_family::{Cov6, InsFamilyFilter, InsKalmanConfig, InsKalmanKind};
 use super::source::local_earth_of;
 use super::strapdown::NavState;
 use super::LocalEarth;
@@ -44,6 +45,17 @@ fn d_max_lag() -> f64 {
 fn d_window() -> f64 {
     5.0
 }
+fn d_aleph() -> f64 {
+    crate::fusion::kalman::DEFAULT_ALEPH_THRESHOLD
+}
+fn d_forgetting() -> f64 {
+    0.95
+}
+fn d_builtin() -> InsKalmanKind {
+    InsKalmanKind::Builtin
+}
+/// The longest interval between two fixes whose difference still gives a velocity (s).
+const MAX_DIFFERENCE_INTERVAL_S: f64 = 2.0;
 
 /// Fixes kept for the position-only initialisation.
 const INIT_RING: usize = 16;
@@ -115,6 +127,38 @@ pub struct InsFilterConfig {
     /// 16) give the initial velocity and acceleration by a quadratic fit (s); default 5.
     #[serde(default = "d_window")]
     pub init_window_s: f64,
+    /// The filter on the error state: `"builtin"` (default, [`InsEkf`]), or seed 004's
+    /// comparison `"ekf"`, `"ckf"`, `"stf"`, `"rekf"` ([`InsFamilyFilter`]). The generic
+    /// filters always update with the position and the velocity difference (eq. 17): the
+    /// velocity from GNSS range rates when there are four, else the difference of this fix
+    /// and the previous one (at most 2 s before); a fix with neither is only remembered.
+    #[serde(default = "d_builtin")]
+    pub kalman: InsKalmanKind,
+    /// Seed 004's eq. 24 residual gate on each component of the difference, `C`
+    /// (generic filters only); default none.
+    #[serde(default)]
+    pub residual_gate_c: Option<f64>,
+    /// RE-KF: ℵ_threshold (eq. 38); default ½ ln 2.
+    #[serde(default = "d_aleph")]
+    pub aleph_threshold: f64,
+    /// STF: forgetting factor ρ (default 0.95) and weakening factor β (default 1).
+    #[serde(default = "d_forgetting")]
+    pub stf_forgetting: f64,
+    #[serde(default = "d_noise_scale")]
+    pub stf_weakening: f64,
+    /// Pool the pseudoranges of every fix source at one epoch (e.g. `"gnss"` and
+    /// `"tcofdm"`) into one least-squares fix, seed 004's joint TC-OFDM/GNSS solution
+    /// (eqs. 10–13); default false (one fix per GNSS batch, TC-OFDM ranges unused).
+    #[serde(default)]
+    pub joint_fix: bool,
+    /// σ of what a fix velocity does not describe of the IMU's motion, `[horizontal,
+    /// vertical]` (m/s), added in quadrature to the fix velocity's covariance; default
+    /// `[0, 0]`. A walker's receiver reports the velocity of the walk, while a handheld
+    /// or body-worn IMU also moves with the gait (`[platform.attitude]`'s bounce and
+    /// surge: amplitudes B/ω₀ vertically and S/ω₀ forward, so σ = B/(√2 ω₀) ≈ 0.25 m/s
+    /// and S/(√2 ω₀) ≈ 0.09 m/s for the default gait).
+    #[serde(default)]
+    pub fix_velocity_noise_mps: [f64; 2],
 }
 
 impl Default for InsFilterConfig {
@@ -129,6 +173,13 @@ impl Default for InsFilterConfig {
             nis_gate: None,
             max_fix_lag_s: d_max_lag(),
             init_window_s: d_window(),
+            kalman: InsKalmanKind::Builtin,
+            residual_gate_c: None,
+            aleph_threshold: d_aleph(),
+            stf_forgetting: d_forgetting(),
+            stf_weakening: 1.0,
+            joint_fix: false,
+            fix_velocity_noise_mps: [0.0, 0.0],
         }
     }
 }
@@ -198,7 +249,68 @@ impl InsFilterConfig {
             self.init_window_s,
             60.0,
             "a time window in s",
-        )
+        )?;
+        if let Some(c) = self.residual_gate_c {
+            positive("residual_gate_c", c, 1.0e3, "a gate factor C")?;
+        }
+        positive(
+            "aleph_threshold",
+            self.aleph_threshold,
+            1.0e3,
+            "a coupling-degree threshold",
+        )?;
+        positive(
+            "stf_forgetting",
+            self.stf_forgetting,
+            1.0,
+            "a forgetting factor ρ",
+        )?;
+        if !(self.stf_weakening.is_finite() && (1.0..=1.0e3).contains(&self.stf_weakening)) {
+            return Err(ConfigIssue::new(
+                "stf_weakening",
+                format!(
+                    "expected a weakening factor β within [1, 1000], got {}",
+                    self.stf_weakening
+                ),
+            ));
+        }
+        if self
+            .fix_velocity_noise_mps
+            .iter()
+            .any(|v| !(v.is_finite() && (0.0..=100.0).contains(v)))
+        {
+            return Err(ConfigIssue::new(
+                "fix_velocity_noise_mps",
+                format!(
+                    "expected [horizontal, vertical] σ in m/s within [0, 100], got {:?}",
+                    self.fix_velocity_noise_mps
+                ),
+            ));
+        }
+        if self.kalman == InsKalmanKind::Builtin {
+            for (key, set) in [
+                ("residual_gate_c", self.residual_gate_c.is_some()),
+                ("aleph_threshold", self.aleph_threshold != d_aleph()),
+            ] {
+                if set {
+                    return Err(ConfigIssue::new(
+                        key,
+                        "applies to kalman = \"ekf\", \"ckf\", \"stf\" or \"rekf\", not to the builtin filter",
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn kalman_config(&self) -> InsKalmanConfig {
+        InsKalmanConfig {
+            kind: self.kalman,
+            residual_gate_c: self.residual_gate_c,
+            aleph_threshold: self.aleph_threshold,
+            stf_forgetting: self.stf_forgetting,
+            stf_weakening: self.stf_weakening,
+        }
     }
 }
 
@@ -364,8 +476,10 @@ fn triad(
 }
 
 /// The loosely coupled INS of seed 004: strapdown mechanisation and the 15-state
-/// error-state filter ([`InsEkf`]) propagated with every `"imu"` sample and corrected with
-/// position (and velocity) fixes, closed loop.
+/// error-state filter propagated with every `"imu"` sample and corrected with position
+/// (and velocity) fixes, closed loop. The filter is [`InsEkf`] (`kalman = "builtin"`) or
+/// one of seed 004's four on the same error model ([`InsFamilyFilter`]: `"ekf"`, `"ckf"`,
+/// `"stf"`, `"rekf"`).
 ///
 /// # Initialisation
 ///
@@ -390,10 +504,22 @@ fn triad(
 ///
 /// # Fixes
 ///
+/// With `joint_fix`, the pseudoranges of every fix source at one epoch (GNSS and TC-OFDM)
+/// are pooled into one weighted least-squares fix with one clock per system (seed 004
+/// eqs. 10–13 write one clock; the simulated receiver has inter-system biases), solved
+/// when every fix source has reported at that time or when a later batch arrives.
+///
 /// A fix at time t_f is compared with the INS at its last sample time t_i, moved by the
-/// INS velocity: r_fix + v̂ (t_i − t_f) (|t_i − t_f| ≤ `max_fix_lag_s`, else rejected);
-/// with a GNSS velocity it is a joint position–velocity update (eqs. 16–19), otherwise a
-/// position update.
+/// INS velocity: r_fix + v̂ (t_i − t_f) (|t_i − t_f| ≤ `max_fix_lag_s`, else rejected).
+/// The builtin filter makes a joint position–velocity update with a GNSS velocity
+/// (eqs. 16–19), otherwise a position update. The generic filters always update position
+/// and velocity: with the GNSS velocity, or with `v = (r_k − r_{k−1})/Δt` from the
+/// previous fix (≤ 2 s before), whose covariance `(P_k + P_{k−1})/Δt²` and cross
+/// covariance `P_k/Δt` with the position enter `R` (its correlation with the previous
+/// epoch's position difference is not modelled); a fix with neither only becomes the
+/// previous fix. `fix_velocity_noise_mps` is added to the velocity's variance. For these
+/// filters `used` and `rejected` count the six components of the difference, and those
+/// the eq. 24 gate removed are reported as gated.
 pub struct InsEstimator {
     name: String,
     cfg: InsFilterConfig,
@@ -402,19 +528,62 @@ pub struct InsEstimator {
     start: GpsTime,
     systems: Vec<System>,
     ekf_cfg: InsEkfConfig,
-    kf: Option<InsEkf>,
+    kf: Option<InsCore>,
     f_sum_mps2: Vector3<f64>,
     f_count: u32,
     last_imu_t_s: Option<f64>,
     last_fix: Option<Fix>,
+    /// The previous fix the generic filters difference for a velocity.
+    prev_fix: Option<Fix>,
     /// Recent position fixes (t s, ENU m, horizontal variance m²) for the position-only
     /// initialisation.
     ring: [Option<(f64, Vector3<f64>, f64)>; INIT_RING],
     ring_next: usize,
     scratch: Vec<RangeMeasurement>,
     fixes: Vec<Fix>,
+    /// `joint_fix`: the epoch being collected, its ranges and which fix sources reported.
+    pending_t: Option<GpsTime>,
+    pending: Vec<RangeMeasurement>,
+    pending_seen: Vec<bool>,
     latest: Option<Estimate>,
     resets: u32,
+}
+
+/// The error-state filter an [`InsEstimator`] runs.
+enum InsCore {
+    Builtin(InsEkf),
+    Family(Box<InsFamilyFilter>),
+}
+
+impl InsCore {
+    fn state(&self) -> &NavState {
+        match self {
+            InsCore::Builtin(k) => k.state(),
+            InsCore::Family(k) => k.state(),
+        }
+    }
+
+    /// The position covariance now (ENU m²).
+    fn position_covariance_m2(&self) -> Matrix3<f64> {
+        match self {
+            InsCore::Builtin(k) => k.covariance().fixed_view::<3, 3>(0, 0).into_owned(),
+            InsCore::Family(k) => k.position_covariance_m2(),
+        }
+    }
+
+    fn covariance(&self) -> &super::ins_ekf::Cov15 {
+        match self {
+            InsCore::Builtin(k) => k.covariance(),
+            InsCore::Family(k) => k.covariance(),
+        }
+    }
+
+    fn propagate(&mut self, s: &ImuSample) {
+        match self {
+            InsCore::Builtin(k) => k.propagate(s),
+            InsCore::Family(k) => k.propagate(s),
+        }
+    }
 }
 
 impl InsEstimator {
@@ -459,18 +628,39 @@ impl InsEstimator {
             f_count: 0,
             last_imu_t_s: None,
             last_fix: None,
+            prev_fix: None,
             ring: [None; INIT_RING],
             ring_next: 0,
             scratch: Vec::with_capacity(64),
             fixes: Vec::with_capacity(4),
+            pending_t: None,
+            pending: Vec::with_capacity(64),
+            pending_seen: vec![false; cfg.fix_sources.len()],
             latest: None,
             resets: 0,
         })
     }
 
-    /// The filter, once initialised.
+    /// The builtin filter ([`InsEkf`]), once initialised; `None` before, or when a
+    /// generic filter runs ([`InsEstimator::family_filter`]).
     pub fn filter(&self) -> Option<&InsEkf> {
-        self.kf.as_ref()
+        match self.kf.as_ref()? {
+            InsCore::Builtin(k) => Some(k),
+            InsCore::Family(_) => None,
+        }
+    }
+
+    /// The generic filter (`kalman = "ekf"`, `"ckf"`, `"stf"`, `"rekf"`), once initialised.
+    pub fn family_filter(&self) -> Option<&InsFamilyFilter> {
+        match self.kf.as_ref()? {
+            InsCore::Builtin(_) => None,
+            InsCore::Family(k) => Some(k),
+        }
+    }
+
+    /// The navigation solution, once initialised (whatever the filter).
+    pub fn nav_state(&self) -> Option<&NavState> {
+        self.kf.as_ref().map(InsCore::state)
     }
 
     /// How many times a numerical failure reset the filter.
@@ -481,8 +671,7 @@ impl InsEstimator {
     fn estimate(&self, t: GpsTime) -> Option<Estimate> {
         let kf = self.kf.as_ref()?;
         let st = kf.state();
-        let p = kf.covariance();
-        let cov_enu: Matrix3<f64> = p.fixed_view::<3, 3>(0, 0).into_owned();
+        let cov_enu = kf.position_covariance_m2();
         Some(Estimate {
             t,
             pos_ecef_m: self.frame.ecef_of_enu(&st.pos_enu_m),
@@ -491,19 +680,22 @@ impl InsEstimator {
         })
     }
 
-    fn healthy(kf: &InsEkf) -> bool {
+    fn healthy(kf: &InsCore) -> bool {
         let st = kf.state();
         let p = kf.covariance();
+        let pos = kf.position_covariance_m2();
         st.pos_enu_m.iter().all(|v| v.is_finite())
             && st.vel_enu_mps.iter().all(|v| v.is_finite())
             && st.q_nb.coords.iter().all(|v| v.is_finite())
             && (0..15).all(|i| p[(i, i)].is_finite() && p[(i, i)] >= 0.0 && p[(i, i)] < 1e15)
+            && (0..3).all(|i| pos[(i, i)].is_finite() && pos[(i, i)] >= 0.0 && pos[(i, i)] < 1e15)
     }
 
     /// Drops the filter after a numerical failure; the next fixes re-initialise it.
     fn reset(&mut self, out: &mut EpochOutcome) {
         self.kf = None;
         self.last_fix = None;
+        self.prev_fix = None;
         self.ring = [None; INIT_RING];
         self.f_sum_mps2 = Vector3::zeros();
         self.f_count = 0;
@@ -538,6 +730,7 @@ impl InsEstimator {
     }
 
     fn apply_fix(&mut self, fix: &Fix, out: &mut EpochOutcome) {
+        let prev = self.prev_fix.replace(*fix);
         let Some(kf) = &mut self.kf else {
             self.try_initialise(fix);
             return;
@@ -549,13 +742,67 @@ impl InsEstimator {
             return;
         }
         let pos = fix.pos_enu_m + st.vel_enu_mps * lag;
-        let r = match &fix.vel {
-            Some((v, vc)) => kf.update_position_velocity(&pos, &fix.pos_cov_m2, v, vc),
-            None => kf.update_position(&pos, &fix.pos_cov_m2),
-        };
-        match r {
-            Ok(o) if o.accepted => out.used += fix.n,
-            _ => out.rejected += fix.n,
+        match kf {
+            InsCore::Builtin(kf) => {
+                let [nh, nv] = self.cfg.fix_velocity_noise_mps;
+                let extra = Matrix3::from_diagonal(&Vector3::new(nh * nh, nh * nh, nv * nv));
+                let r = match &fix.vel {
+                    Some((v, vc)) => {
+                        kf.update_position_velocity(&pos, &fix.pos_cov_m2, v, &(vc + extra))
+                    }
+                    None => kf.update_position(&pos, &fix.pos_cov_m2),
+                };
+                match r {
+                    Ok(o) if o.accepted => out.used += fix.n,
+                    _ => out.rejected += fix.n,
+                }
+            }
+            InsCore::Family(kf) => {
+                let mut r = Cov6::zeros();
+                r.fixed_view_mut::<3, 3>(0, 0).copy_from(&fix.pos_cov_m2);
+                let vel = match (&fix.vel, prev) {
+                    (Some((v, vc)), _) => {
+                        r.fixed_view_mut::<3, 3>(3, 3).copy_from(vc);
+                        *v
+                    }
+                    (None, Some(p))
+                        if fix.t_s > p.t_s && fix.t_s - p.t_s <= MAX_DIFFERENCE_INTERVAL_S =>
+                    {
+                        let dt = fix.t_s - p.t_s;
+                        let cross = fix.pos_cov_m2 / dt;
+                        r.fixed_view_mut::<3, 3>(3, 3)
+                            .copy_from(&((fix.pos_cov_m2 + p.pos_cov_m2) / (dt * dt)));
+                        r.fixed_view_mut::<3, 3>(0, 3).copy_from(&cross);
+                        r.fixed_view_mut::<3, 3>(3, 0).copy_from(&cross.transpose());
+                        (fix.pos_enu_m - p.pos_enu_m) / dt
+                    }
+                    // No velocity: the fix is only remembered for the next difference.
+                    _ => return,
+                };
+                let [nh, nv] = self.cfg.fix_velocity_noise_mps;
+                for (i, n) in [nh, nh, nv].iter().enumerate() {
+                    r[(3 + i, 3 + i)] += n * n;
+                }
+                let rep = kf.update(&pos, &vel, &r);
+                // Counted per component of the difference (eq. 17), which the gates act on.
+                // Like the builtin filter, no NIS goes to the engine's divergence watch:
+                // the paper's filters have no divergence detection and are compared as
+                // they are. A fully gated difference is reported, so a gate that locks
+                // out every fix for ten epochs still resets the filter.
+                out.used += rep.used;
+                out.rejected += rep.rejected;
+                let gated = match rep.outcome {
+                    crate::fusion::ekf11::UpdateOutcome::Accepted { .. } => {
+                        self.cfg.residual_gate_c.is_some()
+                    }
+                    crate::fusion::ekf11::UpdateOutcome::Rejected { reason, .. } => {
+                        reason == crate::fusion::ekf11::RejectReason::Gate
+                    }
+                };
+                if gated {
+                    out.rejected_gate += rep.rejected;
+                }
+            }
         }
     }
 
@@ -638,10 +885,99 @@ impl InsEstimator {
             vel_enu_mps: v,
             q_nb,
         };
-        let kf = InsEkf::new(init, self.earth, &c);
+        let kf = match self.cfg.kalman {
+            InsKalmanKind::Builtin => InsCore::Builtin(InsEkf::new(init, self.earth, &c)),
+            _ => match InsFamilyFilter::new(init, self.earth, &c, &self.cfg.kalman_config()) {
+                Ok(k) => InsCore::Family(Box::new(k)),
+                Err(_) => return,
+            },
+        };
         if Self::healthy(&kf) {
             self.kf = Some(kf);
             self.ring = [None; INIT_RING];
+        }
+    }
+
+    /// `joint_fix`: solves the collected epoch's pooled ranges (and GNSS velocity) as one
+    /// fix and applies it.
+    fn flush_joint(&mut self, out: &mut EpochOutcome) {
+        let Some(t) = self.pending_t.take() else {
+            return;
+        };
+        self.pending_seen.iter_mut().for_each(|s| *s = false);
+        if self.pending.is_empty() {
+            return;
+        }
+        let opts = WlsOptions {
+            initial_pos_ecef_m: self.latest.map(|e| e.pos_ecef_m),
+            ..WlsOptions::default()
+        };
+        let fix = match wls::solve(self.pending.iter(), &opts) {
+            Ok(fix) => fix,
+            Err(_) => {
+                out.rejected += self.pending.len() as u32;
+                self.pending.clear();
+                return;
+            }
+        };
+        let vel = if self.cfg.use_gnss_velocity {
+            velocity_from_rates(&self.pending, &fix.pos_ecef_m)
+                .map(|(v, c, _)| (self.frame.enu_vector_of_ecef(&v), enu_cov(&self.frame, &c)))
+        } else {
+            None
+        };
+        out.gdop = Some(fix.dop.gdop);
+        let f = Fix {
+            t_s: t.seconds_since(self.start),
+            pos_enu_m: self.frame.enu_of_ecef(&fix.pos_ecef_m),
+            pos_cov_m2: enu_cov(&self.frame, &fix.cov_pos_ecef_m2),
+            vel,
+            n: fix.n_measurements as u32,
+        };
+        self.pending.clear();
+        self.apply_fix(&f, out);
+    }
+
+    /// `joint_fix`: adds a fix source's batch to the epoch being collected.
+    fn collect_joint(&mut self, batch: &MeasurementBatch, out: &mut EpochOutcome) {
+        if self.pending_t.is_some_and(|t| t != batch.t) {
+            self.flush_joint(out);
+        }
+        self.pending_t = Some(batch.t);
+        let systems = &self.systems;
+        self.pending.extend(
+            batch
+                .ranges()
+                .filter(|m| systems.is_empty() || systems.contains(&m.system()))
+                .copied(),
+        );
+        if let Some(i) = self.cfg.fix_sources.iter().position(|s| *s == batch.source) {
+            self.pending_seen[i] = true;
+        }
+        // Position items of the batch (a fix source such as "fm") are fixes of their own.
+        let t_s = batch.t.seconds_since(self.start);
+        for m in &batch.items {
+            if let Measurement::Position(p) = m {
+                if p.pos_ecef_m
+                    .iter()
+                    .chain(p.cov_m2.iter())
+                    .all(|v| v.is_finite())
+                {
+                    let f = Fix {
+                        t_s,
+                        pos_enu_m: self.frame.enu_of_ecef(&p.pos_ecef_m),
+                        pos_cov_m2: enu_cov(&self.frame, &p.cov_m2),
+                        vel: None,
+                        n: 1,
+                    };
+                    self.apply_fix(&f, out);
+                } else {
+                    out.rejected += 1;
+                }
+            }
+        }
+        if self.pending_seen.iter().all(|s| *s) {
+            self.flush_joint(out);
         }
     }
 }
@@ -657,6 +993,9 @@ impl Estimator for InsEstimator {
 
     fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
         let mut out = EpochOutcome::default();
+        if self.cfg.joint_fix && self.pending_t.is_some_and(|t| batch.t > t) {
+            self.flush_joint(&mut out);
+        }
         if batch.source == "imu" {
             for m in &batch.items {
                 if let Measurement::Imu(s) = m {
@@ -664,25 +1003,29 @@ impl Estimator for InsEstimator {
                 }
             }
         } else if self.cfg.fix_sources.contains(&batch.source) {
-            let t_s = batch.t.seconds_since(self.start);
-            let near = self.latest.map(|e| e.pos_ecef_m);
-            let mut fixes = std::mem::take(&mut self.fixes);
-            fixes_of_batch(
-                batch,
-                t_s,
-                &self.frame,
-                &self.systems,
-                self.cfg.use_gnss_velocity,
-                near,
-                &mut self.scratch,
-                &mut fixes,
-                &mut out.rejected,
-                &mut out.gdop,
-            );
-            for f in &fixes {
-                self.apply_fix(f, &mut out);
+            if self.cfg.joint_fix {
+                self.collect_joint(batch, &mut out);
+            } else {
+                let t_s = batch.t.seconds_since(self.start);
+                let near = self.latest.map(|e| e.pos_ecef_m);
+                let mut fixes = std::mem::take(&mut self.fixes);
+                fixes_of_batch(
+                    batch,
+                    t_s,
+                    &self.frame,
+                    &self.systems,
+                    self.cfg.use_gnss_velocity,
+                    near,
+                    &mut self.scratch,
+                    &mut fixes,
+                    &mut out.rejected,
+                    &mut out.gdop,
+                );
+                for f in &fixes {
+                    self.apply_fix(f, &mut out);
+                }
+                self.fixes = fixes;
             }
-            self.fixes = fixes;
         }
         if self.kf.as_ref().is_some_and(|kf| !Self::healthy(kf)) {
             self.reset(&mut out);
@@ -699,6 +1042,9 @@ impl Estimator for InsEstimator {
 
     fn reset(&mut self) {
         self.reset(&mut EpochOutcome::default());
+        self.pending_t = None;
+        self.pending.clear();
+        self.pending_seen.iter_mut().for_each(|s| *s = false);
     }
 }
 
