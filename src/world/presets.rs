@@ -63,13 +63,14 @@ filter = "pdr""#,
     },
     Preset {
         name: "seed002-pdr-mag-dtmb",
-        about: "seed 002: PDR corrected by magnetic landmarks, each kept only if consistent with DTMB ranging (sec. 4.1)",
+        about: "seed 002: PDR corrected by magnetic landmarks, each kept only if consistent with DTMB ranging (sec. 4.1), and by the DTMB TPS-CFO range differences (sec. 3.2, 4.2)",
         toml: r#"name = "PDR+MAG/DTMB"
 sources = []
 filter = "pdr"
 [pdr]
 fix_sources = ["magnetic"]
-nis_gate = 13.8"#,
+nis_gate = 13.8
+range_difference_sources = ["dtmb"]"#,
     },
     Preset {
         name: "seed003-ekf",
