@@ -222,7 +222,7 @@ pub fn tps_mean_frequency_hz(paths: &[TpsPath], t_start_s: f64, t_end_s: f64) ->
         }
     }
     let span = t_end_s - t_start_s;
-    if !(span > 0.0) {
+    if span.is_nan() || span <= 0.0 {
         return instantaneous(p, &g, t_start_s);
     }
     // At least 16 points per beat period, at most 4096 per interval.

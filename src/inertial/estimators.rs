@@ -557,7 +557,7 @@ pub struct InsEstimator {
 
 /// The error-state filter an [`InsEstimator`] runs.
 enum InsCore {
-    Builtin(InsEkf),
+    Builtin(Box<InsEkf>),
     Family(Box<InsFamilyFilter>),
 }
 
@@ -892,7 +892,7 @@ impl InsEstimator {
             q_nb,
         };
         let kf = match self.cfg.kalman {
-            InsKalmanKind::Builtin => InsCore::Builtin(InsEkf::new(init, self.earth, &c)),
+            InsKalmanKind::Builtin => InsCore::Builtin(Box::new(InsEkf::new(init, self.earth, &c))),
             _ => match InsFamilyFilter::new(init, self.earth, &c, &self.cfg.kalman_config()) {
                 Ok(k) => InsCore::Family(Box::new(k)),
                 Err(_) => return,
@@ -1405,7 +1405,7 @@ impl PdrEstimator {
             return;
         };
         let dt = t.seconds_since(last);
-        if !(dt > 0.0) {
+        if dt.is_nan() || dt <= 0.0 {
             return;
         }
         // Brown & Hwang's two-state clock noise, S_b = h₀/2, S_d = 2π² h₋₂, in metres.
@@ -1558,7 +1558,7 @@ impl PdrEstimator {
             None => {
                 let d = Vector3::new(pos_now.x, pos_now.y, self.up_m) - tower;
                 let n = d.norm();
-                if !(n > 1.0) {
+                if n.is_nan() || n <= 1.0 {
                     return (false, false);
                 }
                 let u = Vector2::new(d.x / n, d.y / n);

@@ -196,7 +196,7 @@ impl MeasurementModel<15, 6> for InsDifferenceModel {
 /// The generic filter holding the error state.
 #[derive(Clone, Debug)]
 enum Core {
-    Ekf(Ekf<15>),
+    Ekf(Box<Ekf<15>>),
     Ckf(Box<SigmaPointKf<15>>),
     Stf(Box<StrongTrackingFilter<15, 6>>),
     Rekf(Box<RelativeEntropyKf<15>>),
@@ -243,7 +243,7 @@ impl InsFamilyFilter {
                     "the builtin INS filter is InsEkf, not a generic filter".into(),
                 ))
             }
-            InsKalmanKind::Ekf => Core::Ekf(Ekf::new(x0, p0)?.with_gating(gating)?),
+            InsKalmanKind::Ekf => Core::Ekf(Box::new(Ekf::new(x0, p0)?.with_gating(gating)?)),
             InsKalmanKind::Ckf => Core::Ckf(Box::new(
                 SigmaPointKf::cubature(x0, p0)?.with_gating(gating)?,
             )),
