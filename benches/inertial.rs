@@ -258,6 +258,41 @@ fn engine_epochs(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::W
     });
     assert!(ins.filter().is_some(), "the INS reset during the benchmark");
 
+    // The same epoch with seed 004's RE-KF on the error state (chained transition per
+    // sample, one generic-filter prediction and update per fix).
+    let rekf_cfg = InsFilterConfig {
+        fix_sources: vec!["fix".into()],
+        kalman: hybridnav::inertial::ins_family::InsKalmanKind::Rekf,
+        residual_gate_c: Some(3.0),
+        ..Default::default()
+    };
+    let mut rekf =
+        InsEstimator::new("RE-KF", &rekf_cfg, &imu_cfg, &[System::Gps], &frame, start).unwrap();
+    let mut k2 = 0u64;
+    while rekf.nav_state().is_none() && k2 < 5000 {
+        for _ in 0..100 {
+            feed(&mut rekf, &mut imu_batch, &mut k2);
+        }
+        fix_now(&mut rekf, k2);
+    }
+    assert!(
+        rekf.nav_state().is_some(),
+        "the RE-KF INS did not initialise"
+    );
+    g.bench_function("ins_rekf_estimator_imu_epoch", |b| {
+        b.iter(|| {
+            let out = feed(&mut rekf, &mut imu_batch, &mut k2);
+            if k2 % 100 == 0 {
+                fix_now(&mut rekf, k2);
+            }
+            black_box(out)
+        })
+    });
+    assert!(
+        rekf.family_filter().is_some(),
+        "the RE-KF INS reset during the benchmark"
+    );
+
     // A GNSS epoch of eight satellites around the INS position, at the INS time.
     let t_ins = ins.filter().unwrap().state().t_s;
     let rx = frame.ecef_of_enu(&ins.filter().unwrap().state().pos_enu_m);

@@ -34,7 +34,7 @@ use super::measurement::{
 };
 use super::pn::{PnMode, SAMPLE_RATE_HZ};
 use super::receiver::{FirstPathConfig, Receiver, Search, SyncConfig, MAX_FRAMES};
-use super::tps::tps_cfo_sigma_hz;
+use super::tps::{TpsErrorModel, TpsPath};
 use super::transmitter::{FrameSchedule, Transmitter, TxConfig};
 use crate::core::geodesy::{azimuth_elevation_with, ecef_to_enu_rotation};
 use crate::core::rng::StreamRng;
@@ -352,10 +352,9 @@ struct TowerState {
     tx: Option<Transmitter>,
     channel: Option<Channel>,
     receiver: Option<Receiver>,
-    /// TPS ranging: true range at the reference epoch and the accumulated error (m).
+    /// TPS ranging: true range at the reference epoch and the error model.
     tps_ref: Option<(GpsTime, f64)>,
-    tps_err_m: f64,
-    last_t_s: Option<f64>,
+    tps_model: TpsErrorModel,
 }
 
 /// The DTMB receiver as a measurement source.
@@ -473,6 +472,7 @@ impl DtmbSource {
             } else {
                 (None, None)
             };
+            let (spec_mode, spec_freq) = (spec.pn_mode, spec.freq_hz);
             states.push(TowerState {
                 timing: rng.stream(&format!("{name}/timing")),
                 noise: rng.stream(&format!("{name}/noise")),
@@ -483,8 +483,7 @@ impl DtmbSource {
                 channel: None,
                 receiver,
                 tps_ref: None,
-                tps_err_m: 0.0,
-                last_t_s: None,
+                tps_model: TpsErrorModel::new(spec_mode, spec_freq),
             });
         }
         let max_len = states
@@ -736,7 +735,7 @@ impl Source for DtmbSource {
                 elevation_rad: el,
             }));
             if self.cfg.range_differences {
-                let rd = self.range_difference(ti, truth.t, t_s, range_m, snr_peak_db);
+                let rd = self.range_difference(ti, truth, range_m, snr_peak_db, &dopplers);
                 out.items.push(Measurement::RangeDifference(rd));
             }
         }
@@ -747,35 +746,58 @@ impl Source for DtmbSource {
 
 impl DtmbSource {
     /// Seed 002's accumulated range difference at measurement level: the true range change
-    /// since the first epoch plus the accumulated TPS-CFO error. Frame-pair CFO errors
-    /// telescope (each frame's TPS phase noise enters two consecutive pairs with opposite
-    /// signs), so the accumulated phase error stays that of the two end frames,
-    /// `√2 σ_φ` with `σ_φ = 2π T_frame σ_f`, i.e. `λ √2 σ_φ / 2π` metres, a fresh draw per
-    /// epoch; the reported σ is that value.
+    /// since the first epoch plus the error of [`TpsErrorModel`] (the receiver
+    /// oscillator's wander about its static calibration, the integrated multipath Doppler
+    /// of the link's paths, the end frames' TPS phase noise). The reported σ is the white
+    /// TPS part; the correlated parts are for an estimator to model.
     fn range_difference(
         &mut self,
         ti: usize,
-        t: GpsTime,
-        t_s: f64,
+        truth: &crate::engine::Truth,
         range_m: f64,
         snr_db: f64,
+        dopplers: &[f64; crate::propagation::MAX_PATHS],
     ) -> RangeDifference {
+        let t_s = truth.sim.seconds();
         let st = &mut self.towers[ti];
-        let mode = st.spec.pn_mode;
         let lambda = C_MPS / st.spec.freq_hz;
-        let sigma_phi =
-            2.0 * std::f64::consts::PI * mode.frame_duration_s() * tps_cfo_sigma_hz(mode, snr_db);
-        let sigma_m = lambda * std::f64::consts::SQRT_2 * sigma_phi / (2.0 * std::f64::consts::PI);
-        let (t0, r0) = *st.tps_ref.get_or_insert((t, range_m));
-        let n: f64 = st.tps.sample(StandardNormal);
-        st.tps_err_m = n * sigma_m;
-        st.last_t_s = Some(t_s);
+        let to_tower = (st.spec.pos_enu_m - truth.enu.pos_enu_m).normalize();
+        let direct_hz = truth.enu.vel_enu_mps.dot(&to_tower) / lambda;
+        let mut paths = [TpsPath {
+            gain: Complex64::new(1.0, 0.0),
+            excess_delay_s: 0.0,
+            doppler_hz: direct_hz,
+        }; crate::propagation::MAX_PATHS];
+        let n = if self.scene.is_some() {
+            for (p, (tap, f)) in paths.iter_mut().zip(self.taps.iter().zip(dopplers)) {
+                *p = TpsPath {
+                    gain: tap.gain,
+                    excess_delay_s: tap.delay_samples / SAMPLE_RATE_HZ,
+                    doppler_hz: *f,
+                };
+            }
+            self.taps.len().min(paths.len())
+        } else {
+            1
+        };
+        let (t0, r0) = *st.tps_ref.get_or_insert((truth.t, range_m));
+        let n_thermal: f64 = st.tps.sample(StandardNormal);
+        let n_calibration: f64 = st.tps.sample(StandardNormal);
+        let e = st.tps_model.step(
+            t_s,
+            &self.clock,
+            &paths[..n],
+            direct_hz,
+            snr_db,
+            n_thermal,
+            n_calibration,
+        );
         RangeDifference {
             emitter: st.spec.id,
             emitter_pos_ecef_m: st.spec.pos_ecef_m,
             t0,
-            delta_range_m: range_m - r0 + st.tps_err_m,
-            sigma_m: sigma_m.max(1e-3),
+            delta_range_m: range_m - r0 + e.total_m(),
+            sigma_m: e.thermal_sigma_m.max(1e-3),
         }
     }
 

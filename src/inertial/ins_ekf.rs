@@ -146,49 +146,89 @@ pub struct InsEkf {
     f_n: Vector3<f64>,
 }
 
+/// The initial error covariance of [`InsEkfConfig`]: a diagonal in the order δr, δv, ψ
+/// (east and north tilt, then heading), δα, δε.
+pub fn initial_covariance(cfg: &InsEkfConfig) -> Cov15 {
+    let mut p = Cov15::zeros();
+    let tilt2 = cfg.init_tilt_sigma_rad.powi(2);
+    let diag = [
+        cfg.init_pos_sigma_m.powi(2),
+        cfg.init_pos_sigma_m.powi(2),
+        cfg.init_pos_sigma_m.powi(2),
+        cfg.init_vel_sigma_mps.powi(2),
+        cfg.init_vel_sigma_mps.powi(2),
+        cfg.init_vel_sigma_mps.powi(2),
+        tilt2,
+        tilt2,
+        cfg.init_heading_sigma_rad.powi(2),
+        cfg.init_accel_bias_sigma_mps2.powi(2),
+        cfg.init_accel_bias_sigma_mps2.powi(2),
+        cfg.init_accel_bias_sigma_mps2.powi(2),
+        cfg.init_gyro_bias_sigma_rps.powi(2),
+        cfg.init_gyro_bias_sigma_rps.powi(2),
+        cfg.init_gyro_bias_sigma_rps.powi(2),
+    ];
+    for (i, d) in diag.iter().enumerate() {
+        p[(i, i)] = *d;
+    }
+    p
+}
+
+/// The continuous process noise of [`InsEkfConfig`] as the diagonal of `G Q_c Gᵀ` per
+/// second (eqs. 7–8: VRW² on δv, ARW² on ψ, the Gauss–Markov drives 2σ²/τ plus the
+/// random-walk intensities on δα and δε), and `1/τ` (0 for no correlation time).
+pub fn process_noise_rate(cfg: &InsEkfConfig) -> (SVector<f64, 15>, f64) {
+    let tau = cfg.bias_corr_time_s;
+    let inv_tau = if tau.is_finite() && tau > 0.0 {
+        1.0 / tau
+    } else {
+        0.0
+    };
+    let qa = 2.0 * cfg.accel_bias_sigma_mps2.powi(2) * inv_tau + cfg.accel_bias_rw.powi(2);
+    let qg = 2.0 * cfg.gyro_bias_sigma_rps.powi(2) * inv_tau + cfg.gyro_bias_rw.powi(2);
+    let mut q = SVector::<f64, 15>::zeros();
+    for i in 0..3 {
+        q[3 + i] = cfg.accel_vrw_mps_per_sqrt_s.powi(2);
+        q[6 + i] = cfg.gyro_arw_rad_per_sqrt_s.powi(2);
+        q[9 + i] = qa;
+        q[12 + i] = qg;
+    }
+    (q, inv_tau)
+}
+
+/// The error dynamics matrix F of the module documentation at one IMU sample: `c` is
+/// Ĉ_b^n, `f_n` the specific force in ENU, `up_m` the INS height (for the gravity
+/// gradient) and `inv_tau` the bias correlation rate.
+pub fn error_dynamics(
+    earth: &LocalEarth,
+    c: &Matrix3<f64>,
+    f_n: &Vector3<f64>,
+    up_m: f64,
+    inv_tau: f64,
+) -> Cov15 {
+    let w_ie = skew(&earth.omega_ie_enu_rps);
+    let mut f = Cov15::zeros();
+    f.fixed_view_mut::<3, 3>(0, 3)
+        .copy_from(&Matrix3::identity());
+    f.fixed_view_mut::<3, 3>(3, 3).copy_from(&(-2.0 * w_ie));
+    f.fixed_view_mut::<3, 3>(3, 6).copy_from(&skew(f_n));
+    f.fixed_view_mut::<3, 3>(3, 9).copy_from(c);
+    f[(5, 2)] = -earth.gravity_gradient_per_s2(up_m);
+    f.fixed_view_mut::<3, 3>(6, 6).copy_from(&(-w_ie));
+    f.fixed_view_mut::<3, 3>(6, 12).copy_from(&(-c));
+    for i in 9..15 {
+        f[(i, i)] = -inv_tau;
+    }
+    f
+}
+
 impl InsEkf {
     /// A filter starting at `initial` with zero bias estimates.
     pub fn new(initial: NavState, earth: LocalEarth, cfg: &InsEkfConfig) -> Self {
-        let mut p = Cov15::zeros();
-        let tilt2 = cfg.init_tilt_sigma_rad.powi(2);
-        let diag = [
-            cfg.init_pos_sigma_m.powi(2),
-            cfg.init_pos_sigma_m.powi(2),
-            cfg.init_pos_sigma_m.powi(2),
-            cfg.init_vel_sigma_mps.powi(2),
-            cfg.init_vel_sigma_mps.powi(2),
-            cfg.init_vel_sigma_mps.powi(2),
-            tilt2,
-            tilt2,
-            cfg.init_heading_sigma_rad.powi(2),
-            cfg.init_accel_bias_sigma_mps2.powi(2),
-            cfg.init_accel_bias_sigma_mps2.powi(2),
-            cfg.init_accel_bias_sigma_mps2.powi(2),
-            cfg.init_gyro_bias_sigma_rps.powi(2),
-            cfg.init_gyro_bias_sigma_rps.powi(2),
-            cfg.init_gyro_bias_sigma_rps.powi(2),
-        ];
-        for (i, d) in diag.iter().enumerate() {
-            p[(i, i)] = *d;
-        }
-        let tau = cfg.bias_corr_time_s;
-        let inv_tau = if tau.is_finite() && tau > 0.0 {
-            1.0 / tau
-        } else {
-            0.0
-        };
-        let qa = 2.0 * cfg.accel_bias_sigma_mps2.powi(2) * inv_tau + cfg.accel_bias_rw.powi(2);
-        let qg = 2.0 * cfg.gyro_bias_sigma_rps.powi(2) * inv_tau + cfg.gyro_bias_rw.powi(2);
-        let mut q = SVector::<f64, 15>::zeros();
-        for i in 0..3 {
-            q[3 + i] = cfg.accel_vrw_mps_per_sqrt_s.powi(2);
-            q[6 + i] = cfg.gyro_arw_rad_per_sqrt_s.powi(2);
-            q[9 + i] = qa;
-            q[12 + i] = qg;
-        }
+        let (q, inv_tau) = process_noise_rate(cfg);
         Self {
             ins: Strapdown::new(initial, earth),
-            p,
+            p: initial_covariance(cfg),
             q_diag_rate: q,
             inv_tau,
             accel_bias_mps2: Vector3::zeros(),
@@ -240,20 +280,13 @@ impl InsEkf {
         let st = *self.ins.state();
         let c = st.q_nb.to_rotation_matrix().into_inner();
         self.f_n = c * f_b;
-        let earth = self.ins.earth();
-        let w_ie = skew(&earth.omega_ie_enu_rps);
-        let mut f = Cov15::zeros();
-        f.fixed_view_mut::<3, 3>(0, 3)
-            .copy_from(&Matrix3::identity());
-        f.fixed_view_mut::<3, 3>(3, 3).copy_from(&(-2.0 * w_ie));
-        f.fixed_view_mut::<3, 3>(3, 6).copy_from(&skew(&self.f_n));
-        f.fixed_view_mut::<3, 3>(3, 9).copy_from(&c);
-        f[(5, 2)] = -earth.gravity_gradient_per_s2(st.pos_enu_m.z);
-        f.fixed_view_mut::<3, 3>(6, 6).copy_from(&(-w_ie));
-        f.fixed_view_mut::<3, 3>(6, 12).copy_from(&(-c));
-        for i in 9..15 {
-            f[(i, i)] = -self.inv_tau;
-        }
+        let f = error_dynamics(
+            self.ins.earth(),
+            &c,
+            &self.f_n,
+            st.pos_enu_m.z,
+            self.inv_tau,
+        );
         let phi = Cov15::identity() + f * dt;
         self.p = phi * self.p * phi.transpose();
         for i in 0..15 {

@@ -40,6 +40,8 @@
 //! * [`strapdown`]: the mechanisation above.
 //! * [`ins_ekf`]: the psi-angle 15-state error-state Kalman filter (seed 004, eqs. 1–8,
 //!   14–19), closed loop.
+//! * [`ins_family`]: the same error model as a process and measurement model of the
+//!   generic Kalman family, so that seed 004's EKF, CKF, STF and RE-KF run on it.
 //! * [`magnetometer`]: a constant Earth field and a noisy three-axis magnetometer.
 //! * [`pdr`]: step detection, Weinberg step length and an AHRS heading.
 //! * [`source`]: the IMU (`"imu"`) and the PDR unit (`"pdr"`) as event-engine sources.
@@ -50,6 +52,7 @@ pub mod attitude;
 pub mod estimators;
 pub mod imu;
 pub mod ins_ekf;
+pub mod ins_family;
 pub mod magnetometer;
 pub mod pdr;
 pub mod source;

@@ -69,13 +69,14 @@ filter = "pdr""#,
     },
     Preset {
         name: "seed002-pdr-mag-dtmb",
-        about: "seed 002: PDR corrected by magnetic landmarks, each kept only if consistent with DTMB ranging (sec. 4.1)",
+        about: "seed 002: PDR corrected by magnetic landmarks, each kept only if consistent with DTMB ranging (sec. 4.1), and by the DTMB TPS-CFO range differences (sec. 3.2, 4.2)",
         toml: r#"name = "PDR+MAG/DTMB"
 sources = []
 filter = "pdr"
 [pdr]
 fix_sources = ["magnetic"]
-nis_gate = 13.8"#,
+nis_gate = 13.8
+range_difference_sources = ["dtmb"]"#,
     },
     Preset {
         name: "seed003-ekf",
@@ -103,31 +104,80 @@ model = "plane_turning""#,
     },
     Preset {
         name: "seed004-rekf",
-        about: "seed 004: relative-entropy KF (eqs. 33-41) with the eq. 24 residual gate, C = 3, on GNSS + TC-OFDM ranges",
+        about: "seed 004 'RE-KF': relative-entropy KF (eqs. 33-41) with the eq. 24 residual gate, C = 3, on the 15-state INS error state, loosely coupled with joint GNSS + TC-OFDM position and velocity fixes (eqs. 14-19)",
         toml: r#"name = "RE-KF"
+sources = ["gps", "bds", "tcofdm"]
+filter = "ins"
+[ins]
+kalman = "rekf"
+fix_sources = ["gnss", "tcofdm"]
+joint_fix = true
+fix_velocity_noise_mps = [0.1, 0.25]
+residual_gate_c = 3.0"#,
+    },
+    Preset {
+        name: "seed004-stf",
+        about: "seed 004's comparison 'STF': strong tracking filter on the same INS error state and fixes",
+        toml: r#"name = "STF"
+sources = ["gps", "bds", "tcofdm"]
+filter = "ins"
+[ins]
+kalman = "stf"
+fix_sources = ["gnss", "tcofdm"]
+joint_fix = true
+fix_velocity_noise_mps = [0.1, 0.25]"#,
+    },
+    Preset {
+        name: "seed004-ckf",
+        about: "seed 004's comparison 'CKF': cubature Kalman filter on the same INS error state and fixes",
+        toml: r#"name = "CKF"
+sources = ["gps", "bds", "tcofdm"]
+filter = "ins"
+[ins]
+kalman = "ckf"
+fix_sources = ["gnss", "tcofdm"]
+joint_fix = true
+fix_velocity_noise_mps = [0.1, 0.25]"#,
+    },
+    Preset {
+        name: "seed004-ekf",
+        about: "seed 004's comparison 'EKF': the generic EKF (Joseph form) on the same INS error state and fixes",
+        toml: r#"name = "EKF"
+sources = ["gps", "bds", "tcofdm"]
+filter = "ins"
+[ins]
+kalman = "ekf"
+fix_sources = ["gnss", "tcofdm"]
+joint_fix = true
+fix_velocity_noise_mps = [0.1, 0.25]"#,
+    },
+    Preset {
+        name: "seed004-rekf-ranges",
+        about: "seed 004's RE-KF with the eq. 24 gate, C = 3, on seed 000's 12-state PVA + clock model with the GNSS + TC-OFDM pseudoranges (no INS)",
+        toml: r#"name = "RE-KF (ranges)"
 sources = ["gps", "bds", "tcofdm"]
 filter = "rekf"
 [options]
 residual_gate_c = 3.0"#,
     },
     Preset {
-        name: "seed004-stf",
-        about: "seed 004's comparison: strong tracking filter on the same measurements",
-        toml: r#"name = "STF"
+        name: "seed004-stf-ranges",
+        about: "the strong tracking filter on the same pseudoranges and model (no INS)",
+        toml: r#"name = "STF (ranges)"
 sources = ["gps", "bds", "tcofdm"]
 filter = "stf""#,
     },
     Preset {
-        name: "seed004-ckf",
-        about: "seed 004's comparison: cubature Kalman filter on the same measurements",
-        toml: r#"name = "CKF"
+        name: "seed004-ckf-ranges",
+        about: "the cubature Kalman filter on the same pseudoranges and model (no INS)",
+        toml: r#"name = "CKF (ranges)"
 sources = ["gps", "bds", "tcofdm"]
 filter = "ckf""#,
     },
     Preset {
-        name: "seed004-ekf",
-        about: "seed 004's comparison: EKF (Joseph form) on the same measurements",
-        toml: r#"name = "EKF"
+        name: "seed004-ekf-ranges",
+        about: "the EKF (Joseph form) on the same pseudoranges and model (no INS)",
+        toml: r#"name = "EKF (ranges)"
 sources = ["gps", "bds", "tcofdm"]
 filter = "ekf""#,
     },

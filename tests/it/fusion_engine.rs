@@ -102,7 +102,7 @@ sources = ["gps", "bds"]
 process = { model = "pva_clock" }
 
 [[estimator]]
-preset = "seed004-rekf"
+preset = "seed004-rekf-ranges"
 name = "RE-KF (GNSS)"
 sources = ["gps", "bds"]
 "#,
