@@ -533,6 +533,22 @@ impl<const N: usize> SigmaPointKf<N> {
         Ok(self)
     }
 
+    /// Restarts the filter from `x0`, `p0` (keeping its rule and gating), as after a
+    /// divergence or when a state is (re)initialised.
+    ///
+    /// # Errors
+    /// When `x0` or `p0` is not finite or `p0` is not a covariance.
+    pub fn restart(
+        &mut self,
+        x0: SVector<f64, N>,
+        p0: SMatrix<f64, N, N>,
+    ) -> Result<(), FilterError> {
+        check_prior(&x0, &p0)?;
+        self.x = x0;
+        self.p = p0;
+        Ok(())
+    }
+
     /// The sigma-point rule.
     pub fn rule(&self) -> SigmaRule {
         self.rule
@@ -548,12 +564,10 @@ impl<const N: usize> SigmaPointKf<N> {
         &self.p
     }
 
-    /// Fills `points` from `(x, P)`.
+    /// Fills `points` from `(x, P)`, with the factor of [`psd_sqrt`] (the Cholesky factor
+    /// whenever P is positive definite).
     fn draw(&mut self) -> Result<(), FilterError> {
-        let chol = (self.p * self.spread)
-            .cholesky()
-            .ok_or(FilterError::NotPositiveDefinite)?;
-        let l = chol.l();
+        let l = psd_sqrt(&(self.p * self.spread)).ok_or(FilterError::NotPositiveDefinite)?;
         match self.rule {
             SigmaRule::Merwe { .. } => {
                 self.points[0] = self.x;
@@ -638,6 +652,211 @@ impl<const N: usize> SigmaPointKf<N> {
         self.x = x;
         self.p = p;
         accepted::<M>(nis, g.used)
+    }
+}
+
+/// A square root `L` with `L Lᵀ = P` of a covariance, for drawing sigma points.
+///
+/// When `P` is positive definite this is its Cholesky factor, as it always was. When it is
+/// only semi-definite — a state known exactly (zero variance, as the clocks a world
+/// declares, or seed 001's x axis, which moves without noise), or a prior `P(0) = Q(T)`
+/// of rank three in nine states — it is the factor of Cholesky with complete pivoting
+/// (Higham, *Accuracy and Stability of Numerical Algorithms*, 2nd ed., §10.3): at each
+/// step the largest remaining variance is the pivot, and the factorisation stops when
+/// every remaining variance is below `n·ε·max P_ii`, the rounding level of the
+/// remaining Schur complement. The columns of `L` are then in pivot order and those
+/// past the rank are zero, so the points along them coincide with the mean. `None` when
+/// a number is not finite or `P` has a remaining variance below `−1e-9·max P_ii` (it is not
+/// a covariance).
+pub fn psd_sqrt<const N: usize>(p: &SMatrix<f64, N, N>) -> Option<SMatrix<f64, N, N>> {
+    if let Some(c) = p.cholesky() {
+        return Some(c.l());
+    }
+    if !finite(p.iter()) {
+        return None;
+    }
+    let mut a = symmetrise(p);
+    let scale = (0..N).map(|i| a[(i, i)]).fold(0.0_f64, f64::max);
+    let mut l = SMatrix::<f64, N, N>::zeros();
+    if scale <= 0.0 {
+        // Nothing is uncertain (or a variance is negative).
+        return (0..N).all(|i| a[(i, i)] == 0.0).then_some(l);
+    }
+    let tol = N as f64 * f64::EPSILON * scale;
+    let mut done = [false; N];
+    for step in 0..N {
+        let Some(k) = (0..N)
+            .filter(|&i| !done[i])
+            .max_by(|&i, &j| a[(i, i)].total_cmp(&a[(j, j)]))
+        else {
+            break;
+        };
+        if a[(k, k)] <= tol {
+            break;
+        }
+        done[k] = true;
+        let d = a[(k, k)].sqrt();
+        l[(k, step)] = d;
+        for i in 0..N {
+            if !done[i] {
+                l[(i, step)] = a[(i, k)] / d;
+            }
+        }
+        for i in 0..N {
+            for j in 0..N {
+                if !done[i] && !done[j] {
+                    a[(i, j)] -= l[(i, step)] * l[(j, step)];
+                }
+            }
+        }
+    }
+    let left_ok = (0..N).all(|i| done[i] || a[(i, i)] >= -1e-9 * scale);
+    left_ok.then_some(l)
+}
+
+/// Zhou & Frank's fading factor for an [`Ekf`] updated by sequential scalar measurements:
+/// one factor per epoch, from the epoch's stacked, whitened scalar innovations (the
+/// strong tracking filter of [`crate::fusion::family`], generic over the state and the
+/// process model). With `m` scalar measurements, whitened rows `h_j = H_j/σ_j` and
+/// innovations `ν_j/σ_j` at the predicted state:
+///
+/// ```text
+/// ν̄² = Σ (ν_j/σ_j)² / m,   V_k = ν̄² (k = 1),   V_k = (ρ V_{k−1} + ν̄²)/(1 + ρ)
+/// c_k = (V_k − Σ h_j Q h_jᵀ / m − β) / (Σ h_j F P Fᵀ h_jᵀ / m)
+/// λ_k = min(λ_max, max(1, c_k)),   P⁻ = λ_k F P Fᵀ + Q
+/// ```
+/// which is [`StrongTrackingFilter`]'s `tr N_k / tr M_k` for whitened scalar rows. `λ_max`
+/// bounds the factor (see `FamilyConfig::stf_max_fading`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct EpochFading<const N: usize> {
+    forgetting: f64,
+    weakening: f64,
+    max_fading: f64,
+    v: Option<f64>,
+    pending: Option<(SMatrix<f64, N, N>, SMatrix<f64, N, N>)>,
+    last_lambda: f64,
+}
+
+impl<const N: usize> EpochFading<N> {
+    /// Forgetting factor `ρ` (0 < ρ ≤ 1), weakening factor `β ≥ 1` and the largest factor
+    /// `λ_max ≥ 1`.
+    ///
+    /// # Errors
+    /// When a factor is outside its range.
+    pub fn new(forgetting: f64, weakening: f64, max_fading: f64) -> Result<Self, FilterError> {
+        if !(forgetting > 0.0
+            && forgetting <= 1.0
+            && weakening.is_finite()
+            && weakening >= 1.0
+            && max_fading.is_finite()
+            && max_fading >= 1.0)
+        {
+            return Err(FilterError::InvalidParameter(format!(
+                "ρ = {forgetting}, β = {weakening}, λ_max = {max_fading}: expected 0 < ρ ≤ 1, β ≥ 1 and λ_max ≥ 1"
+            )));
+        }
+        Ok(Self {
+            forgetting,
+            weakening,
+            max_fading,
+            v: None,
+            pending: None,
+            last_lambda: 1.0,
+        })
+    }
+
+    /// Forgets the innovation memory, as after a restart of the filter.
+    pub fn reset(&mut self) {
+        self.v = None;
+        self.pending = None;
+        self.last_lambda = 1.0;
+    }
+
+    /// The factor of the last epoch.
+    pub fn last_fading_factor(&self) -> f64 {
+        self.last_lambda
+    }
+
+    /// Predicts `f` over `dt_s` seconds (`P⁻ = F P Fᵀ + Q`), keeping `F P Fᵀ` and `Q`
+    /// for the factor. Two predictions without an [`EpochFading::inflate`] between them
+    /// compose.
+    ///
+    /// # Errors
+    /// An invalid interval or a non-finite result; `f` is then unchanged.
+    pub fn predict<P: ProcessModel<N>>(
+        &mut self,
+        f: &mut Ekf<N>,
+        model: &P,
+        dt_s: f64,
+    ) -> Result<(), FilterError> {
+        check_dt(dt_s)?;
+        let x = *f.state();
+        let fj = model.jacobian(&x, dt_s);
+        let q = model.q(&x, dt_s);
+        let (fpf, q) = match self.pending {
+            Some((fpf0, q0)) => (fj * fpf0 * fj.transpose(), fj * q0 * fj.transpose() + q),
+            None => (fj * *f.covariance() * fj.transpose(), q),
+        };
+        let (fpf, q) = (symmetrise(&fpf), symmetrise(&q));
+        let x_new = model.f(&x, dt_s);
+        let p_new = fpf + q;
+        if !usable(&x_new, &p_new) {
+            return Err(FilterError::NonFinite);
+        }
+        f.restart(x_new, p_new)?;
+        self.pending = Some((fpf, q));
+        Ok(())
+    }
+
+    /// Inflates the prediction of `f` by the factor of this epoch's scalar measurements
+    /// `(model, z)` and returns the factor (1 when there is no pending prediction or no
+    /// usable measurement).
+    ///
+    /// # Errors
+    /// When the inflated covariance is not usable; `f` is then unchanged.
+    pub fn inflate<H: MeasurementModel<N, 1>>(
+        &mut self,
+        f: &mut Ekf<N>,
+        rows: impl IntoIterator<Item = (H, f64)>,
+    ) -> Result<f64, FilterError> {
+        let Some((fpf, q)) = self.pending else {
+            return Ok(1.0);
+        };
+        let x = *f.state();
+        let (mut nu2, mut hqh, mut hfh, mut m) = (0.0, 0.0, 0.0, 0usize);
+        for (model, z) in rows {
+            let sigma = model.r()[(0, 0)].sqrt();
+            let h = model.jacobian(&x) / sigma;
+            let nu = model.residual(&SVector::<f64, 1>::new(z), &model.h(&x))[0] / sigma;
+            if !(nu.is_finite() && h.iter().all(|v| v.is_finite())) {
+                continue;
+            }
+            nu2 += nu * nu;
+            hqh += (h * q * h.transpose())[(0, 0)];
+            hfh += (h * fpf * h.transpose())[(0, 0)];
+            m += 1;
+        }
+        if m == 0 {
+            return Ok(1.0);
+        }
+        self.pending = None;
+        let k = m as f64;
+        let v = match self.v {
+            None => nu2 / k,
+            Some(v0) => (self.forgetting * v0 + nu2 / k) / (1.0 + self.forgetting),
+        };
+        self.v = Some(v);
+        let c = (v - hqh / k - self.weakening) / (hfh / k);
+        let lambda = if c.is_finite() {
+            c.clamp(1.0, self.max_fading)
+        } else {
+            1.0
+        };
+        self.last_lambda = lambda;
+        if lambda > 1.0 {
+            f.restart(x, symmetrise(&(fpf * lambda + q)))?;
+        }
+        Ok(lambda)
     }
 }
 
@@ -937,6 +1156,21 @@ impl<const N: usize> RelativeEntropyKf<N> {
         &self.p
     }
 
+    /// Restarts the filter from `x0`, `p0` (keeping its threshold and gate).
+    ///
+    /// # Errors
+    /// When `x0` or `p0` is not finite or `p0` is not a covariance.
+    pub fn restart(
+        &mut self,
+        x0: SVector<f64, N>,
+        p0: SMatrix<f64, N, N>,
+    ) -> Result<(), FilterError> {
+        check_prior(&x0, &p0)?;
+        self.x = x0;
+        self.p = p0;
+        Ok(())
+    }
+
     /// Predicts over `dt_s` seconds (eqs. 27–28).
     ///
     /// # Errors
@@ -957,10 +1191,17 @@ impl<const N: usize> RelativeEntropyKf<N> {
             Err(rep) => return (rep, None),
         };
         let refused = || UpdateReport::refused::<M>(RejectReason::NumericalFailure, f64::NAN);
-        let Some(chol_p) = self.p.cholesky() else {
+        // A prior that is only semi-definite (a state known exactly) has no Cholesky
+        // factor; its points come from the semi-definite factor of [`psd_sqrt`] instead.
+        let chol_p = self.p.cholesky();
+        let factor = match &chol_p {
+            Some(c) => Some(c.l()),
+            None => psd_sqrt(&self.p),
+        };
+        let Some(factor) = factor else {
             return (refused(), None);
         };
-        let l = chol_p.l() * (N as f64).sqrt();
+        let l = factor * (N as f64).sqrt();
         for i in 0..N {
             self.points[i] = self.x + l.column(i);
             self.points[N + i] = self.x - l.column(i);
@@ -974,7 +1215,24 @@ impl<const N: usize> RelativeEntropyKf<N> {
             &mut self.zbuf,
         );
         let psi = m.pxz;
-        let chi = m.pzz - psi.transpose() * chol_p.solve(&psi);
+        let chi = match &chol_p {
+            Some(c) => m.pzz - psi.transpose() * c.solve(&psi),
+            // With χ_i = μ ± √n L_i the cross covariance is Ψ = L Dᵀ, D's column i being
+            // (ζ_i⁺ − ζ_i⁻)/(2√n), so Ψᵀ P⁻¹ Ψ = D Dᵀ whenever L has full rank; when it
+            // does not, the columns of L that are zero give ζ_i⁺ = ζ_i⁻ and D Dᵀ is the
+            // same product with the pseudo-inverse. No inverse of P is needed.
+            None => {
+                let scale = 0.5 / (N as f64).sqrt();
+                let mut ddt = SMatrix::<f64, M, M>::zeros();
+                for i in 0..N {
+                    let d = SVector::<f64, M>::from_fn(|j, _| {
+                        (self.zbuf[i * M + j] - self.zbuf[(N + i) * M + j]) * scale
+                    });
+                    ddt += d * d.transpose();
+                }
+                m.pzz - ddt
+            }
+        };
         let nu = model.residual(z, &m.z_hat);
         let s = m.pzz + r;
         if !(finite(chi.iter()) && finite(nu.iter()) && finite(s.iter())) {
@@ -1118,5 +1376,120 @@ mod tests {
         let rep = c.update(&both, &SVector::<f64, 2>::new(1.0, 100.0));
         assert_eq!(rep.outcome.reject_reason(), Some(RejectReason::Gate));
         assert_eq!(c.state(), &x0);
+    }
+
+    #[test]
+    fn psd_sqrt_factors_semi_definite_covariances() {
+        // Positive definite: exactly the Cholesky factor.
+        let (_, p0) = prior();
+        let pd = p0 + SMatrix::<f64, 4, 4>::from_fn(|i, j| 0.3 / (1.0 + (i + j) as f64));
+        assert_eq!(psd_sqrt(&pd), Some(pd.cholesky().unwrap().l()));
+        // Rank two in four states, one of them known exactly (zero row and column).
+        let a = SMatrix::<f64, 4, 2>::new(3.0, 0.0, 1.0, 2.0, 0.0, 0.0, -2.0, 5.0);
+        let p = a * a.transpose();
+        assert!(p.cholesky().is_none());
+        let l = psd_sqrt(&p).unwrap();
+        assert!((l * l.transpose() - p).amax() < 1e-12 * p.amax());
+        assert!(
+            l.row(2).iter().all(|&v| v == 0.0),
+            "the known state moves no point"
+        );
+        assert_eq!(
+            l.column(2),
+            SVector::<f64, 4>::zeros(),
+            "rank 2: two zero columns"
+        );
+        assert_eq!(l.column(3), SVector::<f64, 4>::zeros());
+        // Not a covariance: refused.
+        let mut bad = SMatrix::<f64, 4, 4>::identity();
+        bad[(1, 1)] = -1.0;
+        assert!(psd_sqrt(&bad).is_none());
+        assert_eq!(
+            psd_sqrt(&SMatrix::<f64, 4, 4>::zeros()),
+            Some(SMatrix::zeros())
+        );
+    }
+
+    #[test]
+    fn a_known_state_gives_every_filter_the_kalman_posterior() {
+        // Constant velocity in two axes with the x axis known exactly (zero variance, no
+        // process noise on it is not needed: it is only updated once). The model is linear,
+        // so every filter must give the Kalman filter's posterior, and the known position
+        // must not move.
+        let x0 = SVector::<f64, 4>::new(1.0, 0.5, -2.0, 1.0);
+        let mut p0 = SMatrix::<f64, 4, 4>::zeros();
+        p0[(1, 1)] = 0.25;
+        p0[(2, 2)] = 9.0;
+        p0[(3, 3)] = 1.0;
+        p0[(2, 3)] = 0.5;
+        p0[(3, 2)] = 0.5;
+        let fix =
+            PositionFixModel::<4, 2>::new([0, 2], SMatrix::<f64, 2, 2>::identity() * 4.0).unwrap();
+        let z = SVector::<f64, 2>::new(1.5, 0.0);
+        let mut ekf = Ekf::new(x0, p0).unwrap();
+        ekf.update(&fix, &z);
+        let mut ukf = SigmaPointKf::unscented(x0, p0, 0.5, 2.0, 0.0).unwrap();
+        let mut ckf = SigmaPointKf::cubature(x0, p0).unwrap();
+        let mut rekf = RelativeEntropyKf::new(x0, p0, DEFAULT_ALEPH_THRESHOLD, None).unwrap();
+        assert!(ukf.update(&fix, &z).outcome.is_accepted());
+        assert!(ckf.update(&fix, &z).outcome.is_accepted());
+        let (rep, coupling) = rekf.update(&fix, &z);
+        assert!(rep.outcome.is_accepted());
+        assert!(coupling.unwrap().aleph.abs() < 1e-12, "linear h: χ = 0");
+        // Prior y variance 9, fix variance 4: y moves 9/13 of the way to 0.
+        assert!((ekf.state()[2] - (-2.0 + 2.0 * 9.0 / 13.0)).abs() < 1e-12);
+        for (x, p) in [
+            (ukf.state(), ukf.covariance()),
+            (ckf.state(), ckf.covariance()),
+            (rekf.state(), rekf.covariance()),
+        ] {
+            assert!((x - ekf.state()).amax() < 1e-12, "{x:?}");
+            assert!((p - ekf.covariance()).amax() < 1e-12, "{p:?}");
+            assert_eq!(x[0], 1.0);
+        }
+        // The prediction works from the semi-definite prior too (it spreads x by ẋ).
+        let cv = ConstantVelocity::<4>::new(0.0).unwrap();
+        let mut e = Ekf::new(x0, p0).unwrap();
+        e.predict(&cv, 2.0).unwrap();
+        ckf.restart(x0, p0).unwrap();
+        ckf.predict(&cv, 2.0).unwrap();
+        assert!((ckf.covariance() - e.covariance()).amax() < 1e-12);
+        assert!(
+            (e.covariance()[(0, 0)] - 1.0).abs() < 1e-12,
+            "4 s² · 0.25 m²/s²"
+        );
+    }
+
+    #[test]
+    fn epoch_fading_factor_matches_its_formula() {
+        // One axis of constant velocity, two position fixes in the epoch, by hand:
+        // FPFᵀ₀₀ = P₀₀ + 2T P₀₁ + T² P₁₁, Q₀₀ = qT³/3, c = (ν̄² − Q₀₀/σ² − β)/(FPFᵀ₀₀/σ²).
+        let cv = ConstantVelocity::<2>::new(0.5).unwrap();
+        let x0 = SVector::<f64, 2>::new(0.0, 1.0);
+        let p0 = SMatrix::<f64, 2, 2>::new(1.0, 0.2, 0.2, 0.5);
+        let sigma: f64 = 0.5;
+        let fix =
+            PositionFixModel::<2, 1>::new([0], SMatrix::<f64, 1, 1>::new(sigma * sigma)).unwrap();
+        let mut f = Ekf::new(x0, p0).unwrap();
+        let mut fading = EpochFading::<2>::new(0.95, 1.0, 10.0).unwrap();
+        let t = 1.0;
+        fading.predict(&mut f, &cv, t).unwrap();
+        assert_eq!(f.state()[0], 1.0);
+        let zs = [4.0, 3.0];
+        let lambda = fading.inflate(&mut f, zs.map(|z| (fix, z))).unwrap();
+        let fpf = 1.0 + 2.0 * t * 0.2 + t * t * 0.5;
+        let q = 0.5 * t * t * t / 3.0;
+        let nu2 = zs.iter().map(|z| ((z - 1.0) / sigma).powi(2)).sum::<f64>() / 2.0;
+        let c = (nu2 - q / (sigma * sigma) - 1.0) / (fpf / (sigma * sigma));
+        assert!(c > 1.0 && c < 10.0);
+        assert!((lambda - c).abs() < 1e-12, "{lambda} against {c}");
+        assert!((f.covariance()[(0, 0)] - (c * fpf + q)).abs() < 1e-12);
+        // Small innovations: no inflation; no pending prediction: factor 1.
+        fading.predict(&mut f, &cv, t).unwrap();
+        let x = f.state()[0];
+        assert_eq!(fading.inflate(&mut f, [(fix, x)]).unwrap(), 1.0);
+        assert_eq!(fading.inflate(&mut f, [(fix, x + 100.0)]).unwrap(), 1.0);
+        assert!(EpochFading::<2>::new(0.0, 1.0, 10.0).is_err());
+        assert!(EpochFading::<2>::new(0.95, 0.5, 10.0).is_err());
     }
 }

@@ -1,6 +1,24 @@
 //! The abstract papers' own estimators: seed 001's particle filter on the 2-D Singer model
 //! and seed 003's EKF and particle filter on the 3-D plane variable-speed turning model,
-//! each with one pseudorange clock state per system.
+//! each with one pseudorange clock state per system — and, since the models are kept
+//! apart from the algorithms, every other filter of the family on the same models
+//! ([`PaperFilter`]: EKF, UKF, CKF, strong tracking, relative-entropy KF, SIR PF), chosen
+//! by `filter` beside `[estimator.process]`.
+//!
+//! # Filters
+//!
+//! Every filter takes an epoch's pseudoranges one at a time, each relinearised (or, for
+//! the sigma-point filters and the RE-KF, its points redrawn) at the estimate the previous
+//! one left, which for the EKF is the paper's update. The strong tracking filter computes
+//! one fading factor per epoch from all the epoch's whitened pseudorange innovations at
+//! the prediction ([`EpochFading`]) before those updates, as the family's does on seed
+//! 000's model. A state these models know exactly has zero variance — the clocks of
+//! `clocks = "known"`, the clock of a system the world lacks, seed 001's x axis (uniform
+//! motion without noise) and, at the start, everything but seed 003's accelerations
+//! (`P(0) = Q(T)`) — so the covariance is only semi-definite; the sigma-point filters and
+//! the RE-KF then draw their points from a pivoted Cholesky factor
+//! ([`crate::fusion::kalman::psd_sqrt`]), whose points along a known state sit on the
+//! mean.
 //!
 //! # State
 //!
@@ -51,7 +69,9 @@
 use crate::core::rng::{StreamRng, TrialRng};
 use crate::core::{EnuFrame, GpsTime, System};
 use crate::fusion::estimator::{EpochOutcome, Estimate, Estimator};
-use crate::fusion::kalman::Ekf;
+use crate::fusion::kalman::{
+    Ekf, EpochFading, Gating, RelativeEntropyKf, ResidualGate, SigmaPointKf, UpdateReport,
+};
 use crate::fusion::measurement::{MeasurementBatch, RangeMeasurement};
 use crate::fusion::models::{
     PlaneTurning, ProcessModel, Pseudoranges, RangeRow, Singer5, StateLayout,
@@ -177,11 +197,38 @@ impl ProcessSpec {
     }
 }
 
-/// Which filter a paper estimator runs.
+/// Which filter a paper estimator runs. Every member of the Kalman family runs every paper
+/// model (the models are kept apart from the algorithms, [`crate::fusion::models`]); each
+/// takes the epoch's pseudoranges one at a time, relinearised at the latest estimate, with
+/// seed 004's residual gate `|ν| ≤ C·√S` (eq. 24) when `residual_gate_c` is set and no χ²
+/// gate (the papers' filters have none).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum PaperFilter {
-    /// The EKF (Joseph form), updated range by range.
-    Ekf,
+    /// The EKF (Joseph form), as in seed 003 (eqs. 9–12).
+    Ekf { residual_gate_c: Option<f64> },
+    /// The unscented Kalman filter with Merwe's scaled points `(α, β, κ)`.
+    Ukf {
+        alpha: f64,
+        beta: f64,
+        kappa: f64,
+        residual_gate_c: Option<f64>,
+    },
+    /// The cubature Kalman filter (Arasaratnam & Haykin).
+    Ckf { residual_gate_c: Option<f64> },
+    /// The strong tracking filter: the EKF with its prediction inflated once per epoch by
+    /// the fading factor of the epoch's whitened pseudorange innovations
+    /// ([`EpochFading`]: forgetting ρ, weakening β, largest factor λ_max).
+    Stf {
+        forgetting: f64,
+        weakening: f64,
+        max_fading: f64,
+        residual_gate_c: Option<f64>,
+    },
+    /// Seed 004's relative-entropy Kalman filter with coupling threshold ℵ_threshold.
+    Rekf {
+        aleph_threshold: f64,
+        residual_gate_c: Option<f64>,
+    },
     /// The SIR particle filter of seed 001 §4 / seed 003 §2.3: `particles`, the resampling
     /// scheme, and the fraction θ of N below which N_eff triggers resampling.
     Pf {
@@ -241,7 +288,121 @@ impl<P: ProcessModel<NM>, const NM: usize, const N: usize> ProcessModel<N> for W
 
 enum Core<const N: usize> {
     Ekf(Box<Ekf<N>>),
+    Sigma(Box<SigmaPointKf<N>>),
+    Stf(Box<Ekf<N>>, Box<EpochFading<N>>),
+    Rekf(Box<RelativeEntropyKf<N>>),
     Pf(Box<ParticleFilter<N>>),
+}
+
+impl<const N: usize> Core<N> {
+    /// The filter of `filter` started at `(x0, p0)`.
+    fn new(
+        filter: PaperFilter,
+        x0: SVector<f64, N>,
+        p0: SMatrix<f64, N, N>,
+        rng: &mut StreamRng,
+    ) -> Result<Self, String> {
+        let err = |e: crate::fusion::kalman::FilterError| e.to_string();
+        let gating = |c: Option<f64>| Gating {
+            chi2_prob: None,
+            residual: c.map(ResidualGate::sigmas),
+        };
+        Ok(match filter {
+            PaperFilter::Ekf { residual_gate_c } => Core::Ekf(Box::new(
+                Ekf::new(x0, p0)
+                    .and_then(|f| f.with_gating(gating(residual_gate_c)))
+                    .map_err(err)?,
+            )),
+            PaperFilter::Ukf {
+                alpha,
+                beta,
+                kappa,
+                residual_gate_c,
+            } => Core::Sigma(Box::new(
+                SigmaPointKf::unscented(x0, p0, alpha, beta, kappa)
+                    .and_then(|f| f.with_gating(gating(residual_gate_c)))
+                    .map_err(err)?,
+            )),
+            PaperFilter::Ckf { residual_gate_c } => Core::Sigma(Box::new(
+                SigmaPointKf::cubature(x0, p0)
+                    .and_then(|f| f.with_gating(gating(residual_gate_c)))
+                    .map_err(err)?,
+            )),
+            PaperFilter::Stf {
+                forgetting,
+                weakening,
+                max_fading,
+                residual_gate_c,
+            } => Core::Stf(
+                Box::new(
+                    Ekf::new(x0, p0)
+                        .and_then(|f| f.with_gating(gating(residual_gate_c)))
+                        .map_err(err)?,
+                ),
+                Box::new(EpochFading::new(forgetting, weakening, max_fading).map_err(err)?),
+            ),
+            PaperFilter::Rekf {
+                aleph_threshold,
+                residual_gate_c,
+            } => Core::Rekf(Box::new(
+                RelativeEntropyKf::new(
+                    x0,
+                    p0,
+                    aleph_threshold,
+                    residual_gate_c.map(ResidualGate::sigmas),
+                )
+                .map_err(err)?,
+            )),
+            PaperFilter::Pf {
+                particles,
+                resampling,
+                neff_threshold,
+            } => {
+                let buf = ParticleBuffer::<N>::new(particles).map_err(|e| e.to_string())?;
+                let mut pf = ParticleFilter::new(buf, resampling, neff_threshold)
+                    .map_err(|e| e.to_string())?;
+                pf.init_gaussian(&x0, &p0, rng).map_err(|e| e.to_string())?;
+                Core::Pf(Box::new(pf))
+            }
+        })
+    }
+
+    /// The state and covariance (the particle cloud's weighted moments for the PF).
+    fn moments(&self) -> (SVector<f64, N>, SMatrix<f64, N, N>) {
+        match self {
+            Core::Ekf(f) | Core::Stf(f, _) => (*f.state(), *f.covariance()),
+            Core::Sigma(f) => (*f.state(), *f.covariance()),
+            Core::Rekf(f) => (*f.state(), *f.covariance()),
+            Core::Pf(p) => (p.mean(), p.covariance()),
+        }
+    }
+
+    /// Restarts a Kalman-type filter at `(x, p)`, keeping its tuning; the strong tracking
+    /// filter also forgets its innovation memory and pending prediction, so that the
+    /// restart is not undone by this epoch's fading factor. False for the particle filter
+    /// (which is re-drawn by its caller) or when `(x, p)` is unusable.
+    fn restart(&mut self, x: SVector<f64, N>, p: SMatrix<f64, N, N>) -> bool {
+        match self {
+            Core::Ekf(f) => f.restart(x, p).is_ok(),
+            Core::Stf(f, fading) => {
+                fading.reset();
+                f.restart(x, p).is_ok()
+            }
+            Core::Sigma(f) => f.restart(x, p).is_ok(),
+            Core::Rekf(f) => f.restart(x, p).is_ok(),
+            Core::Pf(_) => false,
+        }
+    }
+
+    /// One pseudorange update of a Kalman-type filter; `None` for the particle filter.
+    fn update(&mut self, pr: &Pseudoranges<N, 1>, z: &SVector<f64, 1>) -> Option<UpdateReport> {
+        Some(match self {
+            Core::Ekf(f) | Core::Stf(f, _) => f.update(pr, z),
+            Core::Sigma(f) => f.update(pr, z),
+            Core::Rekf(f) => f.update(pr, z).0,
+            Core::Pf(_) => return None,
+        })
+    }
 }
 
 /// A paper model with its filter, driven by the engine (see the module documentation).
@@ -421,21 +582,7 @@ where
             }
         }
         let mut rng = ctx.rng.stream(&format!("estimator/{name}/paper"));
-        let core = match filter {
-            PaperFilter::Ekf => Core::Ekf(Box::new(Ekf::new(x0, p0).map_err(|e| e.to_string())?)),
-            PaperFilter::Pf {
-                particles,
-                resampling,
-                neff_threshold,
-            } => {
-                let buf = ParticleBuffer::<N>::new(particles).map_err(|e| e.to_string())?;
-                let mut pf = ParticleFilter::new(buf, resampling, neff_threshold)
-                    .map_err(|e| e.to_string())?;
-                pf.init_gaussian(&x0, &p0, &mut rng)
-                    .map_err(|e| e.to_string())?;
-                Core::Pf(Box::new(pf))
-            }
-        };
+        let core = Core::new(filter, x0, p0, &mut rng)?;
         Ok(Self {
             name: name.to_string(),
             model,
@@ -465,10 +612,7 @@ where
     }
 
     fn moments(&self) -> (SVector<f64, N>, SMatrix<f64, N, N>) {
-        match &self.core {
-            Core::Ekf(f) => (*f.state(), *f.covariance()),
-            Core::Pf(p) => (p.mean(), p.covariance()),
-        }
+        self.core.moments()
     }
 
     fn estimate(&self, t: GpsTime) -> Option<Estimate> {
@@ -529,19 +673,6 @@ where
                 (sum / n as f64, var / (n * n) as f64)
             };
             match &mut self.core {
-                Core::Ekf(f) => {
-                    let (mut x, mut p) = (*f.state(), *f.covariance());
-                    let (b, var) = mean_residual(&position_of(&self.layout, self.plane_up_m, &x));
-                    x[k] = b;
-                    for i in 0..N {
-                        p[(i, k)] = 0.0;
-                        p[(k, i)] = 0.0;
-                    }
-                    p[(k, k)] = var;
-                    if let Ok(e) = Ekf::new(x, p) {
-                        **f = e;
-                    }
-                }
                 Core::Pf(pf) => {
                     use rand::Rng;
                     let len = pf.particles().len();
@@ -555,6 +686,18 @@ where
                         let w: f64 = self.rng.sample(rand_distr::StandardNormal);
                         pf.particles_mut().column_mut(k)[i] = mean + var.sqrt() * w;
                     }
+                }
+                kalman => {
+                    let (mut x, mut p) = kalman.moments();
+                    let (b, var) = mean_residual(&position_of(&self.layout, self.plane_up_m, &x));
+                    x[k] = b;
+                    for i in 0..N {
+                        p[(i, k)] = 0.0;
+                        p[(k, i)] = 0.0;
+                    }
+                    p[(k, k)] = var;
+                    // An unusable (non-finite) result leaves the filter as it was.
+                    kalman.restart(x, p);
                 }
             }
         }
@@ -612,6 +755,9 @@ where
         self.last_t = batch.t;
         let predicted = match &mut self.core {
             Core::Ekf(f) => f.predict(&self.model, dt).is_ok(),
+            Core::Sigma(f) => f.predict(&self.model, dt).is_ok(),
+            Core::Stf(f, fading) => fading.predict(f, &self.model, dt).is_ok(),
+            Core::Rekf(f) => f.predict(&self.model, dt).is_ok(),
             Core::Pf(p) => p.predict(&self.model, dt, &mut self.rng).is_ok(),
         };
         if !predicted {
@@ -621,25 +767,21 @@ where
         }
         self.load_rows();
         self.initialise_clocks();
-        match &mut self.core {
-            Core::Ekf(f) => {
-                for (row, z) in &self.rows {
-                    let Ok(pr) = Pseudoranges::<N, 1>::new(self.layout, [*row]) else {
-                        out.rejected += 1;
-                        continue;
-                    };
-                    let rep = f.update(&pr, &SVector::<f64, 1>::new(*z));
-                    out.used += rep.used;
-                    out.rejected += rep.rejected;
-                    if let crate::fusion::ekf11::UpdateOutcome::Accepted { nis } = rep.outcome {
-                        if nis.is_finite() {
-                            out.nis_sum += nis;
-                            out.nis_count += 1;
-                            out.nis_dof += 1;
-                        }
-                    }
-                }
+        if let Core::Stf(f, fading) = &mut self.core {
+            // The fading factor of this epoch, from all its pseudoranges at the prediction.
+            let layout = self.layout;
+            let rows = self.rows.iter().filter_map(|(row, z)| {
+                Pseudoranges::<N, 1>::new(layout, [*row])
+                    .ok()
+                    .map(|pr| (pr, *z))
+            });
+            if fading.inflate(f, rows).is_err() {
+                Estimator::reset(self);
+                out.numerical_failure = true;
+                return out;
             }
+        }
+        match &mut self.core {
             Core::Pf(p) => {
                 if !self.rows.is_empty() {
                     self.lik.clear(self.layout.pos);
@@ -651,6 +793,33 @@ where
                         out.rejected += self.rows.len() as u32;
                     } else {
                         out.used += self.rows.len() as u32;
+                    }
+                }
+            }
+            kalman => {
+                for (row, z) in &self.rows {
+                    let Ok(pr) = Pseudoranges::<N, 1>::new(self.layout, [*row]) else {
+                        out.rejected += 1;
+                        continue;
+                    };
+                    let Some(rep) = kalman.update(&pr, &SVector::<f64, 1>::new(*z)) else {
+                        continue;
+                    };
+                    out.used += rep.used;
+                    out.rejected += rep.rejected;
+                    match rep.outcome {
+                        crate::fusion::ekf11::UpdateOutcome::Accepted { nis }
+                            if nis.is_finite() =>
+                        {
+                            out.nis_sum += nis;
+                            out.nis_count += 1;
+                            out.nis_dof += 1;
+                        }
+                        crate::fusion::ekf11::UpdateOutcome::Rejected {
+                            reason: crate::fusion::ekf11::RejectReason::Gate,
+                            ..
+                        } => out.rejected_gate += rep.rejected,
+                        _ => {}
                     }
                 }
             }
@@ -695,8 +864,8 @@ where
             self.clock_ready = [false; N_CLOCKS];
         }
         let restarted = match &mut self.core {
-            Core::Ekf(f) => f.restart(centre, self.p0).is_ok(),
             Core::Pf(p) => p.init_gaussian(&centre, &self.p0, &mut self.rng).is_ok(),
+            kalman => kalman.restart(centre, self.p0),
         };
         debug_assert!(restarted, "the prior was valid at build time");
     }

@@ -263,7 +263,9 @@ pub struct EstimatorSpec {
     pub pdr: Option<PdrFilterConfig>,
     /// The process model (`[estimator.process]`, `model = "pva_clock"`, `"singer_2d"` or
     /// `"plane_turning"`); absent: seed 000's `pva_clock` for the filter family. The paper
-    /// models run with `filter = "ekf"` or `"pf"` ([`crate::fusion::paper`]).
+    /// models run with every filter of the family, `filter = "ekf"`, `"ukf"`, `"ckf"`,
+    /// `"stf"`, `"rekf"` or `"pf"` ([`crate::fusion::paper`]), tuned by
+    /// `[estimator.options]` as on the 12-state model.
     #[serde(default)]
     pub process: Option<ProcessSpec>,
 }
@@ -314,8 +316,31 @@ impl EstimatorSpec {
         let cfg = self.options.unwrap_or_default();
         cfg.validate()
             .map_err(|(k, m)| format!("options.{k}: {m}"))?;
+        let gate = cfg.residual_gate_c;
         let filter = match self.filter {
-            FilterKind::Ekf => PaperFilter::Ekf,
+            FilterKind::Ekf => PaperFilter::Ekf {
+                residual_gate_c: gate,
+            },
+            FilterKind::Ukf => PaperFilter::Ukf {
+                alpha: cfg.ukf_alpha,
+                beta: cfg.ukf_beta,
+                kappa: cfg.ukf_kappa,
+                residual_gate_c: gate,
+            },
+            FilterKind::Ckf => PaperFilter::Ckf {
+                residual_gate_c: gate,
+            },
+            FilterKind::Stf => PaperFilter::Stf {
+                forgetting: cfg.stf_forgetting,
+                weakening: cfg.stf_weakening,
+                max_fading: cfg.stf_max_fading,
+                residual_gate_c: gate,
+            },
+            // As in the filter family, the RE-KF's data layer defaults to C = 3.
+            FilterKind::Rekf => PaperFilter::Rekf {
+                aleph_threshold: cfg.rekf_aleph_threshold,
+                residual_gate_c: gate.or(Some(3.0)),
+            },
             FilterKind::Pf => PaperFilter::Pf {
                 particles: cfg.particles,
                 resampling: match cfg.resampling {
@@ -328,9 +353,9 @@ impl EstimatorSpec {
                 },
                 neff_threshold: cfg.neff_threshold,
             },
-            other => {
+            other @ (FilterKind::Ekf11 | FilterKind::Wls | FilterKind::Ins | FilterKind::Pdr) => {
                 return Err(format!(
-                    "process model '{}' runs with filter = \"ekf\" or \"pf\", not '{}'",
+                    "process model '{}' runs with filter = \"ekf\", \"ukf\", \"ckf\", \"stf\", \"rekf\" or \"pf\", not '{}'",
                     spec.label(),
                     format!("{other:?}").to_lowercase()
                 ))
