@@ -180,13 +180,13 @@ impl BodyModulator {
         system_info_symbols(carrier, si_vector, &mut si);
         self.logical[..SI_LEN].copy_from_slice(&si);
         let bps = qam.bits_per_symbol();
-        let mask = (1u32 << bps) - 1;
-        // One 32-bit draw serves several symbols: five 6-bit, eight 4-bit or sixteen
+        let mask = (1u64 << bps) - 1;
+        // One 64-bit draw serves several symbols: ten 6-bit, sixteen 4-bit or thirty-two
         // 2-bit symbols, which keeps the random stream cheap in the hot loop.
         let lut = &self.qam_lut[(bps / 2 - 1) as usize];
-        let per_word = (32 / bps) as usize;
+        let per_word = (64 / bps) as usize;
         for chunk in self.logical[SI_LEN..].chunks_mut(per_word) {
-            let mut w: u32 = rng.random();
+            let mut w = rng.next_u64();
             for s in chunk {
                 *s = lut[(w & mask) as usize];
                 w >>= bps;
@@ -195,14 +195,12 @@ impl BodyModulator {
         match carrier {
             CarrierMode::Single => out.copy_from_slice(&self.logical),
             CarrierMode::Multi3780 => {
-                for (l, &p) in self.table.iter().enumerate() {
-                    out[p as usize] = self.logical[l];
+                // Interleave and apply the IDFT's 1/√N in one pass.
+                let s = 1.0 / (BODY_LEN as f32).sqrt();
+                for (&x, &p) in self.logical.iter().zip(&self.table) {
+                    out[p as usize] = x * s;
                 }
                 self.ifft.process_with_scratch(out, &mut self.scratch);
-                let s = 1.0 / (BODY_LEN as f32).sqrt();
-                for x in out.iter_mut() {
-                    *x *= s;
-                }
             }
         }
         Ok(())

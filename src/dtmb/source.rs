@@ -303,6 +303,9 @@ pub struct TowerSpec {
     pub clock_offset_s: f64,
     /// Tower clock drift (s/s).
     pub clock_drift_s_per_s: f64,
+    /// The single-frequency network the tower belongs to, if any: towers of one network
+    /// transmit the same signal (see [`DtmbSource`] on co-channel towers).
+    pub sfn: Option<String>,
 }
 
 impl TowerSpec {
@@ -894,6 +897,7 @@ mod tests {
             pn_mode: PnMode::Pn945,
             clock_offset_s: *off,
             clock_drift_s_per_s: 1e-9,
+            sfn: None,
         })
         .collect()
     }

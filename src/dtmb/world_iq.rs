@@ -213,6 +213,7 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
         pn_mode: mode,
         clock_offset_s: t.spec.clock_offset_ns * 1e-9,
         clock_drift_s_per_s: t.spec.clock_drift_ppb * 1e-9,
+        sfn: t.spec.sfn.clone(),
     };
     let mut cfg = world.file.sensors.dtmb.clone().unwrap_or_default();
     // The link needs no signal-level state of its own.
