@@ -118,6 +118,8 @@ pub struct BodyModulator {
     fft: Arc<dyn Fft<f32>>,
     scratch: Vec<Complex32>,
     logical: Vec<Complex32>,
+    /// The interleaved (physical-order) symbols of the body being built.
+    physical: Vec<Complex32>,
     table: Vec<u16>,
     /// Constellation lookup tables (4, 16, 64 points), so mapping costs one load.
     qam_lut: [Vec<Complex32>; 3],
@@ -143,12 +145,14 @@ impl BodyModulator {
         let fft = planner.plan_fft_forward(BODY_LEN);
         let scratch_len = ifft
             .get_inplace_scratch_len()
+            .max(ifft.get_outofplace_scratch_len())
             .max(fft.get_inplace_scratch_len());
         Self {
             ifft,
             fft,
             scratch: vec![Complex32::default(); scratch_len],
             logical: vec![Complex32::default(); BODY_LEN],
+            physical: vec![Complex32::default(); BODY_LEN],
             table: (0..BODY_LEN).map(|i| interleave_index(i) as u16).collect(),
             qam_lut: [Qam::Qam4, Qam::Qam16, Qam::Qam64]
                 .map(|q| (0..1u32 << q.bits_per_symbol()).map(|b| q.map(b)).collect()),
@@ -195,12 +199,18 @@ impl BodyModulator {
         match carrier {
             CarrierMode::Single => out.copy_from_slice(&self.logical),
             CarrierMode::Multi3780 => {
-                // Interleave and apply the IDFT's 1/√N in one pass.
+                // Interleave and apply the IDFT's 1/√N in one pass, into a buffer reused by
+                // every call (the scattered writes stay in cache; `out` is often a cold
+                // frame buffer), then transform out of place into `out`.
                 let s = 1.0 / (BODY_LEN as f32).sqrt();
                 for (&x, &p) in self.logical.iter().zip(&self.table) {
-                    out[p as usize] = x * s;
+                    self.physical[p as usize] = x * s;
                 }
-                self.ifft.process_with_scratch(out, &mut self.scratch);
+                self.ifft.process_outofplace_with_scratch(
+                    &mut self.physical,
+                    out,
+                    &mut self.scratch,
+                );
             }
         }
         Ok(())
