@@ -638,12 +638,23 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
             &rec.global_extra,
             &rec.annotation_extra,
         )?;
+        let others: Vec<&str> = rec
+            .towers
+            .iter()
+            .filter(|id| **id != rec.tower)
+            .map(String::as_str)
+            .collect();
         eprintln!(
-            "wrote {} samples ({} frames of tower {} {}, SNR {:.1} dB at the start, {:.0} MHz) \
+            "wrote {} samples ({} frames of tower {}{} {}, SNR {:.1} dB at the start, {:.0} MHz) \
              to {}.sigmf-data and .sigmf-meta",
             rec.samples.len(),
             a.frames,
             rec.tower,
+            if others.is_empty() {
+                String::new()
+            } else {
+                format!(" with co-channel towers {}", others.join(", "))
+            },
             rec.mode.name(),
             rec.snr_db,
             rec.center_freq_hz * 1e-6,

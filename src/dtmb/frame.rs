@@ -118,6 +118,8 @@ pub struct BodyModulator {
     fft: Arc<dyn Fft<f32>>,
     scratch: Vec<Complex32>,
     logical: Vec<Complex32>,
+    /// The interleaved (physical-order) symbols of the body being built.
+    physical: Vec<Complex32>,
     table: Vec<u16>,
     /// Constellation lookup tables (4, 16, 64 points), so mapping costs one load.
     qam_lut: [Vec<Complex32>; 3],
@@ -143,12 +145,14 @@ impl BodyModulator {
         let fft = planner.plan_fft_forward(BODY_LEN);
         let scratch_len = ifft
             .get_inplace_scratch_len()
+            .max(ifft.get_outofplace_scratch_len())
             .max(fft.get_inplace_scratch_len());
         Self {
             ifft,
             fft,
             scratch: vec![Complex32::default(); scratch_len],
             logical: vec![Complex32::default(); BODY_LEN],
+            physical: vec![Complex32::default(); BODY_LEN],
             table: (0..BODY_LEN).map(|i| interleave_index(i) as u16).collect(),
             qam_lut: [Qam::Qam4, Qam::Qam16, Qam::Qam64]
                 .map(|q| (0..1u32 << q.bits_per_symbol()).map(|b| q.map(b)).collect()),
@@ -180,13 +184,13 @@ impl BodyModulator {
         system_info_symbols(carrier, si_vector, &mut si);
         self.logical[..SI_LEN].copy_from_slice(&si);
         let bps = qam.bits_per_symbol();
-        let mask = (1u32 << bps) - 1;
-        // One 32-bit draw serves several symbols: five 6-bit, eight 4-bit or sixteen
+        let mask = (1u64 << bps) - 1;
+        // One 64-bit draw serves several symbols: ten 6-bit, sixteen 4-bit or thirty-two
         // 2-bit symbols, which keeps the random stream cheap in the hot loop.
         let lut = &self.qam_lut[(bps / 2 - 1) as usize];
-        let per_word = (32 / bps) as usize;
+        let per_word = (64 / bps) as usize;
         for chunk in self.logical[SI_LEN..].chunks_mut(per_word) {
-            let mut w: u32 = rng.random();
+            let mut w = rng.next_u64();
             for s in chunk {
                 *s = lut[(w & mask) as usize];
                 w >>= bps;
@@ -195,14 +199,18 @@ impl BodyModulator {
         match carrier {
             CarrierMode::Single => out.copy_from_slice(&self.logical),
             CarrierMode::Multi3780 => {
-                for (l, &p) in self.table.iter().enumerate() {
-                    out[p as usize] = self.logical[l];
-                }
-                self.ifft.process_with_scratch(out, &mut self.scratch);
+                // Interleave and apply the IDFT's 1/√N in one pass, into a buffer reused by
+                // every call (the scattered writes stay in cache; `out` is often a cold
+                // frame buffer), then transform out of place into `out`.
                 let s = 1.0 / (BODY_LEN as f32).sqrt();
-                for x in out.iter_mut() {
-                    *x *= s;
+                for (&x, &p) in self.logical.iter().zip(&self.table) {
+                    self.physical[p as usize] = x * s;
                 }
+                self.ifft.process_outofplace_with_scratch(
+                    &mut self.physical,
+                    out,
+                    &mut self.scratch,
+                );
             }
         }
         Ok(())

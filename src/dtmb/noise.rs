@@ -54,17 +54,31 @@ pub(crate) fn fast_ln(x: f32) -> f32 {
 
 /// `(cos 2πu, sin 2πu)` for `u` in [0, 1): the turn is split into quadrants and the
 /// remainder `φ ∈ [−π/4, π/4)` evaluated by Taylor polynomials (error below 4·10⁻⁷).
-#[inline(always)]
+#[cfg(test)]
 pub(crate) fn fast_cos_sin_turns(u: f32) -> (f32, f32) {
-    let a = u * 4.0 + 0.5;
-    // `a` is positive, so truncation is the floor (and vectorises, unlike `floor`).
-    let qi = a as i32;
-    let q = qi as f32;
-    let phi = (a - q - 0.5) * std::f32::consts::FRAC_PI_2;
+    fast_cos_sin_bits(((u as f64) * 16_777_216.0) as u32 & 0x00ff_ffff)
+}
+
+/// `(cos 2πu, sin 2πu)` for the turn `u = v / 2²⁴` given as its 24-bit integer `v`: the
+/// quadrant and the remainder come from the integer bits exactly (integer shifts and
+/// masks vectorise, a float-to-int conversion with Rust's saturating semantics does not),
+/// then [`cos_sin_quadrant`].
+#[inline(always)]
+fn fast_cos_sin_bits(v: u32) -> (f32, f32) {
+    // Shift by half a quadrant so the remainder is centred: t = v + 2²¹.
+    let t = v + (1 << 21);
+    let quadrant = (t >> 22) & 3;
+    let rem = (t & 0x003f_ffff) as i32 - (1 << 21);
+    let phi = rem as f32 * (std::f32::consts::FRAC_PI_2 / 4_194_304.0);
+    cos_sin_quadrant(phi, quadrant)
+}
+
+/// `(cos, sin)` of `φ + quadrant·π/2` for `φ ∈ [−π/4, π/4]` by Taylor polynomials.
+#[inline(always)]
+fn cos_sin_quadrant(phi: f32, quadrant: u32) -> (f32, f32) {
     let p2 = phi * phi;
     let s = phi * (1.0 - p2 * (1.0 / 6.0 - p2 * (1.0 / 120.0 - p2 * (1.0 / 5040.0))));
     let c = 1.0 - p2 * (0.5 - p2 * (1.0 / 24.0 - p2 * (1.0 / 720.0 - p2 * (1.0 / 40320.0))));
-    let quadrant = qi & 3;
     // Rotate (c, s) by the quadrant: 0 → (c, s), 1 → (−s, c), 2 → (−c, −s), 3 → (s, −c).
     let (x, y) = if quadrant & 1 == 1 { (-s, c) } else { (c, s) };
     if quadrant & 2 == 2 {
@@ -112,11 +126,11 @@ fn awgn_kernel(out: &mut [Complex32], sd: f32, k1: u32, k2: u32) {
     for (i, o) in out.iter_mut().enumerate() {
         let h1 = mix(i as u32 ^ k1);
         let h2 = mix(i as u32 ^ k2);
-        // u1 in (0, 1], u2 in [0, 1), both on a 2⁻²⁴ grid.
-        let u1 = ((h1 >> 8) + 1) as f32 * INV24;
-        let u2 = (h2 >> 8) as f32 * INV24;
+        // u1 in (0, 1] on a 2⁻²⁴ grid (through i32, which converts in vector registers);
+        // u2 = (h2 >> 8)/2²⁴ in [0, 1), used as its integer bits.
+        let u1 = ((h1 >> 8) as i32 + 1) as f32 * INV24;
         let r = (-2.0 * fast_ln(u1)).sqrt() * sd;
-        let (c, s) = fast_cos_sin_turns(u2);
+        let (c, s) = fast_cos_sin_bits(h2 >> 8);
         o.re += r * c;
         o.im += r * s;
     }

@@ -303,6 +303,9 @@ pub struct TowerSpec {
     pub clock_offset_s: f64,
     /// Tower clock drift (s/s).
     pub clock_drift_s_per_s: f64,
+    /// The single-frequency network the tower belongs to, if any: towers of one network
+    /// transmit the same signal (see [`DtmbSource`] on co-channel towers).
+    pub sfn: Option<String>,
 }
 
 impl TowerSpec {
@@ -352,6 +355,14 @@ struct TowerState {
     tx: Option<Transmitter>,
     channel: Option<Channel>,
     receiver: Option<Receiver>,
+    /// The tower whose transmitter carries this tower's signal: the first tower of its
+    /// single-frequency network (itself without one).
+    signal_owner: usize,
+    /// The other towers on this tower's carrier, whose copies add to its block.
+    cochannel: Vec<usize>,
+    /// A noiseless channel for this tower's signal when it reaches another tower's block
+    /// as co-channel interference (signal level, built on first use).
+    interference: Option<Channel>,
     /// TPS ranging: true range at the reference epoch and the error model.
     tps_ref: Option<(GpsTime, f64)>,
     tps_model: TpsErrorModel,
@@ -374,6 +385,8 @@ pub struct DtmbSource {
     link: LinkPaths,
     taps: Vec<Tap>,
     block: Vec<Complex32>,
+    /// A co-channel signal's contribution before it is added to `block`.
+    block2: Vec<Complex32>,
     validity: ValidityLog,
     warnings: Vec<String>,
 }
@@ -482,20 +495,61 @@ impl DtmbSource {
                 tx,
                 channel: None,
                 receiver,
+                signal_owner: 0,
+                cochannel: Vec::new(),
+                interference: None,
                 tps_ref: None,
                 tps_model: TpsErrorModel::new(spec_mode, spec_freq),
             });
+        }
+        // Co-channel towers (DTMB: the same carrier) add at the receiver; towers of one
+        // single-frequency network share the first one's transmitter.
+        let mut warnings = Vec::new();
+        if system == System::Dtmb {
+            for i in 0..states.len() {
+                let (fi, sfn_i) = (states[i].spec.freq_hz, states[i].spec.sfn.clone());
+                states[i].cochannel = (0..states.len())
+                    .filter(|&j| j != i && states[j].spec.freq_hz == fi)
+                    .collect();
+                states[i].signal_owner = match &sfn_i {
+                    Some(net) => (0..states.len())
+                        .find(|&j| states[j].spec.sfn.as_ref() == Some(net))
+                        .unwrap_or(i),
+                    None => i,
+                };
+            }
+            let shared: Vec<String> = states
+                .iter()
+                .filter(|s| !s.cochannel.is_empty())
+                .map(|s| s.spec.id.to_string())
+                .collect();
+            if !shared.is_empty() && cfg.level == DtmbLevel::Measurement {
+                warnings.push(format!(
+                    "{name}: towers {} share a carrier; at measurement level each is ranged as if                      alone (the co-channel copies are summed at level = \"signal\")",
+                    shared.join(", ")
+                ));
+            }
+        } else {
+            for (i, s) in states.iter_mut().enumerate() {
+                s.signal_owner = i;
+            }
         }
         let max_len = states
             .iter()
             .map(|s| signal_block_len(s.spec.pn_mode, k, window_samples(&cfg)))
             .max()
             .unwrap_or(0);
+        let any_cochannel = states.iter().any(|s| !s.cochannel.is_empty());
         let period_ns = ((1e9 / cfg.rate_hz).round() as i64).max(1);
         Ok(Self {
             system,
             name,
             block: if cfg.level == DtmbLevel::Signal {
+                vec![Complex32::default(); max_len]
+            } else {
+                Vec::new()
+            },
+            block2: if cfg.level == DtmbLevel::Signal && any_cochannel {
                 vec![Complex32::default(); max_len]
             } else {
                 Vec::new()
@@ -511,7 +565,7 @@ impl DtmbSource {
             link: LinkPaths::new(),
             taps: Vec::with_capacity(crate::propagation::MAX_PATHS),
             validity: ValidityLog::default(),
-            warnings: Vec::new(),
+            warnings,
         })
     }
 
@@ -710,6 +764,7 @@ impl Source for DtmbSource {
                         range_m,
                         &dopplers,
                         aided.then_some(centre_off),
+                        truth,
                     ) {
                         Some(e) => e,
                         None => continue,
@@ -805,6 +860,15 @@ impl DtmbSource {
     /// transmitter through the link's paths (delays, gains, Dopplers, the oscillator's CFO
     /// and SFO) at the link SNR, then the aided (window centred `centre_off` samples from
     /// the truth) or full sync. Returns the timing error in samples.
+    ///
+    /// The towers on the same carrier add their own copies to the block, each through its
+    /// own paths, arriving `Δ = (ρ_j − ρ_i)/c − (δt_j − δt_i)` after tower `i`'s (ranges
+    /// and tower clocks) with the power of its own link budget; the towers of tower `i`'s
+    /// single-frequency network carry the same signal (one transmitter, more paths), other
+    /// co-channel towers their own payload. The receiver cannot tell the copies apart by
+    /// the PN header, so the sync measures the earliest copy that passes the first-path
+    /// thresholds, whichever tower sent it.
+    #[allow(clippy::too_many_arguments)]
     fn signal_error(
         &mut self,
         ti: usize,
@@ -813,44 +877,135 @@ impl DtmbSource {
         range_m: f64,
         dopplers: &[f64],
         centre_off: Option<f64>,
+        truth: &crate::engine::Truth,
     ) -> Option<f64> {
         let w = window_samples(&self.cfg);
         let k = self.cfg.accumulation_frames as usize;
-        let st = &mut self.towers[ti];
-        let mode = st.spec.pn_mode;
+        let mode = self.towers[ti].spec.pn_mode;
         let n = mode.frame_len();
         let len = signal_block_len(mode, k, w);
         // The header of frame `frame_no` arrives at `offset` samples into the block: the
         // fraction is the true range's, so every fractional delay occurs.
         let margin = if centre_off.is_some() { w + 16 } else { n / 2 };
         let offset = margin as f64 + (range_m / METRES_PER_SAMPLE).fract();
-        let total_power: f64 = self.taps.iter().map(|t| t.gain.norm_sqr()).sum();
-        let mut paths = Vec::with_capacity(self.taps.len());
-        for (p, t) in self.taps.iter().enumerate() {
-            paths.push(Path {
-                delay_s: (offset + t.delay_samples) / SAMPLE_RATE_HZ,
-                gain: t.gain,
-                doppler_hz: dopplers.get(p).copied().unwrap_or(0.0),
+        // Paths per signal: (transmitting tower, paths in block samples).
+        let mut signals: Vec<(usize, Vec<Path>)> = vec![(
+            self.towers[ti].signal_owner,
+            self.taps
+                .iter()
+                .enumerate()
+                .map(|(p, t)| Path {
+                    delay_s: offset + t.delay_samples,
+                    gain: t.gain,
+                    doppler_hz: dopplers.get(p).copied().unwrap_or(0.0),
+                })
+                .collect(),
+        )];
+        let t_s = truth.sim.seconds();
+        let spec_i = &self.towers[ti].spec;
+        let clock_i = spec_i.clock_offset_s + spec_i.clock_drift_s_per_s * t_s;
+        for jj in 0..self.towers[ti].cochannel.len() {
+            let j = self.towers[ti].cochannel[jj];
+            let (range_j, snr_j, dop_j) = self.tower_link(j, truth);
+            let spec_j = &self.towers[j].spec;
+            let clock_j = spec_j.clock_offset_s + spec_j.clock_drift_s_per_s * t_s;
+            let delta = ((range_j - range_m) / C_MPS - (clock_j - clock_i)) * SAMPLE_RATE_HZ;
+            let amp = 10f64.powf((snr_j - snr_ref_db) / 20.0);
+            let owner = self.towers[j].signal_owner;
+            let paths = self.taps.iter().enumerate().map(|(p, t)| Path {
+                delay_s: offset + delta + t.delay_samples,
+                gain: t.gain * amp,
+                doppler_hz: dop_j[p],
             });
+            match signals.iter_mut().find(|(o, _)| *o == owner) {
+                Some((_, v)) => v.extend(paths),
+                None => signals.push((owner, paths.collect())),
+            }
         }
+        // A co-channel tower may be heard before tower i: its delay would be negative.
+        // Adding S to every delay and to the receiver index of the block's first sample
+        // leaves the block's samples unchanged (y'[m + S] = x(m + S − d − S) = y[m]), so
+        // tower i's header stays `offset` samples in.
+        let earliest = signals
+            .iter()
+            .flat_map(|(_, v)| v.iter().map(|p| p.delay_s))
+            .fold(f64::INFINITY, f64::min);
+        let shift = if earliest < 1.0 {
+            (1.0 - earliest).ceil()
+        } else {
+            0.0
+        };
+        for (_, v) in signals.iter_mut() {
+            for p in v.iter_mut() {
+                p.delay_s = (p.delay_s + shift) / SAMPLE_RATE_HZ;
+            }
+        }
+        let rx_start = frame_no * n as i64 + shift as i64;
+        // Tower i's own signal (with its network's other towers) carries the noise: the
+        // noise is referred to tower i's free-space reference path, γ_ref.
+        let (owner_i, main_paths) = signals.swap_remove(0);
+        if main_paths.is_empty() {
+            return None;
+        }
+        let main_power: f64 = main_paths.iter().map(|p| p.gain.norm_sqr()).sum();
         let cfg = ChannelConfig::from_oscillators(
-            paths,
+            main_paths,
             0.0,
             self.cfg.rx_oscillator_ppm,
-            st.spec.freq_hz,
-            Some(snr_ref_db + 10.0 * total_power.max(1e-30).log10()),
+            self.towers[ti].spec.freq_hz,
+            Some(snr_ref_db + 10.0 * main_power.max(1e-30).log10()),
         );
+        let max_len = self.block.len();
+        let st = &mut self.towers[ti];
         let reuse = match st.channel.as_mut() {
             Some(ch) => ch.set_paths(cfg.paths.clone(), mode).is_ok(),
             None => false,
         };
         if !reuse {
-            st.channel = Channel::new(cfg, mode, self.block.len()).ok();
+            st.channel = Channel::new(cfg, mode, max_len).ok();
         }
-        let (ch, tx, rx) = (st.channel.as_mut()?, st.tx.as_mut()?, st.receiver.as_mut()?);
         let block = &mut self.block[..len];
-        ch.process(tx, frame_no * n as i64, block, &mut st.noise)
-            .ok()?;
+        {
+            let mut tx = self.towers[owner_i].tx.take()?;
+            let st = &mut self.towers[ti];
+            let res = match st.channel.as_mut() {
+                Some(ch) => ch.process(&mut tx, rx_start, block, &mut st.noise).ok(),
+                None => None,
+            };
+            self.towers[owner_i].tx = Some(tx);
+            res?;
+        }
+        // The other co-channel signals, noiseless, each through its own channel.
+        for (owner, paths) in signals {
+            if paths.is_empty() {
+                continue;
+            }
+            let icfg = ChannelConfig::from_oscillators(
+                paths,
+                0.0,
+                self.cfg.rx_oscillator_ppm,
+                self.towers[owner].spec.freq_hz,
+                None,
+            );
+            let so = &mut self.towers[owner];
+            let reuse = match so.interference.as_mut() {
+                Some(ch) => ch.set_paths(icfg.paths.clone(), mode).is_ok(),
+                None => false,
+            };
+            if !reuse {
+                so.interference = Channel::new(icfg, mode, max_len).ok();
+            }
+            let (Some(ch), Some(tx)) = (so.interference.as_mut(), so.tx.as_mut()) else {
+                continue;
+            };
+            let extra = &mut self.block2[..len];
+            ch.process(tx, rx_start, extra, &mut so.noise).ok()?;
+            for (b, e) in block.iter_mut().zip(extra.iter()) {
+                *b += e;
+            }
+        }
+        let st = &mut self.towers[ti];
+        let rx = st.receiver.as_mut()?;
         let f = mode.frames_per_superframe() as i64;
         let frame_in_superframe = frame_no.rem_euclid(f) as usize;
         let search = match centre_off {
@@ -910,12 +1065,14 @@ mod tests {
             id: EmitterId::new(System::Dtmb, i as u16 + 1),
             pos_enu_m: *p,
             pos_ecef_m: f.ecef_of_enu(p),
-            channel: 14,
-            freq_hz: 482e6,
+            // Two channels (DS-14, DS-15): each tower is heard alone.
+            channel: 14 + i as u8,
+            freq_hz: 482e6 + 8e6 * i as f64,
             erp_dbw: 40.0,
             pn_mode: PnMode::Pn945,
             clock_offset_s: *off,
             clock_drift_s_per_s: 1e-9,
+            sfn: None,
         })
         .collect()
     }
@@ -949,10 +1106,30 @@ mod tests {
 
     fn run(level: DtmbLevel, seed: u64) -> Vec<(f64, f64, f64)> {
         let f = frame();
+        run_with(level, seed, &towers(&f), false, |t| {
+            Vector3::new(10.0 * t, 5.0, 1.5)
+        })
+        .into_iter()
+        .map(|(_, e, s, c)| (e, s, c))
+        .collect()
+    }
+
+    /// Runs the source over 5 s along `walk`, unaided or aided by the true position (a
+    /// perfect estimator), and returns (tower number, pseudorange − geometry − clocks, σ,
+    /// C/N0) for every range.
+    fn run_with(
+        level: DtmbLevel,
+        seed: u64,
+        tw: &[TowerSpec],
+        aided: bool,
+        walk: impl Fn(f64) -> Vector3<f64>,
+    ) -> Vec<(u16, f64, f64, f64)> {
+        let f = frame();
         let rng = TrialRng::new(seed, 0);
         let ck = clock(&rng);
         let cfg = DtmbSensorConfig {
             level,
+            aided,
             shadowing: ShadowingConfig {
                 sigma_db: 0.0,
                 ..ShadowingConfig::default()
@@ -960,14 +1137,13 @@ mod tests {
             range_differences: true,
             ..DtmbSensorConfig::default()
         };
-        let tw = towers(&f);
         let mut src = DtmbSource::new(
             cfg,
-            tw.clone(),
+            tw.to_vec(),
             None,
             f.clone(),
             Arc::clone(&ck),
-            None,
+            aided.then_some(0),
             &rng,
             SimTime::from_seconds(5.0),
         )
@@ -976,13 +1152,19 @@ mod tests {
         let mut t = Some(src.first_sample());
         let mut batch = MeasurementBatch::default();
         while let Some(sim) = t {
-            let pos = Vector3::new(10.0 * sim.seconds(), 5.0, 1.5);
+            let pos = walk(sim.seconds());
             let tr = truth(&f, sim, pos);
             batch.items.clear();
+            let est = [Some(crate::fusion::estimator::Estimate {
+                t: tr.t,
+                pos_ecef_m: tr.pos_ecef_m,
+                vel_ecef_mps: None,
+                cov_pos_m2: nalgebra::Matrix3::identity(),
+            })];
             t = src.sample(
                 &SampleContext {
                     truth: &tr,
-                    estimates: &[],
+                    estimates: if aided { &est } else { &[] },
                 },
                 &mut batch,
             );
@@ -995,11 +1177,71 @@ mod tests {
                         * (ck.bias_s(ts) + ck.isb_s(System::Dtmb, ts)
                             - spec.clock_offset_s
                             - spec.clock_drift_s_per_s * ts);
-                    res.push((r.pseudorange_m - geom - clk, r.sigma_m, r.cn0_dbhz));
+                    res.push((
+                        r.emitter.number,
+                        r.pseudorange_m - geom - clk,
+                        r.sigma_m,
+                        r.cn0_dbhz,
+                    ));
                 }
             }
         }
         res
+    }
+
+    #[test]
+    fn cochannel_towers_add_and_the_sync_measures_the_earliest_strong_copy() {
+        // Towers A (2 km east) and B (5 km west) on DS-14; B's clock runs 1 µs ahead, so
+        // its copy reaches the static receiver Δ = (ρ_B − ρ_A)/c − 1 µs ≈ 9 µs (68
+        // samples) after A's and, by Extended Hata, about 14 dB weaker.
+        let f = frame();
+        let mk = |i: u16, e: f64, off: f64, sfn: Option<&str>| TowerSpec {
+            id: EmitterId::new(System::Dtmb, i),
+            pos_enu_m: Vector3::new(e, 0.0, 150.0),
+            pos_ecef_m: f.ecef_of_enu(&Vector3::new(e, 0.0, 150.0)),
+            channel: 14,
+            freq_hz: 482e6,
+            erp_dbw: 40.0,
+            pn_mode: PnMode::Pn945,
+            clock_offset_s: off,
+            clock_drift_s_per_s: 0.0,
+            sfn: sfn.map(String::from),
+        };
+        let rx = Vector3::new(0.0, 0.0, 1.5);
+        let rho =
+            |e: f64| (f.ecef_of_enu(&Vector3::new(e, 0.0, 150.0)) - f.ecef_of_enu(&rx)).norm();
+        let delta_m = rho(-5000.0) - rho(2000.0) - C_MPS * 1e-6;
+        for sfn in [Some("Beijing"), None] {
+            let tw = [mk(1, 2000.0, 0.0, sfn), mk(2, -5000.0, 1e-6, sfn)];
+            // Full search (no aiding): the block holds both copies; for B the strongest
+            // peak is A's copy, and nothing passes the first-path test before it, so B's
+            // pseudorange is A's arrival: too short by c·Δ. A's own range is unaffected
+            // (B's copy comes after the first path).
+            let res = run_with(DtmbLevel::Signal, 5, &tw, false, |_| rx);
+            assert_eq!(res.len(), 12, "{sfn:?}: 6 epochs × 2 towers");
+            for &(id, err, sigma, _) in &res {
+                if id == 1 {
+                    assert!(
+                        err.abs() < 5.0 * sigma + 0.1,
+                        "{sfn:?} A: {err} (σ {sigma})"
+                    );
+                } else {
+                    assert!(
+                        (err + delta_m).abs() < 1.0,
+                        "{sfn:?} B: error {err} m, expected −c·Δ = {:.2} m",
+                        -delta_m
+                    );
+                }
+            }
+            // Aided by the true position, B's ±1500 m window (±38 samples) excludes A's
+            // copy 68 samples earlier: both towers are measured correctly.
+            let res = run_with(DtmbLevel::Signal, 5, &tw, true, |_| rx);
+            assert_eq!(res.len(), 12);
+            for &(id, err, sigma, _) in &res {
+                assert!(err.abs() < 5.0 * sigma + 0.1, "{sfn:?} aided {id}: {err}");
+            }
+        }
+        println!("co-channel: B's unaided pseudorange is short by c·Δ = {delta_m:.2} m");
     }
 
     #[test]

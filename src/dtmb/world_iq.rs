@@ -30,9 +30,18 @@
 //! the flat band: a ground reflection 0.002 samples behind the direct path in antiphase
 //! cancels, not adds). A blocked link (no path) leaves noise.
 //!
+//! **Co-channel towers.** Every DTMB tower on the requested tower's carrier adds its own
+//! copy: its paths, its range, its clock (offset and drift), its Dopplers and its link
+//! budget's power, with `n_k` above evaluated per tower. The towers of one
+//! single-frequency network (`sfn` in the world file) transmit one signal, the payload of
+//! the network's first tower (`dtmb/Dnn/tx` of that tower); other co-channel towers their
+//! own. Each tower's frame starts are annotated (`hybridnav:tower`), so a recording of an
+//! SFN carries one annotation per tower and frame, sorted by sample.
+//!
 //! Random streams of `TrialRng::new(seed, trial)`: `motion/trajectory`,
 //! `receiver/clock/init`, `receiver/clock`, the shadowing of the master seed (as a run),
-//! the payload `dtmb/Dnn/tx` (the signal-level source's) and the noise `dtmb/iq/Dnn/noise`.
+//! the payloads `dtmb/Dnn/tx` (the signal-level source's) and the noise
+//! `dtmb/iq/Dnn/noise` of the requested tower.
 
 use super::channel::{Channel, ChannelConfig, Path};
 use super::frame::{CarrierMode, Qam};
@@ -87,8 +96,11 @@ pub struct WorldIq {
     pub center_freq_hz: f64,
     /// The tower's header mode.
     pub mode: PnMode,
-    /// The tower's id.
+    /// The requested tower's id.
     pub tower: String,
+    /// Every tower in the recording: the requested one and its co-channel towers, in the
+    /// world file's order.
+    pub towers: Vec<String>,
     /// Link SNR (dB over 7.56 MHz) at the middle of the first block.
     pub snr_db: f64,
 }
@@ -189,6 +201,26 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
             ),
         ));
     }
+    // The requested tower and every DTMB tower on its carrier.
+    let group: Vec<_> = towers
+        .iter()
+        .filter(|o| o.freq_hz == t.freq_hz)
+        .copied()
+        .collect();
+    if let Some(o) = group.iter().find(|o| o.pn_mode() != mode) {
+        return Err(bad(
+            "tower",
+            format!(
+                "towers {} ({}) and {} ({}) share {:.0} MHz with different PN modes; a \
+                 recording holds one frame structure",
+                t.id,
+                mode.name(),
+                o.id,
+                o.pn_mode().name(),
+                t.freq_hz * 1e-6
+            ),
+        ));
+    }
     let rng = TrialRng::new(req.seed, req.trial);
     let trajectory = world
         .build_trajectory(&rng)
@@ -203,17 +235,22 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
         0.1,
         &mut rng.stream("receiver/clock"),
     ));
-    let spec = TowerSpec {
-        id: t.id.parse().unwrap_or(EmitterId::new(System::Dtmb, 1)),
-        pos_enu_m: t.pos_enu_m,
-        pos_ecef_m: t.pos_ecef_m,
-        channel: t.spec.channel.unwrap_or(0).min(255) as u8,
-        freq_hz: t.freq_hz,
-        erp_dbw: t.erp_dbw,
-        pn_mode: mode,
-        clock_offset_s: t.spec.clock_offset_ns * 1e-9,
-        clock_drift_s_per_s: t.spec.clock_drift_ppb * 1e-9,
-    };
+    let specs: Vec<TowerSpec> = group
+        .iter()
+        .map(|o| TowerSpec {
+            id: o.id.parse().unwrap_or(EmitterId::new(System::Dtmb, 1)),
+            pos_enu_m: o.pos_enu_m,
+            pos_ecef_m: o.pos_ecef_m,
+            channel: o.spec.channel.unwrap_or(0).min(255) as u8,
+            freq_hz: o.freq_hz,
+            erp_dbw: o.erp_dbw,
+            pn_mode: mode,
+            clock_offset_s: o.spec.clock_offset_ns * 1e-9,
+            clock_drift_s_per_s: o.spec.clock_drift_ppb * 1e-9,
+            sfn: o.spec.sfn.clone(),
+        })
+        .collect();
+    let me = group.iter().position(|o| o.id == t.id).unwrap_or(0);
     let mut cfg = world.file.sensors.dtmb.clone().unwrap_or_default();
     // The link needs no signal-level state of its own.
     cfg.level = DtmbLevel::Measurement;
@@ -221,7 +258,7 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
     let eps = rx_ppm * 1e-6;
     let mut link = DtmbSource::new(
         cfg,
-        vec![spec.clone()],
+        specs.clone(),
         world.scene.clone(),
         world.frame.clone(),
         Arc::clone(&clock),
@@ -240,16 +277,36 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
         qam: Qam::Qam64,
         si_vector: 0,
     };
-    let mut tx = Transmitter::new(tx_cfg, &mut rng.stream(&format!("dtmb/{}/tx", spec.id)));
-    let mut noise = rng.stream(&format!("dtmb/iq/{}/noise", spec.id));
-    let lambda = C_MPS / spec.freq_hz;
+    // One signal per network (its first tower's payload), one per tower outside one.
+    let owner_of = |i: usize| -> usize {
+        specs[i]
+            .sfn
+            .as_ref()
+            .and_then(|net| specs.iter().position(|o| o.sfn.as_ref() == Some(net)))
+            .unwrap_or(i)
+    };
+    let mut signals: Vec<Signal> = Vec::new();
+    for i in 0..specs.len() {
+        let o = owner_of(i);
+        if !signals.iter().any(|sg| sg.owner == o) {
+            signals.push(Signal {
+                owner: o,
+                tx: Transmitter::new(tx_cfg, &mut rng.stream(&format!("dtmb/{}/tx", specs[o].id))),
+                channel: None,
+                offset: None,
+                paths: Vec::new(),
+            });
+        }
+    }
+    let mut noise = rng.stream(&format!("dtmb/iq/{}/noise", specs[me].id));
+    let lambda = C_MPS / t.freq_hz;
     let total = req.frames * n;
     let mut samples = vec![Complex32::default(); total];
-    let mut annotations = Vec::new();
-    let mut annotation_extra = Vec::new();
-    let mut channel: Option<Channel> = None;
-    let mut offset: Option<i64> = None;
-    let mut snr_first = f64::NAN;
+    let mut extra = vec![Complex32::default(); n];
+    let mut annotations: Vec<(Annotation, Map<String, Value>)> = Vec::new();
+    let mut snr_first = f64::NEG_INFINITY;
+    // Per tower and block: (taps, first excess delay, x of the first path, SNR, ...).
+    let mut links: Vec<TowerBlock> = Vec::with_capacity(specs.len());
     for (j, block) in samples.chunks_mut(n).enumerate() {
         // Receiver-clock time of the block's middle, taken as the trajectory's time (the
         // receiver clock's bias, ≤ ms, moves the platform by millimetres).
@@ -260,181 +317,172 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
             trajectory.as_ref(),
             SimTime::from_seconds(t_s),
         );
-        let (range_m, snr_ref_db, dopplers) = link.tower_link(0, &truth);
         let rx_bias_s = clock.bias_s(t_s) + clock.isb_s(System::Dtmb, t_s);
-        let tower_clock_s = spec.clock_offset_s + spec.clock_drift_s_per_s * t_s;
-        let no_scene_doppler = if world.scene.is_none() {
-            // The direct path's Doppler: the platform's velocity towards the tower.
-            let u = (spec.pos_enu_m - truth.enu.pos_enu_m).normalize();
-            truth.enu.vel_enu_mps.dot(&u) / lambda
-        } else {
-            0.0
-        };
-        let taps: Vec<(f64, Complex64, f64)> = link
-            .taps()
-            .iter()
-            .enumerate()
-            .filter(|(_, tp)| tp.gain.norm_sqr() > 0.0)
-            .map(|(p, tp)| {
-                let d = if world.scene.is_none() {
-                    no_scene_doppler
-                } else {
-                    dopplers[p]
-                };
-                (tp.delay_samples, tp.gain, d)
-            })
-            .collect();
-        // Received power: the paths combine coherently through the band's (flat)
-        // autocorrelation, sinc of their delay difference in samples.
-        let power: f64 = taps
-            .iter()
-            .flat_map(|a| taps.iter().map(move |b| (a, b)))
-            .map(|(a, b)| (a.1 * b.1.conj()).re * sinc(a.0 - b.0))
-            .sum();
-        let snr_db = snr_ref_db + 10.0 * power.max(1e-30).log10();
-        if j == 0 {
-            snr_first = if power > 0.0 {
-                snr_db
+        links.clear();
+        for (i, spec) in specs.iter().enumerate() {
+            let (range_m, snr_ref_db, dopplers) = link.tower_link(i, &truth);
+            let tower_clock_s = spec.clock_offset_s + spec.clock_drift_s_per_s * t_s;
+            let no_scene_doppler = if world.scene.is_none() {
+                // The direct path's Doppler: the platform's velocity towards the tower.
+                let u = (spec.pos_enu_m - truth.enu.pos_enu_m).normalize();
+                truth.enu.vel_enu_mps.dot(&u) / lambda
             } else {
-                f64::NEG_INFINITY
+                0.0
             };
-        }
-        // x_p: transmitter sample minus recording sample for path p (no SFO).
-        let base = fs * (req.from_s - rx_bias_s - range_m / C_MPS + tower_clock_s);
-        let x_of = |delay_samples: f64| base - delay_samples;
-        let first_delay = if taps.is_empty() {
-            0.0
-        } else {
-            taps.iter().map(|t| t.0).fold(f64::INFINITY, f64::min)
-        };
-        let off =
-            *offset.get_or_insert_with(|| (x_of(first_delay).ceil() + DELAY_MARGIN_SAMPLES) as i64);
-        let amp = (10f64.powf(snr_ref_db / 10.0) / mode.nominal_frame_power()).sqrt();
-        let mut paths: Vec<Path> = taps
-            .iter()
-            .map(|&(d, g, dop)| Path {
-                delay_s: (off as f64 - x_of(d)) / fs,
-                gain: g * amp,
-                doppler_hz: dop,
-            })
-            .collect();
-        if paths.is_empty() {
-            // A blocked link: the channel still needs a path; a silent one.
-            paths.push(Path {
-                delay_s: DELAY_MARGIN_SAMPLES / fs,
-                gain: Complex64::new(0.0, 0.0),
-                doppler_hz: 0.0,
+            let taps: Vec<(f64, Complex64, f64)> = link
+                .taps()
+                .iter()
+                .enumerate()
+                .filter(|(_, tp)| tp.gain.norm_sqr() > 0.0)
+                .map(|(p, tp)| {
+                    let d = if world.scene.is_none() {
+                        no_scene_doppler
+                    } else {
+                        dopplers[p]
+                    };
+                    (tp.delay_samples, tp.gain, d)
+                })
+                .collect();
+            // Received power: the paths combine coherently through the band's (flat)
+            // autocorrelation, sinc of their delay difference in samples.
+            let power: f64 = taps
+                .iter()
+                .flat_map(|a| taps.iter().map(move |b| (a, b)))
+                .map(|(a, b)| (a.1 * b.1.conj()).re * sinc(a.0 - b.0))
+                .sum();
+            let snr_db = snr_ref_db + 10.0 * power.max(1e-30).log10();
+            if j == 0 && i == me && power > 0.0 {
+                snr_first = snr_db;
+            }
+            // x: transmitter sample minus recording sample of a path (no SFO).
+            let base = fs * (req.from_s - rx_bias_s - range_m / C_MPS + tower_clock_s);
+            let first_delay = taps.iter().map(|t| t.0).fold(f64::INFINITY, f64::min);
+            links.push(TowerBlock {
+                range_m,
+                snr_ref_db,
+                snr_db,
+                tower_clock_s,
+                base,
+                first_delay,
+                taps,
             });
         }
-        if let Some(p) = paths
-            .iter()
-            .find(|p| !(p.delay_s >= 0.0 && p.delay_s < 1.0))
-        {
-            return Err(bad(
-                "from_s",
-                format!(
-                    "at {t_s:.4} s the path delay moved {:.0} samples from the recording's \
-                     start, beyond the {DELAY_MARGIN_SAMPLES} samples of margin: record fewer frames",
-                    p.delay_s * fs - DELAY_MARGIN_SAMPLES
-                ),
-            ));
+        // Each signal's channel: the paths of its towers, scaled to their link budgets.
+        for sg in signals.iter_mut() {
+            sg.paths.clear();
+            let members: Vec<usize> = (0..specs.len())
+                .filter(|&i| owner_of(i) == sg.owner)
+                .collect();
+            let latest_x = members
+                .iter()
+                .flat_map(|&i| links[i].taps.iter().map(move |tp| (i, tp.0)))
+                .map(|(i, d)| links[i].base - d)
+                .fold(f64::NEG_INFINITY, f64::max);
+            if sg.offset.is_none() && latest_x.is_finite() {
+                sg.offset = Some((latest_x.ceil() + DELAY_MARGIN_SAMPLES) as i64);
+            }
+            let off = sg.offset.unwrap_or(0) as f64;
+            for &i in &members {
+                let l = &links[i];
+                let amp = (10f64.powf(l.snr_ref_db / 10.0) / mode.nominal_frame_power()).sqrt();
+                for &(d, g, dop) in &l.taps {
+                    sg.paths.push(Path {
+                        delay_s: (off - (l.base - d)) / fs,
+                        gain: g * amp,
+                        doppler_hz: dop,
+                    });
+                }
+            }
+            if let Some(p) = sg
+                .paths
+                .iter()
+                .find(|p| !(p.delay_s >= 0.0 && p.delay_s < 1.0))
+            {
+                return Err(bad(
+                    "from_s",
+                    format!(
+                        "at {t_s:.4} s the path delay moved {:.0} samples from the recording's \
+                         start, beyond the {DELAY_MARGIN_SAMPLES} samples of margin: record fewer frames",
+                        p.delay_s * fs - DELAY_MARGIN_SAMPLES
+                    ),
+                ));
+            }
         }
-        let ch_cfg = ChannelConfig::from_oscillators(paths, 0.0, rx_ppm, spec.freq_hz, None);
-        match channel.as_mut() {
-            Some(ch) => ch.set_paths(ch_cfg.paths, mode)?,
-            None => channel = Some(Channel::new(ch_cfg, mode, n)?),
-        }
-        let Some(ch) = channel.as_mut() else {
-            unreachable!("the channel was just built");
-        };
+        // Sum the signals, then the noise once.
         let start = (j * n) as i64;
-        ch.process(
-            &mut Shifted {
-                tx: &mut tx,
-                offset: off,
-            },
-            start,
-            block,
-            &mut noise,
-        )?;
-        super::noise::add_awgn(block, 1.0, &mut noise);
-        // Frame starts (first path) inside this block: n = (1 + ε)(k·N − x_first).
-        if taps.is_empty() {
-            continue;
+        block.iter_mut().for_each(|x| *x = Complex32::default());
+        for sg in signals.iter_mut() {
+            if sg.paths.is_empty() {
+                continue;
+            }
+            let ch_cfg =
+                ChannelConfig::from_oscillators(sg.paths.clone(), 0.0, rx_ppm, t.freq_hz, None);
+            match sg.channel.as_mut() {
+                Some(ch) => ch.set_paths(ch_cfg.paths, mode)?,
+                None => sg.channel = Some(Channel::new(ch_cfg, mode, n)?),
+            }
+            let Some(ch) = sg.channel.as_mut() else {
+                unreachable!("the channel was just built");
+            };
+            let out = &mut extra[..block.len()];
+            ch.process(
+                &mut Shifted {
+                    tx: &mut sg.tx,
+                    offset: sg.offset.unwrap_or(0),
+                },
+                start,
+                out,
+                &mut noise,
+            )?;
+            for (b, e) in block.iter_mut().zip(out.iter()) {
+                *b += e;
+            }
         }
-        let x1 = x_of(first_delay);
-        let lo = start as f64;
-        let hi = lo + block.len() as f64;
-        let mut k = ((lo / (1.0 + eps) + x1) / n as f64).ceil() as i64;
-        loop {
-            let pos = (1.0 + eps) * (k as f64 * n as f64 - x1);
-            if pos >= hi {
-                break;
+        super::noise::add_awgn(block, 1.0, &mut noise);
+        // Frame starts (first path) of each tower inside this block:
+        // n = (1 + ε)(k·N − x_first).
+        for (i, l) in links.iter().enumerate() {
+            if l.taps.is_empty() {
+                continue;
             }
-            if pos >= lo {
-                let s0 = pos.round().min((total - 1) as f64) as u64;
-                let fis = k.rem_euclid(mode.frames_per_superframe() as i64) as usize;
-                let phase = mode.phase_of_frame(fis);
-                let emission = world.start.add_seconds(k as f64 * t_frame - tower_clock_s);
-                annotations.push(Annotation {
-                    sample_start: s0,
-                    sample_count: (n as u64).min(total as u64 - s0),
-                    label: format!("frame {k} {} phase {phase}", mode.name()),
-                });
-                let mut m = Map::new();
-                m.insert("hybridnav:frame".into(), json!(k));
-                m.insert("hybridnav:frame_in_superframe".into(), json!(fis));
-                m.insert("hybridnav:pn_phase".into(), json!(phase));
-                m.insert("hybridnav:emission_gps_week".into(), json!(emission.week()));
-                m.insert(
-                    "hybridnav:emission_gps_tow_s".into(),
-                    json!(emission.tow_s()),
-                );
-                m.insert(
-                    "hybridnav:emission_gpst".into(),
-                    json!(emission.to_iso_gpst()),
-                );
-                m.insert("hybridnav:first_path_sample".into(), json!(pos));
-                m.insert(
-                    "hybridnav:first_path_excess_delay_samples".into(),
-                    json!(first_delay),
-                );
-                m.insert("hybridnav:range_m".into(), json!(range_m));
-                m.insert(
-                    "hybridnav:pseudorange_m".into(),
-                    json!(range_m + C_MPS * (rx_bias_s - tower_clock_s)),
-                );
-                m.insert("hybridnav:snr_db".into(), json!(snr_db));
-                m.insert("hybridnav:snr_ref_db".into(), json!(snr_ref_db));
-                // Each path: excess delay (samples), power relative to the first (dB),
-                // phase (rad), Doppler (Hz).
-                let g0 = taps
-                    .iter()
-                    .find(|t| t.0 == first_delay)
-                    .map_or(1.0, |t| t.1.norm_sqr());
-                let paths: Vec<Value> = taps
-                    .iter()
-                    .map(|(d, g, dop)| json!([d, 10.0 * (g.norm_sqr() / g0).log10(), g.arg(), dop]))
-                    .collect();
-                m.insert("hybridnav:paths".into(), Value::Array(paths));
-                let p = truth.enu.pos_enu_m;
-                m.insert("hybridnav:platform_enu_m".into(), json!([p.x, p.y, p.z]));
-                annotation_extra.push(m);
+            let x1 = l.base - l.first_delay;
+            let lo = start as f64;
+            let hi = lo + block.len() as f64;
+            let mut k = ((lo / (1.0 + eps) + x1) / n as f64).ceil() as i64;
+            loop {
+                let pos = (1.0 + eps) * (k as f64 * n as f64 - x1);
+                if pos >= hi {
+                    break;
+                }
+                if pos >= lo {
+                    annotations.push(frame_annotation(
+                        world, mode, &specs[i], l, k, pos, total, &truth, rx_bias_s,
+                    ));
+                }
+                k += 1;
             }
-            k += 1;
         }
     }
+    // SigMF lists annotations by sample; a tower's frames stay in order (stable sort).
+    annotations.sort_by_key(|(a, _)| a.sample_start);
+    let (annotations, annotation_extra): (Vec<_>, Vec<_>) = annotations.into_iter().unzip();
+    let tower_ids: Vec<String> = group.iter().map(|o| o.id.clone()).collect();
     let mut g = Map::new();
     g.insert(
         "core:description".into(),
         json!(format!(
-            "DTMB (GB 20600-2006) tower {} ({}, {}) as heard by the receiver of world {name:?} \
-             trial {} seed {} from {} s, generated by hybridnav",
+            "DTMB (GB 20600-2006) tower {} ({}, {}){} as heard by the receiver of world \
+             {name:?} trial {} seed {} from {} s, generated by hybridnav",
             t.id,
             mode.name(),
             t.spec
                 .channel
                 .map_or("no channel".into(), |c| format!("DS-{c}")),
+            if tower_ids.len() > 1 {
+                format!(" with its co-channel towers ({})", tower_ids.join(", "))
+            } else {
+                String::new()
+            },
             req.trial,
             req.seed,
             req.from_s
@@ -449,6 +497,10 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
     g.insert("hybridnav:trial".into(), json!(req.trial));
     g.insert("hybridnav:seed".into(), json!(req.seed));
     g.insert("hybridnav:tower".into(), json!(t.id));
+    g.insert("hybridnav:towers".into(), json!(tower_ids));
+    if let Some(net) = &t.spec.sfn {
+        g.insert("hybridnav:sfn".into(), json!(net));
+    }
     g.insert("hybridnav:pn_mode".into(), json!(mode.name()));
     g.insert("hybridnav:from_s".into(), json!(req.from_s));
     g.insert(
@@ -462,9 +514,103 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
         annotations,
         annotation_extra,
         global_extra: g,
-        center_freq_hz: spec.freq_hz,
+        center_freq_hz: t.freq_hz,
         mode,
         tower: t.id.clone(),
+        towers: tower_ids,
         snr_db: snr_first,
     })
+}
+
+/// One transmitted signal of a recording: a network's (or a lone tower's) transmitter,
+/// the channel of its towers' paths, and the transmitter-sample offset of the recording.
+struct Signal {
+    owner: usize,
+    tx: Transmitter,
+    channel: Option<Channel>,
+    offset: Option<i64>,
+    paths: Vec<Path>,
+}
+
+/// One tower's link during one block.
+struct TowerBlock {
+    range_m: f64,
+    snr_ref_db: f64,
+    snr_db: f64,
+    tower_clock_s: f64,
+    /// Transmitter sample minus recording sample of a path with no excess delay.
+    base: f64,
+    first_delay: f64,
+    /// (excess delay in samples, gain, Doppler in Hz) per path.
+    taps: Vec<(f64, Complex64, f64)>,
+}
+
+/// The annotation of frame `k` of one tower, whose first path starts at recording sample
+/// `pos`, with its `hybridnav:` keys.
+#[allow(clippy::too_many_arguments)]
+fn frame_annotation(
+    world: &World,
+    mode: PnMode,
+    spec: &TowerSpec,
+    l: &TowerBlock,
+    k: i64,
+    pos: f64,
+    total: usize,
+    truth: &crate::engine::Truth,
+    rx_bias_s: f64,
+) -> (Annotation, Map<String, Value>) {
+    let n = mode.frame_len();
+    let s0 = pos.round().min((total - 1) as f64) as u64;
+    let fis = k.rem_euclid(mode.frames_per_superframe() as i64) as usize;
+    let phase = mode.phase_of_frame(fis);
+    let emission = world
+        .start
+        .add_seconds(k as f64 * mode.frame_duration_s() - l.tower_clock_s);
+    let ann = Annotation {
+        sample_start: s0,
+        sample_count: (n as u64).min(total as u64 - s0),
+        label: format!("{} frame {k} {} phase {phase}", spec.id, mode.name()),
+    };
+    let mut m = Map::new();
+    m.insert("hybridnav:tower".into(), json!(spec.id.to_string()));
+    m.insert("hybridnav:frame".into(), json!(k));
+    m.insert("hybridnav:frame_in_superframe".into(), json!(fis));
+    m.insert("hybridnav:pn_phase".into(), json!(phase));
+    m.insert("hybridnav:emission_gps_week".into(), json!(emission.week()));
+    m.insert(
+        "hybridnav:emission_gps_tow_s".into(),
+        json!(emission.tow_s()),
+    );
+    m.insert(
+        "hybridnav:emission_gpst".into(),
+        json!(emission.to_iso_gpst()),
+    );
+    m.insert("hybridnav:first_path_sample".into(), json!(pos));
+    m.insert(
+        "hybridnav:first_path_excess_delay_samples".into(),
+        json!(l.first_delay),
+    );
+    m.insert("hybridnav:range_m".into(), json!(l.range_m));
+    m.insert(
+        "hybridnav:pseudorange_m".into(),
+        json!(l.range_m + C_MPS * (rx_bias_s - l.tower_clock_s)),
+    );
+    m.insert("hybridnav:snr_db".into(), json!(l.snr_db));
+    m.insert("hybridnav:snr_ref_db".into(), json!(l.snr_ref_db));
+    // Each path: excess delay (samples), power relative to the first (dB), phase (rad),
+    // Doppler (Hz).
+    let g0 = l
+        .taps
+        .iter()
+        .find(|t| t.0 == l.first_delay)
+        .map_or(1.0, |t| t.1.norm_sqr());
+    let paths: Vec<Value> = l
+        .taps
+        .iter()
+        .map(|(d, g, dop)| json!([d, 10.0 * (g.norm_sqr() / g0).log10(), g.arg(), dop]))
+        .collect();
+    m.insert("hybridnav:paths".into(), Value::Array(paths));
+    let p = truth.enu.pos_enu_m;
+    m.insert("hybridnav:platform_enu_m".into(), json!([p.x, p.y, p.z]));
+    (ann, m)
 }

@@ -263,6 +263,7 @@ impl TcofdmSource {
                     pn_mode: s.pn_mode,
                     clock_offset_s: s.clock_offset_s + sync_s,
                     clock_drift_s_per_s: s.clock_drift_s_per_s,
+                    sfn: None,
                 }
             })
             .collect();

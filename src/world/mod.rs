@@ -454,6 +454,8 @@ fn check_transmitters(
         }
         out.push(t);
     }
+    scene::check_sfn_groups(&out)
+        .map_err(|(i, k, m)| ctx.err(&format!("transmitter[{i}].{k}"), m))?;
     Ok(out)
 }
 
@@ -947,6 +949,7 @@ impl World {
                     pn_mode: t.pn_mode(),
                     clock_offset_s: t.spec.clock_offset_ns * 1e-9,
                     clock_drift_s_per_s: t.spec.clock_drift_ppb * 1e-9,
+                    sfn: t.spec.sfn.clone(),
                 })
                 .collect()
         };

@@ -348,6 +348,12 @@ pub struct TransmitterSpec {
     /// Transmitter clock drift (ns/s, i.e. parts per billion).
     #[serde(default)]
     pub clock_drift_ppb: f64,
+    /// DTMB single-frequency network: towers naming the same network transmit the same
+    /// signal (payload and frame schedule) on the same channel and PN mode. Towers on one
+    /// channel always add at the receiver; without a common `sfn` their payloads are
+    /// independent. Default: none.
+    #[serde(default)]
+    pub sfn: Option<String>,
 }
 
 /// A transmitter with its position resolved.
@@ -372,6 +378,39 @@ impl Transmitter {
             .and_then(|m| m.parse().ok())
             .unwrap_or(crate::dtmb::PnMode::Pn945)
     }
+}
+
+/// Checks that the DTMB towers of each single-frequency network share their carrier and
+/// PN mode (they transmit one signal). Returns the index of the first offending
+/// transmitter, the key and the message.
+///
+/// # Errors
+/// `(index, "sfn", message)` naming both towers and what differs.
+pub fn check_sfn_groups(transmitters: &[Transmitter]) -> Result<(), (usize, String, String)> {
+    for (i, t) in transmitters.iter().enumerate() {
+        let Some(name) = &t.spec.sfn else { continue };
+        let first = transmitters[..i]
+            .iter()
+            .find(|o| o.spec.sfn.as_deref() == Some(name.as_str()));
+        if let Some(o) = first {
+            if o.freq_hz != t.freq_hz || o.pn_mode() != t.pn_mode() {
+                return Err((
+                    i,
+                    "sfn".into(),
+                    format!(
+                        "towers {} and {} are both in single-frequency network {name:?} but                          differ in carrier ({} vs {} MHz) or PN mode ({} vs {}): an SFN's                          towers transmit one signal on one channel",
+                        o.id,
+                        t.id,
+                        o.freq_hz * 1e-6,
+                        t.freq_hz * 1e-6,
+                        o.pn_mode(),
+                        t.pn_mode()
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 impl TransmitterSpec {
@@ -445,6 +484,14 @@ impl TransmitterSpec {
             }
             if let Err(e) = m.parse::<crate::dtmb::PnMode>() {
                 return err("pn_mode", e.to_string());
+            }
+        }
+        if let Some(name) = &self.sfn {
+            if self.kind != TransmitterKind::Dtmb {
+                return err("sfn", "sfn applies to DTMB transmitters only".into());
+            }
+            if name.trim().is_empty() {
+                return err("sfn", "expected a network name, got an empty string".into());
             }
         }
         for (k, v) in [
