@@ -1482,12 +1482,12 @@ impl PdrEstimator {
 
     /// A horizontal position fix: initialises, or updates with H = [I₂ 0]. Returns (used,
     /// numerical failure).
-    fn fix(&mut self, f: &Fix) -> (bool, bool) {
+    fn fix(&mut self, f: &Fix) -> PdrUpdate {
         let z = f.pos_enu_m.xy();
         let r: Matrix2<f64> = f.pos_cov_m2.fixed_view::<2, 2>(0, 0).into_owned();
         let Some(pos) = self.pos_en_m else {
             if r.cholesky().is_none() {
-                return (false, false);
+                return PdrUpdate::Refused;
             }
             self.pos_en_m = Some(z);
             self.up_m = f.pos_enu_m.z;
@@ -1495,17 +1495,16 @@ impl PdrEstimator {
             self.p.fixed_view_mut::<2, 2>(0, 0).copy_from(&r);
             self.anchor = None;
             self.rd = Vector2::zeros();
-            return (true, false);
+            return PdrUpdate::Anchored;
         };
         let s = self.p.fixed_view::<2, 2>(0, 0) + r;
         let Some(chol) = s.cholesky() else {
-            return (false, false);
+            return PdrUpdate::Refused;
         };
         let innov = z - pos;
-        if let Some(g) = self.cfg.nis_gate {
-            if innov.dot(&chol.solve(&innov)) > g {
-                return (false, false);
-            }
+        let nis = innov.dot(&chol.solve(&innov));
+        if self.cfg.nis_gate.is_some_and(|g| nis > g) {
+            return PdrUpdate::Gated;
         }
         // K = P Hᵀ S⁻¹ = (S⁻¹ H P)ᵀ, Joseph form.
         let hp: SMatrix<f64, 2, 4> = self.p.fixed_rows::<2>(0).into_owned();
@@ -1521,17 +1520,17 @@ impl PdrEstimator {
             self.pos_en_m = Some(new_pos);
             self.rd += dx.fixed_rows::<2>(2);
             self.p = 0.5 * (new_p + new_p.transpose());
-            (true, false)
+            PdrUpdate::Used { nis, dof: 2 }
         } else {
-            (false, true)
+            PdrUpdate::Failed
         }
     }
 
     /// A range difference: anchors on the first, then a scalar Joseph update. Returns
     /// (used, numerical failure).
-    fn range_difference(&mut self, m: &RangeDifference, t: GpsTime) -> (bool, bool) {
+    fn range_difference(&mut self, m: &RangeDifference, t: GpsTime) -> PdrUpdate {
         let Some(pos) = self.pos_en_m else {
-            return (false, false);
+            return PdrUpdate::Refused;
         };
         let offset = match self.last_step {
             Some((ts, v)) => {
@@ -1549,17 +1548,17 @@ impl PdrEstimator {
         if !(m.delta_range_m.is_finite() && m.sigma_m.is_finite() && m.sigma_m > 0.0)
             || m.emitter_pos_ecef_m.iter().any(|v| !v.is_finite())
         {
-            return (false, false);
+            return PdrUpdate::Refused;
         }
         let tower = self.frame.enu_of_ecef(&m.emitter_pos_ecef_m);
         let anchor = match self.anchor {
             Some(a) if a.emitter == m.emitter => a,
-            Some(_) => return (false, false),
+            Some(_) => return PdrUpdate::Refused,
             None => {
                 let d = Vector3::new(pos_now.x, pos_now.y, self.up_m) - tower;
                 let n = d.norm();
                 if n.is_nan() || n <= 1.0 {
-                    return (false, false);
+                    return PdrUpdate::Refused;
                 }
                 let u = Vector2::new(d.x / n, d.y / n);
                 let pp: Matrix2<f64> = self.p.fixed_view::<2, 2>(0, 0).into_owned();
@@ -1587,7 +1586,7 @@ impl PdrEstimator {
                     r0_m: n - m.delta_range_m,
                 };
                 self.anchor = Some(a);
-                return (true, false);
+                return PdrUpdate::Anchored;
             }
         };
         let model = RangeDifferenceModel {
@@ -1603,7 +1602,7 @@ impl PdrEstimator {
         let ph = self.p * h.transpose();
         let s = (h * ph)[(0, 0)] + sigma * sigma;
         if !(s.is_finite() && s > 0.0) {
-            return (false, true);
+            return PdrUpdate::Failed;
         }
         let k = ph / s;
         let ikh = Matrix4::identity() - k * h;
@@ -1613,9 +1612,51 @@ impl PdrEstimator {
             self.pos_en_m = Some(pos + dx.fixed_rows::<2>(0));
             self.rd += dx.fixed_rows::<2>(2);
             self.p = 0.5 * (new_p + new_p.transpose());
-            (true, false)
+            PdrUpdate::Used {
+                nis: nu * nu / s,
+                dof: 1,
+            }
         } else {
-            (false, true)
+            PdrUpdate::Failed
+        }
+    }
+}
+
+/// What the PDR filter did with one fix or range difference.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum PdrUpdate {
+    /// A Kalman update with its normalised innovation squared and dimension.
+    Used { nis: f64, dof: u32 },
+    /// The measurement started the filter (the first fix) or its range-difference anchor.
+    Anchored,
+    /// The innovation gate refused it as an outlier.
+    Gated,
+    /// Invalid input, or no filter state to update yet.
+    Refused,
+    /// The update produced a non-finite state or covariance, which was not kept.
+    Failed,
+}
+
+impl PdrUpdate {
+    /// Tallies `n` measurements (a fix counts the ranges it came from) into `out`.
+    fn tally(self, n: u32, out: &mut EpochOutcome) {
+        match self {
+            PdrUpdate::Used { nis, dof } => {
+                out.used += n;
+                out.nis_sum += nis;
+                out.nis_count += 1;
+                out.nis_dof += dof;
+            }
+            PdrUpdate::Anchored => out.used += n,
+            PdrUpdate::Gated => {
+                out.rejected += n;
+                out.rejected_gate += n;
+            }
+            PdrUpdate::Refused => out.rejected += n,
+            PdrUpdate::Failed => {
+                out.rejected += n;
+                out.numerical_failure = true;
+            }
         }
     }
 }
@@ -1653,13 +1694,7 @@ impl Estimator for PdrEstimator {
         } else if self.cfg.range_difference_sources.contains(&batch.source) {
             for m in &batch.items {
                 if let Measurement::RangeDifference(rd) = m {
-                    let (used, failed) = self.range_difference(rd, batch.t);
-                    if used {
-                        out.used += 1;
-                    } else {
-                        out.rejected += 1;
-                    }
-                    out.numerical_failure |= failed;
+                    self.range_difference(rd, batch.t).tally(1, &mut out);
                 }
             }
         }
@@ -1679,13 +1714,7 @@ impl Estimator for PdrEstimator {
                 &mut out.gdop,
             );
             for f in &fixes {
-                let (used, failed) = self.fix(f);
-                if used {
-                    out.used += f.n;
-                } else {
-                    out.rejected += f.n;
-                }
-                out.numerical_failure |= failed;
+                self.fix(f).tally(f.n, &mut out);
             }
             self.fixes = fixes;
         }
