@@ -54,6 +54,40 @@ fn seed000_beihang_proposed_beats_gps_dtmb_beats_gps() {
     assert!((total - 1.0).abs() < 1e-9);
 }
 
+/// Seed 000 site 2: at 2σ, 3σ and in mean ATE, Proposed < GPS+DTMB < GPS (the paper, 3σ:
+/// 60.23 < 262.80 < 416.60). The GPS-only and GPS+DTMB tails come from a few long coasts
+/// of the 11-state EKF in the two-satellite windows, so the ordering of the two needs many
+/// trials: 100 (as `docs/reproductions.md`), where seeds 1–5 give GPS+DTMB / GPS at 3σ of
+/// 0.65–0.72; at 20 trials it can flip.
+#[test]
+fn seed000_kehui_proposed_beats_gps_dtmb_beats_gps() {
+    let s = run("worlds/seed000-kehui.toml", 100, 1);
+    let s2 = |n: &str| get(&s, n).error_3d_m.unwrap().sigma2;
+    let s3 = |n: &str| get(&s, n).error_3d_m.unwrap().sigma3;
+    let ate = |n: &str| get(&s, n).ate_m.unwrap().mean;
+    println!(
+        "2σ: GPS {:.1}, GPS+DTMB {:.1}, Proposed {:.1}; 3σ: {:.1} {:.1} {:.1}; ATE: {:.1} {:.1} {:.1}",
+        s2("GPS"),
+        s2("GPS+DTMB"),
+        s2("Proposed"),
+        s3("GPS"),
+        s3("GPS+DTMB"),
+        s3("Proposed"),
+        ate("GPS"),
+        ate("GPS+DTMB"),
+        ate("Proposed")
+    );
+    for (what, f) in [("2σ", &s2 as &dyn Fn(&str) -> f64), ("3σ", &s3), ("ATE", &ate)] {
+        assert!(
+            f("Proposed") < f("GPS+DTMB") && f("GPS+DTMB") < f("GPS"),
+            "{what}: Proposed {}, GPS+DTMB {}, GPS {}",
+            f("Proposed"),
+            f("GPS+DTMB"),
+            f("GPS")
+        );
+    }
+}
+
 /// Seed 002 outdoors: the proposed PDR + magnetic landmarks + DTMB beats plain PDR at the
 /// 68 % and 95 % levels of the horizontal error (the paper: 2.84 vs 8.77 m, 3.98 vs 12.84).
 #[test]
