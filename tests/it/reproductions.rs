@@ -77,7 +77,11 @@ fn seed000_kehui_proposed_beats_gps_dtmb_beats_gps() {
         ate("GPS+DTMB"),
         ate("Proposed")
     );
-    for (what, f) in [("2σ", &s2 as &dyn Fn(&str) -> f64), ("3σ", &s3), ("ATE", &ate)] {
+    for (what, f) in [
+        ("2σ", &s2 as &dyn Fn(&str) -> f64),
+        ("3σ", &s3),
+        ("ATE", &ate),
+    ] {
         assert!(
             f("Proposed") < f("GPS+DTMB") && f("GPS+DTMB") < f("GPS"),
             "{what}: Proposed {}, GPS+DTMB {}, GPS {}",
