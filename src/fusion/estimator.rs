@@ -39,6 +39,10 @@ pub struct EpochOutcome {
     pub rejected_gate: u32,
     /// The integration mode chosen this epoch, for estimators that select one.
     pub mode: Option<&'static str>,
+    /// The NIS above goes to the records only, not to the divergence watch's χ² test:
+    /// set by the filters compared as their papers run them (seed 004's INS filters have
+    /// no divergence detection). Gated epochs still count.
+    pub nis_unwatched: bool,
 }
 
 /// An estimator the engine drives: it consumes batches from the sources it names and

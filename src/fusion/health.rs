@@ -126,7 +126,8 @@ impl HealthMonitor {
         let offered = out.used + out.rejected_gate;
         let mostly_gated = out.rejected_gate > 0 && 2 * out.rejected_gate >= offered
             || out.rejected_gate >= 3 && 4 * out.rejected_gate >= offered;
-        let nis_outside = out.nis_dof > 0 && out.nis_sum > self.bound(out.nis_dof);
+        let nis_outside =
+            !out.nis_unwatched && out.nis_dof > 0 && out.nis_sum > self.bound(out.nis_dof);
         let outside = nis_outside || mostly_gated;
         let informative = out.nis_dof > 0 || out.rejected_gate > 0;
         if outside {
@@ -177,6 +178,38 @@ mod tests {
             let nis = 1000.0 * ChiSquared::new(8.0).unwrap().sample(&mut rng);
             let v = m.check(&epoch(nis, 8));
             assert_eq!(v == Verdict::Diverged, k == 10, "epoch {k}");
+        }
+    }
+
+    /// A NIS marked for the records only (`nis_unwatched`) is not judged, however large,
+    /// but its epochs still break a run of gated ones, and gated epochs still count.
+    #[test]
+    fn an_unwatched_nis_is_not_judged_but_gating_still_is() {
+        let mut m = HealthMonitor::new(HealthConfig {
+            window_epochs: 3,
+            false_alarm: 1e-4,
+        });
+        let huge = EpochOutcome {
+            nis_unwatched: true,
+            ..epoch(1e9, 6)
+        };
+        for _ in 0..10 {
+            assert_eq!(m.check(&huge), Verdict::Healthy);
+        }
+        let gated = EpochOutcome {
+            rejected: 6,
+            rejected_gate: 6,
+            ..EpochOutcome::default()
+        };
+        assert_eq!(m.check(&gated), Verdict::Healthy);
+        assert_eq!(m.check(&gated), Verdict::Healthy);
+        assert_eq!(m.check(&huge), Verdict::Healthy);
+        assert_eq!(m.check(&gated), Verdict::Healthy);
+        assert_eq!(m.check(&gated), Verdict::Healthy);
+        assert_eq!(m.check(&gated), Verdict::Diverged);
+        // The same NIS, watched, is caught.
+        for k in 1..=3 {
+            assert_eq!(m.check(&epoch(1e9, 6)) == Verdict::Diverged, k == 3);
         }
     }
 

@@ -759,7 +759,11 @@ impl InsEstimator {
                     None => kf.update_position(&pos, &fix.pos_cov_m2),
                 };
                 match r {
-                    Ok(o) if o.accepted => out.used += fix.n,
+                    Ok(o) if o.accepted => {
+                        out.used += fix.n;
+                        let dof = if fix.vel.is_some() { 6 } else { 3 };
+                        tally_unwatched_nis(out, o.nis, dof);
+                    }
                     _ => out.rejected += fix.n,
                 }
             }
@@ -791,12 +795,16 @@ impl InsEstimator {
                 }
                 let rep = kf.update(&pos, &vel, &r);
                 // Counted per component of the difference (eq. 17), which the gates act on.
-                // Like the builtin filter, no NIS goes to the engine's divergence watch:
-                // the paper's filters have no divergence detection and are compared as
-                // they are. A fully gated difference is reported, so a gate that locks
-                // out every fix for ten epochs still resets the filter.
+                // Like the builtin filter, the NIS goes to the records but not to the
+                // engine's divergence watch: the paper's filters have no divergence
+                // detection and are compared as they are. A fully gated difference is
+                // reported, so a gate that locks out every fix for ten epochs still
+                // resets the filter.
                 out.used += rep.used;
                 out.rejected += rep.rejected;
+                if let crate::fusion::ekf11::UpdateOutcome::Accepted { nis } = rep.outcome {
+                    tally_unwatched_nis(out, nis, rep.used);
+                }
                 let gated = match rep.outcome {
                     crate::fusion::ekf11::UpdateOutcome::Accepted { .. } => {
                         self.cfg.residual_gate_c.is_some()
@@ -1619,6 +1627,17 @@ impl PdrEstimator {
         } else {
             PdrUpdate::Failed
         }
+    }
+}
+
+/// Adds one update's NIS of `dof` components to the epoch's record, outside the
+/// divergence watch's χ² test (`EpochOutcome::nis_unwatched`).
+fn tally_unwatched_nis(out: &mut EpochOutcome, nis: f64, dof: u32) {
+    if nis.is_finite() && dof > 0 {
+        out.nis_sum += nis;
+        out.nis_count += 1;
+        out.nis_dof += dof;
+        out.nis_unwatched = true;
     }
 }
 
