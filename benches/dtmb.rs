@@ -171,6 +171,16 @@ fn bench(c: &mut Criterion) {
     let mut rx = Receiver::new(MODE, len).unwrap();
     let mut block = vec![Complex32::default(); n];
     let mut gen_buf = vec![Complex32::default(); n];
+    // The receiver tracks frame k with a ±64-sample window and first-path detection.
+    let tracking = |k: usize| SyncConfig {
+        search: Search::Aided {
+            frame_in_superframe: k % MODE.frames_per_superframe(),
+            predicted_start_samples: 38.0,
+            half_window_samples: 64,
+        },
+        frames: 1,
+        first_path: Some(Default::default()),
+    };
     let (mut t_gen, mut t_ch, mut t_sync) = (0.0, 0.0, 0.0);
     let wall = Instant::now();
     let cpu0 = cpu_ns();
@@ -184,16 +194,7 @@ fn bench(c: &mut Criterion) {
         ch.process(&mut tx, (k * n) as i64, &mut block, &mut noise)
             .unwrap();
         let c2 = cpu_ns();
-        let cfg = SyncConfig {
-            search: Search::Aided {
-                frame_in_superframe: k % MODE.frames_per_superframe(),
-                predicted_start_samples: 38.0,
-                half_window_samples: 64,
-            },
-            frames: 1,
-            first_path: Some(Default::default()),
-        };
-        sink += rx.sync(&block, &cfg).unwrap().toa_samples;
+        sink += rx.sync(&block, &tracking(k)).unwrap().toa_samples;
         let c3 = cpu_ns();
         t_gen += c1 - c0;
         t_ch += c2 - c1;
@@ -230,16 +231,7 @@ fn bench(c: &mut Criterion) {
     for k in frames..2 * frames {
         ch.process(&mut tx, (k * n) as i64, &mut block, &mut noise)
             .unwrap();
-        let cfg = SyncConfig {
-            search: Search::Aided {
-                frame_in_superframe: k % MODE.frames_per_superframe(),
-                predicted_start_samples: 38.0,
-                half_window_samples: 64,
-            },
-            frames: 1,
-            first_path: Some(Default::default()),
-        };
-        sink += rx.sync(&block, &cfg).unwrap().toa_samples;
+        sink += rx.sync(&block, &tracking(k)).unwrap().toa_samples;
     }
     let chain_cpu = (cpu_ns() - cpu1) * 1e-9;
     let el = wall1.elapsed().as_secs_f64();

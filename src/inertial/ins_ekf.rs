@@ -196,6 +196,31 @@ pub fn process_noise_rate(cfg: &InsEkfConfig) -> (SVector<f64, 15>, f64) {
     (q, inv_tau)
 }
 
+/// One IMU sample through the strapdown mechanisation with the bias estimates removed,
+/// shared by this filter and the Kalman-family one (`ins_family`). Returns the interval
+/// since the previous sample, the error dynamics F at the new state and the specific
+/// force in ENU, or `None` when the sample does not advance time (the mechanisation has
+/// then still run, as it always did).
+pub(crate) fn mechanise(
+    ins: &mut Strapdown,
+    s: &ImuSample,
+    accel_bias_mps2: &Vector3<f64>,
+    gyro_bias_rps: &Vector3<f64>,
+    inv_tau: f64,
+) -> Option<(f64, Cov15, Vector3<f64>)> {
+    let dt = s.t_s - ins.state().t_s;
+    let f_b = s.accel_mps2 - accel_bias_mps2;
+    ins.step(s.t_s, &(s.gyro_rps - gyro_bias_rps), &f_b);
+    if dt.is_nan() || dt <= 0.0 {
+        return None;
+    }
+    let st = *ins.state();
+    let c = st.q_nb.to_rotation_matrix().into_inner();
+    let f_n = c * f_b;
+    let f = error_dynamics(ins.earth(), &c, &f_n, st.pos_enu_m.z, inv_tau);
+    Some((dt, f, f_n))
+}
+
 /// The error dynamics matrix F of the module documentation at one IMU sample: `c` is
 /// Ĉ_b^n, `f_n` the specific force in ENU, `up_m` the INS height (for the gravity
 /// gradient) and `inv_tau` the bias correlation rate.
@@ -270,23 +295,16 @@ impl InsEkf {
     /// Mechanises one IMU sample (bias estimates removed) and propagates the covariance over
     /// the interval since the previous sample: the INS step. Does not allocate.
     pub fn propagate(&mut self, s: &ImuSample) {
-        let dt = s.t_s - self.ins.state().t_s;
-        let f_b = s.accel_mps2 - self.accel_bias_mps2;
-        self.ins
-            .step(s.t_s, &(s.gyro_rps - self.gyro_bias_rps), &f_b);
-        if dt.is_nan() || dt <= 0.0 {
-            return;
-        }
-        let st = *self.ins.state();
-        let c = st.q_nb.to_rotation_matrix().into_inner();
-        self.f_n = c * f_b;
-        let f = error_dynamics(
-            self.ins.earth(),
-            &c,
-            &self.f_n,
-            st.pos_enu_m.z,
+        let Some((dt, f, f_n)) = mechanise(
+            &mut self.ins,
+            s,
+            &self.accel_bias_mps2,
+            &self.gyro_bias_rps,
             self.inv_tau,
-        );
+        ) else {
+            return;
+        };
+        self.f_n = f_n;
         let phi = Cov15::identity() + f * dt;
         self.p = phi * self.p * phi.transpose();
         for i in 0..15 {

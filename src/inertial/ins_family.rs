@@ -8,7 +8,7 @@
 //!
 //! The strapdown runs at the IMU rate; between two fixes the error dynamics
 //! `F_k` of each sample interval (the same `F` as [`super::ins_ekf`],
-//! [`error_dynamics`]) are chained into one transition and one process noise,
+//! [`super::ins_ekf::error_dynamics`]) are chained into one transition and one process noise,
 //!
 //! ```text
 //! Φ_k = I + F_k Δt_k,   Q_k = diag(q) Δt_k            (per IMU sample, as InsEkf)
@@ -45,7 +45,7 @@
 //! The strong tracking filter differs by its fading factor.
 
 use super::imu::ImuSample;
-use super::ins_ekf::{error_dynamics, initial_covariance, process_noise_rate, Cov15, InsEkfConfig};
+use super::ins_ekf::{initial_covariance, mechanise, process_noise_rate, Cov15, InsEkfConfig};
 use super::strapdown::{NavState, Strapdown};
 use super::LocalEarth;
 use crate::fusion::ekf11::RejectReason;
@@ -332,17 +332,15 @@ impl InsFamilyFilter {
     /// Mechanises one IMU sample (bias estimates removed) and chains its error transition,
     /// as [`super::ins_ekf::InsEkf::propagate`]. Does not allocate.
     pub fn propagate(&mut self, s: &ImuSample) {
-        let dt = s.t_s - self.ins.state().t_s;
-        let f_b = s.accel_mps2 - self.accel_bias_mps2;
-        self.ins
-            .step(s.t_s, &(s.gyro_rps - self.gyro_bias_rps), &f_b);
-        if dt.is_nan() || dt <= 0.0 {
+        let Some((dt, f, _)) = mechanise(
+            &mut self.ins,
+            s,
+            &self.accel_bias_mps2,
+            &self.gyro_bias_rps,
+            self.inv_tau,
+        ) else {
             return;
-        }
-        let st = *self.ins.state();
-        let c = st.q_nb.to_rotation_matrix().into_inner();
-        let f_n = c * f_b;
-        let f = error_dynamics(self.ins.earth(), &c, &f_n, st.pos_enu_m.z, self.inv_tau);
+        };
         self.transition.push(&f, &self.q_rate, dt);
     }
 

@@ -162,17 +162,20 @@ fn a_displaced_stream_is_reported_or_followed_never_silently_wrong() {
                 .iter()
                 .filter(|e| e.t_s >= t_fault && e.numerical_failure)
                 .count();
+            // The last ten estimates' distances from the truth moved by `offset`.
+            let last_from = |offset: Vector3<f64>| -> Vec<f64> {
+                tr.epochs
+                    .iter()
+                    .rev()
+                    .filter_map(|e| {
+                        let est = Vector3::from(e.est_ecef_m?);
+                        Some((est - (Vector3::from(e.truth_ecef_m) + offset)).norm())
+                    })
+                    .take(10)
+                    .collect()
+            };
             // Where the measurements put the receiver: the truth plus the displacement.
-            let last: Vec<f64> = tr
-                .epochs
-                .iter()
-                .rev()
-                .filter_map(|e| {
-                    let est = Vector3::from(e.est_ecef_m?);
-                    Some((est - (Vector3::from(e.truth_ecef_m) + d)).norm())
-                })
-                .take(10)
-                .collect();
+            let last = last_from(d);
             let follows = !last.is_empty() && last.iter().all(|&m| m < 100.0);
             // A dead-reckoning filter with sparse fixes may instead refuse every displaced
             // fix as an outlier, which its records say (`rejected_gate`), and stay where its
@@ -181,16 +184,7 @@ fn a_displaced_stream_is_reported_or_followed_never_silently_wrong() {
             // emitter does not move them.) Every batch it gated it gated in full; a filter
             // that fits a few measurements and gates the rest fails this.
             let after: Vec<_> = tr.epochs.iter().filter(|e| e.t_s >= t_fault).collect();
-            let at_truth = tr
-                .epochs
-                .iter()
-                .rev()
-                .filter_map(|e| {
-                    let est = Vector3::from(e.est_ecef_m?);
-                    Some((est - Vector3::from(e.truth_ecef_m)).norm())
-                })
-                .take(10)
-                .all(|m| m < 100.0);
+            let at_truth = last_from(Vector3::zeros()).iter().all(|&m| m < 100.0);
             let refused = at_truth
                 && after.iter().any(|e| e.rejected_gate > 0)
                 && after
