@@ -112,17 +112,31 @@ pub fn system_info_symbols(carrier: CarrierMode, vector: u32, out: &mut [Complex
     }
 }
 
+/// The unitary transform's scale `1/√3780`.
+fn idft_scale() -> f32 {
+    1.0 / (BODY_LEN as f32).sqrt()
+}
+
 /// Builds frame bodies with planned transforms and reusable buffers.
 pub struct BodyModulator {
     ifft: Arc<dyn Fft<f32>>,
     fft: Arc<dyn Fft<f32>>,
     scratch: Vec<Complex32>,
     logical: Vec<Complex32>,
-    /// The interleaved (physical-order) symbols of the body being built.
+    /// Whether `logical` holds the last body's symbols (a C = 3780 body is drawn in
+    /// physical order and de-interleaved only when [`BodyModulator::symbols`] asks).
+    logical_current: bool,
+    /// The interleaved (physical-order) symbols of the body being built, times `1/√N`.
     physical: Vec<Complex32>,
+    /// The constellation index of each physical subcarrier of the last C = 3780 body.
+    physical_bits: Vec<u8>,
+    /// The constellation and system information of the last body.
+    last: (Qam, [Complex32; SI_LEN]),
     table: Vec<u16>,
     /// Constellation lookup tables (4, 16, 64 points), so mapping costs one load.
     qam_lut: [Vec<Complex32>; 3],
+    /// The same tables times the IDFT's `1/√N`, for the physical-order symbols.
+    qam_lut_scaled: [Vec<Complex32>; 3],
 }
 
 impl std::fmt::Debug for BodyModulator {
@@ -152,16 +166,26 @@ impl BodyModulator {
             fft,
             scratch: vec![Complex32::default(); scratch_len],
             logical: vec![Complex32::default(); BODY_LEN],
+            logical_current: true,
+            physical_bits: vec![0; BODY_LEN],
+            last: (Qam::Qam4, [Complex32::default(); SI_LEN]),
             physical: vec![Complex32::default(); BODY_LEN],
             table: (0..BODY_LEN).map(|i| interleave_index(i) as u16).collect(),
             qam_lut: [Qam::Qam4, Qam::Qam16, Qam::Qam64]
                 .map(|q| (0..1u32 << q.bits_per_symbol()).map(|b| q.map(b)).collect()),
+            qam_lut_scaled: [Qam::Qam4, Qam::Qam16, Qam::Qam64].map(|q| {
+                (0..1u32 << q.bits_per_symbol())
+                    .map(|b| q.map(b) * idft_scale())
+                    .collect()
+            }),
         }
     }
 
     /// Writes one body into `out` (length 3780): system information with `si_vector`, then
     /// 3744 random data symbols drawn from `rng`, interleaved and inverse-transformed for
-    /// C = 3780. Returns the logical (pre-interleaver) symbols in `self.symbols()`.
+    /// C = 3780 (where the symbols are drawn in subcarrier order, which gives the logical
+    /// sequence the same i.i.d. uniform law). The logical (pre-interleaver) symbols are
+    /// in `self.symbols()`.
     ///
     /// # Errors
     /// [`DtmbError::BufferLength`] when `out` is not 3780 samples long.
@@ -182,30 +206,54 @@ impl BodyModulator {
         }
         let mut si = [Complex32::default(); SI_LEN];
         system_info_symbols(carrier, si_vector, &mut si);
-        self.logical[..SI_LEN].copy_from_slice(&si);
         let bps = qam.bits_per_symbol();
         let mask = (1u64 << bps) - 1;
         // One 64-bit draw serves several symbols: ten 6-bit, sixteen 4-bit or thirty-two
         // 2-bit symbols, which keeps the random stream cheap in the hot loop.
-        let lut = &self.qam_lut[(bps / 2 - 1) as usize];
+        let q = (bps / 2 - 1) as usize;
         let per_word = (64 / bps) as usize;
-        for chunk in self.logical[SI_LEN..].chunks_mut(per_word) {
-            let mut w = rng.next_u64();
-            for s in chunk {
-                *s = lut[(w & mask) as usize];
-                w >>= bps;
-            }
-        }
         match carrier {
-            CarrierMode::Single => out.copy_from_slice(&self.logical),
-            CarrierMode::Multi3780 => {
-                // Interleave and apply the IDFT's 1/√N in one pass, into a buffer reused by
-                // every call (the scattered writes stay in cache; `out` is often a cold
-                // frame buffer), then transform out of place into `out`.
-                let s = 1.0 / (BODY_LEN as f32).sqrt();
-                for (&x, &p) in self.logical.iter().zip(&self.table) {
-                    self.physical[p as usize] = x * s;
+            CarrierMode::Single => {
+                self.logical[..SI_LEN].copy_from_slice(&si);
+                let lut = &self.qam_lut[q];
+                for chunk in self.logical[SI_LEN..].chunks_mut(per_word) {
+                    let mut w = rng.next_u64();
+                    for s in chunk {
+                        *s = lut[(w & mask) as usize];
+                        w >>= bps;
+                    }
                 }
+                self.logical_current = true;
+                out.copy_from_slice(&self.logical);
+            }
+            CarrierMode::Multi3780 => {
+                // The data symbols are independent and uniform, so drawing them in
+                // physical (subcarrier) order gives the logical sequence the same law as
+                // drawing it in logical order and interleaving, without the scattered
+                // writes: fill every subcarrier sequentially, then put the system
+                // information on its 36 interleaved positions. The table holds each
+                // point times the IDFT's 1/√N, the same product as scaling after the
+                // lookup.
+                let lut_s = &self.qam_lut_scaled[q];
+                for (chunk, bits) in self
+                    .physical
+                    .chunks_mut(per_word)
+                    .zip(self.physical_bits.chunks_mut(per_word))
+                {
+                    let mut w = rng.next_u64();
+                    for (x, b) in chunk.iter_mut().zip(bits) {
+                        let k = (w & mask) as usize;
+                        *x = lut_s[k];
+                        *b = k as u8;
+                        w >>= bps;
+                    }
+                }
+                let scale = idft_scale();
+                for (&x, &p) in si.iter().zip(&self.table) {
+                    self.physical[p as usize] = x * scale;
+                }
+                self.last = (qam, si);
+                self.logical_current = false;
                 self.ifft.process_outofplace_with_scratch(
                     &mut self.physical,
                     out,
@@ -217,7 +265,16 @@ impl BodyModulator {
     }
 
     /// The logical symbols (system information then data) of the last body.
-    pub fn symbols(&self) -> &[Complex32] {
+    pub fn symbols(&mut self) -> &[Complex32] {
+        if !self.logical_current {
+            let (qam, si) = self.last;
+            let lut = &self.qam_lut[(qam.bits_per_symbol() / 2 - 1) as usize];
+            self.logical[..SI_LEN].copy_from_slice(&si);
+            for (l, &p) in self.logical.iter_mut().zip(&self.table).skip(SI_LEN) {
+                *l = lut[self.physical_bits[p as usize] as usize];
+            }
+            self.logical_current = true;
+        }
         &self.logical
     }
 
@@ -239,7 +296,7 @@ impl BodyModulator {
             });
         }
         self.fft.process_with_scratch(body, &mut self.scratch);
-        let s = 1.0 / (BODY_LEN as f32).sqrt();
+        let s = idft_scale();
         for (l, &p) in self.table.iter().enumerate() {
             symbols[l] = body[p as usize] * s;
         }
