@@ -614,7 +614,7 @@ fn lerp(s: Complex32, e: Complex32, w: f32) -> Complex32 {
 /// 512 samples they restart from an f64 phasor, so the f32 rounding never accumulates
 /// beyond 32 steps (relative error ~1e-6). A restart costs one f64 `sincos` (the phase of
 /// its first sample) and sixteen complex products with lane offsets `e^{j2π f l}` computed
-/// once, instead of a `sincos` per lane.
+/// once (by products of `e^{j2π f}`), instead of a `sincos` per lane.
 #[derive(Clone, Debug)]
 pub(crate) struct Rotator {
     f_cycles: f64,
@@ -626,13 +626,17 @@ pub(crate) struct Rotator {
 
 impl Rotator {
     pub(crate) fn new(f_cycles: f64) -> Self {
-        let step = Complex64::from_polar(1.0, 2.0 * PI * (f_cycles * LANES as f64).fract());
+        // The lane offsets by products of one f64 phasor (fifteen roundings of ~1e-16).
+        let e1 = Complex64::from_polar(1.0, 2.0 * PI * f_cycles.fract());
+        let mut lane = [Complex64::new(1.0, 0.0); LANES];
+        for l in 1..LANES {
+            lane[l] = lane[l - 1] * e1;
+        }
+        let step = lane[LANES - 1] * e1;
         Self {
             f_cycles,
             step: (step.re as f32, step.im as f32),
-            lane: std::array::from_fn(|l| {
-                Complex64::from_polar(1.0, 2.0 * PI * (f_cycles * l as f64).fract())
-            }),
+            lane,
         }
     }
 

@@ -23,7 +23,7 @@ use rand::Rng;
 
 /// The "triple32" hash: a bijection on 32-bit words with full avalanche.
 #[inline(always)]
-fn mix(mut x: u32) -> u32 {
+pub(crate) fn mix(mut x: u32) -> u32 {
     x ^= x >> 17;
     x = x.wrapping_mul(0xed5a_d4bb);
     x ^= x >> 11;

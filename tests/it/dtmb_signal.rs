@@ -842,12 +842,12 @@ filter = "wls"
 "#,
     )
     .unwrap();
-    let (base, rec, meta) = world_iq("world-iq-sfn-rec", world.to_str().unwrap(), 1.0, 4, "cf32");
+    let (base, rec, meta) = world_iq("world-iq-sfn-rec", world.to_str().unwrap(), 1.0, 16, "cf32");
     let g = &meta["global"];
     assert_eq!(g["hybridnav:towers"], serde_json::json!(["D01", "D02"]));
     assert_eq!(g["hybridnav:sfn"], "Beijing");
     let ann = meta["annotations"].as_array().unwrap();
-    assert_eq!(ann.len(), 8, "one annotation per tower and frame");
+    assert_eq!(ann.len(), 32, "one annotation per tower and frame");
     let f = |a: &serde_json::Value, k: &str| a[k].as_f64().unwrap();
     let mode = PnMode::Pn945;
     let a1 = &ann[0];
@@ -890,8 +890,29 @@ filter = "wls"
         (top[0] as f64 - p1).abs() <= 1.0 && (top[1] as f64 - p2).abs() <= 1.0,
         "correlation peaks at {top:?}, annotated first paths {p1:.2} and {p2:.2}"
     );
-    let lobe = |c: usize| (c - 4..=c + 4).map(|l| lags[l]).sum::<f64>();
-    let ratio_db = 10.0 * (lobe(top[0]) / lobe(top[1])).log10();
+    // The power ratio from the correlation lobes (±4 lags) of every frame's header, each
+    // with its own PN phase: one header's lobe also holds the other tower's signal and
+    // the neighbouring random bodies (a spread of a few tenths of a dB per frame), which
+    // the four frames average down.
+    let mut lobe_power = [0.0f64; 2];
+    for a in ann {
+        let tower = usize::from(a["hybridnav:tower"] == "D02");
+        let mut hk = vec![Complex32::default(); mode.header_len()];
+        mode.header_samples(a["hybridnav:pn_phase"].as_u64().unwrap() as usize, &mut hk)
+            .unwrap();
+        let c = f(a, "hybridnav:first_path_sample").round() as usize;
+        lobe_power[tower] += (c - 4..=c + 4)
+            .map(|lag| {
+                rec.samples[lag..lag + hk.len()]
+                    .iter()
+                    .zip(&hk)
+                    .map(|(r, c)| r * c.conj())
+                    .sum::<Complex32>()
+                    .norm_sqr() as f64
+            })
+            .sum::<f64>();
+    }
+    let ratio_db = 10.0 * (lobe_power[0] / lobe_power[1]).log10();
     let want_db = f(a1, "hybridnav:snr_db") - f(a2, "hybridnav:snr_db");
     println!(
         "SFN recording: peaks at {top:?} (annotated {p1:.3}, {p2:.3}), power ratio \
