@@ -157,7 +157,9 @@ impl rand::RngCore for PayloadRng {
 /// A DTMB transmitter producing baseband samples at 7.56 Msps by absolute sample index.
 ///
 /// The payload of frame `k` comes from a SplitMix64 sequence keyed by a seed drawn once
-/// from the caller's stream and started at a hash of `k` (`PayloadRng`), so any frame
+/// from the caller's stream and started at a hash of `k` (`PayloadRng`; a C = 3780 body
+/// takes one word of it as the key of its per-subcarrier counter hash, see
+/// [`super::frame::BodyModulator::modulate`]), so any frame
 /// can be regenerated in any order with identical content.
 pub struct Transmitter {
     cfg: TxConfig,
