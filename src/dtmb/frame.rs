@@ -267,16 +267,15 @@ impl BodyModulator {
         }
         let mut si = [Complex32::default(); SI_LEN];
         system_info_symbols(carrier, si_vector, &mut si);
-        let bps = qam.bits_per_symbol();
-        let mask = (1u64 << bps) - 1;
-        // One 64-bit draw serves several symbols: ten 6-bit, sixteen 4-bit or thirty-two
-        // 2-bit symbols, which keeps the random stream cheap in the hot loop.
-        let q = (bps / 2 - 1) as usize;
-        let per_word = (64 / bps) as usize;
         match carrier {
             CarrierMode::Single => {
+                // One 64-bit draw serves several symbols: ten 6-bit, sixteen 4-bit or
+                // thirty-two 2-bit symbols, which keeps the random stream cheap.
+                let bps = qam.bits_per_symbol();
+                let mask = (1u64 << bps) - 1;
+                let per_word = (64 / bps) as usize;
                 self.logical[..SI_LEN].copy_from_slice(&si);
-                let lut = &self.qam_lut[q];
+                let lut = &self.qam_lut[(bps / 2 - 1) as usize];
                 for chunk in self.logical[SI_LEN..].chunks_mut(per_word) {
                     let mut w = rng.next_u64();
                     for s in chunk {

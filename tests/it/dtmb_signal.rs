@@ -869,15 +869,16 @@ filter = "wls"
     let mut h = vec![Complex32::default(); mode.header_len()];
     mode.header_samples(a1["hybridnav:pn_phase"].as_u64().unwrap() as usize, &mut h)
         .unwrap();
-    let corr = |lag: usize| -> f64 {
+    // |Σ r[lag + i] h*[i]|² of the recording with a header.
+    let header_corr = |h: &[Complex32], lag: usize| -> f64 {
         rec.samples[lag..lag + h.len()]
             .iter()
-            .zip(&h)
+            .zip(h)
             .map(|(r, c)| r * c.conj())
             .sum::<Complex32>()
             .norm_sqr() as f64
     };
-    let lags: Vec<f64> = (0..p2 as usize + 40).map(corr).collect();
+    let lags: Vec<f64> = (0..p2 as usize + 40).map(|l| header_corr(&h, l)).collect();
     // The two strongest local maxima.
     let mut peaks: Vec<(usize, f64)> = (1..lags.len() - 1)
         .filter(|&l| lags[l] >= lags[l - 1] && lags[l] >= lags[l + 1])
@@ -893,7 +894,7 @@ filter = "wls"
     // The power ratio from the correlation lobes (±4 lags) of every frame's header, each
     // with its own PN phase: one header's lobe also holds the other tower's signal and
     // the neighbouring random bodies (a spread of a few tenths of a dB per frame), which
-    // the four frames average down.
+    // the sixteen frames average down.
     let mut lobe_power = [0.0f64; 2];
     for a in ann {
         let tower = usize::from(a["hybridnav:tower"] == "D02");
@@ -901,16 +902,7 @@ filter = "wls"
         mode.header_samples(a["hybridnav:pn_phase"].as_u64().unwrap() as usize, &mut hk)
             .unwrap();
         let c = f(a, "hybridnav:first_path_sample").round() as usize;
-        lobe_power[tower] += (c - 4..=c + 4)
-            .map(|lag| {
-                rec.samples[lag..lag + hk.len()]
-                    .iter()
-                    .zip(&hk)
-                    .map(|(r, c)| r * c.conj())
-                    .sum::<Complex32>()
-                    .norm_sqr() as f64
-            })
-            .sum::<f64>();
+        lobe_power[tower] += (c - 4..=c + 4).map(|l| header_corr(&hk, l)).sum::<f64>();
     }
     let ratio_db = 10.0 * (lobe_power[0] / lobe_power[1]).log10();
     let want_db = f(a1, "hybridnav:snr_db") - f(a2, "hybridnav:snr_db");
