@@ -889,6 +889,25 @@ mod tests {
     use crate::dtmb::pn::PnMode;
     use crate::dtmb::transmitter::{FrameSchedule, Transmitter, TxConfig};
 
+    /// Whether this CPU runs the AVX2 code, saying so when it does not.
+    fn avx2_here(what: &str) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            return true;
+        }
+        eprintln!("{what}: AVX2 not supported here, not compared");
+        false
+    }
+
+    /// Whether two sample sequences are equal bit for bit.
+    fn same_bits(a: &[Complex32], b: &[Complex32]) -> bool {
+        a.len() == b.len()
+            && a.iter()
+                .zip(b)
+                .all(|(x, y)| x.re.to_bits() == y.re.to_bits() && x.im.to_bits() == y.im.to_bits())
+    }
+
     fn transmitter() -> Transmitter {
         let cfg = TxConfig {
             schedule: FrameSchedule {
@@ -910,10 +929,7 @@ mod tests {
     fn interpolation_intrinsics_give_the_portable_bits() {
         #[cfg(target_arch = "x86_64")]
         {
-            if !(std::arch::is_x86_feature_detected!("avx2")
-                && std::arch::is_x86_feature_detected!("fma"))
-            {
-                eprintln!("interpolation intrinsics: AVX2 not supported here, not compared");
+            if !avx2_here("interpolation intrinsics") {
                 return;
             }
             let rot = Rotator::new(-0.0123456);
@@ -927,13 +943,7 @@ mod tests {
                 rot.interpolate(&mut a, &s, &e, 987_654_321);
                 // SAFETY: the CPU supports AVX2 and FMA, checked above.
                 unsafe { rot.interpolate_avx2(&mut b, &s, &e, 987_654_321) };
-                assert!(
-                    a.iter()
-                        .zip(&b)
-                        .all(|(x, y)| x.re.to_bits() == y.re.to_bits()
-                            && x.im.to_bits() == y.im.to_bits()),
-                    "length {len}"
-                );
+                assert!(same_bits(&a, &b), "length {len}");
             }
         }
     }
@@ -943,10 +953,7 @@ mod tests {
     fn filter_intrinsics_give_the_portable_bits() {
         #[cfg(target_arch = "x86_64")]
         {
-            if !(std::arch::is_x86_feature_detected!("avx2")
-                && std::arch::is_x86_feature_detected!("fma"))
-            {
-                eprintln!("filter intrinsics: AVX2 not supported here, not compared");
+            if !avx2_here("filter intrinsics") {
                 return;
             }
             let n = 2051;
@@ -961,12 +968,7 @@ mod tests {
             filter(&mut xa, &mut ya, &hs, &he);
             // SAFETY: the CPU supports AVX2 and FMA, checked above.
             unsafe { filter_avx2(&mut xb, &mut yb, &hs, &he) };
-            let same = |a: &[Complex32], b: &[Complex32]| {
-                a.iter().zip(b).all(|(x, y)| {
-                    x.re.to_bits() == y.re.to_bits() && x.im.to_bits() == y.im.to_bits()
-                })
-            };
-            assert!(same(&xa, &xb) && same(&ya, &yb));
+            assert!(same_bits(&xa, &xb) && same_bits(&ya, &yb));
         }
     }
 
@@ -1009,20 +1011,10 @@ mod tests {
         let portable = run(&|fd, tx, a, o| fd.process_impl(&cfg, tx, a, o));
         assert!(portable.iter().any(|x| x.norm() > 0.1));
         #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx2")
-                && std::arch::is_x86_feature_detected!("fma")
-            {
-                // SAFETY: the CPU supports AVX2 and FMA, checked just above.
-                let avx2 = run(&|fd, tx, a, o| unsafe { fd.process_avx2(&cfg, tx, a, o) });
-                assert!(avx2
-                    .iter()
-                    .zip(&portable)
-                    .all(|(a, b)| a.re.to_bits() == b.re.to_bits()
-                        && a.im.to_bits() == b.im.to_bits()));
-            } else {
-                eprintln!("channel build avx2: not supported here, not compared");
-            }
+        if avx2_here("channel build avx2") {
+            // SAFETY: the CPU supports AVX2 and FMA, checked just above.
+            let avx2 = run(&|fd, tx, a, o| unsafe { fd.process_avx2(&cfg, tx, a, o) });
+            assert!(same_bits(&avx2, &portable));
         }
     }
 }
