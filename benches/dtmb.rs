@@ -9,7 +9,7 @@ use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughpu
 use hybridnav::core::{GpsTime, TrialRng};
 use hybridnav::dtmb::{
     CarrierMode, Channel, ChannelConfig, FrameSchedule, Path, PnMode, Qam, Receiver, SampleSource,
-    Search, SyncConfig, Transmitter, TxConfig, SAMPLE_RATE_HZ,
+    Search, SyncConfig, Transmitter, TxConfig,
 };
 use num_complex::Complex32;
 use std::time::Instant;
@@ -183,7 +183,6 @@ fn bench(c: &mut Criterion) {
     };
     let (mut t_gen, mut t_ch, mut t_sync) = (0.0, 0.0, 0.0);
     let wall = Instant::now();
-    let cpu0 = cpu_ns();
     let mut sink = 0.0;
     for k in 0..frames {
         // Generation alone is timed on a second transmitter so the channel's frame cache
@@ -202,7 +201,6 @@ fn bench(c: &mut Criterion) {
         black_box(&gen_buf);
     }
     let el = wall.elapsed().as_secs_f64();
-    let cpu = (cpu_ns() - cpu0) * 1e-9;
     black_box(sink);
     let per = |t: f64| t / frames as f64 * 1e-3;
     println!(
@@ -243,7 +241,6 @@ fn bench(c: &mut Criterion) {
         el / frames as f64 * 1e6,
         frame_s * frames as f64 / el,
     );
-    let _ = (cpu, SAMPLE_RATE_HZ);
 }
 
 /// On-CPU time of this thread in nanoseconds (first field of /proc/thread-self/schedstat),

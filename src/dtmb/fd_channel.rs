@@ -144,6 +144,14 @@ impl Plan {
     }
 }
 
+impl Plan {
+    /// The common carrier rotation at the receiver's sample rate, `f_c r / f_s` cycles
+    /// per sample.
+    fn rotator(&self, cfg: &ChannelConfig) -> Rotator {
+        Rotator::new(self.f_common_hz * sfo_ratio(cfg) / SAMPLE_RATE_HZ)
+    }
+}
+
 /// State of the frequency-domain channel: plans, per-path spectra and work buffers.
 pub(crate) struct FdChannel {
     plan: Plan,
@@ -236,7 +244,7 @@ impl FdChannel {
             j_lo: 0,
             spectra: vec![0.0; 2 * n * cfg.paths.len()],
             nyquist: vec![0.0; 4 * cfg.paths.len()],
-            rot: Rotator::new(plan.f_common_hz * sfo_ratio(cfg) / SAMPLE_RATE_HZ),
+            rot: plan.rotator(cfg),
             seg: zeros.clone(),
             y_end: zeros,
             // One bin more than the FFT: index N holds a copy of bin 0 that the pairwise
@@ -268,7 +276,7 @@ impl FdChannel {
         }
         self.spectra.resize(2 * plan.n * cfg.paths.len(), 0.0);
         self.nyquist.resize(4 * cfg.paths.len(), 0.0);
-        self.rot = Rotator::new(plan.f_common_hz * sfo_ratio(cfg) / SAMPLE_RATE_HZ);
+        self.rot = plan.rotator(cfg);
         self.carry.resize(plan.b_len, Complex32::default());
         self.plan = plan;
         self.base = None;
@@ -347,7 +355,7 @@ impl FdChannel {
                 return;
             }
         }
-        self.process_impl(cfg, src, rx_start, out);
+        self.process_impl::<false, S>(cfg, src, rx_start, out);
     }
 
     /// [`FdChannel::process_impl`] compiled for AVX2 and FMA: the spectral loops run in
@@ -366,11 +374,13 @@ impl FdChannel {
         rx_start: i64,
         out: &mut [Complex32],
     ) {
-        self.process_impl(cfg, src, rx_start, out);
+        self.process_impl::<true, S>(cfg, src, rx_start, out);
     }
 
+    /// The engine; `AVX2` selects the intrinsics of the per-bin and interpolation passes
+    /// and is true only inside [`FdChannel::process_avx2`], whose caller checked the CPU.
     #[inline(always)]
-    fn process_impl<S: SampleSource + ?Sized>(
+    fn process_impl<const AVX2: bool, S: SampleSource + ?Sized>(
         &mut self,
         cfg: &ChannelConfig,
         src: &mut S,
@@ -394,12 +404,12 @@ impl FdChannel {
         while pos < out.len() {
             let a = rx_start + pos as i64;
             if out.len() - pos >= b_len {
-                self.sub_block(cfg, src, a, &mut out[pos..pos + b_len]);
+                self.sub_block::<AVX2, S>(cfg, src, a, &mut out[pos..pos + b_len]);
                 pos += b_len;
             } else {
                 // The last, partial sub-block: compute it whole and keep the rest.
                 let mut carry = std::mem::take(&mut self.carry);
-                self.sub_block(cfg, src, a, &mut carry[..b_len]);
+                self.sub_block::<AVX2, S>(cfg, src, a, &mut carry[..b_len]);
                 let take = out.len() - pos;
                 out[pos..].copy_from_slice(&carry[..take]);
                 self.carry = carry;
@@ -496,7 +506,7 @@ impl FdChannel {
 
     /// Computes the `B` outputs of the sub-block starting at receiver sample `a` into `dst`.
     #[inline(always)]
-    fn sub_block<S: SampleSource + ?Sized>(
+    fn sub_block<const AVX2: bool, S: SampleSource + ?Sized>(
         &mut self,
         cfg: &ChannelConfig,
         src: &mut S,
@@ -549,15 +559,11 @@ impl FdChannel {
             .process_with_scratch(&mut self.seg, &mut self.scratch);
         // Y_start = X·H(b_s) in place, Y_end = X·H(b_e).
         #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx2")
-                && std::arch::is_x86_feature_detected!("fma")
-            {
-                // SAFETY: the CPU supports AVX2 and FMA, checked just above.
-                unsafe { filter_avx2(&mut self.seg, &mut self.y_end, &self.h_start, &self.h_end) };
-            } else {
-                filter(&mut self.seg, &mut self.y_end, &self.h_start, &self.h_end);
-            }
+        if AVX2 {
+            // SAFETY: `AVX2` is true only in `process_avx2`, whose caller checked the CPU.
+            unsafe { filter_avx2(&mut self.seg, &mut self.y_end, &self.h_start, &self.h_end) };
+        } else {
+            filter(&mut self.seg, &mut self.y_end, &self.h_start, &self.h_end);
         }
         #[cfg(not(target_arch = "x86_64"))]
         filter(&mut self.seg, &mut self.y_end, &self.h_start, &self.h_end);
@@ -572,15 +578,12 @@ impl FdChannel {
         let ye = &self.y_end[first..first + b_len];
         if self.plan.f_common_hz != 0.0 {
             #[cfg(target_arch = "x86_64")]
-            {
-                if std::arch::is_x86_feature_detected!("avx2")
-                    && std::arch::is_x86_feature_detected!("fma")
-                {
-                    // SAFETY: the CPU supports AVX2 and FMA, checked just above.
-                    unsafe { self.rot.interpolate_avx2(dst, ys, ye, a) };
-                } else {
-                    self.rot.interpolate(dst, ys, ye, a);
-                }
+            if AVX2 {
+                // SAFETY: `AVX2` is true only in `process_avx2`, whose caller checked the
+                // CPU.
+                unsafe { self.rot.interpolate_avx2(dst, ys, ye, a) };
+            } else {
+                self.rot.interpolate(dst, ys, ye, a);
             }
             #[cfg(not(target_arch = "x86_64"))]
             self.rot.interpolate(dst, ys, ye, a);
@@ -887,6 +890,7 @@ mod tests {
     use crate::dtmb::channel::Path;
     use crate::dtmb::frame::{CarrierMode, Qam};
     use crate::dtmb::pn::PnMode;
+    use crate::dtmb::same_bits;
     use crate::dtmb::transmitter::{FrameSchedule, Transmitter, TxConfig};
 
     /// Whether this CPU runs the AVX2 code, saying so when it does not.
@@ -898,14 +902,6 @@ mod tests {
         }
         eprintln!("{what}: AVX2 not supported here, not compared");
         false
-    }
-
-    /// Whether two sample sequences are equal bit for bit.
-    fn same_bits(a: &[Complex32], b: &[Complex32]) -> bool {
-        a.len() == b.len()
-            && a.iter()
-                .zip(b)
-                .all(|(x, y)| x.re.to_bits() == y.re.to_bits() && x.im.to_bits() == y.im.to_bits())
     }
 
     fn transmitter() -> Transmitter {
@@ -1008,7 +1004,7 @@ mod tests {
             }
             out
         };
-        let portable = run(&|fd, tx, a, o| fd.process_impl(&cfg, tx, a, o));
+        let portable = run(&|fd, tx, a, o| fd.process_impl::<false, _>(&cfg, tx, a, o));
         assert!(portable.iter().any(|x| x.norm() > 0.1));
         #[cfg(target_arch = "x86_64")]
         if avx2_here("channel build avx2") {

@@ -114,6 +114,16 @@ pub fn uhf_channel_center_hz(n: u32) -> Result<f64, DtmbError> {
     }
 }
 
+/// Whether two sample sequences are equal bit for bit: the tests that compare the
+/// vectorised builds of the hot loops with their portable code.
+#[cfg(test)]
+pub(crate) fn same_bits(a: &[num_complex::Complex32], b: &[num_complex::Complex32]) -> bool {
+    a.len() == b.len()
+        && a.iter()
+            .zip(b)
+            .all(|(x, y)| x.re.to_bits() == y.re.to_bits() && x.im.to_bits() == y.im.to_bits())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -188,13 +188,7 @@ mod tests {
                 let mut v = vec![Complex32::new(0.25, -0.5); n];
                 // SAFETY: the CPU supports the build's features, checked just above.
                 unsafe { build(&mut v, 0.7, 0x1234_5678, 0x9abc_def0) };
-                assert!(
-                    v.iter()
-                        .zip(&portable)
-                        .all(|(a, b)| a.re.to_bits() == b.re.to_bits()
-                            && a.im.to_bits() == b.im.to_bits()),
-                    "{name}"
-                );
+                assert!(crate::dtmb::same_bits(&v, &portable), "{name}");
             }
         }
     }

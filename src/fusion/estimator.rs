@@ -45,6 +45,20 @@ pub struct EpochOutcome {
     pub nis_unwatched: bool,
 }
 
+impl EpochOutcome {
+    /// Adds one accepted update's normalised innovation squared, of `dof` components, to
+    /// the epoch's NIS record; a non-finite NIS is left out. Returns whether it was added.
+    pub fn record_nis(&mut self, nis: f64, dof: u32) -> bool {
+        if !nis.is_finite() {
+            return false;
+        }
+        self.nis_sum += nis;
+        self.nis_count += 1;
+        self.nis_dof += dof;
+        true
+    }
+}
+
 /// An estimator the engine drives: it consumes batches from the sources it names and
 /// keeps its own latest estimate.
 pub trait Estimator: Send {
@@ -139,11 +153,7 @@ fn tally_outcome(out: &mut EpochOutcome, o: UpdateOutcome, dim: u32) {
     match o {
         UpdateOutcome::Accepted { nis } => {
             out.used += 1;
-            if nis.is_finite() {
-                out.nis_sum += nis;
-                out.nis_count += 1;
-                out.nis_dof += dim;
-            }
+            out.record_nis(nis, dim);
         }
         UpdateOutcome::Rejected { reason, .. } => {
             out.rejected += 1;

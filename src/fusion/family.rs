@@ -255,10 +255,8 @@ fn tally(out: &mut EpochOutcome, rep: &UpdateReport, dim: u32) {
     out.used += rep.used;
     out.rejected += rep.rejected;
     match rep.outcome {
-        UpdateOutcome::Accepted { nis } if nis.is_finite() => {
-            out.nis_sum += nis;
-            out.nis_count += 1;
-            out.nis_dof += dim;
+        UpdateOutcome::Accepted { nis } => {
+            out.record_nis(nis, dim);
         }
         UpdateOutcome::Rejected {
             reason: RejectReason::Gate,

@@ -808,12 +808,8 @@ where
                     out.used += rep.used;
                     out.rejected += rep.rejected;
                     match rep.outcome {
-                        crate::fusion::ekf11::UpdateOutcome::Accepted { nis }
-                            if nis.is_finite() =>
-                        {
-                            out.nis_sum += nis;
-                            out.nis_count += 1;
-                            out.nis_dof += 1;
+                        crate::fusion::ekf11::UpdateOutcome::Accepted { nis } => {
+                            out.record_nis(nis, 1);
                         }
                         crate::fusion::ekf11::UpdateOutcome::Rejected {
                             reason: crate::fusion::ekf11::RejectReason::Gate,

@@ -1633,10 +1633,7 @@ impl PdrEstimator {
 /// Adds one update's NIS of `dof` components to the epoch's record, outside the
 /// divergence watch's χ² test (`EpochOutcome::nis_unwatched`).
 fn tally_unwatched_nis(out: &mut EpochOutcome, nis: f64, dof: u32) {
-    if nis.is_finite() && dof > 0 {
-        out.nis_sum += nis;
-        out.nis_count += 1;
-        out.nis_dof += dof;
+    if dof > 0 && out.record_nis(nis, dof) {
         out.nis_unwatched = true;
     }
 }
@@ -1662,9 +1659,7 @@ impl PdrUpdate {
         match self {
             PdrUpdate::Used { nis, dof } => {
                 out.used += n;
-                out.nis_sum += nis;
-                out.nis_count += 1;
-                out.nis_dof += dof;
+                out.record_nis(nis, dof);
             }
             PdrUpdate::Anchored => out.used += n,
             PdrUpdate::Gated => {
