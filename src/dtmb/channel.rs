@@ -160,6 +160,43 @@ fn bessel_i0(x: f64) -> f64 {
 /// domain channel needs `φ'` for the first-order sampling-clock drift term; the analytic
 /// form is exact to rounding, where a central difference loses half the digits.
 pub fn kernel_with_derivative(u: f64) -> (f64, f64) {
+    let (sn, cs) = (std::f64::consts::PI * u).sin_cos();
+    kernel_with_derivative_given(u, sn, cs)
+}
+
+/// [`kernel_with_derivative`] at the `2K` arguments `u_i = first + i − d`, the taps of a
+/// path at fractional delay `d` starting at integer `first`, into `out` (length `2K`).
+///
+/// The arguments are one integer apart, so `sin πu_i = −(−1)^m sin πf` and
+/// `cos πu_i = (−1)^m cos πf` with `u_i = m − f`, `m = first + i − ⌊d⌋`, `f = d − ⌊d⌋`:
+/// one `sincos` for the whole set instead of one per tap (the frequency-domain channel
+/// rebuilds six paths' taps every few frames).
+pub fn kernel_taps_with_derivative(d: f64, first: i64, out: &mut [(f64, f64)]) {
+    let fl = d.floor();
+    let (sf, cf) = (std::f64::consts::PI * (d - fl)).sin_cos();
+    let fl = fl as i64;
+    for (i, o) in out.iter_mut().enumerate() {
+        let j = first + i as i64;
+        let odd = (j - fl).rem_euclid(2) == 1;
+        let (sn, cs) = if odd { (sf, -cf) } else { (-sf, cf) };
+        *o = kernel_with_derivative_given(j as f64 - d, sn, cs);
+    }
+}
+
+/// `½/(k + 1)` for `k = 1 … 24`: the factor that turns `I0`'s series term into `I1(x)/x`'s.
+const HALF_INV_K1: [f64; 25] = {
+    let mut t = [0.0; 25];
+    let mut k = 1;
+    while k < 25 {
+        t[k] = 0.5 / ((k + 1) as f64);
+        k += 1;
+    }
+    t
+};
+
+/// The body of [`kernel_with_derivative`] with `sin πu` and `cos πu` supplied.
+#[inline(always)]
+fn kernel_with_derivative_given(u: f64, sin_pi_u: f64, cos_pi_u: f64) -> (f64, f64) {
     let k = KERNEL_HALF_WIDTH as f64;
     if u.abs() >= k {
         return (0.0, 0.0);
@@ -172,19 +209,18 @@ pub fn kernel_with_derivative(u: f64) -> (f64, f64) {
             pi * pi * u * (-1.0 / 3.0 + x2 / 30.0),
         )
     } else {
-        let (sn, cs) = (pi * u).sin_cos();
-        let sinc = sn / (pi * u);
-        (sinc, (cs - sinc) / u)
+        let sinc = sin_pi_u / (pi * u);
+        (sinc, (cos_pi_u - sinc) / u)
     };
     let r = u / k;
-    let x = KAISER_BETA * (1.0 - r * r).max(0.0).sqrt();
-    let q = x * x / 4.0;
+    // (x/2)² with x = β√(1 − r²), without the square root.
+    let q = 0.25 * KAISER_BETA * KAISER_BETA * (1.0 - r * r).max(0.0);
     let (mut term, mut i0, mut i1x) = (1.0, 1.0, 0.5);
-    for (j, inv) in INV_SQ[1..].iter().enumerate() {
+    for (inv, half) in INV_SQ[1..].iter().zip(&HALF_INV_K1[1..]) {
         term *= q * inv;
         i0 += term;
-        // The series of I1(x)/x: term_k / (k + 1), halved, with k = j + 1.
-        i1x += 0.5 * term / (j as f64 + 2.0);
+        // The series of I1(x)/x: term_k / (k + 1), halved.
+        i1x += term * half;
     }
     let w = i0 / I0_BETA;
     let dw = -(KAISER_BETA * KAISER_BETA * u / (k * k)) * i1x / I0_BETA;
@@ -531,6 +567,27 @@ mod tests {
         assert!(kernel_with_derivative(0.0).1.abs() < 1e-15);
         let w3 = bessel_i0(KAISER_BETA * (1.0f64 - (3.0f64 / 16.0).powi(2)).sqrt()) / I0_BETA;
         assert!((kernel_with_derivative(3.0).1 - (-1.0 / 3.0) * w3).abs() < 1e-14);
+    }
+
+    #[test]
+    fn kernel_taps_match_the_kernel_tap_by_tap() {
+        // The taps of a set from one sincos against the kernel evaluated at each argument,
+        // for delays on both sides of integers, at integers and near them (the Taylor branch).
+        let k = KERNEL_HALF_WIDTH as i64;
+        let mut taps = vec![(0.0, 0.0); 2 * KERNEL_HALF_WIDTH];
+        for d in [37.8, 38.0, 38.00002, -3.25, 0.5, 1234.999_99, 7.3e4 + 0.61] {
+            let first = (d as f64).floor() as i64 - k + 1;
+            kernel_taps_with_derivative(d, first, &mut taps);
+            for (i, &(h, dh)) in taps.iter().enumerate() {
+                let u = (first + i as i64) as f64 - d;
+                let (h0, dh0) = kernel_with_derivative(u);
+                assert!(
+                    (h - h0).abs() < 1e-13 && (dh - dh0).abs() < 1e-12,
+                    "d {d} u {u}"
+                );
+                assert!((h - kernel(u)).abs() < 1e-13, "d {d} u {u}");
+            }
+        }
     }
 
     #[test]

@@ -26,7 +26,7 @@
 //!
 //! with `D_p`, `D'_p` the exact DFTs of the taps `φ(j − d_p(n_b))` and of their
 //! derivative taps `φ'(j − d_p(n_b))` (computed once per base; the derivative
-//! analytically, [`super::channel::kernel_with_derivative`]). Inside the sub-block the
+//! analytically, [`super::channel::kernel_taps_with_derivative`]). Inside the sub-block the
 //! output is the linear interpolation in time of the two boundary filters' outputs,
 //!
 //! ```text
@@ -54,7 +54,7 @@
 //! the end of a call is kept and served to the next call that continues where this one
 //! stopped, so a stream read frame by frame costs the same as one read in one piece.
 
-use super::channel::{kernel_with_derivative, ChannelConfig, KERNEL_HALF_WIDTH};
+use super::channel::{kernel_taps_with_derivative, ChannelConfig, KERNEL_HALF_WIDTH};
 use super::pn::SAMPLE_RATE_HZ;
 use super::transmitter::SampleSource;
 use num_complex::{Complex32, Complex64};
@@ -304,9 +304,11 @@ impl FdChannel {
             let buf = &mut self.seg;
             buf.iter_mut().for_each(|x| *x = Complex32::default());
             let first = d.floor() as i64 - k + 1;
-            for j in first..first + 2 * k {
-                let (h, dh) = kernel_with_derivative(j as f64 - d);
-                buf[(j - self.j_lo) as usize] = Complex32::new(h as f32, dh as f32);
+            let mut taps = [(0.0, 0.0); 2 * KERNEL_HALF_WIDTH];
+            kernel_taps_with_derivative(d, first, &mut taps);
+            let at = (first - self.j_lo) as usize;
+            for (b, &(h, dh)) in buf[at..].iter_mut().zip(&taps) {
+                *b = Complex32::new(h as f32, dh as f32);
             }
             self.fwd.process_with_scratch(buf, &mut self.scratch);
             let split = |kk: usize| {
