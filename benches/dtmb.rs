@@ -223,23 +223,37 @@ fn bench(c: &mut Criterion) {
     );
     // The same chain without the per-stage clock reads (each one opens and reads a /proc
     // file, a few microseconds, inside every stage it brackets): the figure the real-time
-    // factor is quoted from.
+    // factor is quoted from. On a shared virtual machine the speed drifts by tens of
+    // per cent over seconds, so the chain runs in seven passes of 500 frames and the best,
+    // median and worst pass are reported (the best pass is the least disturbed one, as
+    // with `timeit`; the median is what a user can expect on such a machine).
+    let passes = 7;
+    let per_pass = 500;
+    let mut pass_us = Vec::with_capacity(passes);
+    let mut k = frames;
+    // The thread's on-CPU clock ticks coarsely on some kernels (4 ms here), so it is read
+    // over all passes together.
     let cpu1 = cpu_ns();
-    let wall1 = Instant::now();
-    for k in frames..2 * frames {
-        ch.process(&mut tx, (k * n) as i64, &mut block, &mut noise)
-            .unwrap();
-        sink += rx.sync(&block, &tracking(k)).unwrap().toa_samples;
+    for _ in 0..passes {
+        let wall1 = Instant::now();
+        for _ in 0..per_pass {
+            ch.process(&mut tx, (k * n) as i64, &mut block, &mut noise)
+                .unwrap();
+            sink += rx.sync(&block, &tracking(k)).unwrap().toa_samples;
+            k += 1;
+        }
+        pass_us.push(wall1.elapsed().as_secs_f64() * 1e6 / per_pass as f64);
     }
-    let chain_cpu = (cpu_ns() - cpu1) * 1e-9;
-    let el = wall1.elapsed().as_secs_f64();
+    let cpu_us = (cpu_ns() - cpu1) * 1e-3 / (passes * per_pass) as f64;
     black_box(sink);
+    pass_us.sort_by(f64::total_cmp);
+    let rt = |us: f64| frame_s * 1e6 / us;
+    let (best, median, worst) = (pass_us[0], pass_us[passes / 2], pass_us[passes - 1]);
     println!(
-        "dtmb full chain PN945 (6-path channel generating its frames + aided sync with first-path search), uninstrumented: on-CPU {:.1} µs/frame, real-time factor {:.1}; wall {:.1} µs/frame, real-time factor {:.1}",
-        chain_cpu / frames as f64 * 1e6,
-        frame_s * frames as f64 / chain_cpu,
-        el / frames as f64 * 1e6,
-        frame_s * frames as f64 / el,
+        "dtmb full chain PN945 (6-path channel generating its frames + aided sync with first-path search), uninstrumented, {passes} passes of {per_pass} frames: wall best {best:.1} µs/frame (real-time factor {:.1}), median {median:.1} ({:.1}), worst {worst:.1} ({:.1}); on-CPU {cpu_us:.1} µs/frame over all passes",
+        rt(best),
+        rt(median),
+        rt(worst),
     );
 }
 
