@@ -574,9 +574,17 @@ mod tests {
         // The taps of a set from one sincos against the kernel evaluated at each argument,
         // for delays on both sides of integers, at integers and near them (the Taylor branch).
         let k = KERNEL_HALF_WIDTH as i64;
-        let mut taps = vec![(0.0, 0.0); 2 * KERNEL_HALF_WIDTH];
-        for d in [37.8, 38.0, 38.00002, -3.25, 0.5, 1234.999_99, 7.3e4 + 0.61] {
-            let first = (d as f64).floor() as i64 - k + 1;
+        let mut taps = [(0.0, 0.0); 2 * KERNEL_HALF_WIDTH];
+        for d in [
+            37.8f64,
+            38.0,
+            38.00002,
+            -3.25,
+            0.5,
+            1_234.999_99,
+            7.3e4 + 0.61,
+        ] {
+            let first = d.floor() as i64 - k + 1;
             kernel_taps_with_derivative(d, first, &mut taps);
             for (i, &(h, dh)) in taps.iter().enumerate() {
                 let u = (first + i as i64) as f64 - d;
