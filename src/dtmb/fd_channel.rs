@@ -142,9 +142,7 @@ impl Plan {
             f_res_hz,
         })
     }
-}
 
-impl Plan {
     /// The common carrier rotation at the receiver's sample rate, `f_c r / f_s` cycles
     /// per sample.
     fn rotator(&self, cfg: &ChannelConfig) -> Rotator {

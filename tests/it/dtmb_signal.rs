@@ -896,9 +896,9 @@ filter = "wls"
     // the neighbouring random bodies (a spread of a few tenths of a dB per frame), which
     // the sixteen frames average down.
     let mut lobe_power = [0.0f64; 2];
+    let mut hk = vec![Complex32::default(); mode.header_len()];
     for a in ann {
         let tower = usize::from(a["hybridnav:tower"] == "D02");
-        let mut hk = vec![Complex32::default(); mode.header_len()];
         mode.header_samples(a["hybridnav:pn_phase"].as_u64().unwrap() as usize, &mut hk)
             .unwrap();
         let c = f(a, "hybridnav:first_path_sample").round() as usize;
