@@ -31,11 +31,11 @@
 //! never the truth.
 
 use crate::core::rng::StreamRng;
+use crate::core::ConfigIssue;
 use crate::core::{EmitterId, EnuFrame, SimTime, System, TrialRng};
 use crate::engine::{SampleContext, Source};
 use crate::fusion::measurement::{Measurement, MeasurementBatch, RangeMeasurement};
 use crate::fusion::wls;
-use crate::motion::ConfigIssue;
 use nalgebra::Vector3;
 use rand::Rng;
 use rand_distr::StandardNormal;

@@ -36,15 +36,16 @@ use super::pn::{PnMode, SAMPLE_RATE_HZ};
 use super::receiver::{FirstPathConfig, Receiver, Search, SyncConfig, MAX_FRAMES};
 use super::tps::{TpsErrorModel, TpsPath};
 use super::transmitter::{FrameSchedule, Transmitter, TxConfig};
+use crate::core::config::check;
 use crate::core::geodesy::{azimuth_elevation_with, ecef_to_enu_rotation};
 use crate::core::rng::StreamRng;
+use crate::core::ConfigIssue;
 use crate::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng, C_MPS};
 use crate::engine::{SampleContext, Source};
 use crate::fusion::measurement::{
     Measurement, MeasurementBatch, RangeDifference, RangeMeasurement,
 };
 use crate::gnss::receiver_clock::ClockTrack;
-use crate::motion::ConfigIssue;
 use crate::propagation::pathloss::{extended_hata_db, HataEnvironment, Model, ValidityLog};
 use crate::propagation::{
     Emitter, LinkParams, LinkPaths, Polarisation, Scene, ShadowingConfig, ShadowingField,
@@ -183,14 +184,6 @@ impl Default for DtmbSensorConfig {
             rx_oscillator_ppm: 0.0,
             sigma_floor_m: default_sigma_floor(),
         }
-    }
-}
-
-fn check(key: &str, ok: bool, msg: impl FnOnce() -> String) -> Result<(), ConfigIssue> {
-    if ok {
-        Ok(())
-    } else {
-        Err(ConfigIssue::new(key, msg()))
     }
 }
 

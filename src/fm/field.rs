@@ -33,10 +33,10 @@
 //! [`synthesize_stations`] adds stations at random sites and frequencies (documented
 //! there) so that a study can run with 21 channels.
 
-use super::check;
+use crate::core::config::check;
 use crate::core::rng::StreamRng;
+use crate::core::ConfigIssue;
 use crate::core::TrialRng;
-use crate::motion::ConfigIssue;
 use crate::propagation::pathloss::{extended_hata_db, HataEnvironment, Model, ValidityLog};
 use crate::propagation::{
     Emitter, LinkParams, LinkPaths, Polarisation, Scene, ShadowingConfig, ShadowingField,

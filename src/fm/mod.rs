@@ -36,7 +36,7 @@ pub use wknn::{
 pub enum FmError {
     /// A configuration value is out of range (key, message).
     #[error("{}: {}", .0.key, .0.message)]
-    Config(crate::motion::ConfigIssue),
+    Config(crate::core::ConfigIssue),
     /// Reading or writing a database file failed.
     #[error("{path}: {message}")]
     Io { path: String, message: String },
@@ -62,20 +62,8 @@ pub enum FmError {
     },
 }
 
-impl From<crate::motion::ConfigIssue> for FmError {
-    fn from(c: crate::motion::ConfigIssue) -> Self {
+impl From<crate::core::ConfigIssue> for FmError {
+    fn from(c: crate::core::ConfigIssue) -> Self {
         FmError::Config(c)
-    }
-}
-
-pub(crate) fn check(
-    key: &str,
-    ok: bool,
-    msg: impl FnOnce() -> String,
-) -> Result<(), crate::motion::ConfigIssue> {
-    if ok {
-        Ok(())
-    } else {
-        Err(crate::motion::ConfigIssue::new(key, msg()))
     }
 }

@@ -21,17 +21,17 @@
 //! truth is the same in every trial of a run it is computed once per run
 //! ([`FmEpochTable`], see [`crate::engine::cache`]); the trial draws only the scan noise.
 
-use super::check;
 use super::database::FingerprintDb;
 use super::field::{FmField, FmFieldConfig, FmStation};
 use super::survey::SurveyConfig;
 use super::wknn::{locate, Constraint, ConstraintConfig, WknnConfig, WknnScratch};
+use crate::core::config::check;
 use crate::core::rng::StreamRng;
+use crate::core::ConfigIssue;
 use crate::core::{EnuFrame, SimTime, TrialRng};
 use crate::engine::cache::EpochTable;
 use crate::engine::{SampleContext, Source, Truth};
 use crate::fusion::measurement::{Measurement, MeasurementBatch, PositionFix};
-use crate::motion::ConfigIssue;
 use crate::propagation::pathloss::ValidityLog;
 use crate::propagation::Scene;
 use serde::Deserialize;

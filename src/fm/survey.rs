@@ -9,9 +9,10 @@
 //! a survey is more accurate than one online scan.
 
 use super::field::FmField;
-use super::{check, FmError};
+use super::FmError;
+use crate::core::config::check;
 use crate::core::rng::StreamRng;
-use crate::motion::ConfigIssue;
+use crate::core::ConfigIssue;
 use nalgebra::Vector3;
 use serde::Deserialize;
 

@@ -42,8 +42,9 @@
 //! [`FmError::NoRpInCircle`].
 
 use super::database::FingerprintDb;
-use super::{check, FmError};
-use crate::motion::ConfigIssue;
+use super::FmError;
+use crate::core::config::check;
+use crate::core::ConfigIssue;
 use nalgebra::{Matrix3, Vector3};
 use serde::Deserialize;
 

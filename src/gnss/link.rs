@@ -63,8 +63,9 @@
 //! tracking threshold of a mass-market receiver with 20 ms integration) produces no
 //! measurement.
 
+use crate::core::config::check_range;
+use crate::core::ConfigIssue;
 use crate::core::{System, C_MPS};
-use crate::motion::ConfigIssue;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -249,26 +250,6 @@ impl Default for TrackingConfig {
     }
 }
 
-fn in_range(
-    key: &str,
-    v: f64,
-    lo: f64,
-    hi: f64,
-    open_lo: bool,
-    what: &str,
-) -> Result<(), ConfigIssue> {
-    let ok = v.is_finite() && v <= hi && if open_lo { v > lo } else { v >= lo };
-    if ok {
-        Ok(())
-    } else {
-        let b = if open_lo { "(" } else { "[" };
-        Err(ConfigIssue::new(
-            key,
-            format!("expected {what} within {b}{lo}, {hi}], got {v}"),
-        ))
-    }
-}
-
 impl TrackingConfig {
     /// Checks every value.
     ///
@@ -277,7 +258,7 @@ impl TrackingConfig {
     /// integration times, a spacing outside (0, 1] chip, a loop too wide for its update rate
     /// (B·T > 0.5), or values outside physically sensible ranges.
     pub fn validate(&self) -> Result<(), ConfigIssue> {
-        in_range(
+        check_range(
             "dll_bandwidth_hz",
             self.dll_bandwidth_hz,
             0.0,
@@ -285,7 +266,7 @@ impl TrackingConfig {
             true,
             "a DLL bandwidth in Hz",
         )?;
-        in_range(
+        check_range(
             "correlator_spacing_chips",
             self.correlator_spacing_chips,
             0.0,
@@ -293,7 +274,7 @@ impl TrackingConfig {
             true,
             "a correlator spacing in chips",
         )?;
-        in_range(
+        check_range(
             "integration_time_s",
             self.integration_time_s,
             0.0,
@@ -301,7 +282,7 @@ impl TrackingConfig {
             true,
             "an integration time in s",
         )?;
-        in_range(
+        check_range(
             "fll_bandwidth_hz",
             self.fll_bandwidth_hz,
             0.0,
@@ -309,7 +290,7 @@ impl TrackingConfig {
             true,
             "an FLL bandwidth in Hz",
         )?;
-        in_range(
+        check_range(
             "fll_noise_factor",
             self.fll_noise_factor,
             1.0,
@@ -332,7 +313,7 @@ impl TrackingConfig {
                 ));
             }
         }
-        in_range(
+        check_range(
             "lock_threshold_dbhz",
             self.lock_threshold_dbhz,
             0.0,
@@ -340,7 +321,7 @@ impl TrackingConfig {
             false,
             "a C/N0 threshold in dB-Hz",
         )?;
-        in_range(
+        check_range(
             "antenna_gain_zenith_dbic",
             self.antenna_gain_zenith_dbic,
             -30.0,
@@ -348,7 +329,7 @@ impl TrackingConfig {
             false,
             "an antenna gain in dBic",
         )?;
-        in_range(
+        check_range(
             "antenna_gain_horizon_dbic",
             self.antenna_gain_horizon_dbic,
             -40.0,
@@ -356,7 +337,7 @@ impl TrackingConfig {
             false,
             "an antenna gain in dBic",
         )?;
-        in_range(
+        check_range(
             "antenna_pattern_exponent",
             self.antenna_pattern_exponent,
             0.0,
@@ -364,7 +345,7 @@ impl TrackingConfig {
             true,
             "a pattern exponent",
         )?;
-        in_range(
+        check_range(
             "noise_temp_k",
             self.noise_temp_k,
             1.0,
@@ -372,7 +353,7 @@ impl TrackingConfig {
             false,
             "a system noise temperature in K",
         )?;
-        in_range(
+        check_range(
             "implementation_loss_db",
             self.implementation_loss_db,
             0.0,
@@ -380,7 +361,7 @@ impl TrackingConfig {
             false,
             "a loss in dB",
         )?;
-        in_range(
+        check_range(
             "gps_power_margin_db",
             self.gps_power_margin_db,
             -20.0,
@@ -388,7 +369,7 @@ impl TrackingConfig {
             false,
             "a power margin in dB",
         )?;
-        in_range(
+        check_range(
             "bds_power_margin_db",
             self.bds_power_margin_db,
             -20.0,
@@ -396,7 +377,7 @@ impl TrackingConfig {
             false,
             "a power margin in dB",
         )?;
-        in_range(
+        check_range(
             "power_margin_rolloff_db",
             self.power_margin_rolloff_db,
             0.0,
@@ -404,7 +385,7 @@ impl TrackingConfig {
             false,
             "a margin roll-off in dB",
         )?;
-        in_range(
+        check_range(
             "extra_attenuation_db",
             self.extra_attenuation_db,
             0.0,

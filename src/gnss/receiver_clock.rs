@@ -41,8 +41,9 @@
 //! (ISB(t + T) = ISB(t) + q √T n, n ~ N(0, 1)). [`ReceiverClock::isb_s`] returns it in
 //! seconds; it is 0 for GPS and for systems not listed.
 
+use crate::core::config::check;
+use crate::core::ConfigIssue;
 use crate::core::System;
-use crate::motion::ConfigIssue;
 use nalgebra::{Matrix2, Vector2};
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -97,14 +98,6 @@ pub struct ClockConfig {
     pub inter_system_bias_ns: BTreeMap<System, f64>,
     /// Random-walk intensity of the inter-system bias per system (ns/√s); 0 or absent: constant.
     pub isb_random_walk_ns_per_sqrt_s: BTreeMap<System, f64>,
-}
-
-fn check(key: &str, ok: bool, msg: impl FnOnce() -> String) -> Result<(), ConfigIssue> {
-    if ok {
-        Ok(())
-    } else {
-        Err(ConfigIssue::new(key, msg()))
-    }
 }
 
 impl ClockConfig {

@@ -43,7 +43,8 @@
 //! arcs for IMU work.
 
 use super::{heading_of_attitude, LocalEarth};
-use crate::motion::{ConfigIssue, Trajectory, TruthState};
+use crate::core::ConfigIssue;
+use crate::motion::{Trajectory, TruthState};
 use nalgebra::{UnitQuaternion, Vector3};
 use rand::Rng;
 use serde::{Deserialize, Serialize};

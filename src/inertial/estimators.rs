@@ -13,6 +13,7 @@ use super::ins_family::{Cov6, InsFamilyFilter, InsKalmanConfig, InsKalmanKind};
 use super::source::local_earth_of;
 use super::strapdown::NavState;
 use super::LocalEarth;
+use crate::core::ConfigIssue;
 use crate::core::{EnuFrame, GpsTime, System};
 use crate::fusion::estimator::{EpochOutcome, Estimate, Estimator};
 use crate::fusion::measurement::{
@@ -20,7 +21,6 @@ use crate::fusion::measurement::{
 };
 use crate::fusion::models::MeasurementModel;
 use crate::fusion::wls::{self, WlsOptions};
-use crate::motion::ConfigIssue;
 use nalgebra::{
     Matrix2, Matrix3, Matrix4, Rotation3, SMatrix, SVector, UnitQuaternion, Vector2, Vector3,
     Vector4,

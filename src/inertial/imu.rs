@@ -41,8 +41,8 @@
 //! Units in the configuration are the datasheet units (°/√h, °/h, m/s/√h, m/s²); the
 //! resolved [`ImuSpec`] is in SI.
 
+use crate::core::ConfigIssue;
 use crate::core::StreamRng;
-use crate::motion::ConfigIssue;
 use nalgebra::{Matrix3, Vector3};
 use rand::Rng;
 use rand_distr::StandardNormal;

@@ -31,7 +31,7 @@
 
 use super::imu::ImuSample;
 use super::{heading_of_attitude, LocalEarth};
-use crate::motion::ConfigIssue;
+use crate::core::ConfigIssue;
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;

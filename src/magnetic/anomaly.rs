@@ -16,9 +16,9 @@
 //! landmarks are "long-term stable distortion features").
 
 use super::{EarthField, MagneticError, MU0_OVER_4PI_NT_M3_PER_AM2};
+use crate::core::ConfigIssue;
 use crate::inertial::attitude::PlatformTruth;
 use crate::inertial::magnetometer::Magnetometer;
-use crate::motion::ConfigIssue;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 

@@ -39,7 +39,8 @@
 //! where P_base is the DTMB transmitter and r_dtmb the range measured at the detection.
 
 use super::MagneticError;
-use crate::motion::ConfigIssue;
+use crate::core::config::check_range;
+use crate::core::ConfigIssue;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
@@ -108,26 +109,6 @@ impl Default for LandmarkDetectorConfig {
     }
 }
 
-fn check(
-    key: &str,
-    v: f64,
-    lo: f64,
-    hi: f64,
-    open_lo: bool,
-    what: &str,
-) -> Result<(), ConfigIssue> {
-    let ok = v.is_finite() && v <= hi && if open_lo { v > lo } else { v >= lo };
-    if ok {
-        Ok(())
-    } else {
-        let b = if open_lo { "(" } else { "[" };
-        Err(ConfigIssue::new(
-            key,
-            format!("expected {what} within {b}{lo}, {hi}], got {v}"),
-        ))
-    }
-}
-
 impl LandmarkDetectorConfig {
     /// Checks every value.
     ///
@@ -135,7 +116,7 @@ impl LandmarkDetectorConfig {
     /// A [`ConfigIssue`] naming the first bad field (non-finite, negative, or a shortest
     /// window longer than the longest).
     pub fn validate(&self) -> Result<(), ConfigIssue> {
-        check(
+        check_range(
             "smooth_half_width_s",
             self.smooth_half_width_s,
             0.0,
@@ -143,7 +124,7 @@ impl LandmarkDetectorConfig {
             false,
             "a half-width in s",
         )?;
-        check(
+        check_range(
             "hysteresis_ut",
             self.hysteresis_ut,
             0.0,
@@ -151,7 +132,7 @@ impl LandmarkDetectorConfig {
             false,
             "a hysteresis in µT",
         )?;
-        check(
+        check_range(
             "min_change_rate_ut_per_s",
             self.min_change_rate_ut_per_s,
             0.0,
@@ -159,7 +140,7 @@ impl LandmarkDetectorConfig {
             true,
             "a change-rate threshold in µT/s",
         )?;
-        check(
+        check_range(
             "min_window_s",
             self.min_window_s,
             0.0,
@@ -167,7 +148,7 @@ impl LandmarkDetectorConfig {
             true,
             "a window length in s",
         )?;
-        check(
+        check_range(
             "max_window_s",
             self.max_window_s,
             0.0,
@@ -184,7 +165,7 @@ impl LandmarkDetectorConfig {
                 ),
             ));
         }
-        check(
+        check_range(
             "image_full_scale_ut",
             self.image_full_scale_ut,
             0.0,
@@ -644,7 +625,7 @@ impl DtwLibrary {
         if band == 0 {
             return Err(ConfigIssue::new("band", "expected a band of at least one cell").into());
         }
-        check(
+        check_range(
             "threshold_ut",
             threshold_ut,
             0.0,
@@ -739,7 +720,7 @@ pub fn select_by_dtmb(
     r_dtmb_m: f64,
     delta_r_m: f64,
 ) -> Result<Option<Candidate>, MagneticError> {
-    check(
+    check_range(
         "delta_r_m",
         delta_r_m,
         0.0,
@@ -747,7 +728,7 @@ pub fn select_by_dtmb(
         true,
         "a range threshold in m",
     )?;
-    check("r_dtmb_m", r_dtmb_m, 0.0, 1.0e8, false, "a range in m")?;
+    check_range("r_dtmb_m", r_dtmb_m, 0.0, 1.0e8, false, "a range in m")?;
     for c in candidates {
         let p = landmark_positions_enu_m.get(c.label).ok_or_else(|| {
             MagneticError::Input(format!("candidate label {} has no position", c.label))

@@ -32,7 +32,7 @@ pub use landmark::{
 };
 pub use snn::{SnnClassifier, SnnConfig, SnnEncoding, Tempotron};
 
-use crate::motion::ConfigIssue;
+use crate::core::ConfigIssue;
 
 /// What went wrong in the magnetic module: a bad configuration value (with its key) or an
 /// input that cannot be processed (an empty sequence, a window longer than the sequence).

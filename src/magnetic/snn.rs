@@ -48,8 +48,9 @@
 
 use super::landmark::{Candidate, FEATURE_LEN, IMAGE_COLUMNS};
 use super::MagneticError;
+use crate::core::config::check_range;
+use crate::core::ConfigIssue;
 use crate::core::StreamRng;
-use crate::motion::ConfigIssue;
 use rand::Rng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
@@ -153,17 +154,6 @@ impl Default for SnnConfig {
     }
 }
 
-fn positive(key: &str, v: f64, hi: f64) -> Result<(), ConfigIssue> {
-    if v.is_finite() && v > 0.0 && v <= hi {
-        Ok(())
-    } else {
-        Err(ConfigIssue::new(
-            key,
-            format!("expected a finite value within (0, {hi}], got {v}"),
-        ))
-    }
-}
-
 impl SnnConfig {
     /// Checks every value.
     ///
@@ -171,8 +161,15 @@ impl SnnConfig {
     /// A [`ConfigIssue`] naming the first bad field (τs must be below τ; the grid needs at
     /// least 16 points).
     pub fn validate(&self) -> Result<(), ConfigIssue> {
-        positive("tau_ms", self.tau_ms, 1.0e4)?;
-        positive("tau_s_ms", self.tau_s_ms, 1.0e4)?;
+        check_range("tau_ms", self.tau_ms, 0.0, 1.0e4, true, "a finite value")?;
+        check_range(
+            "tau_s_ms",
+            self.tau_s_ms,
+            0.0,
+            1.0e4,
+            true,
+            "a finite value",
+        )?;
         if self.tau_s_ms >= self.tau_ms {
             return Err(ConfigIssue::new(
                 "tau_s_ms",
@@ -182,8 +179,22 @@ impl SnnConfig {
                 ),
             ));
         }
-        positive("cycle_ms", self.cycle_ms, 1.0e5)?;
-        positive("learning_rate", self.learning_rate, 10.0)?;
+        check_range(
+            "cycle_ms",
+            self.cycle_ms,
+            0.0,
+            1.0e5,
+            true,
+            "a finite value",
+        )?;
+        check_range(
+            "learning_rate",
+            self.learning_rate,
+            0.0,
+            10.0,
+            true,
+            "a finite value",
+        )?;
         if self.max_epochs == 0 || self.max_epochs > 100_000 {
             return Err(ConfigIssue::new(
                 "max_epochs",
@@ -242,8 +253,8 @@ impl LifKernel {
     /// # Errors
     /// [`MagneticError::Config`] when the constants are not finite, positive and ordered.
     pub fn new(tau_ms: f64, tau_s_ms: f64) -> Result<Self, MagneticError> {
-        positive("tau_ms", tau_ms, 1.0e4)?;
-        positive("tau_s_ms", tau_s_ms, 1.0e4)?;
+        check_range("tau_ms", tau_ms, 0.0, 1.0e4, true, "a finite value")?;
+        check_range("tau_s_ms", tau_s_ms, 0.0, 1.0e4, true, "a finite value")?;
         if tau_s_ms >= tau_ms {
             return Err(ConfigIssue::new("tau_s_ms", "expected τs < τ").into());
         }

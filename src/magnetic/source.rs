@@ -29,12 +29,14 @@ use super::landmark::{
     LandmarkDetectorConfig, LandmarkFeature, LandmarkWindow,
 };
 use super::snn::{SnnClassifier, SnnConfig, SnnScratch};
+use crate::core::config::check;
+use crate::core::ConfigIssue;
 use crate::core::{EnuFrame, GpsTime, SimTime, TrialRng};
 use crate::engine::{SampleContext, Source};
 use crate::fusion::measurement::{Measurement, MeasurementBatch, PositionFix};
 use crate::inertial::attitude::{PlatformConfig, PlatformTruth};
 use crate::inertial::magnetometer::{Magnetometer, MagnetometerConfig};
-use crate::motion::{ConfigIssue, Trajectory};
+use crate::motion::Trajectory;
 use nalgebra::{Matrix3, Vector3};
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -118,14 +120,6 @@ impl Default for MagneticSensorConfig {
             fix_sigma_m: 1.5,
             fix_sigma_up_m: 5.0,
         }
-    }
-}
-
-fn check(key: &str, ok: bool, msg: impl FnOnce() -> String) -> Result<(), ConfigIssue> {
-    if ok {
-        Ok(())
-    } else {
-        Err(ConfigIssue::new(key, msg()))
     }
 }
 

@@ -25,10 +25,11 @@ pub mod singer;
 pub mod turning;
 pub mod waypoints;
 
+use crate::core::config::{check_finite, check_range};
+use crate::core::ConfigIssue;
 use nalgebra::Vector3;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
-use std::fmt;
 
 /// The longest trajectory a world may ask for: ten days, in seconds.
 pub const MAX_DURATION_S: f64 = 10.0 * 86_400.0;
@@ -58,70 +59,6 @@ pub trait Trajectory: Send + Sync {
     fn state_at(&self, t_s: f64) -> TruthState;
     /// The length of the trajectory in seconds.
     fn duration_s(&self) -> f64;
-}
-
-/// A configuration value that cannot be used, with the key that holds it.
-///
-/// `key` is the offending field's name as written in the world file (e.g. `"speed_mps"`),
-/// so the world loader can point at its line; `message` says what was expected and what
-/// was found.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct ConfigIssue {
-    /// The offending field name, e.g. `"speed_mps"` or `"points_enu_m"`.
-    pub key: String,
-    /// What was expected, e.g. `"expected a positive speed in m/s, got -3"`.
-    pub message: String,
-}
-
-impl ConfigIssue {
-    /// An issue with `key`.
-    pub fn new(key: impl Into<String>, message: impl Into<String>) -> Self {
-        Self {
-            key: key.into(),
-            message: message.into(),
-        }
-    }
-}
-
-impl fmt::Display for ConfigIssue {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}: {}", self.key, self.message)
-    }
-}
-
-impl std::error::Error for ConfigIssue {}
-
-/// Checks that `value` is finite and inside `[lo, hi]` (or `(lo, hi]` when `open_lo`).
-pub(crate) fn check_range(
-    key: &str,
-    value: f64,
-    lo: f64,
-    hi: f64,
-    open_lo: bool,
-    what: &str,
-) -> Result<(), ConfigIssue> {
-    let ok = value.is_finite() && value <= hi && if open_lo { value > lo } else { value >= lo };
-    if ok {
-        Ok(())
-    } else {
-        let bracket = if open_lo { "(" } else { "[" };
-        Err(ConfigIssue::new(
-            key,
-            format!("expected {what} within {bracket}{lo}, {hi}], got {value}"),
-        ))
-    }
-}
-
-/// Checks that every element of a vector is finite.
-pub(crate) fn check_finite(key: &str, values: &[f64], what: &str) -> Result<(), ConfigIssue> {
-    if values.iter().all(|v| v.is_finite()) {
-        Ok(())
-    } else {
-        Err(ConfigIssue::new(
-            key,
-            format!("expected {what} with finite components, got {values:?}"),
-        ))
-    }
 }
 
 /// Checks a stochastic model's duration and step: both positive, the duration at most ten

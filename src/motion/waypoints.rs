@@ -54,10 +54,9 @@
 //! rest (so a stopped car keeps pointing along its leg); a vertical leg keeps the heading of
 //! the leg before it.
 
-use super::{
-    check_range, clamp_time, heading_of, ConfigIssue, Trajectory, TrajectoryConfig, TruthState,
-    MAX_DURATION_S,
-};
+use super::{clamp_time, heading_of, Trajectory, TrajectoryConfig, TruthState, MAX_DURATION_S};
+use crate::core::config::check_range;
+use crate::core::ConfigIssue;
 use nalgebra::Vector3;
 
 /// Largest speed a waypoint platform may have (m/s).

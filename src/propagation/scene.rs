@@ -16,7 +16,8 @@
 //! of 3GPP TR 38.901 Table 7.4.3-1 (stated valid 0.5–100 GHz, used at the 0.5 GHz value
 //! below it).
 
-use crate::motion::ConfigIssue;
+use crate::core::config::check_range;
+use crate::core::ConfigIssue;
 use serde::{Deserialize, Serialize};
 
 /// The largest number of vertices one polygon may have. Footprints of real buildings have
@@ -308,17 +309,6 @@ pub struct SceneConfig {
     pub link: LinkOptions,
 }
 
-fn finite_range(key: &str, v: f64, lo: f64, hi: f64, what: &str) -> Result<(), ConfigIssue> {
-    if v.is_finite() && v >= lo && v <= hi {
-        Ok(())
-    } else {
-        Err(ConfigIssue::new(
-            key,
-            format!("expected {what} within [{lo}, {hi}], got {v}"),
-        ))
-    }
-}
-
 fn positive(key: &str, v: f64, what: &str) -> Result<(), ConfigIssue> {
     if v.is_finite() && v > 0.0 && v <= MAX_COORDINATE_M {
         Ok(())
@@ -384,11 +374,12 @@ impl SceneConfig {
                 &format!("indoor_zones[{i}].polygon_enu_m"),
                 &z.polygon_enu_m,
             )?;
-            finite_range(
+            check_range(
                 &format!("indoor_zones[{i}].floor_m"),
                 z.floor_m,
                 -MAX_COORDINATE_M,
                 MAX_COORDINATE_M,
+                false,
                 "a floor height (m)",
             )?;
             if !(z.ceiling_m.is_finite()
@@ -407,32 +398,36 @@ impl SceneConfig {
         for (i, s) in self.surfaces.iter().enumerate() {
             validate_polygon(&format!("surfaces[{i}].polygon_enu_m"), &s.polygon_enu_m)?;
         }
-        finite_range(
+        check_range(
             "ground.height_m",
             self.ground.height_m,
             -MAX_COORDINATE_M,
             MAX_COORDINATE_M,
+            false,
             "a ground height (m)",
         )?;
-        finite_range(
+        check_range(
             "link.max_reflection_range_m",
             self.link.max_reflection_range_m,
             0.0,
             100_000.0,
+            false,
             "a reflection range (m)",
         )?;
-        finite_range(
+        check_range(
             "link.gnss_antenna_xpd_db",
             self.link.gnss_antenna_xpd_db,
             0.0,
             100.0,
+            false,
             "a cross-polarisation discrimination (dB)",
         )?;
-        finite_range(
+        check_range(
             "link.min_relative_amplitude_db",
             self.link.min_relative_amplitude_db,
             -300.0,
             0.0,
+            false,
             "a relative amplitude threshold (dB)",
         )?;
         Ok(())

@@ -22,13 +22,13 @@
 //!
 //! The source is [`TcofdmSource`] (name `"tcofdm"`, emitters of [`System::Tcofdm`]).
 
+use crate::core::ConfigIssue;
 use crate::core::{EmitterId, EnuFrame, SimTime, System, TrialRng};
 use crate::dtmb::source::{DtmbLevel, DtmbSensorConfig, DtmbSource, Environment, TowerSpec};
 use crate::dtmb::PnMode;
 use crate::engine::{SampleContext, Source};
 use crate::fusion::measurement::MeasurementBatch;
 use crate::gnss::receiver_clock::ClockTrack;
-use crate::motion::ConfigIssue;
 use crate::propagation::{Scene, ShadowingConfig};
 use nalgebra::Vector3;
 use rand::Rng;

@@ -131,7 +131,7 @@ impl Ctx<'_> {
     }
 
     /// Prefixes a module's [`ConfigIssue`] key with the table that holds it.
-    fn issue(&self, table: &str, issue: crate::motion::ConfigIssue) -> WorldError {
+    fn issue(&self, table: &str, issue: crate::core::ConfigIssue) -> WorldError {
         self.err(&format!("{table}.{}", issue.key), issue.message)
     }
 }
@@ -910,7 +910,7 @@ impl World {
             0.1,
             &mut rng.stream("receiver/clock"),
         ));
-        let err = |t: &str, i: crate::motion::ConfigIssue| format!("{t}.{}: {}", i.key, i.message);
+        let err = |t: &str, i: crate::core::ConfigIssue| format!("{t}.{}: {}", i.key, i.message);
         let cache = self.epoch_cache(rng.master_seed())?;
         if let Some(g) = &sensors.gnss {
             sources.push(Box::new(

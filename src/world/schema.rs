@@ -388,8 +388,7 @@ impl EstimatorSpec {
     /// # Errors
     /// When its configuration is unusable.
     pub fn build(&self, ctx: &BuildContext<'_>) -> Result<Box<dyn Estimator>, String> {
-        let issue =
-            |t: &str, i: crate::motion::ConfigIssue| format!("{t}.{}: {}", i.key, i.message);
+        let issue = |t: &str, i: crate::core::ConfigIssue| format!("{t}.{}: {}", i.key, i.message);
         let selection = self.selection.map(|k| match k {
             SelectionKind::Fuzzy => {
                 ModeSelection::Fuzzy(Box::new(self.fuzzy.clone().unwrap_or_default()))
