@@ -22,7 +22,11 @@ fn export_rates(c: &mut Criterion) {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("worlds/{name}.toml"));
         let world = load_world(&path).expect("world loads");
         let rec = record_trial(&world, 1, 0).expect("trial records");
-        let epochs = rec.batches.iter().filter(|b| b.source == "gnss").count() as u64;
+        let epochs = rec
+            .batches
+            .iter()
+            .filter(|b| b.source == hybridnav::measurement::SourceKind::Gnss)
+            .count() as u64;
         g.throughput(Throughput::Elements(epochs));
         g.bench_function(format!("{name}/record"), |b| {
             b.iter(|| record_trial(&world, 1, 0).expect("trial records"));

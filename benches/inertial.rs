@@ -10,18 +10,17 @@
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use hybridnav::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng};
 use hybridnav::engine::trial::truth_at;
-use hybridnav::engine::{SampleContext, Source};
-use hybridnav::fusion::estimator::Estimator;
-use hybridnav::fusion::measurement::{
-    Measurement, MeasurementBatch, PositionFix, RangeMeasurement,
-};
 use hybridnav::inertial::attitude::{ideal_imu, Platform, PlatformConfig, PlatformTruth};
 use hybridnav::inertial::estimators::{InsEstimator, InsFilterConfig};
-use hybridnav::inertial::imu::{Imu, ImuConfig, ImuGrade, ImuSample};
+use hybridnav::inertial::imu::{Imu, ImuConfig, ImuGrade};
 use hybridnav::inertial::ins_ekf::{InsEkf, InsEkfConfig};
 use hybridnav::inertial::source::{local_earth_of, ImuSource};
 use hybridnav::inertial::strapdown::NavState;
 use hybridnav::inertial::LocalEarth;
+use hybridnav::measurement::Estimator;
+use hybridnav::measurement::ImuSample;
+use hybridnav::measurement::{Measurement, MeasurementBatch, PositionFix, RangeMeasurement};
+use hybridnav::measurement::{SampleContext, Source};
 use hybridnav::motion::TrajectoryConfig;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
@@ -192,7 +191,10 @@ fn engine_epochs(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::W
 
     // An INS estimator initialised from position fixes on a level body gliding east.
     let cfg = InsFilterConfig {
-        fix_sources: vec!["fix".into(), "gnss".into()],
+        fix_sources: vec![
+            hybridnav::measurement::SourceKind::Fm,
+            hybridnav::measurement::SourceKind::Gnss,
+        ],
         ..Default::default()
     };
     let mut ins = InsEstimator::new("INS", &cfg, &imu_cfg, &[System::Gps], &frame, start).unwrap();
@@ -201,7 +203,7 @@ fn engine_epochs(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::W
         unscored: false,
         raw: None,
         t: start,
-        source: "imu".into(),
+        source: hybridnav::measurement::SourceKind::Imu,
         items: vec![Measurement::Imu(ImuSample {
             t_s: 0.0,
             gyro_rps: Vector3::zeros(),
@@ -222,7 +224,7 @@ fn engine_epochs(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::W
         unscored: false,
         raw: None,
         t: start,
-        source: "fix".into(),
+        source: hybridnav::measurement::SourceKind::Fm,
         items: vec![Measurement::Position(PositionFix {
             pos_ecef_m: frame.origin_ecef(),
             cov_m2: Matrix3::identity() * 0.01,
@@ -261,7 +263,7 @@ fn engine_epochs(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::W
     // The same epoch with seed 004's RE-KF on the error state (chained transition per
     // sample, one generic-filter prediction and update per fix).
     let rekf_cfg = InsFilterConfig {
-        fix_sources: vec!["fix".into()],
+        fix_sources: vec![hybridnav::measurement::SourceKind::Fm],
         kalman: hybridnav::inertial::ins_family::InsKalmanKind::Rekf,
         residual_gate_c: Some(3.0),
         ..Default::default()
@@ -322,7 +324,7 @@ fn engine_epochs(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::W
         unscored: false,
         raw: None,
         t: start.add_seconds(t_ins),
-        source: "gnss".into(),
+        source: hybridnav::measurement::SourceKind::Gnss,
         items: ranges,
     };
     g.bench_function("ins_estimator_gnss_epoch_8_sats", |b| {

@@ -15,6 +15,7 @@ pub mod inertial;
 pub mod io;
 pub mod layout;
 pub mod magnetic;
+pub mod measurement;
 pub mod metrics;
 pub mod montecarlo;
 pub mod motion;

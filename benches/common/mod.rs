@@ -2,7 +2,7 @@
 //! by `benches/python/ekf_epoch_bench.py`), so both time the same problem.
 
 use hybridnav::core::{EmitterId, EnuFrame, Geodetic, System};
-use hybridnav::fusion::measurement::RangeMeasurement;
+use hybridnav::measurement::RangeMeasurement;
 use nalgebra::Vector3;
 
 /// Twelve emitters (8 GPS, 4 BDS) spread over the sky of a Beijing receiver, with their

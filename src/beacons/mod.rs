@@ -33,9 +33,10 @@
 use crate::core::rng::StreamRng;
 use crate::core::ConfigIssue;
 use crate::core::{EmitterId, EnuFrame, SimTime, System, TrialRng};
-use crate::engine::{SampleContext, Source};
-use crate::fusion::measurement::{Measurement, MeasurementBatch, RangeMeasurement};
 use crate::fusion::wls;
+use crate::measurement::SourceKind;
+use crate::measurement::{Measurement, MeasurementBatch, RangeMeasurement};
+use crate::measurement::{SampleContext, Source};
 use nalgebra::Vector3;
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -348,8 +349,8 @@ impl EmittersSource {
 }
 
 impl Source for EmittersSource {
-    fn name(&self) -> &str {
-        SOURCE_NAME
+    fn kind(&self) -> SourceKind {
+        SourceKind::Emitters
     }
 
     /// The first sample is one period after the start: the papers' filters start from the
@@ -361,8 +362,7 @@ impl Source for EmittersSource {
     fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
         let truth = ctx.truth;
         out.t = truth.t;
-        out.source.clear();
-        out.source.push_str(SOURCE_NAME);
+        out.source = SourceKind::Emitters;
         let t_s = truth.sim.seconds();
         // The geocentric vertical: the elevation is informative only.
         let up = truth.pos_ecef_m.normalize();

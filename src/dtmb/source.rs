@@ -18,7 +18,7 @@
 //! The tower clock is broadcast-unknown: the pseudorange carries it, as for a real SFN
 //! tower without monitoring. The aided search window is centred on the delay predicted
 //! from the aiding estimator's position (the receiver clock is assumed tracked, since an
-//! [`crate::fusion::estimator::Estimate`] carries no clock state); when the true arrival is
+//! [`crate::measurement::Estimate`] carries no clock state); when the true arrival is
 //! outside the window the sync locks onto noise. The Earth's rotation during the ≤ 0.3 ms
 //! of flight (< 0.1 m) is neglected.
 //!
@@ -41,11 +41,10 @@ use crate::core::geodesy::{azimuth_elevation_with, ecef_to_enu_rotation};
 use crate::core::rng::StreamRng;
 use crate::core::ConfigIssue;
 use crate::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng, C_MPS};
-use crate::engine::{SampleContext, Source};
-use crate::fusion::measurement::{
-    Measurement, MeasurementBatch, RangeDifference, RangeMeasurement,
-};
 use crate::gnss::receiver_clock::ClockTrack;
+use crate::measurement::SourceKind;
+use crate::measurement::{Measurement, MeasurementBatch, RangeDifference, RangeMeasurement};
+use crate::measurement::{SampleContext, Source};
 use crate::propagation::pathloss::{extended_hata_db, HataEnvironment, Model, ValidityLog};
 use crate::propagation::{
     Emitter, LinkParams, LinkPaths, Polarisation, Scene, ShadowingConfig, ShadowingField,
@@ -365,8 +364,8 @@ struct TowerState {
 pub struct DtmbSource {
     /// The system of the emitters (DTMB, or TC-OFDM reusing this receiver).
     system: System,
-    /// Source name and stream prefix: `"dtmb"` or `"tcofdm"`.
-    name: &'static str,
+    /// The source kind, whose name is the stream prefix: `"dtmb"` or `"tcofdm"`.
+    kind: SourceKind,
     cfg: DtmbSensorConfig,
     towers: Vec<TowerState>,
     scene: Option<Arc<Scene>>,
@@ -411,7 +410,7 @@ impl DtmbSource {
     ) -> Result<Self, ConfigIssue> {
         Self::with_system(
             System::Dtmb,
-            "dtmb",
+            SourceKind::Dtmb,
             cfg,
             towers,
             scene,
@@ -423,15 +422,15 @@ impl DtmbSource {
         )
     }
 
-    /// As [`DtmbSource::new`] for emitters of `system` under source name `name` (also the
-    /// prefix of the random streams): the TC-OFDM source reuses this receiver.
+    /// As [`DtmbSource::new`] for emitters of `system` as a source of `kind` (whose name is
+    /// also the prefix of the random streams): the TC-OFDM source reuses this receiver.
     ///
     /// # Errors
     /// As [`DtmbSource::new`].
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn with_system(
         system: System,
-        name: &'static str,
+        kind: SourceKind,
         cfg: DtmbSensorConfig,
         towers: Vec<TowerSpec>,
         scene: Option<Arc<Scene>>,
@@ -445,7 +444,7 @@ impl DtmbSource {
         for (i, t) in towers.iter().enumerate() {
             t.validate(i, system)?;
         }
-        let src_name = name;
+        let src_name = kind.name();
         let k = cfg.accumulation_frames as usize;
         let mut states = Vec::with_capacity(towers.len());
         for spec in towers {
@@ -518,7 +517,7 @@ impl DtmbSource {
                 .collect();
             if !shared.is_empty() && cfg.level == DtmbLevel::Measurement {
                 warnings.push(format!(
-                    "{name}: towers {} share a carrier; at measurement level each is ranged as if                      alone (the co-channel copies are summed at level = \"signal\")",
+                    "{src_name}: towers {} share a carrier; at measurement level each is ranged as if                      alone (the co-channel copies are summed at level = \"signal\")",
                     shared.join(", ")
                 ));
             }
@@ -536,7 +535,7 @@ impl DtmbSource {
         let period_ns = ((1e9 / cfg.rate_hz).round() as i64).max(1);
         Ok(Self {
             system,
-            name,
+            kind,
             block: if cfg.level == DtmbLevel::Signal {
                 vec![Complex32::default(); max_len]
             } else {
@@ -587,7 +586,7 @@ impl DtmbSource {
     pub(crate) fn tower_link(
         &mut self,
         ti: usize,
-        truth: &crate::engine::Truth,
+        truth: &crate::measurement::Truth,
     ) -> (f64, f64, [f64; crate::propagation::MAX_PATHS]) {
         let spec = self.towers[ti].spec.clone();
         let rx_enu = truth.enu.pos_enu_m;
@@ -603,7 +602,7 @@ impl DtmbSource {
         );
         if let Some(w) = self.validity.note(Model::ExtendedHata, validity) {
             self.warnings
-                .push(format!("{} {}: {w}", self.name, spec.id));
+                .push(format!("{} {}: {w}", self.kind, spec.id));
         }
         let shadow_db = self.towers[ti]
             .shadow
@@ -643,7 +642,7 @@ impl DtmbSource {
                     Err(e) => {
                         if self.warnings.len() < 64 {
                             self.warnings
-                                .push(format!("{} {}: link: {e}", self.name, spec.id));
+                                .push(format!("{} {}: link: {e}", self.kind, spec.id));
                         }
                     }
                 }
@@ -679,8 +678,8 @@ impl Source for DtmbSource {
         self.warnings.clone()
     }
 
-    fn name(&self) -> &str {
-        self.name
+    fn kind(&self) -> SourceKind {
+        self.kind
     }
 
     fn first_sample(&self) -> SimTime {
@@ -690,8 +689,7 @@ impl Source for DtmbSource {
     fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
         let truth = ctx.truth;
         out.t = truth.t;
-        out.source.clear();
-        out.source.push_str(self.name);
+        out.source = self.kind;
         let t_s = truth.sim.seconds();
         let rx_ecef = truth.pos_ecef_m;
         let g = Geodetic::from_ecef(&rx_ecef);
@@ -801,7 +799,7 @@ impl DtmbSource {
     fn range_difference(
         &mut self,
         ti: usize,
-        truth: &crate::engine::Truth,
+        truth: &crate::measurement::Truth,
         range_m: f64,
         snr_db: f64,
         dopplers: &[f64; crate::propagation::MAX_PATHS],
@@ -870,7 +868,7 @@ impl DtmbSource {
         range_m: f64,
         dopplers: &[f64],
         centre_off: Option<f64>,
-        truth: &crate::engine::Truth,
+        truth: &crate::measurement::Truth,
     ) -> Option<f64> {
         let w = window_samples(&self.cfg);
         let k = self.cfg.accumulation_frames as usize;
@@ -1039,8 +1037,8 @@ pub fn reported_sigma_m(mode: PnMode, snr_db: f64, frames: usize) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::engine::Truth;
     use crate::gnss::receiver_clock::{ClockConfig, ReceiverClock};
+    use crate::measurement::Truth;
     use crate::motion::TruthState;
 
     fn frame() -> EnuFrame {
@@ -1148,7 +1146,7 @@ mod tests {
             let pos = walk(sim.seconds());
             let tr = truth(&f, sim, pos);
             batch.items.clear();
-            let est = [Some(crate::fusion::estimator::Estimate {
+            let est = [Some(crate::measurement::Estimate {
                 t: tr.t,
                 pos_ecef_m: tr.pos_ecef_m,
                 vel_ecef_mps: None,

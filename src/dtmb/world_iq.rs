@@ -556,7 +556,7 @@ fn frame_annotation(
     k: i64,
     pos: f64,
     total: usize,
-    truth: &crate::engine::Truth,
+    truth: &crate::measurement::Truth,
     rx_bias_s: f64,
 ) -> (Annotation, Map<String, Value>) {
     let n = mode.frame_len();

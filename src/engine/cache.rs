@@ -29,10 +29,10 @@
 //! epochs of about 20 satellite links and 21 FM stations) needs about 1 MB.
 
 use super::trial::truth_at;
-use super::Truth;
 use crate::core::{SimTime, TrialRng};
 use crate::fm::source::FmEpochTable;
 use crate::gnss::measurement::{GnssEpochTable, GnssGeometry};
+use crate::measurement::Truth;
 use crate::world::World;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};

@@ -1,11 +1,11 @@
 //! One trial: the event loop that moves truth, sources and estimators forward together.
 
 use super::queue::{EventKind, EventQueue};
-use super::{SampleContext, Truth};
 use crate::core::{EnuFrame, GpsTime, SimTime, System, TrialRng};
-use crate::fusion::estimator::Estimate;
 use crate::fusion::health::{HealthConfig, HealthMonitor, Verdict};
-use crate::fusion::measurement::MeasurementBatch;
+use crate::measurement::Estimate;
+use crate::measurement::MeasurementBatch;
+use crate::measurement::{SampleContext, Truth};
 use crate::motion::Trajectory;
 use crate::world::{TrialSetup, World};
 use nalgebra::Vector3;
@@ -67,7 +67,7 @@ pub struct EstimatorTrace {
 pub struct TrialResult {
     pub trial: u64,
     pub estimators: Vec<EstimatorTrace>,
-    /// The sources' warnings (see [`crate::engine::Source::warnings`]).
+    /// The sources' warnings (see [`crate::measurement::Source::warnings`]).
     pub warnings: Vec<String>,
 }
 
@@ -172,9 +172,21 @@ pub fn simulate_observed(
             epochs: Vec::new(),
         })
         .collect();
+    // The routing, decided once: which estimators consume each source's batches, in the
+    // world's estimator order.
+    let subscribers: Vec<Vec<usize>> = setup
+        .sources
+        .iter()
+        .map(|s| {
+            let kind = s.kind();
+            (0..setup.estimators.len())
+                .filter(|&k| setup.estimators[k].consumes(kind))
+                .collect()
+        })
+        .collect();
     let mut batch = MeasurementBatch::default();
     if observer.as_ref().is_some_and(|o| o.wants_raw()) {
-        batch.raw = Some(crate::fusion::measurement::RawLog::default());
+        batch.raw = Some(crate::measurement::RawLog::default());
     }
 
     while let Some(ev) = queue.pop() {
@@ -202,14 +214,11 @@ pub fn simulate_observed(
         if batch.items.is_empty() && !source.empty_batches_are_epochs() {
             continue;
         }
-        let source_name = source.name();
         let count = |sys: System| batch.ranges().filter(|r| r.emitter.system == sys).count() as u32;
         let (n_gps, n_bds) = (count(System::Gps), count(System::Bds));
         let truth_ecef_m = [truth.pos_ecef_m.x, truth.pos_ecef_m.y, truth.pos_ecef_m.z];
-        for (k, est) in setup.estimators.iter_mut().enumerate() {
-            if !est.consumes(source_name) {
-                continue;
-            }
+        for &k in &subscribers[source_idx] {
+            let est = &mut setup.estimators[k];
             let mut out = est.process(&batch);
             // A diverged estimator is reported at this epoch and reset; it never hands
             // a non-finite estimate on (see `fusion::health`).
@@ -267,9 +276,10 @@ pub fn simulate_observed(
 mod tests {
     use super::*;
     use crate::core::Geodetic;
-    use crate::engine::Source;
-    use crate::fusion::estimator::{EpochOutcome, Estimator};
-    use crate::fusion::measurement::{Measurement, PositionFix};
+    use crate::measurement::Source;
+    use crate::measurement::SourceKind;
+    use crate::measurement::{EpochOutcome, Estimator};
+    use crate::measurement::{Measurement, PositionFix};
     use crate::motion::TrajectoryConfig;
     use nalgebra::Matrix3;
     use std::sync::{Arc, Mutex};
@@ -282,8 +292,8 @@ mod tests {
     }
 
     impl Source for Probe {
-        fn name(&self) -> &str {
-            "probe"
+        fn kind(&self) -> SourceKind {
+            SourceKind::Fm
         }
         fn first_sample(&self) -> SimTime {
             SimTime(0)
@@ -314,8 +324,8 @@ mod tests {
         fn name(&self) -> &str {
             "echo"
         }
-        fn consumes(&self, source: &str) -> bool {
-            source == "probe"
+        fn consumes(&self, source: SourceKind) -> bool {
+            source == SourceKind::Fm
         }
         fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
             if let Some(Measurement::Position(f)) = batch.items.first() {
@@ -380,8 +390,8 @@ mod tests {
         fn name(&self) -> &str {
             "faulty"
         }
-        fn consumes(&self, source: &str) -> bool {
-            source == "probe"
+        fn consumes(&self, source: SourceKind) -> bool {
+            source == SourceKind::Fm
         }
         fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
             let t = batch.t.seconds_since(self.t0);

@@ -15,9 +15,10 @@ pub mod tables;
 
 use crate::core::TrialRng;
 use crate::engine::trial::{simulate_observed, BatchObserver, EstimatorTrace};
-use crate::engine::Truth;
-use crate::fusion::measurement::{Measurement, MeasurementBatch, RawLog};
 use crate::io::atomic::write_atomic;
+use crate::measurement::SourceKind;
+use crate::measurement::Truth;
+use crate::measurement::{Measurement, MeasurementBatch, RawLog};
 use crate::world::World;
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -111,7 +112,7 @@ impl fmt::Display for Format {
 #[derive(Clone, Debug)]
 pub struct RecordedBatch {
     pub truth: Truth,
-    pub source: String,
+    pub source: SourceKind,
     pub items: Vec<Measurement>,
     pub raw: RawLog,
 }
@@ -174,7 +175,7 @@ impl BatchObserver for Recorder {
     fn batch(&mut self, truth: &Truth, batch: &MeasurementBatch) {
         self.batches.push(RecordedBatch {
             truth: *truth,
-            source: batch.source.clone(),
+            source: batch.source,
             items: batch.items.clone(),
             raw: batch.raw.clone().unwrap_or_default(),
         });

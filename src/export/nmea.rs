@@ -15,7 +15,8 @@
 use super::{write_text, RecordedBatch, Recording};
 use crate::core::geodesy::azimuth_elevation;
 use crate::core::{Geodetic, GpsTime, System};
-use crate::fusion::measurement::Measurement;
+use crate::measurement::Measurement;
+use crate::measurement::SourceKind;
 use crate::world::World;
 use nalgebra::Vector3;
 use std::fmt::Write;
@@ -220,7 +221,10 @@ fn epoch(out: &mut String, f: &Fix<'_>) {
 
 /// The receiver (GNSS) batches of the recording, in time order.
 fn gnss_batches(rec: &Recording) -> Vec<&RecordedBatch> {
-    rec.batches.iter().filter(|b| b.source == "gnss").collect()
+    rec.batches
+        .iter()
+        .filter(|b| b.source == SourceKind::Gnss)
+        .collect()
 }
 
 /// Writes `DIR/truth.nmea` and `DIR/<estimator>.nmea`.

@@ -20,8 +20,9 @@
 use super::Recording;
 use crate::core::{GpsTime, System, C_MPS};
 use crate::gnss::measurement::{F_B1I_HZ, F_L1_HZ};
-use crate::gnss::raw::RawGnssObservation;
 use crate::io::atomic::write_atomic;
+use crate::measurement::RawGnssObservation;
+use crate::measurement::SourceKind;
 use crate::world::{World, BUILTIN_EPHEMERIS, BUILTIN_EPHEMERIS_NAME};
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
@@ -65,7 +66,7 @@ fn lambda_m(system: System) -> f64 {
 /// The receiver epochs with their time tags and clock steps.
 fn epochs(rec: &Recording) -> Vec<Epoch<'_>> {
     let mut out = Vec::new();
-    for b in rec.batches.iter().filter(|b| b.source == "gnss") {
+    for b in rec.batches.iter().filter(|b| b.source == SourceKind::Gnss) {
         let mut sats: Vec<&RawGnssObservation> = b
             .raw
             .gnss
@@ -164,7 +165,7 @@ pub fn observation_text(world: &World, rec: &Recording) -> Result<String, String
     let p0 = rec
         .batches
         .iter()
-        .find(|b| b.source == "gnss")
+        .find(|b| b.source == SourceKind::Gnss)
         .map(|b| b.truth.pos_ecef_m)
         .unwrap_or_default();
     header(

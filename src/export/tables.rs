@@ -12,10 +12,10 @@
 //! (carrier-phase range differences) and `truth` (the reference track).
 
 use super::Recording;
-use crate::engine::Truth;
-use crate::fusion::measurement::Measurement;
 use crate::io::atomic::write_atomic;
 use crate::io::table::{Table, Values};
+use crate::measurement::Measurement;
+use crate::measurement::Truth;
 use crate::world::World;
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
@@ -99,7 +99,7 @@ pub fn tables(world: &World, rec: &Recording) -> Vec<(&'static str, Table)> {
         for m in &b.items {
             if let Measurement::Range(r) = m {
                 tr.push(&b.truth);
-                src.push(b.source.clone());
+                src.push(b.source.name().to_string());
                 emitter.push(r.emitter.to_string());
                 system.push(format!("{:?}", r.emitter.system).to_lowercase());
                 let geometric_m = (r.emitter_pos_ecef_m - b.truth.pos_ecef_m).norm();
@@ -158,7 +158,7 @@ pub fn tables(world: &World, rec: &Recording) -> Vec<(&'static str, Table)> {
         for m in &b.items {
             if let Measurement::Position(f) = m {
                 tr.push(&b.truth);
-                src.push(b.source.clone());
+                src.push(b.source.name().to_string());
                 let enu = frame.enu_of_ecef(&f.pos_ecef_m);
                 let r = frame.rotation();
                 let cov_enu = r * f.cov_m2 * r.transpose();

@@ -30,8 +30,9 @@ use crate::core::rng::StreamRng;
 use crate::core::ConfigIssue;
 use crate::core::{EnuFrame, SimTime, TrialRng};
 use crate::engine::cache::EpochTable;
-use crate::engine::{SampleContext, Source, Truth};
-use crate::fusion::measurement::{Measurement, MeasurementBatch, PositionFix};
+use crate::measurement::SourceKind;
+use crate::measurement::{Measurement, MeasurementBatch, PositionFix};
+use crate::measurement::{SampleContext, Source, Truth};
 use crate::propagation::pathloss::ValidityLog;
 use crate::propagation::Scene;
 use serde::Deserialize;
@@ -422,8 +423,8 @@ impl FmSource {
 }
 
 impl Source for FmSource {
-    fn name(&self) -> &str {
-        "fm"
+    fn kind(&self) -> SourceKind {
+        SourceKind::Fm
     }
 
     fn first_sample(&self) -> SimTime {
@@ -433,8 +434,7 @@ impl Source for FmSource {
     fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
         let truth = ctx.truth;
         out.t = truth.t;
-        out.source.clear();
-        out.source.push_str("fm");
+        out.source = SourceKind::Fm;
         let t_s = truth.sim.seconds();
         self.mean_rssi(truth);
         self.field.read_scan(&mut self.rng, &mut self.scan_buf);

@@ -44,7 +44,7 @@
 //! `−u` is the paper's `e = (r̂ − r_s)/r` of eqs. 10–12. The paper's eq. 16 writes the
 //! range rate as `e·(v_s − v) + Δf`; differentiating eq. 9 gives `−e·(v_s − v) + Δf`
 //! instead (the range shrinks when the receiver moves towards the emitter), which is the
-//! sign used here and in [`crate::fusion::measurement::RangeMeasurement`]. Eq. 17 also drops
+//! sign used here and in [`crate::measurement::RangeMeasurement`]. Eq. 17 also drops
 //! the position derivative of the range rate; it is kept here by default because it costs
 //! nothing and is the exact Jacobian, and dropped with
 //! [`Ekf11Config::rate_position_jacobian`] = false, as seed 000's presets do to run the
@@ -81,7 +81,7 @@
 //! time; they use no fused multiply–add, so both builds give the same bits (tested).
 
 use crate::core::{System, C_MPS};
-use crate::fusion::measurement::{PositionFix, RangeMeasurement};
+use crate::measurement::{PositionFix, RangeMeasurement};
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -1141,154 +1141,11 @@ fn symmetrise(p: &mut StateMatrix) {
     }
 }
 
-/// χ² distribution functions for filter-consistency tests (NEES, NIS).
-///
-/// The CDF is the regularised lower incomplete gamma function `P(k/2, x/2)`, evaluated by
-/// its power series for `x < a + 1` and by Lentz's continued fraction for its complement
-/// otherwise (Press et al., *Numerical Recipes*, 3rd ed., §6.2); `ln Γ` is Lanczos'
-/// approximation with g = 7, n = 9 (error below 1e-15). The quantile starts from the
-/// Wilson–Hilferty approximation and is polished by safeguarded Newton steps on the CDF.
-///
-/// Wilson–Hilferty (1931): `(X/k)^{1/3}` is nearly normal with mean `1 − 2/(9k)` and
-/// variance `2/(9k)`, so `χ²_p(k) ≈ k·(1 − 2/(9k) + z_p·√(2/(9k)))³` with `z_p` the
-/// standard normal quantile. Its relative error is below 1 % for k ≥ 3 and shrinks as
-/// k grows; at k = 1 it is a few per cent in the tails.
-pub mod chi2 {
-    /// Natural log of the gamma function for `x > 0` (Lanczos, g = 7, n = 9).
-    pub fn ln_gamma(x: f64) -> f64 {
-        const G: f64 = 7.0;
-        const COEF: [f64; 9] = [
-            0.999_999_999_999_809_9,
-            676.520_368_121_885_1,
-            -1_259.139_216_722_402_8,
-            771.323_428_777_653_1,
-            -176.615_029_162_140_6,
-            12.507_343_278_686_905,
-            -0.138_571_095_265_720_12,
-            9.984_369_578_019_572e-6,
-            1.505_632_735_149_311_6e-7,
-        ];
-        if x < 0.5 {
-            // Reflection: Γ(x)Γ(1 − x) = π / sin(πx).
-            let pi = std::f64::consts::PI;
-            return (pi / (pi * x).sin()).abs().ln() - ln_gamma(1.0 - x);
-        }
-        let x = x - 1.0;
-        let mut a = COEF[0];
-        for (i, &c) in COEF.iter().enumerate().skip(1) {
-            a += c / (x + i as f64);
-        }
-        let t = x + G + 0.5;
-        0.5 * (2.0 * std::f64::consts::PI).ln() + (x + 0.5) * t.ln() - t + a.ln()
-    }
-
-    /// Regularised lower incomplete gamma function `P(a, x)`, `a > 0`, `x ≥ 0`.
-    pub fn gamma_p(a: f64, x: f64) -> f64 {
-        if x <= 0.0 {
-            return 0.0;
-        }
-        let log_prefactor = -x + a * x.ln() - ln_gamma(a);
-        if x < a + 1.0 {
-            // Series: P = e^{−x} x^a / Γ(a) · Σ x^n / (a (a+1) … (a+n)).
-            let (mut term, mut sum, mut ap) = (1.0 / a, 1.0 / a, a);
-            for _ in 0..10_000 {
-                ap += 1.0;
-                term *= x / ap;
-                sum += term;
-                if term.abs() < sum.abs() * 1e-17 {
-                    break;
-                }
-            }
-            (sum.ln() + log_prefactor).exp().min(1.0)
-        } else {
-            // Continued fraction for Q = 1 − P (modified Lentz).
-            let tiny = 1e-300;
-            let mut b = x + 1.0 - a;
-            let mut c = 1.0 / tiny;
-            let mut d = 1.0 / b;
-            let mut h = d;
-            for i in 1..10_000 {
-                let an = -(i as f64) * (i as f64 - a);
-                b += 2.0;
-                d = an * d + b;
-                if d.abs() < tiny {
-                    d = tiny;
-                }
-                c = b + an / c;
-                if c.abs() < tiny {
-                    c = tiny;
-                }
-                d = 1.0 / d;
-                let delta = d * c;
-                h *= delta;
-                if (delta - 1.0).abs() < 1e-16 {
-                    break;
-                }
-            }
-            (1.0 - (log_prefactor.exp() * h)).max(0.0)
-        }
-    }
-
-    /// CDF of χ²(k) at `x`.
-    pub fn cdf(x: f64, dof: f64) -> f64 {
-        gamma_p(0.5 * dof, 0.5 * x)
-    }
-
-    /// Standard normal quantile, used for the Wilson–Hilferty start (see
-    /// [`crate::core::stats::normal_quantile`]).
-    pub use crate::core::stats::normal_quantile;
-
-    /// Wilson–Hilferty approximation of the χ²(k) quantile at probability `p`.
-    pub fn quantile_wilson_hilferty(p: f64, dof: f64) -> f64 {
-        let v = 2.0 / (9.0 * dof);
-        let c = 1.0 - v + normal_quantile(p) * v.sqrt();
-        dof * (c.max(0.0)).powi(3)
-    }
-
-    /// The χ²(k) quantile at probability `p` (0 < p < 1), accurate to about 1e-12
-    /// relative: Wilson–Hilferty, then Newton on the CDF inside a shrinking bracket.
-    pub fn quantile(p: f64, dof: f64) -> f64 {
-        if !(p > 0.0 && p < 1.0 && dof > 0.0) {
-            return f64::NAN;
-        }
-        let a = 0.5 * dof;
-        let ln_norm = a * 2f64.ln() + ln_gamma(a);
-        let pdf = |x: f64| ((a - 1.0) * x.ln() - 0.5 * x - ln_norm).exp();
-        let (mut lo, mut hi) = (0.0_f64, f64::INFINITY);
-        let mut x = quantile_wilson_hilferty(p, dof).max(1e-300);
-        for _ in 0..200 {
-            let f = cdf(x, dof) - p;
-            if f == 0.0 {
-                return x;
-            }
-            if f < 0.0 {
-                lo = lo.max(x);
-            } else {
-                hi = hi.min(x);
-            }
-            let step = f / pdf(x);
-            let mut next = x - step;
-            // Keep the iterate inside the bracket: bisect (or expand) when Newton leaves it.
-            if !(next.is_finite() && next > lo && next < hi) {
-                next = if hi.is_finite() {
-                    0.5 * (lo + hi)
-                } else {
-                    2.0 * x.max(lo) + 1.0
-                };
-            }
-            if (next - x).abs() <= 1e-14 * x.abs() {
-                return next;
-            }
-            x = next;
-        }
-        x
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::core::{EmitterId, Geodetic};
+    use crate::fusion::kalman::chi2;
     use approx::assert_relative_eq;
 
     thread_local! {

@@ -26,14 +26,13 @@
 //! re-initialises from least squares.
 
 use crate::core::rng::{StreamRng, TrialRng};
+use crate::core::stats::chi2;
 use crate::core::{GpsTime, System};
-use crate::fusion::ekf11::{chi2, idx, Ekf11Config, IsbConfig, RejectReason, UpdateOutcome};
-use crate::fusion::estimator::{EpochOutcome, Estimate, Estimator};
+use crate::fusion::ekf11::{idx, Ekf11Config, IsbConfig, RejectReason, UpdateOutcome};
 use crate::fusion::kalman::{
     Ekf, Gating, RelativeEntropyKf, ResidualGate, SigmaPointKf, UpdateReport,
     DEFAULT_ALEPH_THRESHOLD,
 };
-use crate::fusion::measurement::{MeasurementBatch, RangeMeasurement};
 use crate::fusion::models::{
     MeasurementModel, PositionFixModel, ProcessModel, Pseudoranges, PseudorangesAndRates,
     Pva11Clock, RangeRow, StateLayout,
@@ -42,6 +41,9 @@ use crate::fusion::particle::{ParticleBuffer, ParticleFilter, Resampling};
 use crate::fusion::preprocess::{ClockCorrectionConfig, FrontEnd};
 use crate::fusion::selection::ModeSelection;
 use crate::fusion::wls;
+use crate::measurement::SourceKind;
+use crate::measurement::{EpochOutcome, Estimate, Estimator};
+use crate::measurement::{MeasurementBatch, RangeMeasurement};
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use serde::Deserialize;
 
@@ -549,7 +551,7 @@ impl FamilyEstimator {
         name: &str,
         kind: FamilyKind,
         systems: &[System],
-        fixes: &[String],
+        fixes: &[SourceKind],
         ekf: Option<Ekf11Config>,
         cfg: Option<FamilyConfig>,
         selection: Option<&ModeSelection>,
@@ -766,7 +768,7 @@ impl Estimator for FamilyEstimator {
         &self.name
     }
 
-    fn consumes(&self, source: &str) -> bool {
+    fn consumes(&self, source: SourceKind) -> bool {
         self.front.consumes(source)
     }
 

@@ -21,10 +21,10 @@
 //!
 //! On either, the engine sets `numerical_failure` on the epoch record (with its time and
 //! the estimator's name), drops the epoch's estimate and calls
-//! [`crate::fusion::estimator::Estimator::reset`].
+//! [`crate::measurement::Estimator::reset`].
 
-use crate::fusion::ekf11::chi2;
-use crate::fusion::estimator::EpochOutcome;
+use crate::core::stats::chi2;
+use crate::measurement::EpochOutcome;
 
 /// The divergence test's settings.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -30,7 +30,7 @@
 //! is zeroed, so the gain has a zero column for it and the update is the update with the
 //! remaining components alone.
 
-pub use crate::fusion::ekf11::chi2;
+pub use crate::core::stats::chi2;
 pub use crate::fusion::ekf11::{RejectReason, UpdateOutcome};
 use crate::fusion::models::{MeasurementModel, ProcessModel};
 use nalgebra::{SMatrix, SVector};

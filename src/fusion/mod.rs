@@ -9,7 +9,6 @@ pub mod family;
 pub mod health;
 pub mod kalman;
 pub mod linear_kf;
-pub mod measurement;
 pub mod mode;
 pub mod models;
 pub mod paper;

@@ -36,8 +36,8 @@
 
 use crate::core::System;
 use crate::fusion::ekf11::{Ekf11, Ekf11Config, N_STATES as N_EKF11};
-use crate::fusion::measurement::RangeMeasurement;
 use crate::fusion::wls;
+use crate::measurement::RangeMeasurement;
 use crate::motion::singer::{singer_process_noise, singer_transition};
 use crate::motion::turning;
 use nalgebra::{SMatrix, SVector, Vector3};

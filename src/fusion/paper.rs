@@ -68,11 +68,9 @@
 
 use crate::core::rng::{StreamRng, TrialRng};
 use crate::core::{EnuFrame, GpsTime, System};
-use crate::fusion::estimator::{EpochOutcome, Estimate, Estimator};
 use crate::fusion::kalman::{
     Ekf, EpochFading, Gating, RelativeEntropyKf, ResidualGate, SigmaPointKf, UpdateReport,
 };
-use crate::fusion::measurement::{MeasurementBatch, RangeMeasurement};
 use crate::fusion::models::{
     PlaneTurning, ProcessModel, Pseudoranges, RangeRow, Singer5, StateLayout,
 };
@@ -80,6 +78,9 @@ use crate::fusion::particle::{ParticleBuffer, ParticleFilter, PseudorangeLikelih
 use crate::fusion::preprocess::FrontEnd;
 use crate::fusion::selection::ModeSelection;
 use crate::fusion::wls;
+use crate::measurement::SourceKind;
+use crate::measurement::{EpochOutcome, Estimate, Estimator};
+use crate::measurement::{MeasurementBatch, RangeMeasurement};
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use serde::Deserialize;
 
@@ -743,7 +744,7 @@ where
         &self.name
     }
 
-    fn consumes(&self, source: &str) -> bool {
+    fn consumes(&self, source: SourceKind) -> bool {
         self.front.consumes(source)
     }
 

@@ -19,10 +19,11 @@
 //! counted as rejected) until its first calibration.
 
 use crate::core::{EmitterId, GpsTime, System};
-use crate::fusion::estimator::EpochOutcome;
-use crate::fusion::measurement::{Measurement, MeasurementBatch, PositionFix, RangeMeasurement};
 use crate::fusion::selection::{Admission, ModeSelection, ModeSelector};
 use crate::fusion::wls::{self, WlsOptions};
+use crate::measurement::EpochOutcome;
+use crate::measurement::SourceKind;
+use crate::measurement::{Measurement, MeasurementBatch, PositionFix, RangeMeasurement};
 use nalgebra::Vector3;
 use serde::Deserialize;
 
@@ -96,7 +97,7 @@ impl DtmbClockCorrector {
     /// Takes note of a GNSS batch: a GPS-only fix with GDOP ≤ `gdop_max` becomes the
     /// calibration reference for DTMB batches of the same instant.
     pub fn observe(&mut self, batch: &MeasurementBatch) {
-        if batch.source != "gnss" {
+        if batch.source != SourceKind::Gnss {
             return;
         }
         self.gps.clear();
@@ -167,7 +168,7 @@ impl DtmbClockCorrector {
 /// whether the batch's position fixes are used. Shared by `ekf11` and the filter family.
 pub struct FrontEnd {
     systems: Vec<System>,
-    fixes: Vec<String>,
+    fixes: Vec<SourceKind>,
     selector: Option<ModeSelector>,
     corrector: Option<DtmbClockCorrector>,
     /// This batch's admitted (and corrected) ranges, after [`FrontEnd::admit`].
@@ -193,7 +194,7 @@ impl FrontEnd {
     /// When the selection's configuration is invalid.
     pub fn new(
         systems: &[System],
-        fixes: &[String],
+        fixes: &[SourceKind],
         selection: Option<&ModeSelection>,
         correction: Option<ClockCorrectionConfig>,
     ) -> Result<Self, String> {
@@ -216,12 +217,12 @@ impl FrontEnd {
     /// systems; the ranges are filtered by system in [`FrontEnd::admit`]), DTMB or
     /// TC-OFDM batches when the estimator uses those systems, and the batches of its fix
     /// sources.
-    pub fn consumes(&self, source: &str) -> bool {
+    pub fn consumes(&self, source: SourceKind) -> bool {
         match source {
-            "gnss" | crate::beacons::SOURCE_NAME => true,
-            "dtmb" => self.systems.contains(&System::Dtmb),
-            "tcofdm" => self.systems.contains(&System::Tcofdm),
-            other => self.fixes.iter().any(|f| f == other),
+            SourceKind::Gnss | SourceKind::Emitters => true,
+            SourceKind::Dtmb => self.systems.contains(&System::Dtmb),
+            SourceKind::Tcofdm => self.systems.contains(&System::Tcofdm),
+            other => self.fixes.contains(&other),
         }
     }
 
@@ -289,7 +290,7 @@ impl FrontEnd {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fusion::measurement::Measurement;
+    use crate::measurement::Measurement;
 
     fn range(id: EmitterId, e: Vector3<f64>, rx: &Vector3<f64>, bias_m: f64) -> RangeMeasurement {
         RangeMeasurement {
@@ -331,7 +332,7 @@ mod tests {
         .collect();
         let gnss = MeasurementBatch {
             t: GpsTime::from_week_tow(2000, 100.0),
-            source: "gnss".into(),
+            source: SourceKind::Gnss,
             items: sats
                 .iter()
                 .enumerate()

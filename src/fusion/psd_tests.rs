@@ -296,7 +296,7 @@ fn above<R: Rng>(rng: &mut R, up: &nalgebra::Vector3<f64>) -> nalgebra::Vector3<
 fn the_seed000_ekf_covariance_stays_symmetric_psd() {
     use crate::core::{EmitterId, System};
     use crate::fusion::ekf11::{Ekf11, Ekf11Config, IsbConfig};
-    use crate::fusion::measurement::{PositionFix, RangeMeasurement};
+    use crate::measurement::{PositionFix, RangeMeasurement};
     use nalgebra::Vector3;
     let (mut total, mut accepted) = (0usize, 0usize);
     for k in 0..200u64 {
@@ -376,10 +376,11 @@ fn the_seed000_ekf_covariance_stays_symmetric_psd() {
 /// covariance whose eigenvalues span four decades.
 #[test]
 fn the_ins_error_state_covariance_stays_symmetric_psd() {
-    use crate::inertial::imu::{ImuConfig, ImuGrade, ImuSample};
+    use crate::inertial::imu::{ImuConfig, ImuGrade};
     use crate::inertial::ins_ekf::{InsEkf, InsEkfConfig};
     use crate::inertial::strapdown::NavState;
     use crate::inertial::LocalEarth;
+    use crate::measurement::ImuSample;
     use nalgebra::{UnitQuaternion, Vector3};
     for k in 0..100u64 {
         let mut rng = TrialRng::new(78, k).stream("test/psd/ins");

@@ -15,11 +15,12 @@
 //!   fixes are not part of the scheme and are always admitted.
 
 use crate::core::System;
-use crate::fusion::measurement::{Measurement, MeasurementBatch};
 use crate::fusion::mode::{
     seamless_mode, FuzzyConfig, FuzzyInputs, FuzzySystem, Mode, SeamlessMode,
 };
 use crate::fusion::wls;
+use crate::measurement::SourceKind;
+use crate::measurement::{Measurement, MeasurementBatch};
 use nalgebra::Vector3;
 use serde::Deserialize;
 
@@ -127,8 +128,8 @@ impl ModeSelector {
     /// Takes note of `batch` and decides what it may contribute. `rx` is the estimator's
     /// current position estimate (ECEF), needed for the GDOPs.
     pub fn decide(&mut self, batch: &MeasurementBatch, rx: Option<&Vector3<f64>>) -> Admission {
-        match batch.source.as_str() {
-            "gnss" => {
+        match batch.source {
+            SourceKind::Gnss => {
                 self.gps.clear();
                 self.gps.extend(
                     batch
@@ -137,14 +138,14 @@ impl ModeSelector {
                         .map(|m| m.emitter_pos_ecef_m),
                 );
             }
-            "dtmb" => {
+            SourceKind::Dtmb => {
                 self.dtmb.clear();
                 self.dtmb
                     .extend(batch.ranges().map(|m| m.emitter_pos_ecef_m));
             }
             // The abstract emitters (seeds 001 and 003) deliver every system in one batch:
             // it is at once the latest GPS and the latest DTMB batch.
-            crate::beacons::SOURCE_NAME => {
+            SourceKind::Emitters => {
                 self.gps.clear();
                 self.dtmb.clear();
                 for m in batch.ranges() {

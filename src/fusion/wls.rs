@@ -30,7 +30,7 @@
 
 use crate::core::geodesy::ecef_to_enu_rotation;
 use crate::core::{Geodetic, System};
-use crate::fusion::measurement::RangeMeasurement;
+use crate::measurement::RangeMeasurement;
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
 /// At most this many clock unknowns: one per [`System`].

@@ -42,15 +42,16 @@ use crate::core::geodesy::{azimuth_elevation_with, ecef_to_enu_rotation};
 use crate::core::rng::{StreamRng, TrialRng};
 use crate::core::{EmitterId, EnuFrame, Geodetic, SimTime, System, C_MPS};
 use crate::engine::cache::EpochTable;
-use crate::engine::{SampleContext, Source, Truth};
-use crate::fusion::measurement::{Measurement, MeasurementBatch, RangeMeasurement};
 use crate::gnss::atmosphere::{saastamoinen_m, Klobuchar};
 use crate::gnss::ephemeris::sagnac_rotate;
 use crate::gnss::link::{Signal, TrackingConfig};
-use crate::gnss::raw::RawGnssObservation;
 use crate::gnss::receiver_clock::ClockTrack;
 use crate::gnss::rinex_nav::NavData;
 use crate::gnss::visibility::{scene_effect, LinkClass};
+use crate::measurement::RawGnssObservation;
+use crate::measurement::SourceKind;
+use crate::measurement::{Measurement, MeasurementBatch, RangeMeasurement};
+use crate::measurement::{SampleContext, Source, Truth};
 use crate::propagation::{LinkPaths, Scene};
 use nalgebra::Vector3;
 use rand::Rng;
@@ -765,8 +766,8 @@ pub fn transmit_geometry(
 }
 
 impl Source for GnssSource {
-    fn name(&self) -> &str {
-        "gnss"
+    fn kind(&self) -> SourceKind {
+        SourceKind::Gnss
     }
 
     fn first_sample(&self) -> SimTime {
@@ -780,8 +781,7 @@ impl Source for GnssSource {
     fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
         let truth = ctx.truth;
         out.t = truth.t;
-        out.source.clear();
-        out.source.push_str("gnss");
+        out.source = SourceKind::Gnss;
         // The run's table when it holds this epoch at this truth, else this epoch's own
         // geometry: the same links either way.
         let table = self.table.take();

@@ -7,7 +7,7 @@
 //! that stops being finite is reported as `numerical_failure` and reset (the INS
 //! re-initialises from the next fixes; the PDR keeps its last finite position).
 
-use super::imu::{ImuConfig, ImuSample};
+use super::imu::ImuConfig;
 use super::ins_ekf::{InsEkf, InsEkfConfig};
 use super::ins_family::{Cov6, InsFamilyFilter, InsKalmanConfig, InsKalmanKind};
 use super::source::local_earth_of;
@@ -15,20 +15,22 @@ use super::strapdown::NavState;
 use super::LocalEarth;
 use crate::core::ConfigIssue;
 use crate::core::{EnuFrame, GpsTime, System};
-use crate::fusion::estimator::{EpochOutcome, Estimate, Estimator};
-use crate::fusion::measurement::{
-    Measurement, MeasurementBatch, RangeDifference, RangeMeasurement, StepEvent,
-};
 use crate::fusion::models::MeasurementModel;
 use crate::fusion::wls::{self, WlsOptions};
+use crate::measurement::ImuSample;
+use crate::measurement::SourceKind;
+use crate::measurement::{EpochOutcome, Estimate, Estimator};
+use crate::measurement::{
+    Measurement, MeasurementBatch, RangeDifference, RangeMeasurement, StepEvent,
+};
 use nalgebra::{
     Matrix2, Matrix3, Matrix4, Rotation3, SMatrix, SVector, UnitQuaternion, Vector2, Vector3,
     Vector4,
 };
 use serde::{Deserialize, Serialize};
 
-fn d_fix_sources() -> Vec<String> {
-    vec!["gnss".to_string()]
+fn d_fix_sources() -> Vec<SourceKind> {
+    vec![SourceKind::Gnss]
 }
 fn d_true() -> bool {
     true
@@ -107,7 +109,7 @@ pub struct InsFilterConfig {
     /// estimator lists) and, with `use_gnss_velocity`, a velocity fix from the range rates;
     /// any other source gives its [`Measurement::Position`] items (e.g. `"tcofdm"`).
     #[serde(default = "d_fix_sources")]
-    pub fix_sources: Vec<String>,
+    pub fix_sources: Vec<SourceKind>,
     /// Also use the velocity solved from GNSS range rates (eqs. 16–19 in full); default true.
     #[serde(default = "d_true")]
     pub use_gnss_velocity: bool,
@@ -207,11 +209,11 @@ impl InsFilterConfig {
     /// # Errors
     /// A [`ConfigIssue`] naming the first bad field.
     pub fn validate(&self) -> Result<(), ConfigIssue> {
-        if self.fix_sources.iter().any(|s| s.is_empty() || s == "imu") {
+        if self.fix_sources.contains(&SourceKind::Imu) {
             return Err(ConfigIssue::new(
                 "fix_sources",
                 format!(
-                    "expected names of fix sources such as \"gnss\" or \"tcofdm\" (not \"imu\" or empty), got {:?}",
+                    "expected names of fix sources such as \"gnss\" or \"tcofdm\" (not \"imu\"), got {:?}",
                     self.fix_sources
                 ),
             ));
@@ -402,7 +404,7 @@ fn fixes_of_batch(
     gdop: &mut Option<f64>,
 ) {
     fixes.clear();
-    if batch.source == "gnss" {
+    if batch.source == SourceKind::Gnss {
         scratch.clear();
         scratch.extend(
             batch
@@ -1001,8 +1003,8 @@ impl Estimator for InsEstimator {
         &self.name
     }
 
-    fn consumes(&self, source: &str) -> bool {
-        source == "imu" || self.cfg.fix_sources.iter().any(|s| s == source)
+    fn consumes(&self, source: SourceKind) -> bool {
+        source == SourceKind::Imu || self.cfg.fix_sources.contains(&source)
     }
 
     fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
@@ -1010,7 +1012,7 @@ impl Estimator for InsEstimator {
         if self.cfg.joint_fix && self.pending_t.is_some_and(|t| batch.t > t) {
             self.flush_joint(&mut out);
         }
-        if batch.source == "imu" {
+        if batch.source == SourceKind::Imu {
             for m in &batch.items {
                 if let Measurement::Imu(s) = m {
                     self.imu_sample(s, &mut out);
@@ -1095,14 +1097,14 @@ pub struct PdrFilterConfig {
     /// Sources whose fixes update the position (`"gnss"` by least squares, others by their
     /// position items); default none (PDR only, seed 002's "PDR" row).
     #[serde(default)]
-    pub fix_sources: Vec<String>,
+    pub fix_sources: Vec<SourceKind>,
     /// Reject fixes whose NIS exceeds this (χ², 2 degrees of freedom); default none.
     #[serde(default)]
     pub nis_gate: Option<f64>,
     /// Sources whose TPS-CFO range differences (seed 002 §3.2) update the filter, e.g.
     /// `["dtmb"]`; default none. Only the first tower seen is used.
     #[serde(default)]
-    pub range_difference_sources: Vec<String>,
+    pub range_difference_sources: Vec<SourceKind>,
     /// The power-law coefficients h₀ (s) and h₋₂ (1/s) of the DTMB receiver's oscillator,
     /// whose phase wander the range differences integrate; default Brown & Hwang's OCXO
     /// (2e-25, 6e-25), the `ocxo` preset of `[receiver.clock]` (a TCXO is 2e-19, 2e-20).
@@ -1159,11 +1161,11 @@ impl PdrFilterConfig {
             }
         }
         positive("start_sigma_m", self.start_sigma_m, 1.0e4, "a start σ in m")?;
-        if self.fix_sources.iter().any(|s| s.is_empty() || s == "pdr") {
+        if self.fix_sources.contains(&SourceKind::Pdr) {
             return Err(ConfigIssue::new(
                 "fix_sources",
                 format!(
-                    "expected names of fix sources such as \"gnss\" (not \"pdr\" or empty), got {:?}",
+                    "expected names of fix sources such as \"gnss\" (not \"pdr\"), got {:?}",
                     self.fix_sources
                 ),
             ));
@@ -1171,11 +1173,7 @@ impl PdrFilterConfig {
         if let Some(g) = self.nis_gate {
             positive("nis_gate", g, 1.0e6, "a χ² gate")?;
         }
-        if self
-            .range_difference_sources
-            .iter()
-            .any(|s| s.is_empty() || s == "pdr")
-        {
+        if self.range_difference_sources.contains(&SourceKind::Pdr) {
             return Err(ConfigIssue::new(
                 "range_difference_sources",
                 format!(
@@ -1680,14 +1678,10 @@ impl Estimator for PdrEstimator {
         &self.name
     }
 
-    fn consumes(&self, source: &str) -> bool {
-        source == "pdr"
-            || self.cfg.fix_sources.iter().any(|s| s == source)
-            || self
-                .cfg
-                .range_difference_sources
-                .iter()
-                .any(|s| s == source)
+    fn consumes(&self, source: SourceKind) -> bool {
+        source == SourceKind::Pdr
+            || self.cfg.fix_sources.contains(&source)
+            || self.cfg.range_difference_sources.contains(&source)
     }
 
     fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
@@ -1695,7 +1689,7 @@ impl Estimator for PdrEstimator {
         if !self.cfg.range_difference_sources.is_empty() {
             self.propagate_rd(batch.t);
         }
-        if batch.source == "pdr" {
+        if batch.source == SourceKind::Pdr {
             for m in &batch.items {
                 if let Measurement::Step(s) = m {
                     if self.step(s, batch.t) {
@@ -1759,7 +1753,7 @@ impl Estimator for PdrEstimator {
 mod tests {
     use super::*;
     use crate::core::{EmitterId, Geodetic};
-    use crate::fusion::measurement::PositionFix;
+    use crate::measurement::PositionFix;
 
     fn frame() -> EnuFrame {
         EnuFrame::new(Geodetic::from_deg(30.55, 114.27, 25.0))
@@ -1819,7 +1813,7 @@ mod tests {
             unscored: false,
             raw: None,
             t: start.add_seconds(t(k0 + n - 1)),
-            source: "imu".into(),
+            source: SourceKind::Imu,
             items: (k0..k0 + n)
                 .map(|k| {
                     Measurement::Imu(ImuSample {
@@ -1842,7 +1836,7 @@ mod tests {
         let f = frame();
         let start = GpsTime::from_week_tow(2300, 0.0);
         let cfg = InsFilterConfig {
-            fix_sources: vec!["fix".into()],
+            fix_sources: vec![SourceKind::Fm],
             ..Default::default()
         };
         let mut ins =
@@ -1854,7 +1848,7 @@ mod tests {
             unscored: false,
             raw: None,
             t: start.add_seconds(k as f64 * 0.01),
-            source: "fix".into(),
+            source: SourceKind::Fm,
             items: vec![Measurement::Position(PositionFix {
                 pos_ecef_m: f.ecef_of_enu(&Vector3::new(0.02 * k as f64, 0.0, 0.0)),
                 cov_m2: Matrix3::identity() * 0.01,
@@ -1948,7 +1942,7 @@ mod tests {
     fn pdr_steps_a_square_and_a_fix_pulls_it() {
         let f = frame();
         let cfg = PdrFilterConfig {
-            fix_sources: vec!["fm".into()],
+            fix_sources: vec![SourceKind::Fm],
             ..Default::default()
         };
         let mut est =
@@ -1956,7 +1950,7 @@ mod tests {
         let mut batch = MeasurementBatch {
             unscored: false,
             raw: None,
-            source: "pdr".into(),
+            source: SourceKind::Pdr,
             ..Default::default()
         };
         // Four sides of 10 steps of 0.5 m: back to the start.
@@ -1986,7 +1980,7 @@ mod tests {
         let b = MeasurementBatch {
             unscored: false,
             raw: None,
-            source: "fm".into(),
+            source: SourceKind::Fm,
             items: vec![Measurement::Position(PositionFix {
                 pos_ecef_m: f.ecef_of_enu(&fix_enu),
                 cov_m2: ecef_cov(&f, &cov),
@@ -2076,7 +2070,7 @@ mod tests {
                 .collect();
             for fuse in [false, true] {
                 let cfg = PdrFilterConfig {
-                    range_difference_sources: if fuse { vec!["dtmb".into()] } else { vec![] },
+                    range_difference_sources: if fuse { vec![SourceKind::Dtmb] } else { vec![] },
                     ..Default::default()
                 };
                 let mut est = PdrEstimator::new("PDR", &cfg, &[], &f, Some(p0)).unwrap();
@@ -2085,7 +2079,7 @@ mod tests {
                     let t = k as f64 * 0.5;
                     let step = MeasurementBatch {
                         t: start.add_seconds(t),
-                        source: "pdr".into(),
+                        source: SourceKind::Pdr,
                         items: vec![Measurement::Step(StepEvent {
                             length_m: 0.5,
                             sigma_length_m: 0.05,
@@ -2105,7 +2099,7 @@ mod tests {
                     let w: f64 = 0.002 * Normal::new(0.0, 1.0).unwrap().sample(&mut white);
                     let b = MeasurementBatch {
                         t: start.add_seconds(t),
-                        source: "dtmb".into(),
+                        source: SourceKind::Dtmb,
                         items: vec![Measurement::RangeDifference(RangeDifference {
                             emitter: crate::core::EmitterId {
                                 system: System::Dtmb,

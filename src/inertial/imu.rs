@@ -43,6 +43,7 @@
 
 use crate::core::ConfigIssue;
 use crate::core::StreamRng;
+use crate::measurement::ImuSample;
 use nalgebra::{Matrix3, Vector3};
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -472,17 +473,6 @@ impl ImuConfig {
             accel_range_mps2: arange,
         })
     }
-}
-
-/// One IMU output sample.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ImuSample {
-    /// Sample time (s since the trial start).
-    pub t_s: f64,
-    /// Measured angular rate ω̃_ib^b (rad/s).
-    pub gyro_rps: Vector3<f64>,
-    /// Measured specific force f̃^b (m/s²).
-    pub accel_mps2: Vector3<f64>,
 }
 
 /// One sensor triad's error state.

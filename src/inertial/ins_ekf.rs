@@ -38,9 +38,10 @@
 //! r̂ −= δr, v̂ −= δv, Ĉ ← exp([ψ×]) Ĉ, b̂_a += δα, b̂_g += δε) and the error state is
 //! reset to zero, so the linearisation stays about the corrected solution.
 
-use super::imu::{ImuSample, ImuSpec};
+use super::imu::ImuSpec;
 use super::strapdown::{NavState, Strapdown};
 use super::{skew, LocalEarth};
+use crate::measurement::ImuSample;
 use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
 
 /// 15-state covariance.

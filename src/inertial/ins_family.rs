@@ -44,7 +44,6 @@
 //! ℵ threshold, and the RE-KF is the Kalman update with seed 004's eq. 24 residual gate.
 //! The strong tracking filter differs by its fading factor.
 
-use super::imu::ImuSample;
 use super::ins_ekf::{initial_covariance, mechanise, process_noise_rate, Cov15, InsEkfConfig};
 use super::strapdown::{NavState, Strapdown};
 use super::LocalEarth;
@@ -54,6 +53,7 @@ use crate::fusion::kalman::{
     UpdateOutcome, UpdateReport, DEFAULT_ALEPH_THRESHOLD,
 };
 use crate::fusion::models::{MeasurementModel, ProcessModel};
+use crate::measurement::ImuSample;
 use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 

@@ -29,9 +29,9 @@
 //! The heading of a step is the circular mean of the AHRS heading over the step, which
 //! averages the phone's sway.
 
-use super::imu::ImuSample;
 use super::{heading_of_attitude, LocalEarth};
 use crate::core::ConfigIssue;
+use crate::measurement::ImuSample;
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;

@@ -71,8 +71,9 @@ use super::pdr::{Ahrs, Pdr, PdrConfig};
 use super::LocalEarth;
 use crate::core::ConfigIssue;
 use crate::core::{EnuFrame, SimTime, TrialRng};
-use crate::engine::{SampleContext, Source};
-use crate::fusion::measurement::{Measurement, MeasurementBatch, StepEvent};
+use crate::measurement::SourceKind;
+use crate::measurement::{Measurement, MeasurementBatch, StepEvent};
+use crate::measurement::{SampleContext, Source};
 use crate::motion::{Trajectory, TruthState};
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
@@ -251,8 +252,8 @@ impl ImuSource {
 }
 
 impl Source for ImuSource {
-    fn name(&self) -> &str {
-        "imu"
+    fn kind(&self) -> SourceKind {
+        SourceKind::Imu
     }
 
     fn first_sample(&self) -> SimTime {
@@ -261,8 +262,7 @@ impl Source for ImuSource {
 
     fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
         out.t = ctx.truth.t;
-        out.source.clear();
-        out.source.push_str("imu");
+        out.source = SourceKind::Imu;
         // Only the first batch of each whole second is scored: the INS is judged at 1 Hz
         // like every other estimator, whatever the IMU rate and batch grouping.
         let second = ctx.truth.sim.0.div_euclid(1_000_000_000);
@@ -506,8 +506,8 @@ impl PdrSource {
 }
 
 impl Source for PdrSource {
-    fn name(&self) -> &str {
-        "pdr"
+    fn kind(&self) -> SourceKind {
+        SourceKind::Pdr
     }
 
     fn first_sample(&self) -> SimTime {
@@ -516,8 +516,7 @@ impl Source for PdrSource {
 
     fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
         out.t = ctx.truth.t;
-        out.source.clear();
-        out.source.push_str("pdr");
+        out.source = SourceKind::Pdr;
         let p = self.pending.take()?;
         out.items.push(Measurement::Step(StepEvent {
             length_m: p.step.length_m,
@@ -538,9 +537,9 @@ impl Source for PdrSource {
 mod tests {
     use super::*;
     use crate::core::{Geodetic, GpsTime};
-    use crate::engine::Truth;
     use crate::inertial::attitude::Platform;
     use crate::inertial::imu::ImuGrade;
+    use crate::measurement::Truth;
     use crate::motion::TrajectoryConfig;
 
     fn walk() -> TrajectoryConfig {
@@ -589,7 +588,7 @@ mod tests {
                 estimates: &[],
             };
             let next = src.sample(&ctx, &mut batch);
-            assert_eq!(batch.source, "imu");
+            assert_eq!(batch.source, SourceKind::Imu);
             for m in &batch.items {
                 let Measurement::Imu(s) = m else {
                     panic!("not an IMU sample")

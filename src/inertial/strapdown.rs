@@ -15,8 +15,8 @@
 //! The specific-force term is the trapezoid of the navigation-frame specific force, which
 //! keeps the sculling error second order. The step does not allocate.
 
-use super::imu::ImuSample;
 use super::LocalEarth;
+use crate::measurement::ImuSample;
 use nalgebra::{UnitQuaternion, Vector3};
 
 /// The navigation solution.

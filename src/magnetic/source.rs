@@ -32,10 +32,11 @@ use super::snn::{SnnClassifier, SnnConfig, SnnScratch};
 use crate::core::config::check;
 use crate::core::ConfigIssue;
 use crate::core::{EnuFrame, GpsTime, SimTime, TrialRng};
-use crate::engine::{SampleContext, Source};
-use crate::fusion::measurement::{Measurement, MeasurementBatch, PositionFix};
 use crate::inertial::attitude::{PlatformConfig, PlatformTruth};
 use crate::inertial::magnetometer::{Magnetometer, MagnetometerConfig};
+use crate::measurement::SourceKind;
+use crate::measurement::{Measurement, MeasurementBatch, PositionFix};
+use crate::measurement::{SampleContext, Source};
 use crate::motion::Trajectory;
 use nalgebra::{Matrix3, Vector3};
 use rand::Rng;
@@ -446,8 +447,8 @@ impl MagneticSource {
 }
 
 impl Source for MagneticSource {
-    fn name(&self) -> &str {
-        "magnetic"
+    fn kind(&self) -> SourceKind {
+        SourceKind::Magnetic
     }
 
     fn first_sample(&self) -> SimTime {
@@ -458,8 +459,7 @@ impl Source for MagneticSource {
 
     fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
         out.t = ctx.truth.t;
-        out.source.clear();
-        out.source.push_str("magnetic");
+        out.source = SourceKind::Magnetic;
         // Compared as the engine's integer times, so a detection is never missed by a
         // rounding of its time.
         while let Some(d) = self.detections.get(self.next) {
@@ -487,7 +487,7 @@ impl Source for MagneticSource {
                 && (next.is_none() || SimTime::from_seconds(w.t_s[self.walk_next]) <= ctx.truth.sim)
             {
                 let k = self.walk_next;
-                raw.mag.push(crate::fusion::measurement::MagSample {
+                raw.mag.push(crate::measurement::MagSample {
                     t_s: w.t_s[k],
                     b_body_ut: w.b_body_ut[k].into(),
                     true_pos_enu_m: w.pos_enu_m[k].into(),

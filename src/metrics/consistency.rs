@@ -25,7 +25,7 @@
 
 use serde::Serialize;
 
-use crate::fusion::ekf11::chi2;
+use crate::core::stats::chi2;
 
 /// The probability mass of the acceptance bands.
 pub const BAND_PROBABILITY: f64 = 0.95;

@@ -5,13 +5,13 @@
 //! freedom is `F(t) = 1 − ½ I_x(ν/2, ½)` for `t ≥ 0`, with `x = ν / (ν + t²)` and `I` the
 //! regularised incomplete beta function (Abramowitz & Stegun 26.7.1), evaluated by its
 //! continued fraction (A&S 26.5.8); the quantile is Newton's method on that tail inside a
-//! shrinking bracket, as [`crate::fusion::ekf11::chi2::quantile`] does for χ².
+//! shrinking bracket, as [`crate::core::stats::chi2::quantile`] does for χ².
 
 use rand::Rng;
 
 use super::quantile_sorted;
+use crate::core::stats::chi2::{ln_gamma, normal_quantile};
 use crate::core::TrialRng;
-use crate::fusion::ekf11::chi2::{ln_gamma, normal_quantile};
 
 /// The two-sided confidence level of the intervals in this module.
 pub const CONFIDENCE: f64 = 0.95;

@@ -26,9 +26,10 @@ use crate::core::ConfigIssue;
 use crate::core::{EmitterId, EnuFrame, SimTime, System, TrialRng};
 use crate::dtmb::source::{DtmbLevel, DtmbSensorConfig, DtmbSource, Environment, TowerSpec};
 use crate::dtmb::PnMode;
-use crate::engine::{SampleContext, Source};
-use crate::fusion::measurement::MeasurementBatch;
 use crate::gnss::receiver_clock::ClockTrack;
+use crate::measurement::MeasurementBatch;
+use crate::measurement::SourceKind;
+use crate::measurement::{SampleContext, Source};
 use crate::propagation::{Scene, ShadowingConfig};
 use nalgebra::Vector3;
 use rand::Rng;
@@ -269,7 +270,7 @@ impl TcofdmSource {
             .collect();
         let inner = DtmbSource::with_system(
             System::Tcofdm,
-            "tcofdm",
+            SourceKind::Tcofdm,
             cfg.as_dtmb(),
             towers,
             scene,
@@ -301,8 +302,8 @@ impl Source for TcofdmSource {
         self.inner.warnings().to_vec()
     }
 
-    fn name(&self) -> &str {
-        "tcofdm"
+    fn kind(&self) -> SourceKind {
+        SourceKind::Tcofdm
     }
 
     fn first_sample(&self) -> SimTime {

@@ -18,6 +18,7 @@ use crate::gnss::measurement::{GnssSource, SceneView, Shielding, ShieldingRule};
 use crate::gnss::receiver_clock::{ClockTrack, ReceiverClock};
 use crate::gnss::rinex_nav::{parse_nav, read_nav_file, NavData};
 use crate::inertial::source::{ImuSource, PdrSource};
+use crate::measurement::SourceKind;
 use crate::motion::Trajectory;
 use crate::propagation::{Indoor, Scene};
 use crate::tcofdm::{BaseStationSpec, TcofdmSource};
@@ -91,8 +92,8 @@ pub struct World {
 /// Everything a trial needs, freshly built from the world and the trial's random streams.
 pub struct TrialSetup {
     pub trajectory: Box<dyn Trajectory>,
-    pub sources: Vec<Box<dyn crate::engine::Source>>,
-    pub estimators: Vec<Box<dyn crate::fusion::estimator::Estimator>>,
+    pub sources: Vec<Box<dyn crate::measurement::Source>>,
+    pub estimators: Vec<Box<dyn crate::measurement::Estimator>>,
     pub end: SimTime,
 }
 
@@ -700,10 +701,10 @@ fn check_terrestrial_and_inertial(
 fn fix_sources(file: &WorldFile) -> Vec<&'static str> {
     let mut v = Vec::new();
     if file.sensors.fm.is_some() {
-        v.push("fm");
+        v.push(SourceKind::Fm.name());
     }
     if file.sensors.magnetic.is_some() {
-        v.push("magnetic");
+        v.push(SourceKind::Magnetic.name());
     }
     v
 }
@@ -791,7 +792,7 @@ fn check_estimator(
     }
     for (j, f) in e.fixes.iter().enumerate() {
         let simulated_fix = fix_sources(file);
-        if !simulated_fix.contains(&f.as_str()) {
+        if !simulated_fix.contains(&f.name()) {
             return Err(ctx.err(
                 &at(&format!("fixes[{j}]")),
                 format!(
@@ -899,7 +900,7 @@ impl World {
         let end = SimTime::from_seconds(self.duration_s);
         let trajectory = self.build_trajectory(rng)?;
         let sensors = &self.file.sensors;
-        let mut sources: Vec<Box<dyn crate::engine::Source>> = Vec::new();
+        let mut sources: Vec<Box<dyn crate::measurement::Source>> = Vec::new();
         // One receiver clock for every radio source of the trial.
         let clock = Arc::new(ClockTrack::record(
             ReceiverClock::new(
@@ -1001,7 +1002,7 @@ impl World {
                 .file
                 .estimators
                 .iter()
-                .position(|e| e.fixes.iter().any(|f| f == "fm"));
+                .position(|e| e.fixes.contains(&SourceKind::Fm));
             sources.push(Box::new(
                 crate::fm::FmSource::new(
                     fm.clone(),

@@ -4,7 +4,7 @@
 use crate::core::System;
 use crate::dtmb::DtmbSensorConfig;
 use crate::fusion::ekf11::Ekf11Config;
-use crate::fusion::estimator::{EkfEstimator, Estimator, WlsEstimator};
+use crate::fusion::estimator::{EkfEstimator, WlsEstimator};
 use crate::fusion::family::{FamilyConfig, FamilyEstimator, FamilyKind};
 use crate::fusion::mode::FuzzyConfig;
 use crate::fusion::paper::{PaperContext, PaperFilter, ProcessSpec};
@@ -16,6 +16,8 @@ use crate::inertial::attitude::{Platform, PlatformConfig};
 use crate::inertial::estimators::{InsEstimator, InsFilterConfig, PdrEstimator, PdrFilterConfig};
 use crate::inertial::imu::ImuConfig;
 use crate::inertial::source::PdrSensorConfig;
+use crate::measurement::Estimator;
+use crate::measurement::SourceKind;
 use crate::motion::TrajectoryConfig;
 use crate::tcofdm::TcofdmSensorConfig;
 use crate::world::scene::{SceneSection, TransmitterSpec};
@@ -245,7 +247,7 @@ pub struct EstimatorSpec {
     pub options: Option<FamilyConfig>,
     /// Sources whose position fixes the estimator takes (`"fm"`).
     #[serde(default)]
-    pub fixes: Vec<String>,
+    pub fixes: Vec<SourceKind>,
     /// Mode selection: `"fuzzy"` (seed 000) or `"seamless"` (seed 003).
     #[serde(default)]
     pub selection: Option<SelectionKind>,

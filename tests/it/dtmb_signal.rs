@@ -560,8 +560,8 @@ fn world_iq(
 /// it gives no measurement.
 fn source_cn0_dbhz(world: &str, seed: u64, t_s: f64) -> Option<f64> {
     use hybridnav::core::SimTime;
-    use hybridnav::engine::{SampleContext, Source};
-    use hybridnav::fusion::measurement::{Measurement, MeasurementBatch};
+    use hybridnav::measurement::{Measurement, MeasurementBatch};
+    use hybridnav::measurement::{SampleContext, Source};
     let w = hybridnav::world::load_world(&crate::common::repo().join(world)).unwrap();
     let rng = TrialRng::new(seed, 0);
     let mut setup = w.build_trial(&rng).unwrap();
@@ -571,7 +571,10 @@ fn source_cn0_dbhz(world: &str, seed: u64, t_s: f64) -> Option<f64> {
         setup.trajectory.as_ref(),
         SimTime::from_seconds(t_s),
     );
-    let src: &mut Box<dyn Source> = setup.sources.iter_mut().find(|s| s.name() == "dtmb")?;
+    let src: &mut Box<dyn Source> = setup
+        .sources
+        .iter_mut()
+        .find(|s| s.kind() == hybridnav::measurement::SourceKind::Dtmb)?;
     let mut batch = MeasurementBatch::default();
     src.sample(
         &SampleContext {

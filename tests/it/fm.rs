@@ -3,14 +3,14 @@
 //! setup, the fingerprint database file, bad inputs, and the `"fm"` source.
 
 use hybridnav::core::{EnuFrame, Geodetic, GpsTime, SimTime, TrialRng};
-use hybridnav::engine::{SampleContext, Source, Truth};
 use hybridnav::fm::database::{build_kriged, ChannelInfo};
 use hybridnav::fm::field::synthesize_stations;
 use hybridnav::fm::kriging::{empirical_variogram, fit_variogram, FitOptions};
 use hybridnav::fm::wknn::locate;
 use hybridnav::fm::*;
-use hybridnav::fusion::estimator::Estimate;
-use hybridnav::fusion::measurement::{Measurement, MeasurementBatch};
+use hybridnav::measurement::Estimate;
+use hybridnav::measurement::{Measurement, MeasurementBatch};
+use hybridnav::measurement::{SampleContext, Source, Truth};
 use hybridnav::motion::TruthState;
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use rand::Rng;
@@ -748,7 +748,7 @@ fn fm_source_emits_constrained_fixes_in_ecef() {
         SimTime::from_seconds(100.0),
     )
     .unwrap();
-    assert_eq!(src.name(), "fm");
+    assert_eq!(src.kind(), hybridnav::measurement::SourceKind::Fm);
     let estimate = |t_s: f64, sigma_m: f64| Estimate {
         t: GpsTime::from_ns(0).add_seconds(t_s),
         pos_ecef_m: fr.ecef_of_enu(&Vector3::new(2.0, -3.0, UP_M)),

@@ -5,13 +5,12 @@
 //!
 //! Everything random comes from named `TrialRng` streams, so every figure is reproducible.
 
+use hybridnav::core::stats::chi2;
 use hybridnav::core::{EmitterId, EnuFrame, Geodetic, StreamRng, System, TrialRng};
-use hybridnav::fusion::ekf11::{
-    chi2, idx, Ekf11, Ekf11Config, IsbConfig, RejectReason, UpdateOutcome,
-};
+use hybridnav::fusion::ekf11::{idx, Ekf11, Ekf11Config, IsbConfig, RejectReason, UpdateOutcome};
 use hybridnav::fusion::linear_kf::LinearKf;
-use hybridnav::fusion::measurement::{PositionFix, RangeMeasurement};
 use hybridnav::fusion::wls::{self, WlsError, WlsOptions};
+use hybridnav::measurement::{PositionFix, RangeMeasurement};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use rand::Rng;
 use rand_distr::StandardNormal;

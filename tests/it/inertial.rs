@@ -14,12 +14,13 @@ use hybridnav::inertial::allan::{
 use hybridnav::inertial::attitude::{
     attitude_from_euler, ideal_imu, BodyTruth, Platform, PlatformConfig, PlatformTruth,
 };
-use hybridnav::inertial::imu::{Imu, ImuConfig, ImuGrade, ImuSample, GM_ADEV_PEAK_TAU_OVER_T};
+use hybridnav::inertial::imu::{Imu, ImuConfig, ImuGrade, GM_ADEV_PEAK_TAU_OVER_T};
 use hybridnav::inertial::ins_ekf::{InsEkf, InsEkfConfig};
 use hybridnav::inertial::magnetometer::{Magnetometer, MagnetometerConfig};
 use hybridnav::inertial::pdr::{Ahrs, Pdr, PdrConfig, StepEvent};
 use hybridnav::inertial::strapdown::{NavState, Strapdown};
 use hybridnav::inertial::LocalEarth;
+use hybridnav::measurement::ImuSample;
 use hybridnav::motion::TrajectoryConfig;
 use nalgebra::{Matrix3, UnitQuaternion, Vector2, Vector3};
 use rand::Rng;
@@ -675,13 +676,13 @@ fn bad_imu_input_gives_clear_messages() {
 
 use hybridnav::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System};
 use hybridnav::engine::trial::{simulate, EstimatorTrace};
-use hybridnav::engine::{SampleContext, Source};
-use hybridnav::fusion::estimator::{EpochOutcome, Estimate, Estimator};
-use hybridnav::fusion::measurement::{Measurement, MeasurementBatch, RangeMeasurement};
 use hybridnav::inertial::estimators::{
     InsEstimator, InsFilterConfig, PdrEstimator, PdrFilterConfig,
 };
 use hybridnav::inertial::source::{local_earth_of, ImuSource, PdrSensorConfig, PdrSource};
+use hybridnav::measurement::{EpochOutcome, Estimate, Estimator};
+use hybridnav::measurement::{Measurement, MeasurementBatch, RangeMeasurement};
+use hybridnav::measurement::{SampleContext, Source};
 use hybridnav::world::TrialSetup;
 
 /// Seed 002's site, Lianhua Lake Park, Wuhan.
@@ -712,8 +713,8 @@ impl Estimator for Integrator {
     fn name(&self) -> &str {
         "integrator"
     }
-    fn consumes(&self, source: &str) -> bool {
-        source == "imu"
+    fn consumes(&self, source: hybridnav::measurement::SourceKind) -> bool {
+        source == hybridnav::measurement::SourceKind::Imu
     }
     fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
         for m in &batch.items {
@@ -867,16 +868,15 @@ struct FakeGnss {
 }
 
 impl Source for FakeGnss {
-    fn name(&self) -> &str {
-        "gnss"
+    fn kind(&self) -> hybridnav::measurement::SourceKind {
+        hybridnav::measurement::SourceKind::Gnss
     }
     fn first_sample(&self) -> SimTime {
         SimTime(0)
     }
     fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
         out.t = ctx.truth.t;
-        out.source.clear();
-        out.source.push_str("gnss");
+        out.source = hybridnav::measurement::SourceKind::Gnss;
         let t = ctx.truth.sim.seconds();
         if !(t >= self.outage_s.0 && t < self.outage_s.1) {
             let rx = ctx.truth.pos_ecef_m;
@@ -940,7 +940,7 @@ impl<E: Estimator> Estimator for Recorder<E> {
     fn name(&self) -> &str {
         self.inner.name()
     }
-    fn consumes(&self, source: &str) -> bool {
+    fn consumes(&self, source: hybridnav::measurement::SourceKind) -> bool {
         self.inner.consumes(source)
     }
     fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
@@ -1321,7 +1321,7 @@ fn pdr_drift_over_the_seed_002_walk() {
 
 /// A synthetic position-fix source (e.g. TC-OFDM): the truth plus N(0, σ²) per axis at 1 Hz.
 struct FakePositionFixes {
-    name: &'static str,
+    kind: hybridnav::measurement::SourceKind,
     sigma_m: f64,
     rng: hybridnav::core::StreamRng,
     frame: EnuFrame,
@@ -1329,29 +1329,27 @@ struct FakePositionFixes {
 }
 
 impl Source for FakePositionFixes {
-    fn name(&self) -> &str {
-        self.name
+    fn kind(&self) -> hybridnav::measurement::SourceKind {
+        self.kind
     }
     fn first_sample(&self) -> SimTime {
         SimTime(0)
     }
     fn sample(&mut self, ctx: &SampleContext<'_>, out: &mut MeasurementBatch) -> Option<SimTime> {
         out.t = ctx.truth.t;
-        out.source.clear();
-        out.source.push_str(self.name);
+        out.source = self.kind;
         let n = Vector3::new(
             self.rng.sample::<f64, _>(StandardNormal),
             self.rng.sample(StandardNormal),
             self.rng.sample(StandardNormal),
         );
         let c = self.frame.rotation();
-        out.items.push(Measurement::Position(
-            hybridnav::fusion::measurement::PositionFix {
+        out.items
+            .push(Measurement::Position(hybridnav::measurement::PositionFix {
                 pos_ecef_m: ctx.truth.pos_ecef_m + c.transpose() * n * self.sigma_m,
                 cov_m2: Matrix3::identity() * self.sigma_m * self.sigma_m,
                 support: 0,
-            },
-        ));
+            }));
         let next = SimTime(ctx.truth.sim.0 + 1_000_000_000);
         (next < self.end).then_some(next)
     }
@@ -1385,14 +1383,14 @@ fn ins_initialises_and_runs_on_position_only_fixes() {
         )
         .unwrap();
         let fixes = FakePositionFixes {
-            name: "tcofdm",
+            kind: hybridnav::measurement::SourceKind::Tcofdm,
             sigma_m: 1.0,
             rng: rng.stream("test/tcofdm"),
             frame: frame.clone(),
             end,
         };
         let cfg = InsFilterConfig {
-            fix_sources: vec!["tcofdm".into()],
+            fix_sources: vec![hybridnav::measurement::SourceKind::Tcofdm],
             ..Default::default()
         };
         let ins = InsEstimator::new("INS/TC-OFDM", &cfg, &imu_cfg, &[], &frame, start).unwrap();

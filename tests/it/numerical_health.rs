@@ -18,8 +18,8 @@
 
 use hybridnav::core::{SimTime, TrialRng};
 use hybridnav::engine::trial::simulate;
-use hybridnav::engine::{SampleContext, Source};
-use hybridnav::fusion::measurement::{Measurement, MeasurementBatch};
+use hybridnav::measurement::{Measurement, MeasurementBatch};
+use hybridnav::measurement::{SampleContext, Source};
 use hybridnav::world::load_world;
 use nalgebra::Vector3;
 
@@ -56,8 +56,8 @@ struct Faulty {
 }
 
 impl Source for Faulty {
-    fn name(&self) -> &str {
-        self.inner.name()
+    fn kind(&self) -> hybridnav::measurement::SourceKind {
+        self.inner.kind()
     }
     fn first_sample(&self) -> SimTime {
         self.inner.first_sample()

@@ -5,8 +5,8 @@
 use hybridnav::beacons::{EmittersConfig, EmittersSource};
 use hybridnav::core::{EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng};
 use hybridnav::engine::trial::{run_trial, truth_at, EstimatorTrace, TrialResult};
-use hybridnav::engine::{SampleContext, Source};
-use hybridnav::fusion::measurement::MeasurementBatch;
+use hybridnav::measurement::MeasurementBatch;
+use hybridnav::measurement::{SampleContext, Source};
 use hybridnav::motion::TrajectoryConfig;
 use hybridnav::world::{load_world, parse_world, World};
 use std::path::PathBuf;
@@ -280,7 +280,7 @@ sigma_m = 10.0
             estimates: &[],
         };
         let next = src.sample(&ctx, &mut batch);
-        assert_eq!(batch.source, "emitters");
+        assert_eq!(batch.source, hybridnav::measurement::SourceKind::Emitters);
         for (k, m) in batch.ranges().enumerate() {
             assert_eq!(m.emitter, resolved[k].id);
             let geo = (m.emitter_pos_ecef_m - truth.pos_ecef_m).norm();

@@ -99,7 +99,7 @@ fn open_sky_white_world() -> String {
 
 #[test]
 fn full_chain_nees_is_within_its_chi2_band_in_open_sky() {
-    use hybridnav::fusion::ekf11::chi2;
+    use hybridnav::core::stats::chi2;
     let text = open_sky_white_world();
     let w = parse_world(&text, &repo().join("worlds/default.toml")).unwrap();
     let runs = 50;

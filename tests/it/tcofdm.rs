@@ -5,9 +5,9 @@
 use hybridnav::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng, C_MPS};
 use hybridnav::dtmb::measurement::{crb_samples, signal_timing_errors};
 use hybridnav::dtmb::PnMode;
-use hybridnav::engine::{SampleContext, Source, Truth};
-use hybridnav::fusion::measurement::{Measurement, MeasurementBatch};
 use hybridnav::gnss::receiver_clock::{ClockConfig, ClockTrack, ReceiverClock};
+use hybridnav::measurement::{Measurement, MeasurementBatch};
+use hybridnav::measurement::{SampleContext, Source, Truth};
 use hybridnav::motion::TruthState;
 use hybridnav::propagation::ShadowingConfig;
 use hybridnav::tcofdm::{BaseStationSpec, TcofdmSensorConfig, TcofdmSource};
@@ -105,7 +105,7 @@ fn synchronisation_error_appears_in_the_pseudoranges() {
             SimTime::from_seconds(0.5),
         )
         .unwrap();
-        assert_eq!(src.name(), "tcofdm");
+        assert_eq!(src.kind(), hybridnav::measurement::SourceKind::Tcofdm);
         let tr = truth(&f, SimTime(0), pos);
         let mut batch = MeasurementBatch::default();
         src.sample(
@@ -115,7 +115,7 @@ fn synchronisation_error_appears_in_the_pseudoranges() {
             },
             &mut batch,
         );
-        assert_eq!(batch.source, "tcofdm");
+        assert_eq!(batch.source, hybridnav::measurement::SourceKind::Tcofdm);
         assert_eq!(batch.items.len(), 3);
         for m in &batch.items {
             let Measurement::Range(r) = m else {

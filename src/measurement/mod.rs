@@ -1,8 +1,21 @@
-//! Measurement types every estimator consumes.
+//! What flows from the sources to the estimators, and the two traits at its ends.
 //!
 //! A measurement carries everything an estimator needs to use it (the emitter's position
 //! and velocity as the receiver computes them, the noise it should assume) and nothing of
-//! the truth. Sources produce them; the engine hands each batch to every estimator.
+//! the truth. Sources ([`Source`]) produce them in batches tagged with their
+//! [`SourceKind`]; the engine hands each batch to the estimators ([`Estimator`]) that
+//! subscribe to that kind, computed once when a trial is built.
+//!
+//! This module sits below every source and every filter: it knows `core` and `motion`
+//! and nothing else, so the sensor models and the fusion algorithms never see each other.
+
+pub mod estimator;
+pub mod raw;
+pub mod source;
+
+pub use estimator::{EpochOutcome, Estimate, Estimator};
+pub use raw::{MagSample, RawGnssObservation, RawLog};
+pub use source::{SampleContext, Source, SourceKind, Truth};
 
 use crate::core::{EmitterId, GpsTime, System};
 use nalgebra::{Matrix3, Vector3};
@@ -94,8 +107,8 @@ pub enum Measurement {
     Range(RangeMeasurement),
     Position(PositionFix),
     Step(StepEvent),
-    /// One IMU output sample ([`crate::inertial::imu::ImuSample`]).
-    Imu(crate::inertial::imu::ImuSample),
+    /// One IMU output sample.
+    Imu(ImuSample),
     RangeDifference(RangeDifference),
 }
 
@@ -104,50 +117,17 @@ pub enum Measurement {
 pub struct MeasurementBatch {
     /// Reception time (GPST, the receiver's true time; the clock offset is in the ranges).
     pub t: GpsTime,
-    /// Name of the source that produced the batch (e.g. `"gnss"`).
-    pub source: String,
+    /// The kind of source that produced the batch.
+    pub source: SourceKind,
     pub items: Vec<Measurement>,
     /// True for a batch the estimators process but the metrics do not score (all but the
     /// first of each second's IMU propagation batches), so that a fast source neither
     /// outweighs the 1 Hz sources in the statistics nor floods the per-epoch output.
     pub unscored: bool,
     /// The raw observations behind the batch, as a receiver logs them (dataset export).
-    /// `None` unless a [`crate::engine::trial::BatchObserver`] asked for them, so a Monte
+    /// `None` unless a `BatchObserver` (the engine's) asked for them, so a Monte
     /// Carlo trial neither fills nor allocates it; estimators never read it.
     pub raw: Option<RawLog>,
-}
-
-/// Raw observations a source logs beside its measurements when asked (see
-/// [`MeasurementBatch::raw`]).
-#[derive(Clone, Debug, PartialEq, Default)]
-pub struct RawLog {
-    /// GNSS code, phase, Doppler and C/N0 per tracked satellite (RINEX observables).
-    pub gnss: Vec<crate::gnss::raw::RawGnssObservation>,
-    /// FM scan: (carrier frequency in MHz, RSSI in dBm) per scanned station.
-    pub fm_rssi: Vec<(f64, f64)>,
-    /// Magnetometer samples (each with its own time and true position: the magnetic
-    /// source logs the samples since its previous batch).
-    pub mag: Vec<MagSample>,
-}
-
-/// One magnetometer sample as logged for a dataset.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MagSample {
-    /// Seconds since the trial start.
-    pub t_s: f64,
-    /// Body-frame reading (µT).
-    pub b_body_ut: [f64; 3],
-    /// True position (ENU, m).
-    pub true_pos_enu_m: [f64; 3],
-}
-
-impl RawLog {
-    /// Empties every list, keeping the capacity.
-    pub fn clear(&mut self) {
-        self.gnss.clear();
-        self.fm_rssi.clear();
-        self.mag.clear();
-    }
 }
 
 impl MeasurementBatch {
@@ -158,4 +138,15 @@ impl MeasurementBatch {
             _ => None,
         })
     }
+}
+
+/// One IMU output sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ImuSample {
+    /// Sample time (s since the trial start).
+    pub t_s: f64,
+    /// Measured angular rate ω̃_ib^b (rad/s).
+    pub gyro_rps: Vector3<f64>,
+    /// Measured specific force f̃^b (m/s²).
+    pub accel_mps2: Vector3<f64>,
 }
