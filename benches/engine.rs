@@ -6,7 +6,7 @@
 //! Run: `cargo bench --bench engine -- --warm-up-time 1 --measurement-time 5`.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use hybridnav::engine::trial::run_trial;
+use hybridnav::world::trial::run_trial;
 use hybridnav::world::{load_world, parse_world};
 use std::path::Path;
 

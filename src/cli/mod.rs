@@ -347,10 +347,10 @@ fn cmd_run(a: RunArgs) -> Result<()> {
     };
     let world = load_world(&path)?;
     let trials = a.trials.unwrap_or(world.file.montecarlo.trials);
-    if !(1..=crate::montecarlo::MAX_TRIALS).contains(&trials) {
+    if !(1..=crate::world::schema::MAX_TRIALS).contains(&trials) {
         bail!(
             "--trials {trials}: expected 1 to {} (run more as several runs with different --seed)",
-            crate::montecarlo::MAX_TRIALS
+            crate::world::schema::MAX_TRIALS
         );
     }
     let shard = match &a.shard {
@@ -608,14 +608,14 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
             bail!("--frames must be at least 1");
         }
         let w = load_world(path).map_err(|e| anyhow::anyhow!("{e}"))?;
-        let req = crate::dtmb::world_iq::WorldIqRequest {
+        let req = crate::world::dtmb_iq::WorldIqRequest {
             tower: a.tower.clone(),
             from_s: a.from_s,
             frames: a.frames,
             seed: a.seed.unwrap_or(w.file.montecarlo.seed),
             trial: a.trial,
         };
-        let rec = crate::dtmb::world_iq::world_iq(&w, &req)?;
+        let rec = crate::world::dtmb_iq::world_iq(&w, &req)?;
         if let Some(m) = &a.mode {
             let m: PnMode = m.parse()?;
             if m != rec.mode {

@@ -34,7 +34,6 @@ pub mod sigmf;
 pub mod source;
 pub mod tps;
 pub mod transmitter;
-pub mod world_iq;
 
 pub use channel::{link_snr_db, Channel, ChannelConfig, Path};
 pub use frame::{BodyModulator, CarrierMode, Qam};

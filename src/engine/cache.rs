@@ -6,15 +6,14 @@
 //! multipath code and rate error), the broadcast ionosphere and troposphere models, and
 //! each FM station's mean RSSI at the receiver (its shadowing is keyed by the master seed,
 //! not the trial). Only the noise, the receiver clock and the estimators differ between
-//! trials. An [`EpochCache`] holds that deterministic part for one `(world, master seed)`,
-//! built once by the first trial that asks ([`crate::world::World::epoch_cache`]) and
-//! shared by every trial through an `Arc`.
+//! trials. The world's `EpochCache` (`world::cache`) holds that deterministic part for
+//! one `(world, master seed)` in [`EpochTable`]s, built once by the first trial that asks
+//! and shared by every trial through an `Arc`.
 //!
 //! # Invariant: a cached epoch is the uncached computation
 //!
 //! A table is filled by the very functions the sources call without it
-//! ([`crate::gnss::measurement::GnssGeometry::epoch`],
-//! [`crate::fm::FmField::mean_rssi_dbm`]), at the very truth the engine hands the
+//! (`gnss::measurement::GnssGeometry::epoch`, `fm::FmField::mean_rssi_dbm`), at the very truth the engine hands the
 //! source (the same [`super::trial::truth_at`] at the same integer [`SimTime`]), and a
 //! source uses a cached epoch only when the truth it is given equals, bit for bit, the
 //! truth the epoch was computed at ([`EpochTable::epoch`]); otherwise it computes the
@@ -28,14 +27,8 @@
 //! computed on the fly by each trial, as without a cache. The Kehui Road world (361
 //! epochs of about 20 satellite links and 21 FM stations) needs about 1 MB.
 
-use super::trial::truth_at;
-use crate::core::{SimTime, TrialRng};
-use crate::fm::source::FmEpochTable;
-use crate::gnss::measurement::{GnssEpochTable, GnssGeometry};
+use crate::core::SimTime;
 use crate::measurement::Truth;
-use crate::world::World;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
 
 /// The most bytes one table holds (the GNSS links of about 3 h at 1 Hz; the FM means of
 /// about 30 h). Later epochs are computed by each trial.
@@ -167,119 +160,6 @@ impl<T, E> EpochTable<T, E> {
             + self.extra.len() * std::mem::size_of::<E>()
             + self.offsets.len() * std::mem::size_of::<u32>()
             + self.items.len() * std::mem::size_of::<T>()
-    }
-}
-
-/// The deterministic epochs of one `(world, master seed)`, for each source that has them.
-#[derive(Debug, Default)]
-pub struct EpochCache {
-    /// The GNSS receiver's links.
-    pub gnss: Option<Arc<GnssEpochTable>>,
-    /// The FM receiver's mean RSSI of every station.
-    pub fm: Option<Arc<FmEpochTable>>,
-}
-
-impl EpochCache {
-    /// Computes the cache of `world` for `master_seed`, each table bounded by
-    /// `max_table_bytes`: the GNSS links and the FM means at every epoch of the trajectory
-    /// the trials of this seed drive. Only valid for a world whose truth does not depend
-    /// on the trial (the sources check it epoch by epoch anyway, see
-    /// [`EpochTable::epoch`]).
-    ///
-    /// # Errors
-    /// When the trajectory or the FM field cannot be built (the first trial would fail
-    /// the same way).
-    pub fn build(world: &World, master_seed: u64, max_table_bytes: usize) -> Result<Self, String> {
-        let trajectory = world.build_trajectory(&TrialRng::new(master_seed, 0))?;
-        let end = SimTime::from_seconds(world.duration_s);
-        let mut truth_of = |t: SimTime| truth_at(&world.frame, world.start, trajectory.as_ref(), t);
-        let sensors = &world.file.sensors;
-        let gnss = sensors.gnss.as_ref().map(|g| {
-            let mut geometry = GnssGeometry::new(
-                g,
-                Arc::clone(&world.nav),
-                world.shielding.clone(),
-                world.gnss_scene_view(),
-            );
-            Arc::new(geometry.table(end, max_table_bytes, &mut truth_of))
-        });
-        let fm = match &sensors.fm {
-            None => None,
-            Some(cfg) => Some(Arc::new(
-                FmEpochTable::build(
-                    cfg,
-                    &crate::world::fm::stations(world),
-                    world.scene.clone(),
-                    master_seed,
-                    end,
-                    max_table_bytes,
-                    &mut truth_of,
-                )
-                .map_err(|i| format!("sensors.fm.{}: {}", i.key, i.message))?,
-            )),
-        };
-        Ok(Self { gnss, fm })
-    }
-
-    /// Approximate heap bytes held.
-    pub fn bytes(&self) -> usize {
-        self.gnss.as_ref().map_or(0, |t| t.bytes()) + self.fm.as_ref().map_or(0, |t| t.bytes())
-    }
-}
-
-/// A world's cache of the last master seed asked for, built on first use. Trials running
-/// in parallel wait for the first one's build (one trial's worth of geometry).
-#[derive(Debug, Default)]
-pub struct CacheSlot {
-    disabled: AtomicBool,
-    /// The bound of each table; 0 for [`MAX_TABLE_BYTES`].
-    max_table_bytes: AtomicUsize,
-    slot: Mutex<Option<(u64, Arc<EpochCache>)>>,
-}
-
-impl CacheSlot {
-    /// Turns the cache on (the default) or off; off, every trial computes every epoch.
-    pub fn set_enabled(&self, enabled: bool) {
-        self.disabled.store(!enabled, Ordering::SeqCst);
-        self.clear();
-    }
-
-    /// Sets the bound of each table (bytes; 0 for [`MAX_TABLE_BYTES`]).
-    pub fn set_max_table_bytes(&self, bytes: usize) {
-        self.max_table_bytes.store(bytes, Ordering::SeqCst);
-        self.clear();
-    }
-
-    fn clear(&self) {
-        *self.slot.lock().unwrap_or_else(|p| p.into_inner()) = None;
-    }
-
-    /// The cache for `master_seed`, built by `build` (given the table bound) when the slot
-    /// holds another seed's or none; `None` when the cache is off.
-    ///
-    /// # Errors
-    /// What `build` returns.
-    pub fn get_or_build(
-        &self,
-        master_seed: u64,
-        build: impl FnOnce(usize) -> Result<EpochCache, String>,
-    ) -> Result<Option<Arc<EpochCache>>, String> {
-        if self.disabled.load(Ordering::SeqCst) {
-            return Ok(None);
-        }
-        let mut guard = self.slot.lock().unwrap_or_else(|p| p.into_inner());
-        if let Some((seed, cache)) = guard.as_ref() {
-            if *seed == master_seed {
-                return Ok(Some(Arc::clone(cache)));
-            }
-        }
-        let bound = match self.max_table_bytes.load(Ordering::SeqCst) {
-            0 => MAX_TABLE_BYTES,
-            b => b,
-        };
-        let cache = Arc::new(build(bound)?);
-        *guard = Some((master_seed, Arc::clone(&cache)));
-        Ok(Some(cache))
     }
 }
 

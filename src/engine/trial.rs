@@ -1,16 +1,25 @@
 //! One trial: the event loop that moves truth, sources and estimators forward together.
 
 use super::queue::{EventKind, EventQueue};
-use crate::core::{EnuFrame, GpsTime, SimTime, System, TrialRng};
+use crate::core::{EnuFrame, GpsTime, SimTime, System};
 use crate::fusion::health::{HealthConfig, HealthMonitor, Verdict};
 use crate::measurement::Estimate;
+use crate::measurement::Estimator;
 use crate::measurement::MeasurementBatch;
+use crate::measurement::Source;
 use crate::measurement::{SampleContext, Truth};
 use crate::motion::Trajectory;
-use crate::world::{TrialSetup, World};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::borrow::Cow;
+
+/// Everything a trial needs, freshly built from the world and the trial's random streams.
+pub struct TrialSetup {
+    pub trajectory: Box<dyn Trajectory>,
+    pub sources: Vec<Box<dyn Source>>,
+    pub estimators: Vec<Box<dyn Estimator>>,
+    pub end: SimTime,
+}
 
 /// One estimator's record at one measurement epoch.
 ///
@@ -101,25 +110,6 @@ fn errors(frame: &EnuFrame, truth: &Truth, est: &Estimate) -> (f64, f64, Option<
         (e_enu.x * e_enu.x + e_enu.y * e_enu.y).sqrt(),
         nees,
     )
-}
-
-/// Runs trial `trial` of `world` under `seed`.
-///
-/// The trial depends only on `(world, seed, trial)`: every random draw comes from a
-/// stream of [`TrialRng::new(seed, trial)`].
-///
-/// # Errors
-/// When the world cannot build this trial's parts.
-pub fn run_trial(world: &World, seed: u64, trial: u64) -> Result<TrialResult, String> {
-    let rng = TrialRng::new(seed, trial);
-    let mut setup = world.build_trial(&rng)?;
-    let estimators = simulate(&world.frame, world.start, &mut setup);
-    let warnings = setup.sources.iter().flat_map(|s| s.warnings()).collect();
-    Ok(TrialResult {
-        trial,
-        estimators,
-        warnings,
-    })
 }
 
 /// The event loop of one trial: samples every source when it asks, hands each batch to
@@ -276,6 +266,7 @@ pub fn simulate_observed(
 mod tests {
     use super::*;
     use crate::core::Geodetic;
+    use crate::core::TrialRng;
     use crate::measurement::Source;
     use crate::measurement::SourceKind;
     use crate::measurement::{EpochOutcome, Estimator};

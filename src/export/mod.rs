@@ -312,14 +312,14 @@ fn write_sigmf(world: &World, rec: &Recording, dir: &Path) -> Result<Vec<PathBuf
         .iter()
         .filter(|t| t.kind == TransmitterKind::Dtmb)
     {
-        let req = crate::dtmb::world_iq::WorldIqRequest {
+        let req = crate::world::dtmb_iq::WorldIqRequest {
             tower: Some(t.id.clone()),
             from_s: 0.0,
             frames: SIGMF_FRAMES,
             seed: rec.seed,
             trial: rec.trial,
         };
-        let iq = crate::dtmb::world_iq::world_iq(world, &req).map_err(|e| e.to_string())?;
+        let iq = crate::world::dtmb_iq::world_iq(world, &req).map_err(|e| e.to_string())?;
         let base = dir.join(format!("dtmb-{}", file_stem(&t.id)));
         write_sigmf_with(
             &base,

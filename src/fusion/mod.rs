@@ -14,7 +14,5 @@ pub mod models;
 pub mod paper;
 pub mod particle;
 pub mod preprocess;
-#[cfg(test)]
-mod psd_tests;
 pub mod selection;
 pub mod wls;

@@ -12,6 +12,7 @@
 pub mod consistency;
 pub mod ecdf;
 pub mod interval;
+pub mod summary;
 pub mod trajectory;
 
 pub use consistency::{

@@ -13,14 +13,13 @@ pub mod outputs;
 pub mod reduce;
 pub mod store;
 
-use crate::engine::trial::{run_trial, TrialResult};
+use crate::engine::trial::TrialResult;
 use crate::io::atomic::AtomicFile;
-use crate::metrics::{ConsistencySummary, ErrorStats, TrajectoryStats};
+pub use crate::metrics::summary::{AcrossTrials, EstimatorSummary, FailureEpoch, Summary};
+use crate::world::trial::run_trial;
 use crate::world::World;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
-use serde::Serialize;
-use std::collections::BTreeMap;
 use store::{Manifest, RunDir, Shard, STORE_FORMAT};
 
 /// How to run.
@@ -52,96 +51,6 @@ impl RunOptions {
         }
     }
 }
-
-/// One estimator's line of the summary.
-#[derive(Clone, Debug, Serialize, PartialEq)]
-pub struct EstimatorSummary {
-    pub name: String,
-    /// Statistics of the 3-D position error over every epoch of every trial.
-    pub error_3d_m: Option<ErrorStats>,
-    /// Statistics of the horizontal position error.
-    pub error_h_m: Option<ErrorStats>,
-    /// Share of measurement epochs with an estimate.
-    pub availability: f64,
-    /// Measurement epochs over all trials.
-    pub epochs: usize,
-    /// Epochs without an estimate.
-    pub epochs_without_fix: usize,
-    /// Mean position NEES (3 degrees of freedom; 3 for a consistent filter).
-    pub mean_nees_pos: Option<f64>,
-    /// Epochs where the estimator reported a numerical failure (a non-finite state or a
-    /// divergence it detected), after which it re-initialised.
-    pub numerical_failures: usize,
-    /// The first of them (at most [`reduce::FAILURES_LISTED`]), in trial and time order.
-    pub first_failures: Vec<FailureEpoch>,
-    /// Absolute trajectory error as seed 000 computes it (TUM definition, ECEF, no
-    /// alignment), over every epoch with an estimate of every trial.
-    pub ate_m: Option<TrajectoryStats>,
-    /// The ATE after a rigid (Horn) alignment of each trial's trajectory to the truth.
-    pub ate_aligned_m: Option<TrajectoryStats>,
-    /// Relative pose error of the translation over Δ = 1 s, no alignment (seed 000).
-    pub rpe_m: Option<TrajectoryStats>,
-    /// The RPE after each trial's rigid alignment.
-    pub rpe_aligned_m: Option<TrajectoryStats>,
-    /// Position NEES (3 degrees of freedom) against its χ² bands over the trials.
-    pub nees: Option<ConsistencySummary>,
-    /// NIS (summed over each epoch's updates, with their summed dimensions as degrees of
-    /// freedom) against its χ² bands. Particle filters have no innovation covariance and
-    /// report none.
-    pub nis: Option<ConsistencySummary>,
-    /// Share of scored epochs in each integration mode (mode-selecting estimators only).
-    pub modes: BTreeMap<String, f64>,
-    /// How much each statistic varies from trial to trial: the 95 % confidence interval
-    /// (Student t) of the mean over trials of each trial's own value.
-    pub across_trials: AcrossTrials,
-}
-
-/// An epoch at which an estimator reported a numerical failure.
-#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
-pub struct FailureEpoch {
-    pub trial: u64,
-    pub t_s: f64,
-}
-
-/// 95 % confidence intervals, across trials, of per-trial statistics (`[lo, hi]`; absent
-/// with fewer than two trials with an estimate).
-#[derive(Clone, Debug, Serialize, PartialEq, Default)]
-pub struct AcrossTrials {
-    /// Trials that contributed (those with at least one estimate).
-    pub trials: usize,
-    pub sigma1_ci95_m: Option<[f64; 2]>,
-    pub sigma2_ci95_m: Option<[f64; 2]>,
-    pub sigma3_ci95_m: Option<[f64; 2]>,
-    pub mean_ci95_m: Option<[f64; 2]>,
-    pub rmse_ci95_m: Option<[f64; 2]>,
-    pub ate_rmse_ci95_m: Option<[f64; 2]>,
-    pub rpe_rmse_ci95_m: Option<[f64; 2]>,
-    pub availability_ci95: Option<[f64; 2]>,
-}
-
-/// The content of `summary.json`.
-#[derive(Clone, Debug, Serialize, PartialEq)]
-pub struct Summary {
-    pub hybridnav_version: String,
-    pub world: String,
-    pub world_file: String,
-    pub world_hash: String,
-    pub seed: u64,
-    pub trials: u64,
-    /// `"K/N"` for the summary of one shard's trials; absent for a whole run.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub shard: Option<String>,
-    pub duration_s: f64,
-    pub estimators: Vec<EstimatorSummary>,
-    /// Distinct warnings of every trial's sources, sorted (a model used outside its
-    /// validity range, …).
-    pub warnings: Vec<String>,
-}
-
-/// The most trials one run takes (world file or `--trials`). Memory does not grow with
-/// the count, as the outputs are streamed (a merge's plan keeps 4 bytes per trial); the
-/// bound stops a typo of a few extra digits from starting a run of centuries.
-pub const MAX_TRIALS: u64 = 100_000_000;
 
 /// The most worker threads `--threads` starts.
 pub const MAX_THREADS: usize = 4096;

@@ -438,7 +438,7 @@ impl MergePlan {
                     )));
                 }
             } else {
-                let max = crate::montecarlo::MAX_TRIALS;
+                let max = crate::world::schema::MAX_TRIALS;
                 let n = usize::try_from(m.trials).ok().filter(|_| m.trials <= max);
                 let Some(n) = n else {
                     return Err(StoreError::Refused(format!(

@@ -10,7 +10,7 @@ pub mod svg;
 
 use crate::core::{SimTime, TrialRng};
 use crate::engine::trial::{truth_at, EpochRecord, TrialResult};
-use crate::montecarlo::Summary;
+use crate::metrics::summary::Summary;
 use crate::world::map::Overlay;
 use crate::world::World;
 use std::fmt::Write;

@@ -4,16 +4,20 @@
 //! errors through the spans serde reports, value checks made after deserialisation through
 //! [`locate`], which maps a key path back to the text.
 
+pub mod cache;
+pub mod dtmb_iq;
 pub mod fm;
 pub mod locate;
 pub mod map;
 pub mod presets;
 pub mod scene;
 pub mod schema;
+pub mod trial;
 pub mod visibility;
 
 use crate::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng};
 use crate::dtmb::{DtmbSource, TowerSpec};
+use crate::engine::trial::TrialSetup;
 use crate::gnss::measurement::{GnssSource, SceneView, Shielding, ShieldingRule};
 use crate::gnss::receiver_clock::{ClockTrack, ReceiverClock};
 use crate::gnss::rinex_nav::{parse_nav, read_nav_file, NavData};
@@ -86,15 +90,7 @@ pub struct World {
     /// The FM fingerprint database (see [`fm`]).
     pub fm_db: fm::FmDatabase,
     /// The deterministic epochs every trial shares (see [`crate::engine::cache`]).
-    pub epoch_cache: crate::engine::cache::CacheSlot,
-}
-
-/// Everything a trial needs, freshly built from the world and the trial's random streams.
-pub struct TrialSetup {
-    pub trajectory: Box<dyn Trajectory>,
-    pub sources: Vec<Box<dyn crate::measurement::Source>>,
-    pub estimators: Vec<Box<dyn crate::measurement::Estimator>>,
-    pub end: SimTime,
+    pub epoch_cache: cache::CacheSlot,
 }
 
 struct Ctx<'a> {
@@ -245,12 +241,12 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
         .map_err(|i| ctx.issue("receiver.clock", i))?;
     let shielding = check_shielding(&ctx, &file.shielding, &nav, &nav_source)?;
 
-    if !(1..=crate::montecarlo::MAX_TRIALS).contains(&file.montecarlo.trials) {
+    if !(1..=crate::world::schema::MAX_TRIALS).contains(&file.montecarlo.trials) {
         return Err(ctx.err(
             "montecarlo.trials",
             format!(
                 "expected 1 to {} trials, got {}",
-                crate::montecarlo::MAX_TRIALS,
+                crate::world::schema::MAX_TRIALS,
                 file.montecarlo.trials
             ),
         ));
@@ -866,15 +862,12 @@ impl World {
     ///
     /// # Errors
     /// When the cache cannot be built (as the trial itself could not be).
-    pub fn epoch_cache(
-        &self,
-        master_seed: u64,
-    ) -> Result<Option<Arc<crate::engine::cache::EpochCache>>, String> {
+    pub fn epoch_cache(&self, master_seed: u64) -> Result<Option<Arc<cache::EpochCache>>, String> {
         if !self.truth_is_deterministic() {
             return Ok(None);
         }
         self.epoch_cache.get_or_build(master_seed, |bound| {
-            crate::engine::cache::EpochCache::build(self, master_seed, bound)
+            cache::EpochCache::build(self, master_seed, bound)
         })
     }
 

@@ -23,6 +23,11 @@ use crate::tcofdm::TcofdmSensorConfig;
 use crate::world::scene::{SceneSection, TransmitterSpec};
 use serde::Deserialize;
 
+/// The most trials one run takes (world file or `--trials`). Memory does not grow with
+/// the count, as the outputs are streamed (a merge's plan keeps 4 bytes per trial); the
+/// bound stops a typo of a few extra digits from starting a run of centuries.
+pub const MAX_TRIALS: u64 = 100_000_000;
+
 /// A whole world file.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -6,9 +6,9 @@
 //! be the Monte Carlo trial of the same seed and index.
 
 use crate::common::{hybridnav, python_has, refused, repo, stderr, tmp_dir};
-use hybridnav::engine::trial::run_trial;
 use hybridnav::export::record_trial;
 use hybridnav::world::load_world;
+use hybridnav::world::trial::run_trial;
 use std::collections::BTreeMap;
 use std::path::Path;
 

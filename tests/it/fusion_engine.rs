@@ -2,8 +2,9 @@
 //! measurements, presets expand, modes are recorded, divergence is reported.
 
 use crate::common::default_world_text;
-use hybridnav::engine::trial::{run_trial, EstimatorTrace};
+use hybridnav::engine::trial::EstimatorTrace;
 use hybridnav::world::load_world;
+use hybridnav::world::trial::run_trial;
 
 /// The default world (Kehui Road, real GPS/BDS geometry, shielding windows) with the
 /// estimator tables replaced by `estimators`.

@@ -675,6 +675,7 @@ fn bad_imu_input_gives_clear_messages() {
 // ---------------------------------------------------------------------------------------
 
 use hybridnav::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System};
+use hybridnav::engine::trial::TrialSetup;
 use hybridnav::engine::trial::{simulate, EstimatorTrace};
 use hybridnav::inertial::estimators::{
     InsEstimator, InsFilterConfig, PdrEstimator, PdrFilterConfig,
@@ -683,7 +684,6 @@ use hybridnav::inertial::source::{local_earth_of, ImuSource, PdrSensorConfig, Pd
 use hybridnav::measurement::{EpochOutcome, Estimate, Estimator};
 use hybridnav::measurement::{Measurement, MeasurementBatch, RangeMeasurement};
 use hybridnav::measurement::{SampleContext, Source};
-use hybridnav::world::TrialSetup;
 
 /// Seed 002's site, Lianhua Lake Park, Wuhan.
 fn wuhan() -> EnuFrame {

@@ -4,6 +4,7 @@
 mod cli;
 mod cluster;
 mod common;
+mod covariance_psd;
 mod dtmb_signal;
 mod environment;
 mod export;

@@ -4,10 +4,11 @@
 
 use hybridnav::beacons::{EmittersConfig, EmittersSource};
 use hybridnav::core::{EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng};
-use hybridnav::engine::trial::{run_trial, truth_at, EstimatorTrace, TrialResult};
+use hybridnav::engine::trial::{truth_at, EstimatorTrace, TrialResult};
 use hybridnav::measurement::MeasurementBatch;
 use hybridnav::measurement::{SampleContext, Source};
 use hybridnav::motion::TrajectoryConfig;
+use hybridnav::world::trial::run_trial;
 use hybridnav::world::{load_world, parse_world, World};
 use std::path::PathBuf;
 

@@ -2,8 +2,8 @@
 //! closed loop between sources and estimators.
 
 use crate::common::*;
-use hybridnav::engine::trial::run_trial;
 use hybridnav::world::parse_world;
+use hybridnav::world::trial::run_trial;
 
 #[test]
 fn shielding_removes_the_snapshot_fix_and_degrades_the_ekf() {

@@ -13,10 +13,10 @@
 //! rates) and the 15-state INS error-state filter get random models of their own kind:
 //! random geometry, noise spanning decades, random intervals and motions.
 
-use crate::core::TrialRng;
-use crate::fusion::kalman::{Ekf, RelativeEntropyKf, SigmaPointKf, StrongTrackingFilter};
-use crate::fusion::models::{MeasurementModel, ProcessModel};
-use crate::fusion::particle::{ParticleBuffer, ParticleFilter, Resampling};
+use hybridnav::core::TrialRng;
+use hybridnav::fusion::kalman::{Ekf, RelativeEntropyKf, SigmaPointKf, StrongTrackingFilter};
+use hybridnav::fusion::models::{MeasurementModel, ProcessModel};
+use hybridnav::fusion::particle::{ParticleBuffer, ParticleFilter, Resampling};
 use nalgebra::{SMatrix, SVector};
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -215,7 +215,7 @@ fn strong_tracking_and_relative_entropy_covariances_stay_symmetric_psd() {
                 RelativeEntropyKf::new(
                     SVector::zeros(),
                     c.p0,
-                    crate::fusion::kalman::DEFAULT_ALEPH_THRESHOLD,
+                    hybridnav::fusion::kalman::DEFAULT_ALEPH_THRESHOLD,
                     None,
                 )
                 .unwrap(),
@@ -294,14 +294,14 @@ fn above<R: Rng>(rng: &mut R, up: &nalgebra::Vector3<f64>) -> nalgebra::Vector3<
 /// from 10 ms to 30 s, occasional position fixes with random covariances, no gates.
 #[test]
 fn the_seed000_ekf_covariance_stays_symmetric_psd() {
-    use crate::core::{EmitterId, System};
-    use crate::fusion::ekf11::{Ekf11, Ekf11Config, IsbConfig};
-    use crate::measurement::{PositionFix, RangeMeasurement};
+    use hybridnav::core::{EmitterId, System};
+    use hybridnav::fusion::ekf11::{Ekf11, Ekf11Config, IsbConfig};
+    use hybridnav::measurement::{PositionFix, RangeMeasurement};
     use nalgebra::Vector3;
     let (mut total, mut accepted) = (0usize, 0usize);
     for k in 0..200u64 {
         let mut rng = TrialRng::new(77, k).stream("test/psd/ekf11");
-        let decade = |rng: &mut crate::core::rng::StreamRng, lo: f64, hi: f64| {
+        let decade = |rng: &mut hybridnav::core::rng::StreamRng, lo: f64, hi: f64| {
             10f64.powf(lo + (hi - lo) * rng.random::<f64>())
         };
         let cfg = Ekf11Config {
@@ -376,11 +376,11 @@ fn the_seed000_ekf_covariance_stays_symmetric_psd() {
 /// covariance whose eigenvalues span four decades.
 #[test]
 fn the_ins_error_state_covariance_stays_symmetric_psd() {
-    use crate::inertial::imu::{ImuConfig, ImuGrade};
-    use crate::inertial::ins_ekf::{InsEkf, InsEkfConfig};
-    use crate::inertial::strapdown::NavState;
-    use crate::inertial::LocalEarth;
-    use crate::measurement::ImuSample;
+    use hybridnav::inertial::imu::{ImuConfig, ImuGrade};
+    use hybridnav::inertial::ins_ekf::{InsEkf, InsEkfConfig};
+    use hybridnav::inertial::strapdown::NavState;
+    use hybridnav::inertial::LocalEarth;
+    use hybridnav::measurement::ImuSample;
     use nalgebra::{UnitQuaternion, Vector3};
     for k in 0..100u64 {
         let mut rng = TrialRng::new(78, k).stream("test/psd/ins");

@@ -43,14 +43,14 @@
 //! the payloads `dtmb/Dnn/tx` (the signal-level source's) and the noise
 //! `dtmb/iq/Dnn/noise` of the requested tower.
 
-use super::channel::{Channel, ChannelConfig, Path};
-use super::frame::{CarrierMode, Qam};
-use super::pn::{PnMode, SAMPLE_RATE_HZ};
-use super::sigmf::Annotation;
-use super::source::{DtmbLevel, DtmbSource, TowerSpec};
-use super::transmitter::{FrameSchedule, SampleSource, Transmitter, TxConfig};
-use super::DtmbError;
 use crate::core::{EmitterId, SimTime, System, TrialRng, C_MPS};
+use crate::dtmb::channel::{Channel, ChannelConfig, Path};
+use crate::dtmb::frame::{CarrierMode, Qam};
+use crate::dtmb::pn::{PnMode, SAMPLE_RATE_HZ};
+use crate::dtmb::sigmf::Annotation;
+use crate::dtmb::source::{DtmbLevel, DtmbSource, TowerSpec};
+use crate::dtmb::transmitter::{FrameSchedule, SampleSource, Transmitter, TxConfig};
+use crate::dtmb::DtmbError;
 use crate::gnss::receiver_clock::{ClockTrack, ReceiverClock};
 use crate::world::scene::TransmitterKind;
 use crate::world::World;
@@ -62,7 +62,7 @@ use std::sync::Arc;
 /// stay positive while the platform approaches the tower (256 samples ≈ 10 km).
 const DELAY_MARGIN_SAMPLES: f64 = 256.0;
 
-/// Most frames a recording may hold (as [`super::sigmf::generate_iq`]).
+/// Most frames a recording may hold (as [`crate::dtmb::sigmf::generate_iq`]).
 pub const MAX_FRAMES: usize = 20_000;
 
 /// What to record.
@@ -80,7 +80,7 @@ pub struct WorldIqRequest {
     pub trial: u64,
 }
 
-/// A recording made by [`world_iq`], ready for [`super::sigmf::write_sigmf_with`].
+/// A recording made by [`world_iq`], ready for [`crate::dtmb::sigmf::write_sigmf_with`].
 #[derive(Clone, Debug)]
 pub struct WorldIq {
     /// The samples (7.56 Msps, unit noise variance).
@@ -438,7 +438,7 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
                 *b += e;
             }
         }
-        super::noise::add_awgn(block, 1.0, &mut noise);
+        crate::dtmb::noise::add_awgn(block, 1.0, &mut noise);
         // Frame starts (first path) of each tower inside this block:
         // n = (1 + ε)(k·N − x_first).
         for (i, l) in links.iter().enumerate() {
