@@ -33,7 +33,6 @@
 use crate::core::rng::StreamRng;
 use crate::core::ConfigIssue;
 use crate::core::{EmitterId, EnuFrame, SimTime, System, TrialRng};
-use crate::fusion::wls;
 use crate::measurement::SourceKind;
 use crate::measurement::{Measurement, MeasurementBatch, RangeMeasurement};
 use crate::measurement::{SampleContext, Source};
@@ -157,14 +156,14 @@ impl EmittersConfig {
         self.receiver_clock_m + self.clock_offset_m.get(s).unwrap_or(0.0)
     }
 
-    /// The clock term of every system, indexed like [`wls::SYSTEMS`].
-    pub fn clocks_m(&self) -> [f64; wls::MAX_CLOCKS] {
-        wls::SYSTEMS.map(|s| self.clock_m(s))
+    /// The clock term of every system, indexed like [`System::ALL`].
+    pub fn clocks_m(&self) -> [f64; System::COUNT] {
+        System::ALL.map(|s| self.clock_m(s))
     }
 
-    /// The systems the emitters belong to, in [`wls::SYSTEMS`] order.
+    /// The systems the emitters belong to, in [`System::ALL`] order.
     pub fn systems(&self) -> Vec<System> {
-        wls::SYSTEMS
+        System::ALL
             .into_iter()
             .filter(|s| self.emitters.iter().any(|e| e.system == *s))
             .collect()
@@ -218,10 +217,10 @@ impl EmittersConfig {
             ));
         }
         let mut out: Vec<ResolvedEmitter> = Vec::with_capacity(self.emitters.len());
-        let mut rank = [0u16; wls::MAX_CLOCKS];
+        let mut rank = [0u16; System::COUNT];
         for (i, e) in self.emitters.iter().enumerate() {
             let at = |k: &str| format!("emitter[{i}].{k}");
-            let s = wls::system_index(e.system);
+            let s = e.system.index();
             rank[s] += 1;
             let id = match &e.id {
                 Some(text) => {
@@ -315,7 +314,7 @@ impl EmittersConfig {
 /// The source: every `1/rate_hz` seconds, one range to each emitter not in an outage.
 pub struct EmittersSource {
     emitters: Vec<ResolvedEmitter>,
-    clocks_m: [f64; wls::MAX_CLOCKS],
+    clocks_m: [f64; System::COUNT],
     rngs: Vec<StreamRng>,
     period_ns: i64,
     end: SimTime,
@@ -379,9 +378,7 @@ impl Source for EmittersSource {
                 emitter: e.id,
                 emitter_pos_ecef_m: e.pos_ecef_m,
                 emitter_vel_ecef_mps: Vector3::zeros(),
-                pseudorange_m: range_m
-                    + self.clocks_m[wls::system_index(e.id.system)]
-                    + e.sigma_m * n,
+                pseudorange_m: range_m + self.clocks_m[e.id.system.index()] + e.sigma_m * n,
                 sigma_m: e.sigma_m,
                 range_rate_mps: None,
                 sigma_rate_mps: 1.0,

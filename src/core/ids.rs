@@ -21,6 +21,23 @@ pub enum System {
 }
 
 impl System {
+    /// How many systems there are (the clock unknowns of a multi-system solution).
+    pub const COUNT: usize = 4;
+    /// Every system, in the order of [`System::index`]: the order of per-system clock
+    /// arrays throughout (least squares, the abstract emitters, the paper estimators).
+    pub const ALL: [System; System::COUNT] =
+        [System::Gps, System::Bds, System::Dtmb, System::Tcofdm];
+
+    /// The position of the system in [`System::ALL`].
+    pub const fn index(self) -> usize {
+        match self {
+            System::Gps => 0,
+            System::Bds => 1,
+            System::Dtmb => 2,
+            System::Tcofdm => 3,
+        }
+    }
+
     /// The one-letter code used in RINEX (`G`, `C`) and for terrestrial emitters (`D`, `T`).
     pub fn letter(self) -> char {
         match self {

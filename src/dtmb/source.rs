@@ -38,10 +38,10 @@ use super::tps::{TpsErrorModel, TpsPath};
 use super::transmitter::{FrameSchedule, Transmitter, TxConfig};
 use crate::core::config::check;
 use crate::core::geodesy::{azimuth_elevation_with, ecef_to_enu_rotation};
+use crate::core::receiver_clock::ClockTrack;
 use crate::core::rng::StreamRng;
 use crate::core::ConfigIssue;
 use crate::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng, C_MPS};
-use crate::gnss::receiver_clock::ClockTrack;
 use crate::measurement::SourceKind;
 use crate::measurement::{Measurement, MeasurementBatch, RangeDifference, RangeMeasurement};
 use crate::measurement::{SampleContext, Source};
@@ -1037,7 +1037,7 @@ pub fn reported_sigma_m(mode: PnMode, snr_db: f64, frames: usize) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gnss::receiver_clock::{ClockConfig, ReceiverClock};
+    use crate::core::receiver_clock::{ClockConfig, ReceiverClock};
     use crate::measurement::Truth;
     use crate::motion::TruthState;
 

@@ -59,8 +59,8 @@
 
 use super::frame::{interleave_index, SI_LEN};
 use super::pn::{PnMode, BODY_LEN, SAMPLE_RATE_HZ};
+use crate::core::receiver_clock::ClockTrack;
 use crate::core::C_MPS;
-use crate::gnss::receiver_clock::ClockTrack;
 use num_complex::{Complex32, Complex64};
 
 /// Physical subcarriers (FFT bins of the 3780-point body) carrying the 36 TPS symbols
@@ -362,12 +362,12 @@ impl TpsErrorModel {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::core::receiver_clock::{ClockConfig, Oscillator, ReceiverClock};
     use crate::core::GpsTime;
     use crate::core::TrialRng;
     use crate::dtmb::channel::{Channel, ChannelConfig, Path};
     use crate::dtmb::frame::{BodyModulator, CarrierMode, Qam};
     use crate::dtmb::transmitter::{FrameSchedule, Transmitter, TxConfig};
-    use crate::gnss::receiver_clock::{ClockConfig, Oscillator, ReceiverClock};
 
     #[test]
     fn one_path_gives_its_doppler_and_resolved_paths_their_power_weighted_mean() {

@@ -6,5 +6,6 @@
 //! windows, FM reference-point circles and clock corrections use it in later issues).
 
 pub mod cache;
+pub mod health;
 pub mod queue;
 pub mod trial;

@@ -2,7 +2,7 @@
 
 use super::queue::{EventKind, EventQueue};
 use crate::core::{EnuFrame, GpsTime, SimTime, System};
-use crate::fusion::health::{HealthConfig, HealthMonitor, Verdict};
+use crate::engine::health::{HealthConfig, HealthMonitor, Verdict};
 use crate::measurement::Estimate;
 use crate::measurement::Estimator;
 use crate::measurement::MeasurementBatch;

@@ -6,7 +6,6 @@
 pub mod ekf11;
 pub mod estimator;
 pub mod family;
-pub mod health;
 pub mod kalman;
 pub mod linear_kf;
 pub mod mode;

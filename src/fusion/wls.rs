@@ -34,7 +34,7 @@ use crate::measurement::RangeMeasurement;
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
 /// At most this many clock unknowns: one per [`System`].
-pub const MAX_CLOCKS: usize = 4;
+pub const MAX_CLOCKS: usize = System::COUNT;
 const MAX_UNKNOWNS: usize = 3 + MAX_CLOCKS;
 type NormalMatrix = SMatrix<f64, MAX_UNKNOWNS, MAX_UNKNOWNS>;
 type UnknownVector = SVector<f64, MAX_UNKNOWNS>;
@@ -43,16 +43,11 @@ type UnknownVector = SVector<f64, MAX_UNKNOWNS>;
 const MIN_PIVOT_RATIO: f64 = 1e-12;
 
 /// The systems in the order used by [`WlsFix::clocks_m`].
-pub const SYSTEMS: [System; MAX_CLOCKS] = [System::Gps, System::Bds, System::Dtmb, System::Tcofdm];
+pub const SYSTEMS: [System; MAX_CLOCKS] = System::ALL;
 
 /// The index of a system in [`SYSTEMS`].
 pub fn system_index(s: System) -> usize {
-    match s {
-        System::Gps => 0,
-        System::Bds => 1,
-        System::Dtmb => 2,
-        System::Tcofdm => 3,
-    }
+    s.index()
 }
 
 /// Options of [`solve`].

@@ -39,13 +39,13 @@
 //! ([`GnssEpochTable`], see [`crate::engine::cache`]).
 
 use crate::core::geodesy::{azimuth_elevation_with, ecef_to_enu_rotation};
+use crate::core::receiver_clock::ClockTrack;
 use crate::core::rng::{StreamRng, TrialRng};
 use crate::core::{EmitterId, EnuFrame, Geodetic, SimTime, System, C_MPS};
 use crate::engine::cache::EpochTable;
 use crate::gnss::atmosphere::{saastamoinen_m, Klobuchar};
 use crate::gnss::ephemeris::sagnac_rotate;
 use crate::gnss::link::{Signal, TrackingConfig};
-use crate::gnss::receiver_clock::ClockTrack;
 use crate::gnss::rinex_nav::NavData;
 use crate::gnss::visibility::{scene_effect, LinkClass};
 use crate::measurement::RawGnssObservation;

@@ -6,7 +6,6 @@ pub mod ephemeris;
 pub mod link;
 pub mod measurement;
 pub mod multipath;
-pub mod receiver_clock;
 pub mod rinex_nav;
 pub mod sp3;
 pub mod synth;

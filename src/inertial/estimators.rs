@@ -2044,7 +2044,7 @@ mod tests {
         // wander about its frequency at the start, Brown & Hwang's OCXO, the filter's
         // default model) plus 2 mm of white noise. Over 20 seeded walks the RMS horizontal
         // error against the truth must fall when they are fused.
-        use crate::gnss::receiver_clock::{ClockConfig, ClockTrack, Oscillator, ReceiverClock};
+        use crate::core::receiver_clock::{ClockConfig, ClockTrack, Oscillator, ReceiverClock};
         use rand_distr::{Distribution, Normal};
         let f = frame();
         let tower = Vector3::new(600.0, 0.0, 200.0);

@@ -127,8 +127,8 @@ impl CacheSlot {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::core::receiver_clock::{ClockTrack, ReceiverClock};
     use crate::gnss::measurement::{GnssConfig, GnssSource};
-    use crate::gnss::receiver_clock::{ClockTrack, ReceiverClock};
     use crate::measurement::{MeasurementBatch, SampleContext, Source, Truth};
 
     /// The default world (Kehui Road's street, GNSS through its scene).

@@ -43,6 +43,7 @@
 //! the payloads `dtmb/Dnn/tx` (the signal-level source's) and the noise
 //! `dtmb/iq/Dnn/noise` of the requested tower.
 
+use crate::core::receiver_clock::{ClockTrack, ReceiverClock};
 use crate::core::{EmitterId, SimTime, System, TrialRng, C_MPS};
 use crate::dtmb::channel::{Channel, ChannelConfig, Path};
 use crate::dtmb::frame::{CarrierMode, Qam};
@@ -51,7 +52,6 @@ use crate::dtmb::sigmf::Annotation;
 use crate::dtmb::source::{DtmbLevel, DtmbSource, TowerSpec};
 use crate::dtmb::transmitter::{FrameSchedule, SampleSource, Transmitter, TxConfig};
 use crate::dtmb::DtmbError;
-use crate::gnss::receiver_clock::{ClockTrack, ReceiverClock};
 use crate::world::scene::TransmitterKind;
 use crate::world::World;
 use num_complex::{Complex32, Complex64};

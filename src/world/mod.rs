@@ -15,11 +15,11 @@ pub mod schema;
 pub mod trial;
 pub mod visibility;
 
+use crate::core::receiver_clock::{ClockTrack, ReceiverClock};
 use crate::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng};
 use crate::dtmb::{DtmbSource, TowerSpec};
 use crate::engine::trial::TrialSetup;
 use crate::gnss::measurement::{GnssSource, SceneView, Shielding, ShieldingRule};
-use crate::gnss::receiver_clock::{ClockTrack, ReceiverClock};
 use crate::gnss::rinex_nav::{parse_nav, read_nav_file, NavData};
 use crate::inertial::source::{ImuSource, PdrSource};
 use crate::measurement::SourceKind;

@@ -1,6 +1,7 @@
 //! The serde schema of world files. Every table denies unknown keys, so a typo is an
 //! error that names the key and its line, never a silently ignored setting.
 
+use crate::core::receiver_clock::ClockConfig;
 use crate::core::System;
 use crate::dtmb::DtmbSensorConfig;
 use crate::fusion::ekf11::Ekf11Config;
@@ -11,7 +12,6 @@ use crate::fusion::paper::{PaperContext, PaperFilter, ProcessSpec};
 use crate::fusion::preprocess::ClockCorrectionConfig;
 use crate::fusion::selection::{ModeSelection, SelectionKind};
 use crate::gnss::measurement::GnssConfig;
-use crate::gnss::receiver_clock::ClockConfig;
 use crate::inertial::attitude::{Platform, PlatformConfig};
 use crate::inertial::estimators::{InsEstimator, InsFilterConfig, PdrEstimator, PdrFilterConfig};
 use crate::inertial::imu::ImuConfig;
@@ -287,7 +287,7 @@ pub struct BuildContext<'a> {
     /// The trial's random streams (the particle filter draws from its own).
     pub rng: crate::core::TrialRng,
     /// The clock term (m) of each system's ranges declared by `[sensors.emitters]`,
-    /// indexed like [`crate::fusion::wls::SYSTEMS`]: what a paper estimator with
+    /// indexed like [`crate::core::System::ALL`]: what a paper estimator with
     /// `clocks = "known"` is assumed to know.
     pub emitter_clocks_m: Option<[f64; crate::fusion::wls::MAX_CLOCKS]>,
 }

@@ -2,10 +2,10 @@
 //! correlator against its Cramér–Rao bound, and the base stations' synchronisation error
 //! in the pseudoranges.
 
+use hybridnav::core::receiver_clock::{ClockConfig, ClockTrack, ReceiverClock};
 use hybridnav::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng, C_MPS};
 use hybridnav::dtmb::measurement::{crb_samples, signal_timing_errors};
 use hybridnav::dtmb::PnMode;
-use hybridnav::gnss::receiver_clock::{ClockConfig, ClockTrack, ReceiverClock};
 use hybridnav::measurement::{Measurement, MeasurementBatch};
 use hybridnav::measurement::{SampleContext, Source, Truth};
 use hybridnav::motion::TruthState;
