@@ -1,25 +1,21 @@
 //! hybridnav: a discrete-event, signal-level simulator for multi-source positioning.
 //!
-//! See `docs/architecture.md` for the bird's-eye view, the code map and the invariants.
+//! This crate is the facade and the command line: it re-exports every layer of the
+//! workspace under the module paths the product has always had (`hybridnav::gnss::…`,
+//! `hybridnav::world::…`), and owns the top layer itself: the dataset exporters
+//! (`export`), transmitter-layout design (`layout`) and the CLI (`cli`).
+//!
+//! See `docs/architecture.md` for the bird's-eye view, the layers and the invariants.
 
-pub mod beacons;
+#![deny(unsafe_code)]
+
+pub use hybridnav_core::{core, engine, io, measurement, metrics, motion};
+pub use hybridnav_dtmb::{dtmb, tcofdm};
+pub use hybridnav_fusion::fusion;
+pub use hybridnav_gnss::{gnss, propagation};
+pub use hybridnav_sensors::{beacons, fm, inertial, magnetic};
+pub use hybridnav_sim::{montecarlo, report, world};
+
 pub mod cli;
-pub mod core;
-pub mod dtmb;
-pub mod engine;
 pub mod export;
-pub mod fm;
-pub mod fusion;
-pub mod gnss;
-pub mod inertial;
-pub mod io;
 pub mod layout;
-pub mod magnetic;
-pub mod measurement;
-pub mod metrics;
-pub mod montecarlo;
-pub mod motion;
-pub mod propagation;
-pub mod report;
-pub mod tcofdm;
-pub mod world;

@@ -80,6 +80,11 @@
 //! checked copy. The hot bodies are compiled a second time for AVX2 and chosen at run
 //! time; they use no fused multiply–add, so both builds give the same bits (tested).
 
+// The one kind of unsafe code hybridnav has: its AVX2 builds of the predict and scalar update, `#[target_feature]`
+// functions called only after run-time CPU detection, each with a same-bits test against
+// the portable code.
+#![allow(unsafe_code)]
+
 use crate::core::{System, C_MPS};
 use crate::measurement::{PositionFix, RangeMeasurement};
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};

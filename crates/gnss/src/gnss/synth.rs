@@ -807,7 +807,8 @@ mod tests {
     }
 
     fn generated_file() -> std::path::PathBuf {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("ephemeris/nominal-gps-bds.rnx")
+        Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
+            .join("ephemeris/nominal-gps-bds.rnx")
     }
 
     /// Regenerates `ephemeris/nominal-gps-bds.rnx`: 2018-06-01T00:00:00 GPST, every 2 h

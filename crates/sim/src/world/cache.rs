@@ -134,7 +134,8 @@ mod tests {
     /// The default world (Kehui Road's street, GNSS through its scene).
     fn world() -> World {
         crate::world::load_world(
-            &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/default.toml"),
+            &std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
+                .join("worlds/default.toml"),
         )
         .unwrap()
     }

@@ -35,7 +35,7 @@ use std::sync::Arc;
 
 /// The navigation file embedded in the binary: the nominal GPS + BeiDou constellation that
 /// `hybridnav ephemeris synth` writes, used when a world names no ephemeris.
-pub const BUILTIN_EPHEMERIS: &str = include_str!("../../ephemeris/nominal-gps-bds.rnx");
+pub const BUILTIN_EPHEMERIS: &str = include_str!("../../../../ephemeris/nominal-gps-bds.rnx");
 /// The name a world file uses for the embedded navigation file.
 pub const BUILTIN_EPHEMERIS_NAME: &str = "builtin:nominal-gps-bds";
 

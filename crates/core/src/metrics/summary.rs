@@ -89,3 +89,44 @@ pub struct Summary {
     /// validity range, …).
     pub warnings: Vec<String>,
 }
+
+impl Summary {
+    /// The table printed after a run, in the papers' layout.
+    pub fn table(&self) -> String {
+        use std::fmt::Write;
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "{} — {} trial(s), seed {}",
+            self.world, self.trials, self.seed
+        );
+        let _ = writeln!(
+            s,
+            "{:<16} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7}",
+            "estimator", "1σ", "2σ", "3σ", "rmse", "ATE", "ATE rms", "RPE", "RPE rms", "avail"
+        );
+        let f = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |x| format!("{x:.2}"));
+        for e in &self.estimators {
+            let x = e.error_3d_m.as_ref();
+            let _ = writeln!(
+                s,
+                "{:<16} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6.1}%",
+                e.name,
+                f(x.map(|x| x.sigma1)),
+                f(x.map(|x| x.sigma2)),
+                f(x.map(|x| x.sigma3)),
+                f(x.map(|x| x.rmse)),
+                f(e.ate_m.as_ref().map(|a| a.mean)),
+                f(e.ate_m.as_ref().map(|a| a.rmse)),
+                f(e.rpe_m.as_ref().map(|a| a.mean)),
+                f(e.rpe_m.as_ref().map(|a| a.rmse)),
+                100.0 * e.availability
+            );
+        }
+        let _ = writeln!(
+            s,
+            "(metres; σ-levels: 3-D error percentiles 68.27/95.45/99.73 % over all epochs of all trials;\n ATE/RPE: mean and RMSE, TUM definitions in ECEF, no alignment, RPE over 1 s)"
+        );
+        s
+    }
+}

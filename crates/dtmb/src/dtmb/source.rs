@@ -583,7 +583,7 @@ impl DtmbSource {
     /// [`DtmbSource::taps`] (the direct path alone, without Doppler, when the world has
     /// no scene). Shared by [`Source::sample`] and the world IQ recorder
     /// ([`super::world_iq`]).
-    pub(crate) fn tower_link(
+    pub fn tower_link(
         &mut self,
         ti: usize,
         truth: &crate::measurement::Truth,
@@ -656,7 +656,7 @@ impl DtmbSource {
     }
 
     /// The paths of the last [`DtmbSource::tower_link`]: excess delay (samples) and gain.
-    pub(crate) fn taps(&self) -> &[Tap] {
+    pub fn taps(&self) -> &[Tap] {
         &self.taps
     }
 }

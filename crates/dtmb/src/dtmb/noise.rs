@@ -23,6 +23,11 @@
 //!   `u₁` has 24 bits, so `r ≤ √(2 · 24 ln 2) = 5.77`: the tails are cut at 5.77σ per
 //!   component (probability 8·10⁻⁹ per sample).
 
+// The one kind of unsafe code hybridnav has: its AVX2 and AVX-512F builds of the Gaussian noise, `#[target_feature]`
+// functions called only after run-time CPU detection, each with a same-bits test against
+// the portable code.
+#![allow(unsafe_code)]
+
 use num_complex::Complex32;
 use rand::Rng;
 

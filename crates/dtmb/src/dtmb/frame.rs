@@ -19,6 +19,11 @@
 //! `i, j, k ∈ 0..=2`, `l, m ∈ 0..=1`, `n ∈ 0..=4`, `o ∈ 0..=6`: a mixed-radix digit
 //! reversal, hence a permutation (tested).
 
+// The one kind of unsafe code hybridnav has: its AVX2 and AVX-512 builds of the subcarrier fill, `#[target_feature]`
+// functions called only after run-time CPU detection, each with a same-bits test against
+// the portable code.
+#![allow(unsafe_code)]
+
 use super::noise::mix;
 use super::pn::BODY_LEN;
 use super::DtmbError;

@@ -54,6 +54,11 @@
 //! the end of a call is kept and served to the next call that continues where this one
 //! stopped, so a stream read frame by frame costs the same as one read in one piece.
 
+// The one kind of unsafe code hybridnav has: its AVX2 intrinsics, `#[target_feature]`
+// functions called only after run-time CPU detection, each with a same-bits test against
+// the portable code.
+#![allow(unsafe_code)]
+
 use super::channel::{kernel_taps_with_derivative, ChannelConfig, KERNEL_HALF_WIDTH};
 use super::pn::SAMPLE_RATE_HZ;
 use super::transmitter::SampleSource;

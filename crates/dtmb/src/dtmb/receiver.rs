@@ -37,6 +37,11 @@
 //! of the `H` header chips (−2.2 dB for PN420, −2.7 dB for PN945). PN595 uses the linear
 //! correlation of the whole header in a zero-padded window.
 
+// The one kind of unsafe code hybridnav has: its AVX2 build of the frame sync, `#[target_feature]`
+// functions called only after run-time CPU detection, each with a same-bits test against
+// the portable code.
+#![allow(unsafe_code)]
+
 use super::pn::{PnMode, SAMPLE_RATE_HZ};
 use super::transmitter::FrameSchedule;
 use super::DtmbError;
