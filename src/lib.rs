@@ -13,8 +13,9 @@ pub use hybridnav_core::{core, engine, io, measurement, metrics, motion};
 pub use hybridnav_dtmb::{dtmb, tcofdm};
 pub use hybridnav_fusion::fusion;
 pub use hybridnav_gnss::{gnss, propagation};
+pub use hybridnav_run::{montecarlo, report};
 pub use hybridnav_sensors::{beacons, fm, inertial, magnetic};
-pub use hybridnav_sim::{montecarlo, report, world};
+pub use hybridnav_sim::world;
 
 pub mod cli;
 pub mod export;

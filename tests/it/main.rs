@@ -1,6 +1,7 @@
 //! The one integration-test binary (as ripgrep does): each module tests one area through
 //! the public API or the `hybridnav` binary.
 
+mod architecture;
 mod cli;
 mod cluster;
 mod common;

@@ -1,4 +1,5 @@
-//! hybridnav-sim: part of hybridnav (see the workspace's `docs/architecture.md` for the layers).
+//! hybridnav-sim: the world layer (see the workspace's `docs/architecture.md` for the
+//! layers): world files, their validation, and the construction of a trial's parts.
 //!
 //! The modules of the crates below this one are imported at the root under their usual
 //! names, so code here reaches them as `crate::core::…`, `crate::fusion::…`, as it did
@@ -17,6 +18,4 @@ use hybridnav_gnss::{gnss, propagation};
 #[allow(unused_imports)]
 use hybridnav_sensors::{beacons, fm, inertial, magnetic};
 
-pub mod montecarlo;
-pub mod report;
 pub mod world;
