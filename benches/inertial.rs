@@ -11,9 +11,9 @@ use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughpu
 use hybridnav::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng};
 use hybridnav::engine::trial::truth_at;
 use hybridnav::inertial::attitude::{ideal_imu, Platform, PlatformConfig, PlatformTruth};
-use hybridnav::inertial::estimators::{InsEstimator, InsFilterConfig};
 use hybridnav::inertial::imu::{Imu, ImuConfig, ImuGrade};
 use hybridnav::inertial::ins_ekf::{InsEkf, InsEkfConfig};
+use hybridnav::inertial::ins_estimator::{InsEstimator, InsFilterConfig};
 use hybridnav::inertial::source::{local_earth_of, ImuSource};
 use hybridnav::inertial::strapdown::NavState;
 use hybridnav::inertial::LocalEarth;

@@ -2,10 +2,14 @@
 
 use crate::core::{EmitterId, GpsTime};
 use crate::io::atomic::write_atomic;
+use crate::layout::metrics::ClockModel;
+use crate::layout::place::Objective;
+use crate::layout::LayoutRequest;
 use crate::montecarlo::store::{MergePlan, RunDir, Shard};
 use crate::montecarlo::{merge_into, run_into, RunOptions};
 use crate::world::load_world;
 use anyhow::{bail, Context, Result};
+use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::{Args, Parser, Subcommand};
 use std::path::{Path, PathBuf};
 
@@ -65,7 +69,7 @@ pub enum Command {
     Export(ExportArgs),
     /// Transmitter-layout design: coverage, GDOP and predicted accuracy over a grid, and
     /// the choice of new transmitter sites (`--place K --candidates FILE`).
-    Layout(crate::layout::LayoutArgs),
+    Layout(LayoutArgs),
 }
 
 #[derive(Debug, Args)]
@@ -249,7 +253,7 @@ pub fn run(cli: Cli) -> Result<()> {
             let epochs = crate::world::visibility::survey(&w, step).map_err(anyhow::Error::msg)?;
             print!("{}", crate::world::visibility::table(&epochs));
             if let Some(path) = map {
-                let svg = crate::world::map::svg(&w).map_err(anyhow::Error::msg)?;
+                let svg = crate::report::map::svg(&w).map_err(anyhow::Error::msg)?;
                 write_atomic(&path, svg.as_bytes())
                     .with_context(|| format!("cannot write the map {}", path.display()))?;
                 println!("map        {}", path.display());
@@ -296,7 +300,7 @@ pub fn run(cli: Cli) -> Result<()> {
         }
         Command::Fm(FmCommand::Survey { world, out, seed }) => cmd_fm_survey(&world, &out, seed),
         Command::Export(a) => cmd_export(&a),
-        Command::Layout(a) => crate::layout::run(&a),
+        Command::Layout(a) => Ok(crate::layout::run(&a.request())?),
         Command::Presets => {
             for p in crate::world::presets::PRESETS {
                 println!("{}\n  {}", p.name, p.about);
@@ -687,4 +691,66 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
         out.display()
     );
     Ok(())
+}
+
+/// `hybridnav layout` options.
+#[derive(Debug, Clone, Args)]
+pub struct LayoutArgs {
+    /// The world file.
+    pub world: PathBuf,
+    /// Grid spacing (m).
+    #[arg(long, default_value_t = 10.0)]
+    pub grid: f64,
+    /// Output directory.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Receiver antenna height above the ground (m).
+    #[arg(long, default_value_t = 1.5)]
+    pub height: f64,
+    /// GNSS epoch: `YYYY-MM-DDTHH:MM:SS GPST`, or `+SECONDS` after the world's start
+    /// (default: the start). Repeat for several epochs; each cell reports its worst.
+    #[arg(long = "time")]
+    pub times: Vec<String>,
+    /// The region as `W,S,E,N` in the world's ENU metres (default: the scene and the
+    /// trajectory; see docs/layout.md).
+    #[arg(long)]
+    pub region: Option<String>,
+    /// How ranges share clock unknowns.
+    #[arg(long, default_value = "shared", value_parser = PossibleValuesParser::new(ClockModel::NAMES).try_map(|s| s.parse::<ClockModel>()))]
+    pub clocks: ClockModel,
+    /// Choose this many new sites from `--candidates`.
+    #[arg(long)]
+    pub place: Option<usize>,
+    /// Candidate sites: CSV `id,east_m,north_m,height_m[,kind[,erp_kw[,freq_mhz]]]`.
+    #[arg(long)]
+    pub candidates: Option<PathBuf>,
+    /// What the placement minimises over the region.
+    #[arg(long, default_value = "gdop95", value_parser = PossibleValuesParser::new(Objective::NAMES).try_map(|s| s.parse::<Objective>()))]
+    pub objective: Objective,
+    /// Seed of the random-placement baseline.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Random placements in the baseline.
+    #[arg(long, default_value_t = 20)]
+    pub random_trials: usize,
+}
+
+impl LayoutArgs {
+    /// The request the layout module runs.
+    fn request(self) -> LayoutRequest {
+        LayoutRequest {
+            world: self.world,
+            grid: self.grid,
+            out: self.out,
+            height: self.height,
+            times: self.times,
+            region: self.region,
+            clocks: self.clocks,
+            place: self.place,
+            candidates: self.candidates,
+            objective: self.objective,
+            seed: self.seed,
+            random_trials: self.random_trials,
+        }
+    }
 }

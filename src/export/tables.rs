@@ -86,10 +86,25 @@ impl TruthColumns {
 
 /// The tables of a recording, by file stem; tables without rows are left out.
 pub fn tables(world: &World, rec: &Recording) -> Vec<(&'static str, Table)> {
-    let frame = &world.frame;
-    let mut out = Vec::new();
+    type Build = fn(&World, &Recording) -> Option<Table>;
+    let builds: [(&'static str, Build); 8] = [
+        ("ranges", ranges_table),
+        ("fixes", fixes_table),
+        ("fm_rssi", fm_rssi_table),
+        ("imu", imu_table),
+        ("magnetometer", magnetometer_table),
+        ("steps", steps_table),
+        ("range_diffs", range_diffs_table),
+        ("truth", truth_table),
+    ];
+    builds
+        .into_iter()
+        .filter_map(|(stem, build)| build(world, rec).map(|t| (stem, t)))
+        .collect()
+}
 
-    // Ranges: every range measurement with the geometric range from the truth.
+/// Ranges: every range measurement with the geometric range from the truth.
+fn ranges_table(_world: &World, rec: &Recording) -> Option<Table> {
     let mut tr = TruthColumns::default();
     let (mut src, mut emitter, mut system) = (Vec::new(), Vec::new(), Vec::new());
     let mut cols: [Vec<f64>; 7] = Default::default();
@@ -146,10 +161,14 @@ pub fn tables(world: &World, rec: &Recording) -> Vec<(&'static str, Table)> {
         t.push("true_range_rate_mps", Values::F64(true_rate));
         tr.prepend_time(&mut t);
         tr.append(&mut t, "truth_");
-        out.push(("ranges", t));
+        return Some(t);
     }
+    None
+}
 
-    // Position fixes (FM fingerprinting, magnetic landmarks).
+/// Position fixes (FM fingerprinting, magnetic landmarks).
+fn fixes_table(world: &World, rec: &Recording) -> Option<Table> {
+    let frame = &world.frame;
     let mut tr = TruthColumns::default();
     let mut src = Vec::new();
     let mut cols: [Vec<f64>; 6] = Default::default();
@@ -193,10 +212,13 @@ pub fn tables(world: &World, rec: &Recording) -> Vec<(&'static str, Table)> {
         t.push("err_h_m", Values::F64(err_h));
         tr.prepend_time(&mut t);
         tr.append(&mut t, "truth_");
-        out.push(("fixes", t));
+        return Some(t);
     }
+    None
+}
 
-    // FM scans: each station's RSSI.
+/// FM scans: each station's RSSI.
+fn fm_rssi_table(_world: &World, rec: &Recording) -> Option<Table> {
     let mut tr = TruthColumns::default();
     let (mut freq, mut rssi) = (Vec::new(), Vec::new());
     for b in &rec.batches {
@@ -212,10 +234,13 @@ pub fn tables(world: &World, rec: &Recording) -> Vec<(&'static str, Table)> {
         t.push("rssi_dbm", Values::OptF64(rssi));
         tr.prepend_time(&mut t);
         tr.append(&mut t, "truth_");
-        out.push(("fm_rssi", t));
+        return Some(t);
     }
+    None
+}
 
-    // IMU samples, with the truth's specific force in ENU for reference.
+/// IMU samples, with the truth's specific force in ENU for reference.
+fn imu_table(_world: &World, rec: &Recording) -> Option<Table> {
     let mut tr = TruthColumns::default();
     let mut cols: [Vec<f64>; 9] = Default::default();
     for b in &rec.batches {
@@ -260,10 +285,13 @@ pub fn tables(world: &World, rec: &Recording) -> Vec<(&'static str, Table)> {
         }
         tr.prepend_time(&mut t);
         tr.append(&mut t, "truth_");
-        out.push(("imu", t));
+        return Some(t);
     }
+    None
+}
 
-    // Magnetometer samples, each with the true position at its own time.
+/// Magnetometer samples, each with the true position at its own time.
+fn magnetometer_table(_world: &World, rec: &Recording) -> Option<Table> {
     let mut cols: [Vec<f64>; 8] = Default::default();
     for b in &rec.batches {
         for m in &b.raw.mag {
@@ -290,10 +318,13 @@ pub fn tables(world: &World, rec: &Recording) -> Vec<(&'static str, Table)> {
         for (name, v) in names.into_iter().zip(cols) {
             t.push(name, Values::F64(v));
         }
-        out.push(("magnetometer", t));
+        return Some(t);
     }
+    None
+}
 
-    // PDR steps.
+/// PDR steps.
+fn steps_table(_world: &World, rec: &Recording) -> Option<Table> {
     let mut tr = TruthColumns::default();
     let mut cols: [Vec<f64>; 4] = Default::default();
     for b in &rec.batches {
@@ -323,10 +354,13 @@ pub fn tables(world: &World, rec: &Recording) -> Vec<(&'static str, Table)> {
         t.push("sigma_heading_deg", Values::F64(sh));
         tr.prepend_time(&mut t);
         tr.append(&mut t, "truth_");
-        out.push(("steps", t));
+        return Some(t);
     }
+    None
+}
 
-    // Range differences (seed 002's carrier-frequency-offset integrals).
+/// Range differences (seed 002's carrier-frequency-offset integrals).
+fn range_diffs_table(world: &World, rec: &Recording) -> Option<Table> {
     let mut tr = TruthColumns::default();
     let mut emitter = Vec::new();
     let mut cols: [Vec<f64>; 4] = Default::default();
@@ -359,10 +393,13 @@ pub fn tables(world: &World, rec: &Recording) -> Vec<(&'static str, Table)> {
         t.push("true_range_m", Values::F64(geo));
         tr.prepend_time(&mut t);
         tr.append(&mut t, "truth_");
-        out.push(("range_diffs", t));
+        return Some(t);
     }
+    None
+}
 
-    // The reference track.
+/// The reference track.
+fn truth_table(_world: &World, rec: &Recording) -> Option<Table> {
     let mut tr = TruthColumns::default();
     for t in rec.truth_track() {
         tr.push(t);
@@ -370,8 +407,7 @@ pub fn tables(world: &World, rec: &Recording) -> Vec<(&'static str, Table)> {
     let mut t = Table::default();
     tr.prepend_time(&mut t);
     tr.append(&mut t, "");
-    out.push(("truth", t));
-    out
+    Some(t)
 }
 
 /// Writes every table as `DIR/<stem>.csv`.

@@ -58,13 +58,33 @@ pub const UNKNOWNS: usize = 7;
 pub type Normal = SMatrix<f64, UNKNOWNS, UNKNOWNS>;
 
 /// How ranges share clock unknowns (module documentation).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ClockModel {
     /// GPS, DTMB and TC-OFDM on the receiver clock; BeiDou on its own.
     Shared,
     /// One clock per system.
     PerSystem,
+}
+
+impl ClockModel {
+    /// The names the command line and the outputs use.
+    pub const NAMES: [&'static str; 2] = ["shared", "per-system"];
+}
+
+impl std::str::FromStr for ClockModel {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "shared" => Ok(ClockModel::Shared),
+            "per-system" => Ok(ClockModel::PerSystem),
+            _ => Err(format!(
+                "expected one of {}, got {s:?}",
+                Self::NAMES.join(", ")
+            )),
+        }
+    }
 }
 
 impl ClockModel {

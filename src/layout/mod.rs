@@ -19,57 +19,56 @@ use crate::io::atomic::write_atomic;
 use crate::world::World;
 use eval::Context;
 use grid::{Grid, Region};
-use metrics::{CellMetrics, ClockModel, Coverage};
+use metrics::{CellMetrics, ClockModel, Coverage, Normals};
 use nalgebra::Vector3;
 use place::{Candidate, Objective, Placement};
 use serde_json::{json, Value};
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
 
-/// `hybridnav layout` options.
-#[derive(Debug, Clone, clap::Args)]
-pub struct LayoutArgs {
+/// What `hybridnav layout` is asked to do (the CLI's options, checked by [`run`]).
+#[derive(Debug, Clone)]
+pub struct LayoutRequest {
     /// The world file.
     pub world: PathBuf,
     /// Grid spacing (m).
-    #[arg(long, default_value_t = 10.0)]
     pub grid: f64,
     /// Output directory.
-    #[arg(long)]
     pub out: PathBuf,
     /// Receiver antenna height above the ground (m).
-    #[arg(long, default_value_t = 1.5)]
     pub height: f64,
     /// GNSS epoch: `YYYY-MM-DDTHH:MM:SS GPST`, or `+SECONDS` after the world's start
     /// (default: the start). Repeat for several epochs; each cell reports its worst.
-    #[arg(long = "time")]
     pub times: Vec<String>,
     /// The region as `W,S,E,N` in the world's ENU metres (default: the scene and the
     /// trajectory; see docs/layout.md).
-    #[arg(long)]
     pub region: Option<String>,
     /// How ranges share clock unknowns.
-    #[arg(long, value_enum, default_value_t = ClockModel::Shared)]
     pub clocks: ClockModel,
     /// Choose this many new sites from `--candidates`.
-    #[arg(long)]
     pub place: Option<usize>,
     /// Candidate sites: CSV `id,east_m,north_m,height_m[,kind[,erp_kw[,freq_mhz]]]`.
-    #[arg(long)]
     pub candidates: Option<PathBuf>,
     /// What the placement minimises over the region.
-    #[arg(long, value_enum, default_value_t = Objective::Gdop95)]
     pub objective: Objective,
     /// Seed of the random-placement baseline.
-    #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Random placements in the baseline.
-    #[arg(long, default_value_t = 20)]
     pub random_trials: usize,
 }
 
+/// What stops `hybridnav layout`: the world file, or an option or input it cannot use
+/// (the message names the option and what was expected).
+#[derive(Debug, thiserror::Error)]
+pub enum LayoutError {
+    #[error(transparent)]
+    World(#[from] crate::world::WorldError),
+    #[error("{0}")]
+    Invalid(String),
+}
+
 /// The epochs of `--time` (the world's start when none is given).
-fn epochs(world: &World, times: &[String]) -> anyhow::Result<Vec<GpsTime>> {
+fn epochs(world: &World, times: &[String]) -> Result<Vec<GpsTime>, LayoutError> {
     if times.is_empty() {
         return Ok(vec![world.start]);
     }
@@ -78,14 +77,19 @@ fn epochs(world: &World, times: &[String]) -> anyhow::Result<Vec<GpsTime>> {
         .map(|t| {
             if let Some(rest) = t.strip_prefix('+') {
                 let s: f64 = rest.trim().parse().map_err(|_| {
-                    anyhow::anyhow!("--time {t:?}: expected +SECONDS after the world's start")
+                    LayoutError::Invalid(format!(
+                        "--time {t:?}: expected +SECONDS after the world's start"
+                    ))
                 })?;
                 if !(s.is_finite() && s.abs() < 1e8) {
-                    anyhow::bail!("--time {t:?}: expected a finite offset in seconds");
+                    return Err(LayoutError::Invalid(format!(
+                        "--time {t:?}: expected a finite offset in seconds"
+                    )));
                 }
                 Ok(world.start.add_seconds(s))
             } else {
-                GpsTime::parse_iso(t).map_err(|m| anyhow::anyhow!("--time {t:?}: {m}"))
+                GpsTime::parse_iso(t)
+                    .map_err(|m| LayoutError::Invalid(format!("--time {t:?}: {m}")))
             }
         })
         .collect()
@@ -95,32 +99,47 @@ fn epochs(world: &World, times: &[String]) -> anyhow::Result<Vec<GpsTime>> {
 ///
 /// # Errors
 /// Every user-facing failure, with what was expected.
-pub fn run(args: &LayoutArgs) -> anyhow::Result<()> {
+pub fn run(args: &LayoutRequest) -> Result<(), LayoutError> {
     let started = std::time::Instant::now();
     if !(args.height.is_finite() && (0.0..=1000.0).contains(&args.height)) {
-        anyhow::bail!(
+        return Err(LayoutError::Invalid(format!(
             "--height: expected a receiver height in [0, 1000] m, got {}",
             args.height
-        );
+        )));
     }
     if !(args.grid.is_finite() && args.grid > 0.0) {
-        anyhow::bail!("--grid: expected a spacing > 0 m, got {}", args.grid);
+        return Err(LayoutError::Invalid(format!(
+            "--grid: expected a spacing > 0 m, got {}",
+            args.grid
+        )));
     }
     let k = match (args.place, &args.candidates) {
         (None, None) => 0,
-        (Some(0), _) => anyhow::bail!("--place: expected at least 1 site, got 0"),
+        (Some(0), _) => {
+            return Err(LayoutError::Invalid(
+                "--place: expected at least 1 site, got 0".to_string(),
+            ))
+        }
         (Some(k), Some(_)) => k,
-        (Some(_), None) => anyhow::bail!("--place needs --candidates FILE"),
-        (None, Some(_)) => anyhow::bail!("--candidates needs --place K"),
+        (Some(_), None) => {
+            return Err(LayoutError::Invalid(
+                "--place needs --candidates FILE".to_string(),
+            ))
+        }
+        (None, Some(_)) => {
+            return Err(LayoutError::Invalid(
+                "--candidates needs --place K".to_string(),
+            ))
+        }
     };
     let world = crate::world::load_world(&args.world)?;
     let times = epochs(&world, &args.times)?;
     let region = match &args.region {
-        Some(r) => Region::parse(r).map_err(anyhow::Error::msg)?,
-        None => Region::of_world(&world).map_err(anyhow::Error::msg)?,
+        Some(r) => Region::parse(r).map_err(LayoutError::Invalid)?,
+        None => Region::of_world(&world).map_err(LayoutError::Invalid)?,
     };
     let candidates = match &args.candidates {
-        Some(p) => place::parse_candidates(p, &region).map_err(anyhow::Error::msg)?,
+        Some(p) => place::parse_candidates(p, &region).map_err(LayoutError::Invalid)?,
         None => Vec::new(),
     };
     // A candidate mast must stand where the world would accept a transmitter: above the
@@ -130,28 +149,28 @@ pub fn run(args: &LayoutArgs) -> anyhow::Result<()> {
             scene
                 .check_transmitter(&Vector3::new(c.east_m, c.north_m, c.height_m))
                 .map_err(|i| {
-                    anyhow::anyhow!(
+                    LayoutError::Invalid(format!(
                         "{}:{}: candidate {}: {}",
                         file.display(),
                         c.line,
                         c.id,
                         i.message
-                    )
+                    ))
                 })?;
         }
     }
     if k > candidates.len() {
-        anyhow::bail!(
+        return Err(LayoutError::Invalid(format!(
             "--place {k}: only {} candidate sites in {}",
             candidates.len(),
             args.candidates
                 .as_deref()
                 .unwrap_or(Path::new("?"))
                 .display()
-        );
+        )));
     }
-    let grid =
-        Grid::new(region, args.grid, times.len(), candidates.len()).map_err(anyhow::Error::msg)?;
+    let grid = Grid::new(region, args.grid, times.len(), candidates.len())
+        .map_err(LayoutError::Invalid)?;
     let centre = (
         0.5 * (region.west_m + region.east_m),
         0.5 * (region.south_m + region.north_m),
@@ -164,10 +183,10 @@ pub fn run(args: &LayoutArgs) -> anyhow::Result<()> {
         );
     }
     std::fs::create_dir_all(&args.out).map_err(|e| {
-        anyhow::anyhow!(
+        LayoutError::Invalid(format!(
             "cannot create the output directory {}: {e}",
             args.out.display()
-        )
+        ))
     })?;
 
     let t0 = std::time::Instant::now();
@@ -198,118 +217,22 @@ pub fn run(args: &LayoutArgs) -> anyhow::Result<()> {
         .map(|s| (s.id.clone(), s.pos_enu_m.x, s.pos_enu_m.y, "#1f78b4"))
         .collect();
 
-    let mut placed: Option<(Placement, Vec<CellMetrics>)> = None;
-    if k > 0 {
-        let sites: Vec<_> = candidates.iter().map(|c| candidate_site(&ctx, c)).collect();
-        let rows = ctx.site_rows(&grid, &sites);
-        let problem = place::Problem {
-            base: &base,
-            epochs: times.len(),
-            rows: &rows,
-            cells: grid.cells(),
-            considered: &considered,
-            objective: args.objective,
-        };
-        let f = |s: &[usize]| problem.score(s);
-        let unit = match args.objective {
-            Objective::Gdop95 => "",
-            Objective::Error95 => " m",
-        };
-        let start = problem.score(&[]);
-        println!(
-            "place: {k} of {} candidates minimising {:?}; without new sites p95 {:.3}{unit} (mean {:.3})",
-            candidates.len(),
-            args.objective,
-            start.p95,
-            start.mean
-        );
-        let names = |s: &[usize]| {
-            s.iter()
-                .map(|&i| candidates[i].id.as_str())
-                .collect::<Vec<_>>()
-                .join(",")
-        };
-        let p = place::optimise(candidates.len(), k, &f, &mut |step| {
-            println!(
-                "place: {:<6} [{}] p95 {:.4}{unit} (mean {:.4})",
-                step.phase,
-                names(&step.chosen),
-                step.score.p95,
-                step.score.mean
-            );
-        });
-        // Each candidate alone: what the first greedy step compared, kept for the user (and
-        // for checking the evaluation's symmetry).
-        let single: Vec<Value> = (0..candidates.len())
-            .map(|i| {
-                let s = f(&[i]);
-                json!({ "id": candidates[i].id, "p95": s.p95, "mean": s.mean })
-            })
-            .collect();
-        let random = place::random_baseline(candidates.len(), k, args.random_trials, args.seed, &f);
-        let rp: Vec<f64> = random.iter().map(|s| s.p95).collect();
-        let r_mean = rp.iter().sum::<f64>() / rp.len().max(1) as f64;
-        let r_min = rp.iter().copied().fold(f64::INFINITY, f64::min);
-        let r_better = random.iter().filter(|s| s.better_than(&p.score)).count();
-        println!(
-            "place: greedy p95 {:.4}{unit}, after local search {:.4}{unit} [{}]; {} random placements (seed {}): mean p95 {:.4}{unit}, best {:.4}{unit}, {} better than the search",
-            p.greedy_score.p95,
-            p.score.p95,
-            names(&p.chosen),
-            random.len(),
-            args.seed,
-            r_mean,
-            r_min,
-            r_better
-        );
-        // The completed layout: the world's transmitters and the chosen sites.
-        let mut after = cells.clone();
-        for (c, m) in after.iter_mut().enumerate() {
-            let mut worst = (0.0f64, 0.0f64);
-            for e in 0..times.len() {
-                let mut n = base[c * times.len() + e];
-                for &s in &p.chosen {
-                    n.add(&rows[s * grid.cells() + c]);
-                }
-                let (g, s) = n.solve();
-                worst = (worst.0.max(g), worst.1.max(s));
-            }
-            m.gdop_hybrid = worst.0;
-            m.sigma_hybrid_m = worst.1;
-        }
-        let placement = json!({
-            "objective": args.objective,
-            "k": k,
-            "candidates": candidates,
-            "without_new_sites": start,
-            "greedy": { "sites": ids(&candidates, &p.greedy), "score": p.greedy_score },
-            "chosen": { "sites": ids(&candidates, &p.chosen), "score": p.score },
-            "steps": p.steps.iter().map(|s| json!({
-                "phase": s.phase,
-                "sites": ids(&candidates, &s.chosen),
-                "p95": s.score.p95,
-                "mean": s.score.mean,
-            })).collect::<Vec<_>>(),
-            "evaluations": p.evaluations,
-            "single_site": single,
-            "random": {
-                "seed": args.seed,
-                "trials": random.len(),
-                "p95_mean": r_mean,
-                "p95_min": r_min,
-                "better_than_search": r_better,
-                "p95": rp,
-            },
-            "after": stats_json(&after, &considered),
-        });
-        write_json(&args.out.join("placement.json"), &placement)?;
-        summary["placement"] = json!({
-            "chosen": ids(&candidates, &p.chosen),
-            "score": p.score,
-            "greedy_score": p.greedy_score,
-        });
-        placed = Some((p, after));
-    }
+    let placed = if k > 0 {
+        Some(place_sites(
+            args,
+            &ctx,
+            &grid,
+            &candidates,
+            &cells,
+            &base,
+            &considered,
+            times.len(),
+            k,
+            &mut summary,
+        )?)
+    } else {
+        None
+    };
 
     write_json(&args.out.join("layout.json"), &summary)?;
     write_file(
@@ -365,6 +288,133 @@ pub fn run(args: &LayoutArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `--place K`: chooses `k` of the candidate sites (greedy, then local search, against a
+/// random baseline), writes `placement.json`, notes the choice in the summary, and
+/// returns the placement with the cells' metrics once the chosen sites are added.
+#[allow(clippy::too_many_arguments)]
+fn place_sites(
+    args: &LayoutRequest,
+    ctx: &Context<'_>,
+    grid: &Grid,
+    candidates: &[Candidate],
+    cells: &[CellMetrics],
+    base: &[Normals],
+    considered: &[usize],
+    epochs: usize,
+    k: usize,
+    summary: &mut Value,
+) -> Result<(Placement, Vec<CellMetrics>), LayoutError> {
+    let sites: Vec<_> = candidates.iter().map(|c| candidate_site(ctx, c)).collect();
+    let rows = ctx.site_rows(grid, &sites);
+    let problem = place::Problem {
+        base,
+        epochs,
+        rows: &rows,
+        cells: grid.cells(),
+        considered,
+        objective: args.objective,
+    };
+    let f = |s: &[usize]| problem.score(s);
+    let unit = match args.objective {
+        Objective::Gdop95 => "",
+        Objective::Error95 => " m",
+    };
+    let start = problem.score(&[]);
+    println!(
+        "place: {k} of {} candidates minimising {:?}; without new sites p95 {:.3}{unit} (mean {:.3})",
+        candidates.len(),
+        args.objective,
+        start.p95,
+        start.mean
+    );
+    let names = |s: &[usize]| {
+        s.iter()
+            .map(|&i| candidates[i].id.as_str())
+            .collect::<Vec<_>>()
+            .join(",")
+    };
+    let p = place::optimise(candidates.len(), k, &f, &mut |step| {
+        println!(
+            "place: {:<6} [{}] p95 {:.4}{unit} (mean {:.4})",
+            step.phase,
+            names(&step.chosen),
+            step.score.p95,
+            step.score.mean
+        );
+    });
+    // Each candidate alone: what the first greedy step compared, kept for the user (and
+    // for checking the evaluation's symmetry).
+    let single: Vec<Value> = (0..candidates.len())
+        .map(|i| {
+            let s = f(&[i]);
+            json!({ "id": candidates[i].id, "p95": s.p95, "mean": s.mean })
+        })
+        .collect();
+    let random = place::random_baseline(candidates.len(), k, args.random_trials, args.seed, &f);
+    let rp: Vec<f64> = random.iter().map(|s| s.p95).collect();
+    let r_mean = rp.iter().sum::<f64>() / rp.len().max(1) as f64;
+    let r_min = rp.iter().copied().fold(f64::INFINITY, f64::min);
+    let r_better = random.iter().filter(|s| s.better_than(&p.score)).count();
+    println!(
+        "place: greedy p95 {:.4}{unit}, after local search {:.4}{unit} [{}]; {} random placements (seed {}): mean p95 {:.4}{unit}, best {:.4}{unit}, {} better than the search",
+        p.greedy_score.p95,
+        p.score.p95,
+        names(&p.chosen),
+        random.len(),
+        args.seed,
+        r_mean,
+        r_min,
+        r_better
+    );
+    // The completed layout: the world's transmitters and the chosen sites.
+    let mut after = cells.to_vec();
+    for (c, m) in after.iter_mut().enumerate() {
+        let mut worst = (0.0f64, 0.0f64);
+        for e in 0..epochs {
+            let mut n = base[c * epochs + e];
+            for &s in &p.chosen {
+                n.add(&rows[s * grid.cells() + c]);
+            }
+            let (g, s) = n.solve();
+            worst = (worst.0.max(g), worst.1.max(s));
+        }
+        m.gdop_hybrid = worst.0;
+        m.sigma_hybrid_m = worst.1;
+    }
+    let placement = json!({
+        "objective": args.objective,
+        "k": k,
+        "candidates": candidates,
+        "without_new_sites": start,
+        "greedy": { "sites": ids(candidates, &p.greedy), "score": p.greedy_score },
+        "chosen": { "sites": ids(candidates, &p.chosen), "score": p.score },
+        "steps": p.steps.iter().map(|s| json!({
+            "phase": s.phase,
+            "sites": ids(candidates, &s.chosen),
+            "p95": s.score.p95,
+            "mean": s.score.mean,
+        })).collect::<Vec<_>>(),
+        "evaluations": p.evaluations,
+        "single_site": single,
+        "random": {
+            "seed": args.seed,
+            "trials": random.len(),
+            "p95_mean": r_mean,
+            "p95_min": r_min,
+            "better_than_search": r_better,
+            "p95": rp,
+        },
+        "after": stats_json(&after, considered),
+    });
+    write_json(&args.out.join("placement.json"), &placement)?;
+    summary["placement"] = json!({
+        "chosen": ids(candidates, &p.chosen),
+        "score": p.score,
+        "greedy_score": p.greedy_score,
+    });
+    Ok((p, after))
+}
+
 /// The site a candidate describes, with the world's receiver parameters.
 pub fn candidate_site(ctx: &Context<'_>, c: &Candidate) -> metrics::Site {
     let system = if c.kind == "tcofdm" {
@@ -386,13 +436,14 @@ fn ids(c: &[Candidate], s: &[usize]) -> Vec<String> {
     s.iter().map(|&i| c[i].id.clone()).collect()
 }
 
-fn write_file(path: &Path, text: &str) -> anyhow::Result<()> {
+fn write_file(path: &Path, text: &str) -> Result<(), LayoutError> {
     write_atomic(path, text.as_bytes())
-        .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))
+        .map_err(|e| LayoutError::Invalid(format!("cannot write {}: {e}", path.display())))
 }
 
-fn write_json(path: &Path, v: &Value) -> anyhow::Result<()> {
-    let mut text = serde_json::to_string_pretty(v)?;
+fn write_json(path: &Path, v: &Value) -> Result<(), LayoutError> {
+    let mut text = serde_json::to_string_pretty(v)
+        .map_err(|e| LayoutError::Invalid(format!("cannot encode {}: {e}", path.display())))?;
     text.push('\n');
     write_file(path, &text)
 }
@@ -456,7 +507,7 @@ fn summary_json(
     grid: &Grid,
     cells: &[CellMetrics],
     considered: &[usize],
-    args: &LayoutArgs,
+    args: &LayoutRequest,
 ) -> Value {
     let frames = world
         .file
@@ -633,7 +684,7 @@ fn write_maps(
     cells: &[CellMetrics],
     outlines: &[Vec<[f64; 2]>],
     markers: &[svg::Marker<'_>],
-) -> anyhow::Result<()> {
+) -> Result<(), LayoutError> {
     const COVERAGE: &[(&str, &str)] = &[
         ("no usable DTMB/TC-OFDM", "#d7191c"),
         ("NLOS only", "#fdae61"),

@@ -27,13 +27,33 @@ pub const GDOP_CAP: f64 = 100.0;
 pub const ERROR_CAP_M: f64 = 1000.0;
 
 /// What the placement minimises.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Objective {
     /// 95th percentile of the hybrid GDOP over the region.
     Gdop95,
     /// 95th percentile of the predicted 3-D position error over the region.
     Error95,
+}
+
+impl Objective {
+    /// The names the command line and the outputs use.
+    pub const NAMES: [&'static str; 2] = ["gdop95", "error95"];
+}
+
+impl std::str::FromStr for Objective {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "gdop95" => Ok(Objective::Gdop95),
+            "error95" => Ok(Objective::Error95),
+            _ => Err(format!(
+                "expected one of {}, got {s:?}",
+                Self::NAMES.join(", ")
+            )),
+        }
+    }
 }
 
 /// A value of the objective: the 95th percentile and the mean that breaks ties.

@@ -1,6 +1,6 @@
 //! Heat maps of one metric over the grid as SVG, drawn under the scene's building
 //! outlines and the transmitters, with a colour bar. Plain SVG, as the world map
-//! (`world::map`): one `<rect>` per cell, small and viewable anywhere.
+//! (`report::map`): one `<rect>` per cell, small and viewable anywhere.
 
 use super::grid::Grid;
 use crate::report::svg::escape;

@@ -677,9 +677,8 @@ fn bad_imu_input_gives_clear_messages() {
 use hybridnav::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System};
 use hybridnav::engine::trial::TrialSetup;
 use hybridnav::engine::trial::{simulate, EstimatorTrace};
-use hybridnav::inertial::estimators::{
-    InsEstimator, InsFilterConfig, PdrEstimator, PdrFilterConfig,
-};
+use hybridnav::inertial::ins_estimator::{InsEstimator, InsFilterConfig};
+use hybridnav::inertial::pdr_estimator::{PdrEstimator, PdrFilterConfig};
 use hybridnav::inertial::source::{local_earth_of, ImuSource, PdrSensorConfig, PdrSource};
 use hybridnav::measurement::{EpochOutcome, Estimate, Estimator};
 use hybridnav::measurement::{Measurement, MeasurementBatch, RangeMeasurement};

@@ -1,20 +1,8 @@
 //! A multipath channel for DTMB: paths with exact fractional delays, per-path Doppler,
 //! carrier and sampling-frequency offsets, and complex white Gaussian noise at an SNR.
 //!
-//! **Waveform.** The transmitted samples `x[m]` (7.56 Msps) define the continuous-time
-//! signal
-//!
-//! ```text
-//! x(u) = Σ_m x[m] φ(u − m),   φ(u) = sinc(u) · I0(β√(1 − (u/K)²)) / I0(β),  |u| < K,
-//! ```
-//!
-//! with `u` in transmitter samples: a Kaiser-windowed sinc of half-width `K = 16` samples
-//! and `β = 6`. `φ(m) = δ[m]` at integers, so the waveform passes through the samples,
-//! and its spectrum is flat to within 0.1 dB up to 0.44 of the sample rate. Evaluating
-//! `x(u)` at any real `u` is exact for this waveform (no table, no quantised delay); a
-//! delay is therefore exact to floating-point precision. Relative to the ideal
-//! band-limited (infinite sinc) interpolation, the window alters only the outermost
-//! 6 % of the band.
+//! **Waveform.** The transmitted samples define a continuous-time signal through the
+//! Kaiser-windowed sinc of [`super::kernel`], evaluated exactly at any real delay.
 //!
 //! **Paths and clocks.** With receiver sample-clock offset `ε` (`sfo_ppm·10⁻⁶`, the
 //! receiver samples at `f_s(1 + ε)`), receiver sample `n` is taken at true time
@@ -37,210 +25,19 @@
 //! Single-frequency networks are more paths, each with its tower's extra delay.
 
 use super::fd_channel::FdChannel;
+use super::kernel::KERNEL_HALF_WIDTH;
+use super::multipath::ChannelConfig;
 use super::pn::{PnMode, SAMPLE_RATE_HZ};
 use super::transmitter::SampleSource;
 use super::DtmbError;
+use crate::dtmb::kernel::kernel;
+use crate::dtmb::Path;
 use num_complex::{Complex32, Complex64};
 use rand::Rng;
 use rand_distr::StandardNormal;
 
-/// Half-width of the interpolation kernel in samples.
-pub const KERNEL_HALF_WIDTH: usize = 16;
-/// Kaiser window parameter of the kernel.
-pub const KAISER_BETA: f64 = 6.0;
-/// `I0(β)` for β = 6, the window normalisation (checked against the series in a test).
-const I0_BETA: f64 = 67.234_406_976_477_97;
 /// Sub-block over which a path's fractional delay is held.
 pub const SUB_BLOCK: usize = 256;
-
-/// One propagation path.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Path {
-    /// Propagation delay in seconds (may include tower and receiver clock offsets).
-    pub delay_s: f64,
-    /// Complex amplitude gain.
-    pub gain: Complex64,
-    /// Doppler shift of this path in hertz.
-    pub doppler_hz: f64,
-}
-
-impl Path {
-    /// A path from amplitude and phase.
-    pub fn new(delay_s: f64, amplitude: f64, phase_rad: f64, doppler_hz: f64) -> Self {
-        Self {
-            delay_s,
-            gain: Complex64::from_polar(amplitude, phase_rad),
-            doppler_hz,
-        }
-    }
-}
-
-/// Channel configuration.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ChannelConfig {
-    /// The paths (at least one).
-    pub paths: Vec<Path>,
-    /// Carrier frequency offset in hertz, common to all paths.
-    pub cfo_hz: f64,
-    /// Receiver sampling-frequency offset in parts per million.
-    pub sfo_ppm: f64,
-    /// SNR over the 7.56 MHz band in dB; `None` for a noiseless channel.
-    pub snr_db: Option<f64>,
-}
-
-impl ChannelConfig {
-    /// A configuration whose CFO and SFO come from the oscillators: the receiver derives
-    /// its local oscillator and sample clock from one reference (as SDRs do), so a
-    /// fractional frequency error `e_rx` and a transmitter error `e_tx` give
-    /// `Δf = (e_tx − e_rx) f_c` and `ε = e_rx`.
-    pub fn from_oscillators(
-        paths: Vec<Path>,
-        tx_ppm: f64,
-        rx_ppm: f64,
-        carrier_hz: f64,
-        snr_db: Option<f64>,
-    ) -> Self {
-        Self {
-            paths,
-            cfo_hz: (tx_ppm - rx_ppm) * 1e-6 * carrier_hz,
-            sfo_ppm: rx_ppm,
-            snr_db,
-        }
-    }
-}
-
-/// Link SNR over `bandwidth_hz` from the budget: `ERP − L − (kTB + NF)` with
-/// `kT = 1.380649e-23 · 290` W/Hz (−203.98 dBW/Hz). DTMB's band is 7.56 MHz.
-pub fn link_snr_db(
-    erp_dbw: f64,
-    path_loss_db: f64,
-    noise_figure_db: f64,
-    bandwidth_hz: f64,
-) -> f64 {
-    let ktb_dbw = 10.0 * (1.380_649e-23 * 290.0 * bandwidth_hz).log10();
-    erp_dbw - path_loss_db - ktb_dbw - noise_figure_db
-}
-
-/// `1/k²` for the Bessel series, so its loop multiplies instead of dividing.
-const INV_SQ: [f64; 25] = {
-    let mut t = [0.0; 25];
-    let mut k = 1;
-    while k < 25 {
-        t[k] = 1.0 / ((k * k) as f64);
-        k += 1;
-    }
-    t
-};
-
-/// Modified Bessel function of the first kind, order 0, by its power series
-/// `Σ_k ((x/2)^k / k!)²`. For the arguments used here (`x ≤ β = 6`, `x²/4 ≤ 9`) the
-/// 24th term is below 10⁻²⁴ of the sum, so 24 terms reach double precision.
-fn bessel_i0(x: f64) -> f64 {
-    let q = x * x / 4.0;
-    let mut term = 1.0;
-    let mut sum = 1.0;
-    for inv in &INV_SQ[1..] {
-        term *= q * inv;
-        sum += term;
-    }
-    sum
-}
-
-/// The interpolation kernel `φ(u)` and its derivative `φ'(u)`, analytically:
-///
-/// ```text
-/// φ(u)  = sinc(u) w(u),   w(u) = I0(β s)/I0(β),   s = √(1 − (u/K)²),
-/// φ'(u) = sinc'(u) w(u) + sinc(u) w'(u),
-/// sinc'(u) = (cos πu − sinc u)/u,   w'(u) = −(β² u/K²) · [I1(βs)/(βs)] / I0(β),
-/// ```
-///
-/// with `I1(x)/x = ½ Σ_k (x²/4)^k / (k!(k+1)!)` summed with `I0`'s series in one loop,
-/// so the derivative has no `1/s` singularity at the window's edge. Near `u = 0` the
-/// sinc and its derivative use their Taylor series (error below 10⁻¹⁶). The frequency-
-/// domain channel needs `φ'` for the first-order sampling-clock drift term; the analytic
-/// form is exact to rounding, where a central difference loses half the digits.
-pub fn kernel_with_derivative(u: f64) -> (f64, f64) {
-    let (sn, cs) = (std::f64::consts::PI * u).sin_cos();
-    kernel_with_derivative_given(u, sn, cs)
-}
-
-/// [`kernel_with_derivative`] at the `2K` arguments `u_i = first + i − d`, the taps of a
-/// path at fractional delay `d` starting at integer `first`, into `out` (length `2K`).
-///
-/// The arguments are one integer apart, so `sin πu_i = −(−1)^m sin πf` and
-/// `cos πu_i = (−1)^m cos πf` with `u_i = m − f`, `m = first + i − ⌊d⌋`, `f = d − ⌊d⌋`:
-/// one `sincos` for the whole set instead of one per tap (the frequency-domain channel
-/// rebuilds six paths' taps every few frames).
-pub fn kernel_taps_with_derivative(d: f64, first: i64, out: &mut [(f64, f64)]) {
-    let fl = d.floor();
-    let (sf, cf) = (std::f64::consts::PI * (d - fl)).sin_cos();
-    let fl = fl as i64;
-    for (i, o) in out.iter_mut().enumerate() {
-        let j = first + i as i64;
-        let odd = (j - fl).rem_euclid(2) == 1;
-        let (sn, cs) = if odd { (sf, -cf) } else { (-sf, cf) };
-        *o = kernel_with_derivative_given(j as f64 - d, sn, cs);
-    }
-}
-
-/// `½/(k + 1)` for `k = 1 … 24`: the factor that turns `I0`'s series term into `I1(x)/x`'s.
-const HALF_INV_K1: [f64; 25] = {
-    let mut t = [0.0; 25];
-    let mut k = 1;
-    while k < 25 {
-        t[k] = 0.5 / ((k + 1) as f64);
-        k += 1;
-    }
-    t
-};
-
-/// The body of [`kernel_with_derivative`] with `sin πu` and `cos πu` supplied.
-#[inline(always)]
-fn kernel_with_derivative_given(u: f64, sin_pi_u: f64, cos_pi_u: f64) -> (f64, f64) {
-    let k = KERNEL_HALF_WIDTH as f64;
-    if u.abs() >= k {
-        return (0.0, 0.0);
-    }
-    let pi = std::f64::consts::PI;
-    let (s, ds) = if u.abs() < 1e-4 {
-        let x2 = (pi * u) * (pi * u);
-        (
-            1.0 - x2 / 6.0 + x2 * x2 / 120.0,
-            pi * pi * u * (-1.0 / 3.0 + x2 / 30.0),
-        )
-    } else {
-        let sinc = sin_pi_u / (pi * u);
-        (sinc, (cos_pi_u - sinc) / u)
-    };
-    let r = u / k;
-    // (x/2)² with x = β√(1 − r²), without the square root.
-    let q = 0.25 * KAISER_BETA * KAISER_BETA * (1.0 - r * r).max(0.0);
-    let (mut term, mut i0, mut i1x) = (1.0, 1.0, 0.5);
-    for (inv, half) in INV_SQ[1..].iter().zip(&HALF_INV_K1[1..]) {
-        term *= q * inv;
-        i0 += term;
-        // The series of I1(x)/x: term_k / (k + 1), halved.
-        i1x += term * half;
-    }
-    let w = i0 / I0_BETA;
-    let dw = -(KAISER_BETA * KAISER_BETA * u / (k * k)) * i1x / I0_BETA;
-    (s * w, ds * w + s * dw)
-}
-
-/// The interpolation kernel `φ(u)` of the module documentation.
-pub fn kernel(u: f64) -> f64 {
-    let k = KERNEL_HALF_WIDTH as f64;
-    if u.abs() >= k {
-        return 0.0;
-    }
-    let s = if u.abs() < 1e-12 {
-        1.0
-    } else {
-        (std::f64::consts::PI * u).sin() / (std::f64::consts::PI * u)
-    };
-    let r = u / k;
-    s * bessel_i0(KAISER_BETA * (1.0 - r * r).sqrt()) / I0_BETA
-}
 
 /// A channel instance with its caller-independent work buffers.
 #[derive(Clone, Debug)]
@@ -521,6 +318,7 @@ impl Channel {
 mod tests {
     use super::*;
     use crate::core::TrialRng;
+    use crate::dtmb::link_snr_db;
 
     /// A test source: a known band-limited tone sum, so `x(u)` has a closed form.
     struct Tones;
@@ -538,72 +336,6 @@ mod tests {
             .map(|f| Complex64::from_polar(1.0, 2.0 * std::f64::consts::PI * f * u))
             .sum();
         Complex32::new(z.re as f32, z.im as f32)
-    }
-
-    #[test]
-    fn kaiser_normalisation_matches_the_series() {
-        assert!((bessel_i0(KAISER_BETA) / I0_BETA - 1.0).abs() < 1e-14);
-        assert!((bessel_i0(1.0) - 1.266_065_877_752_008_4).abs() < 1e-15);
-    }
-
-    #[test]
-    fn kernel_derivative_matches_a_central_difference() {
-        // The analytic φ' against a central difference of φ (truncation h²|φ‴|/6 with
-        // h = 1e-4, about 1e-8 here) over the whole support, the window edge included.
-        let mut worst = 0.0f64;
-        let mut u = -16.0;
-        while u <= 16.0 {
-            let (phi, dphi) = kernel_with_derivative(u);
-            assert!((phi - kernel(u)).abs() < 1e-15, "φ({u})");
-            let h = 1e-4;
-            let fd = (kernel(u + h) - kernel(u - h)) / (2.0 * h);
-            if u.abs() < 16.0 - h {
-                worst = worst.max((dphi - fd).abs());
-            }
-            u += 0.013_7;
-        }
-        assert!(worst < 1e-7, "worst |φ' − central difference| {worst}");
-        // φ'(0) = 0 by symmetry, and φ'(m) = cos(πm)/m · w(m) at integers m ≠ 0.
-        assert!(kernel_with_derivative(0.0).1.abs() < 1e-15);
-        let w3 = bessel_i0(KAISER_BETA * (1.0f64 - (3.0f64 / 16.0).powi(2)).sqrt()) / I0_BETA;
-        assert!((kernel_with_derivative(3.0).1 - (-1.0 / 3.0) * w3).abs() < 1e-14);
-    }
-
-    #[test]
-    fn kernel_taps_match_the_kernel_tap_by_tap() {
-        // The taps of a set from one sincos against the kernel evaluated at each argument,
-        // for delays on both sides of integers, at integers and near them (the Taylor branch).
-        let k = KERNEL_HALF_WIDTH as i64;
-        let mut taps = [(0.0, 0.0); 2 * KERNEL_HALF_WIDTH];
-        for d in [
-            37.8f64,
-            38.0,
-            38.00002,
-            -3.25,
-            0.5,
-            1_234.999_99,
-            7.3e4 + 0.61,
-        ] {
-            let first = d.floor() as i64 - k + 1;
-            kernel_taps_with_derivative(d, first, &mut taps);
-            for (i, &(h, dh)) in taps.iter().enumerate() {
-                let u = (first + i as i64) as f64 - d;
-                let (h0, dh0) = kernel_with_derivative(u);
-                assert!(
-                    (h - h0).abs() < 1e-13 && (dh - dh0).abs() < 1e-12,
-                    "d {d} u {u}"
-                );
-                assert!((h - kernel(u)).abs() < 1e-13, "d {d} u {u}");
-            }
-        }
-    }
-
-    #[test]
-    fn kernel_interpolates_through_samples() {
-        assert!((kernel(0.0) - 1.0).abs() < 1e-15);
-        for m in 1..20 {
-            assert!(kernel(m as f64).abs() < 1e-15 && kernel(-(m as f64)).abs() < 1e-15);
-        }
     }
 
     #[test]

@@ -26,7 +26,7 @@
 //!
 //! with `D_p`, `D'_p` the exact DFTs of the taps `φ(j − d_p(n_b))` and of their
 //! derivative taps `φ'(j − d_p(n_b))` (computed once per base; the derivative
-//! analytically, [`super::channel::kernel_taps_with_derivative`]). Inside the sub-block the
+//! analytically, [`crate::dtmb::kernel::kernel_taps_with_derivative`]). Inside the sub-block the
 //! output is the linear interpolation in time of the two boundary filters' outputs,
 //!
 //! ```text
@@ -59,9 +59,10 @@
 // the portable code.
 #![allow(unsafe_code)]
 
-use super::channel::{kernel_taps_with_derivative, ChannelConfig, KERNEL_HALF_WIDTH};
 use super::pn::SAMPLE_RATE_HZ;
 use super::transmitter::SampleSource;
+use crate::dtmb::kernel::{kernel_taps_with_derivative, KERNEL_HALF_WIDTH};
+use crate::dtmb::multipath::ChannelConfig;
 use num_complex::{Complex32, Complex64};
 use rustfft::{Fft, FftPlanner};
 use std::f64::consts::PI;
@@ -892,8 +893,8 @@ pub(crate) fn rotate(v: &mut [Complex32], n0: i64, f_cycles: f64) {
 mod tests {
     use super::*;
     use crate::core::{GpsTime, TrialRng};
-    use crate::dtmb::channel::Path;
     use crate::dtmb::frame::{CarrierMode, Qam};
+    use crate::dtmb::multipath::Path;
     use crate::dtmb::pn::PnMode;
     use crate::dtmb::same_bits;
     use crate::dtmb::transmitter::{FrameSchedule, Transmitter, TxConfig};

@@ -356,11 +356,12 @@ pub fn signal_timing_errors(
     seed: u64,
     extra: &[Tap],
 ) -> Vec<f64> {
-    use super::channel::{Channel, ChannelConfig, Path};
+    use super::channel::Channel;
     use super::frame::{CarrierMode, Qam};
     use super::receiver::{Receiver, Search, SyncConfig};
     use super::transmitter::{FrameSchedule, Transmitter, TxConfig};
     use crate::core::{GpsTime, TrialRng};
+    use crate::dtmb::multipath::{ChannelConfig, Path};
     let streams = TrialRng::new(seed, snr_ref_db.to_bits() ^ mode.header_len() as u64);
     let tx_cfg = TxConfig {
         schedule: FrameSchedule {

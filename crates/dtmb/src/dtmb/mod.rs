@@ -26,7 +26,9 @@
 pub mod channel;
 mod fd_channel;
 pub mod frame;
+pub mod kernel;
 pub mod measurement;
+pub mod multipath;
 pub mod noise;
 pub mod pn;
 pub mod receiver;
@@ -35,8 +37,9 @@ pub mod source;
 pub mod tps;
 pub mod transmitter;
 
-pub use channel::{link_snr_db, Channel, ChannelConfig, Path};
+pub use channel::Channel;
 pub use frame::{BodyModulator, CarrierMode, Qam};
+pub use multipath::{link_snr_db, ChannelConfig, Path};
 pub use pn::{PnMode, SAMPLE_RATE_HZ};
 pub use receiver::{pseudorange_m, FirstPathConfig, Receiver, Search, SyncConfig, SyncResult};
 pub use sigmf::{generate_iq, read_sigmf, write_sigmf, Annotation, SampleFormat, SigmfRecording};

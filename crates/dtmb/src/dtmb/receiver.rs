@@ -966,8 +966,9 @@ fn parabolic_offset(acc: &[f32], lag: usize, last: usize) -> f64 {
 mod tests {
     use super::*;
     use crate::core::TrialRng;
-    use crate::dtmb::channel::{Channel, ChannelConfig, Path};
+    use crate::dtmb::channel::Channel;
     use crate::dtmb::frame::{CarrierMode, Qam};
+    use crate::dtmb::multipath::{ChannelConfig, Path};
     use crate::dtmb::transmitter::{Transmitter, TxConfig};
 
     pub(super) fn setup(

@@ -6,12 +6,13 @@
 //! scaled so the largest component maps to ±127; the scale is recorded under the
 //! non-core key `hybridnav:ci8_scale` so the reader can restore the amplitude.
 
-use super::channel::{Channel, ChannelConfig, Path as ChannelPath};
+use super::channel::Channel;
 use super::frame::{CarrierMode, Qam};
 use super::pn::{PnMode, SAMPLE_RATE_HZ};
 use super::transmitter::{FrameSchedule, SrrcInterpolator, Transmitter, TxConfig};
 use super::DtmbError;
 use crate::core::{GpsTime, TrialRng};
+use crate::dtmb::multipath::{ChannelConfig, Path as ChannelPath};
 use crate::io::atomic::write_atomic;
 use num_complex::Complex32;
 use serde_json::{json, Map, Value};

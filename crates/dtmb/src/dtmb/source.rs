@@ -26,7 +26,7 @@
 //! `dtmb/Dnn/noise` (signal level), `dtmb/Dnn/tps`; shadowing `dtmb/shadowing/Dnn` from the
 //! master seed (the same city in every trial).
 
-use super::channel::{link_snr_db, Channel, ChannelConfig, Path};
+use super::channel::Channel;
 use super::frame::{CarrierMode, Qam};
 use super::measurement::{
     crb_samples, draw_timing_error_samples, multipath_estimate, thermal_stats, Tap,
@@ -42,6 +42,7 @@ use crate::core::receiver_clock::ClockTrack;
 use crate::core::rng::StreamRng;
 use crate::core::ConfigIssue;
 use crate::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng, C_MPS};
+use crate::dtmb::multipath::{link_snr_db, ChannelConfig, Path};
 use crate::measurement::SourceKind;
 use crate::measurement::{Measurement, MeasurementBatch, RangeDifference, RangeMeasurement};
 use crate::measurement::{SampleContext, Source};

@@ -365,8 +365,9 @@ mod tests {
     use crate::core::receiver_clock::{ClockConfig, Oscillator, ReceiverClock};
     use crate::core::GpsTime;
     use crate::core::TrialRng;
-    use crate::dtmb::channel::{Channel, ChannelConfig, Path};
+    use crate::dtmb::channel::Channel;
     use crate::dtmb::frame::{BodyModulator, CarrierMode, Qam};
+    use crate::dtmb::multipath::{ChannelConfig, Path};
     use crate::dtmb::transmitter::{FrameSchedule, Transmitter, TxConfig};
 
     #[test]

@@ -348,11 +348,12 @@ pub fn parse_nav(text: &str, file_name: &str) -> Result<NavData, RinexError> {
         leap_seconds: header.leap_seconds,
         ..NavData::default()
     };
-    if header.version < 3.0 {
-        parse_body_v2(&ctx, &lines, &header, &mut nav)?;
+    let dialect = if header.version < 3.0 {
+        &RINEX_2
     } else {
-        parse_body_v3(&ctx, &lines, &header, &mut nav)?;
-    }
+        &RINEX_3
+    };
+    parse_body(&ctx, &lines, &header, &mut nav, dialect)?;
     nav.sort();
     Ok(nav)
 }
@@ -672,11 +673,60 @@ fn skip_record(lines: &[&str], idx: usize, is_record_start: fn(&str) -> bool) ->
     j
 }
 
-fn parse_body_v2(
+/// How one RINEX version lays out a record: what starts one, where its clock fields
+/// begin, how far its orbit lines are indented, and how its first line names the
+/// satellite and the epoch. The record loop ([`parse_body`]) is shared.
+struct Dialect {
+    is_record_start: fn(&str) -> bool,
+    /// What the loop expected when a line does not start a record.
+    record_start_expected: &'static str,
+    /// Column (0-based) of the first of the three clock fields on the epoch line.
+    clock_col: usize,
+    /// Columns of indentation before an orbit line's first field.
+    orbit_indent: usize,
+    /// RINEX 3 (whose records carry the system letter and whose BeiDou epochs are BDT).
+    v3: bool,
+    /// Reads the satellite and the epoch (GPST) of a record's first line, or the system
+    /// letter of a record this reader skips.
+    first_line: fn(&Ctx<'_>, usize, &str, &Header) -> Result<FirstLine, RinexError>,
+}
+
+/// What a record's first line says.
+enum FirstLine {
+    /// A GPS or BeiDou record: its satellite and its time of clock (GPST).
+    Record { sat: EmitterId, toc: GpsTime },
+    /// A record of a system hybridnav does not use, by its RINEX letter.
+    Skip(char),
+}
+
+const RINEX_2: Dialect = Dialect {
+    is_record_start: v2_record_start,
+    record_start_expected: "the first line of a record (PRN in columns 1-2, then the epoch)",
+    clock_col: 22,
+    orbit_indent: 3,
+    v3: false,
+    first_line: v2_first_line,
+};
+
+const RINEX_3: Dialect = Dialect {
+    is_record_start: v3_record_start,
+    record_start_expected:
+        "the first line of a record (satellite id such as G05 or C01 in columns 1-3)",
+    clock_col: 23,
+    orbit_indent: 4,
+    v3: true,
+    first_line: v3_first_line,
+};
+
+/// The record loop of both versions: blank lines skipped, each record's first line read
+/// by the dialect, then its clock fields, its 7 orbit lines and the check that a new
+/// record (or the end) follows them.
+fn parse_body(
     ctx: &Ctx<'_>,
     lines: &[&str],
     header: &Header,
     nav: &mut NavData,
+    dialect: &Dialect,
 ) -> Result<(), RinexError> {
     let mut idx = header.body_start;
     while idx < lines.len() {
@@ -685,63 +735,26 @@ fn parse_body_v2(
             idx += 1;
             continue;
         }
-        if !v2_record_start(line) {
-            return Err(ctx.syntax(
-                idx,
-                "the first line of a record (PRN in columns 1-2, then the epoch)",
-                quote(line),
-            ));
+        if !(dialect.is_record_start)(line) {
+            return Err(ctx.syntax(idx, dialect.record_start_expected, quote(line)));
         }
-        if header.file_type != 'N' {
-            // RINEX 2 GLONASS ('G') and SBAS ('H') navigation files: nothing for us.
-            let letter = if header.file_type == 'G' { 'R' } else { 'S' };
-            *nav.skipped.entry(letter).or_insert(0) += 1;
-            idx = skip_record(lines, idx, v2_record_start);
-            continue;
-        }
-        let prn = int_field(ctx, idx, line, 0, 2, "the satellite PRN")?;
-        if !(1..=99).contains(&prn) {
-            return Err(ctx.syntax(
-                idx,
-                "a PRN 1-99 in columns 1-2",
-                quote(cols(line, 0, 2).unwrap_or("")),
-            ));
-        }
-        let sat = EmitterId::new(System::Gps, prn as u16);
-        let yy = int_field(ctx, idx, line, 2, 5, "the two-digit year")?;
-        // RINEX 2 years: 80–99 are 1980–1999, 00–79 are 2000–2079.
-        let year = match yy {
-            0..=79 => 2000 + yy,
-            80..=99 => 1900 + yy,
-            _ => {
-                return Err(ctx.syntax(
-                    idx,
-                    "a two-digit year 00-99 in columns 4-5",
-                    quote(cols(line, 2, 5).unwrap_or("")),
-                ))
+        let (sat, toc) = match (dialect.first_line)(ctx, idx, line, header)? {
+            FirstLine::Skip(letter) => {
+                *nav.skipped.entry(letter).or_insert(0) += 1;
+                idx = skip_record(lines, idx, dialect.is_record_start);
+                continue;
             }
+            FirstLine::Record { sat, toc } => (sat, toc),
         };
-        let mo = int_field(ctx, idx, line, 5, 8, "the month")?;
-        let d = int_field(ctx, idx, line, 8, 11, "the day")?;
-        let h = int_field(ctx, idx, line, 11, 14, "the hour")?;
-        let mi = int_field(ctx, idx, line, 14, 17, "the minute")?;
-        let sec_field = cols(line, 17, 22).unwrap_or("");
-        let sec = parse_fortran_f64(sec_field).ok().flatten().ok_or_else(|| {
-            ctx.syntax(
-                idx,
-                "the seconds of the epoch (F5.1 in columns 18-22)",
-                quote(sec_field),
-            )
-        })?;
-        let toc = gpst_from_calendar(year, mo, d, h, mi, sec).ok_or_else(|| {
-            ctx.syntax(
-                idx,
-                format!("a valid epoch date and time for {sat}"),
-                quote(cols(line, 2, 22).unwrap_or("")),
-            )
-        })?;
-        let clock = clock_fields(ctx, idx, line, 22, sat)?;
-        let (orbit, orbit_line) = collect_orbit_lines(ctx, lines, idx, sat, 3, v2_record_start)?;
+        let clock = clock_fields(ctx, idx, line, dialect.clock_col, sat)?;
+        let (orbit, orbit_line) = collect_orbit_lines(
+            ctx,
+            lines,
+            idx,
+            sat,
+            dialect.orbit_indent,
+            dialect.is_record_start,
+        )?;
         let raw = RawRecord {
             sat,
             clock,
@@ -749,10 +762,10 @@ fn parse_body_v2(
             orbit_line,
         };
         nav.ephemerides
-            .push(build_ephemeris(ctx, &raw, toc, false)?);
+            .push(build_ephemeris(ctx, &raw, toc, dialect.v3)?);
         idx += 8;
         if let Some(next) = lines.get(idx) {
-            if !is_blank(next) && !v2_record_start(next) {
+            if !is_blank(next) && !(dialect.is_record_start)(next) {
                 return Err(ctx.syntax(
                     idx,
                     format!("a new record after the 7 orbit lines of {sat}"),
@@ -764,95 +777,118 @@ fn parse_body_v2(
     Ok(())
 }
 
-fn parse_body_v3(
+/// A RINEX 2 record's first line: the PRN (columns 1-2) and the epoch with a two-digit
+/// year. GLONASS ('G') and SBAS ('H') navigation files are skipped whole.
+fn v2_first_line(
     ctx: &Ctx<'_>,
-    lines: &[&str],
+    idx: usize,
+    line: &str,
     header: &Header,
-    nav: &mut NavData,
-) -> Result<(), RinexError> {
-    let mut idx = header.body_start;
-    while idx < lines.len() {
-        let line = lines[idx];
-        if is_blank(line) {
-            idx += 1;
-            continue;
-        }
-        if !v3_record_start(line) {
+) -> Result<FirstLine, RinexError> {
+    if header.file_type != 'N' {
+        return Ok(FirstLine::Skip(if header.file_type == 'G' {
+            'R'
+        } else {
+            'S'
+        }));
+    }
+    let prn = int_field(ctx, idx, line, 0, 2, "the satellite PRN")?;
+    if !(1..=99).contains(&prn) {
+        return Err(ctx.syntax(
+            idx,
+            "a PRN 1-99 in columns 1-2",
+            quote(cols(line, 0, 2).unwrap_or("")),
+        ));
+    }
+    let sat = EmitterId::new(System::Gps, prn as u16);
+    let yy = int_field(ctx, idx, line, 2, 5, "the two-digit year")?;
+    // RINEX 2 years: 80–99 are 1980–1999, 00–79 are 2000–2079.
+    let year = match yy {
+        0..=79 => 2000 + yy,
+        80..=99 => 1900 + yy,
+        _ => {
             return Err(ctx.syntax(
                 idx,
-                "the first line of a record (satellite id such as G05 or C01 in columns 1-3)",
+                "a two-digit year 00-99 in columns 4-5",
+                quote(cols(line, 2, 5).unwrap_or("")),
+            ))
+        }
+    };
+    let mo = int_field(ctx, idx, line, 5, 8, "the month")?;
+    let d = int_field(ctx, idx, line, 8, 11, "the day")?;
+    let h = int_field(ctx, idx, line, 11, 14, "the hour")?;
+    let mi = int_field(ctx, idx, line, 14, 17, "the minute")?;
+    let sec_field = cols(line, 17, 22).unwrap_or("");
+    let sec = parse_fortran_f64(sec_field).ok().flatten().ok_or_else(|| {
+        ctx.syntax(
+            idx,
+            "the seconds of the epoch (F5.1 in columns 18-22)",
+            quote(sec_field),
+        )
+    })?;
+    let toc = gpst_from_calendar(year, mo, d, h, mi, sec).ok_or_else(|| {
+        ctx.syntax(
+            idx,
+            format!("a valid epoch date and time for {sat}"),
+            quote(cols(line, 2, 22).unwrap_or("")),
+        )
+    })?;
+    Ok(FirstLine::Record { sat, toc })
+}
+
+/// A RINEX 3 record's first line: the satellite id (system letter and number) and the
+/// epoch, in BDT for BeiDou. Systems other than GPS and BeiDou are skipped.
+fn v3_first_line(
+    ctx: &Ctx<'_>,
+    idx: usize,
+    line: &str,
+    _header: &Header,
+) -> Result<FirstLine, RinexError> {
+    let letter = line.chars().next().unwrap_or(' ');
+    let system = match letter {
+        'G' => System::Gps,
+        'C' => System::Bds,
+        'R' | 'E' | 'J' | 'S' | 'I' => return Ok(FirstLine::Skip(letter)),
+        _ => {
+            return Err(ctx.syntax(
+                idx,
+                "a satellite system letter G, R, E, C, J, S or I in column 1",
                 quote(line),
             ));
         }
-        let letter = line.chars().next().unwrap_or(' ');
-        let system = match letter {
-            'G' => System::Gps,
-            'C' => System::Bds,
-            'R' | 'E' | 'J' | 'S' | 'I' => {
-                *nav.skipped.entry(letter).or_insert(0) += 1;
-                idx = skip_record(lines, idx, v3_record_start);
-                continue;
-            }
-            _ => {
-                return Err(ctx.syntax(
-                    idx,
-                    "a satellite system letter G, R, E, C, J, S or I in column 1",
-                    quote(line),
-                ));
-            }
-        };
-        let prn_field = cols(line, 1, 3).unwrap_or("");
-        let prn: u16 = match prn_field.trim().parse() {
-            Ok(p) if (1..=99).contains(&p) => p,
-            _ => {
-                return Err(ctx.syntax(
-                    idx,
-                    "a satellite number 01-99 in columns 2-3",
-                    quote(prn_field),
-                ))
-            }
-        };
-        let sat = EmitterId::new(system, prn);
-        let year = int_field(ctx, idx, line, 3, 8, "the year")?;
-        let mo = int_field(ctx, idx, line, 8, 11, "the month")?;
-        let d = int_field(ctx, idx, line, 11, 14, "the day")?;
-        let h = int_field(ctx, idx, line, 14, 17, "the hour")?;
-        let mi = int_field(ctx, idx, line, 17, 20, "the minute")?;
-        let s = int_field(ctx, idx, line, 20, 23, "the second")?;
-        let calendar = gpst_from_calendar(year, mo, d, h, mi, s as f64).ok_or_else(|| {
-            ctx.syntax(
+    };
+    let prn_field = cols(line, 1, 3).unwrap_or("");
+    let prn: u16 = match prn_field.trim().parse() {
+        Ok(p) if (1..=99).contains(&p) => p,
+        _ => {
+            return Err(ctx.syntax(
                 idx,
-                format!("a valid epoch date and time for {sat}"),
-                quote(cols(line, 3, 23).unwrap_or("")),
-            )
-        })?;
-        // BeiDou epochs are read in BDT: the same calendar reading is 14 s later in GPST.
-        let toc = if system == System::Bds {
-            calendar.add_ns(BDT_WEEK_OFFSET_NS)
-        } else {
-            calendar
-        };
-        let clock = clock_fields(ctx, idx, line, 23, sat)?;
-        let (orbit, orbit_line) = collect_orbit_lines(ctx, lines, idx, sat, 4, v3_record_start)?;
-        let raw = RawRecord {
-            sat,
-            clock,
-            orbit,
-            orbit_line,
-        };
-        nav.ephemerides.push(build_ephemeris(ctx, &raw, toc, true)?);
-        idx += 8;
-        if let Some(next) = lines.get(idx) {
-            if !is_blank(next) && !v3_record_start(next) {
-                return Err(ctx.syntax(
-                    idx,
-                    format!("a new record after the 7 orbit lines of {sat}"),
-                    quote(next),
-                ));
-            }
+                "a satellite number 01-99 in columns 2-3",
+                quote(prn_field),
+            ))
         }
-    }
-    Ok(())
+    };
+    let sat = EmitterId::new(system, prn);
+    let year = int_field(ctx, idx, line, 3, 8, "the year")?;
+    let mo = int_field(ctx, idx, line, 8, 11, "the month")?;
+    let d = int_field(ctx, idx, line, 11, 14, "the day")?;
+    let h = int_field(ctx, idx, line, 14, 17, "the hour")?;
+    let mi = int_field(ctx, idx, line, 17, 20, "the minute")?;
+    let s = int_field(ctx, idx, line, 20, 23, "the second")?;
+    let calendar = gpst_from_calendar(year, mo, d, h, mi, s as f64).ok_or_else(|| {
+        ctx.syntax(
+            idx,
+            format!("a valid epoch date and time for {sat}"),
+            quote(cols(line, 3, 23).unwrap_or("")),
+        )
+    })?;
+    // BeiDou epochs are read in BDT: the same calendar reading is 14 s later in GPST.
+    let toc = if system == System::Bds {
+        calendar.add_ns(BDT_WEEK_OFFSET_NS)
+    } else {
+        calendar
+    };
+    Ok(FirstLine::Record { sat, toc })
 }
 
 /// Turns the raw fields of a GPS or BeiDou record into an [`Ephemeris`], checking that

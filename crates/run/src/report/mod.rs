@@ -6,13 +6,14 @@
 //! timeline, the GDOP and a sky plot of the satellites. Every chart is inline SVG
 //! ([`svg`]); there is no script, no external style sheet and no font to fetch.
 
+pub mod map;
 pub mod svg;
 
 use crate::core::{SimTime, TrialRng};
 use crate::engine::trial::{truth_at, EpochRecord, TrialResult};
 use crate::metrics::summary::Summary;
-use crate::world::map::Overlay;
 use crate::world::World;
+use map::Overlay;
 use std::fmt::Write;
 use svg::{colour, escape, Chart, ModeRow, Scale, Series, SkyTrack};
 
@@ -225,7 +226,7 @@ fn trajectories(h: &mut String, world: &World, t0: &TrialResult) -> Result<(), S
                 .collect(),
         })
         .collect();
-    let map = crate::world::map::svg_with(world, &overlays)?;
+    let map = map::svg_with(world, &overlays)?;
     let _ = writeln!(
         h,
         "<h2>Trajectories (trial {})</h2><figure>{map}<figcaption>The true path in black; each estimator's estimates as a line (broken where it had none), over the scene. The frame spans the scene and the true path: estimates outside it are clipped.</figcaption></figure>",

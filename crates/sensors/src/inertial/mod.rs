@@ -45,16 +45,19 @@
 //! * [`magnetometer`]: a constant Earth field and a noisy three-axis magnetometer.
 //! * [`pdr`]: step detection, Weinberg step length and an AHRS heading.
 //! * [`source`]: the IMU (`"imu"`) and the PDR unit (`"pdr"`) as event-engine sources.
-//! * [`estimators`]: the loosely coupled INS and PDR dead reckoning as engine estimators.
+//! * [`ins_estimator`], [`pdr_estimator`]: the loosely coupled INS and PDR dead reckoning as
+//!   engine estimators, taking their fixes through [`fixes`].
 
 pub mod allan;
 pub mod attitude;
-pub mod estimators;
+pub mod fixes;
 pub mod imu;
 pub mod ins_ekf;
+pub mod ins_estimator;
 pub mod ins_family;
 pub mod magnetometer;
 pub mod pdr;
+pub mod pdr_estimator;
 pub mod source;
 pub mod strapdown;
 

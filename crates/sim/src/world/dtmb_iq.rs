@@ -43,10 +43,10 @@
 //! the payloads `dtmb/Dnn/tx` (the signal-level source's) and the noise
 //! `dtmb/iq/Dnn/noise` of the requested tower.
 
-use crate::core::receiver_clock::{ClockTrack, ReceiverClock};
-use crate::core::{EmitterId, SimTime, System, TrialRng, C_MPS};
-use crate::dtmb::channel::{Channel, ChannelConfig, Path};
+use crate::core::{SimTime, System, TrialRng, C_MPS};
+use crate::dtmb::channel::Channel;
 use crate::dtmb::frame::{CarrierMode, Qam};
+use crate::dtmb::multipath::{ChannelConfig, Path};
 use crate::dtmb::pn::{PnMode, SAMPLE_RATE_HZ};
 use crate::dtmb::sigmf::Annotation;
 use crate::dtmb::source::{DtmbLevel, DtmbSource, TowerSpec};
@@ -225,31 +225,10 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
     let trajectory = world
         .build_trajectory(&rng)
         .map_err(|e| bad("trajectory", e))?;
-    // The receiver clock exactly as `World::build_trial` records it.
-    let clock = Arc::new(ClockTrack::record(
-        ReceiverClock::new(
-            &world.file.receiver.clock,
-            &mut rng.stream("receiver/clock/init"),
-        ),
-        dur,
-        0.1,
-        &mut rng.stream("receiver/clock"),
-    ));
-    let specs: Vec<TowerSpec> = group
-        .iter()
-        .map(|o| TowerSpec {
-            id: o.id.parse().unwrap_or(EmitterId::new(System::Dtmb, 1)),
-            pos_enu_m: o.pos_enu_m,
-            pos_ecef_m: o.pos_ecef_m,
-            channel: o.spec.channel.unwrap_or(0).min(255) as u8,
-            freq_hz: o.freq_hz,
-            erp_dbw: o.erp_dbw,
-            pn_mode: mode,
-            clock_offset_s: o.spec.clock_offset_ns * 1e-9,
-            clock_drift_s_per_s: o.spec.clock_drift_ppb * 1e-9,
-            sfn: o.spec.sfn.clone(),
-        })
-        .collect();
+    // The receiver clock and the towers exactly as `World::build_trial` makes them (the
+    // group shares one PN mode, checked above).
+    let clock = Arc::new(world.receiver_clock(&rng));
+    let specs: Vec<TowerSpec> = group.iter().map(|o| o.tower_spec(System::Dtmb)).collect();
     let me = group.iter().position(|o| o.id == t.id).unwrap_or(0);
     let mut cfg = world.file.sensors.dtmb.clone().unwrap_or_default();
     // The link needs no signal-level state of its own.

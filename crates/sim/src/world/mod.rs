@@ -8,7 +8,6 @@ pub mod cache;
 pub mod dtmb_iq;
 pub mod fm;
 pub mod locate;
-pub mod map;
 pub mod presets;
 pub mod scene;
 pub mod schema;
@@ -884,6 +883,22 @@ impl World {
             .map(|s| SceneView::new(Arc::clone(s), self.frame.clone()))
     }
 
+    /// The trial's receiver clock: its initial state from the stream
+    /// `receiver/clock/init`, its random walk recorded on a 0.1 s grid from
+    /// `receiver/clock`. Every radio source of the trial shares it, and a world IQ
+    /// recording of the same trial draws the very same clock here.
+    pub fn receiver_clock(&self, rng: &TrialRng) -> ClockTrack {
+        ClockTrack::record(
+            ReceiverClock::new(
+                &self.file.receiver.clock,
+                &mut rng.stream("receiver/clock/init"),
+            ),
+            self.duration_s,
+            0.1,
+            &mut rng.stream("receiver/clock"),
+        )
+    }
+
     /// Builds the trajectory, sources and estimators of one trial.
     ///
     /// # Errors
@@ -895,15 +910,7 @@ impl World {
         let sensors = &self.file.sensors;
         let mut sources: Vec<Box<dyn crate::measurement::Source>> = Vec::new();
         // One receiver clock for every radio source of the trial.
-        let clock = Arc::new(ClockTrack::record(
-            ReceiverClock::new(
-                &self.file.receiver.clock,
-                &mut rng.stream("receiver/clock/init"),
-            ),
-            self.duration_s,
-            0.1,
-            &mut rng.stream("receiver/clock"),
-        ));
+        let clock = Arc::new(self.receiver_clock(rng));
         let err = |t: &str, i: crate::core::ConfigIssue| format!("{t}.{}: {}", i.key, i.message);
         let cache = self.epoch_cache(rng.master_seed())?;
         if let Some(g) = &sensors.gnss {
@@ -933,18 +940,7 @@ impl World {
             self.transmitters
                 .iter()
                 .filter(|t| t.kind == kind)
-                .map(|t| TowerSpec {
-                    id: t.id.parse().unwrap_or(EmitterId::new(sys, 1)),
-                    pos_enu_m: t.pos_enu_m,
-                    pos_ecef_m: t.pos_ecef_m,
-                    channel: t.spec.channel.unwrap_or(0).min(255) as u8,
-                    freq_hz: t.freq_hz,
-                    erp_dbw: t.erp_dbw,
-                    pn_mode: t.pn_mode(),
-                    clock_offset_s: t.spec.clock_offset_ns * 1e-9,
-                    clock_drift_s_per_s: t.spec.clock_drift_ppb * 1e-9,
-                    sfn: t.spec.sfn.clone(),
-                })
+                .map(|t| t.tower_spec(sys))
                 .collect()
         };
         if let Some(d) = &sensors.dtmb {

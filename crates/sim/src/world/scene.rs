@@ -370,6 +370,27 @@ pub struct Transmitter {
 }
 
 impl Transmitter {
+    /// The transmitter as a DTMB or TC-OFDM receiver takes it (an id that does not parse
+    /// becomes emitter 1 of `system`). Every receiver of a trial and a world's IQ
+    /// recording build their towers here, so they describe the same towers.
+    pub fn tower_spec(&self, system: crate::core::System) -> crate::dtmb::TowerSpec {
+        crate::dtmb::TowerSpec {
+            id: self
+                .id
+                .parse()
+                .unwrap_or(crate::core::EmitterId::new(system, 1)),
+            pos_enu_m: self.pos_enu_m,
+            pos_ecef_m: self.pos_ecef_m,
+            channel: self.spec.channel.unwrap_or(0).min(255) as u8,
+            freq_hz: self.freq_hz,
+            erp_dbw: self.erp_dbw,
+            pn_mode: self.pn_mode(),
+            clock_offset_s: self.spec.clock_offset_ns * 1e-9,
+            clock_drift_s_per_s: self.spec.clock_drift_ppb * 1e-9,
+            sfn: self.spec.sfn.clone(),
+        }
+    }
+
     /// The DTMB/TC-OFDM frame-header mode (validated at load; PN945 by default).
     pub fn pn_mode(&self) -> crate::dtmb::PnMode {
         self.spec

@@ -6,6 +6,7 @@
 //! Transmitters farther than the drawing's extent (a TV tower kilometres away) are drawn as
 //! an arrow on the border pointing towards them, labelled with their distance.
 
+use super::svg::escape;
 use crate::world::scene::TransmitterKind;
 use crate::world::World;
 use std::fmt::Write;
@@ -26,13 +27,6 @@ impl View {
             MARGIN_PX + (self.max_n - n) * self.scale,
         )
     }
-}
-
-fn escape(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
 }
 
 fn polygon(svg: &mut String, v: &View, pts: &[[f64; 2]], style: &str) {

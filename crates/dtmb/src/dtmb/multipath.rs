@@ -1,0 +1,73 @@
+//! What a DTMB channel is: its propagation paths, the carrier and sampling-frequency
+//! offsets, and the SNR, with the link budget that gives the SNR. Both channel engines
+//! ([`super::channel`], [`super::fd_channel`]) take this description.
+
+use num_complex::Complex64;
+
+/// One propagation path.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Path {
+    /// Propagation delay in seconds (may include tower and receiver clock offsets).
+    pub delay_s: f64,
+    /// Complex amplitude gain.
+    pub gain: Complex64,
+    /// Doppler shift of this path in hertz.
+    pub doppler_hz: f64,
+}
+
+impl Path {
+    /// A path from amplitude and phase.
+    pub fn new(delay_s: f64, amplitude: f64, phase_rad: f64, doppler_hz: f64) -> Self {
+        Self {
+            delay_s,
+            gain: Complex64::from_polar(amplitude, phase_rad),
+            doppler_hz,
+        }
+    }
+}
+
+/// Channel configuration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChannelConfig {
+    /// The paths (at least one).
+    pub paths: Vec<Path>,
+    /// Carrier frequency offset in hertz, common to all paths.
+    pub cfo_hz: f64,
+    /// Receiver sampling-frequency offset in parts per million.
+    pub sfo_ppm: f64,
+    /// SNR over the 7.56 MHz band in dB; `None` for a noiseless channel.
+    pub snr_db: Option<f64>,
+}
+
+impl ChannelConfig {
+    /// A configuration whose CFO and SFO come from the oscillators: the receiver derives
+    /// its local oscillator and sample clock from one reference (as SDRs do), so a
+    /// fractional frequency error `e_rx` and a transmitter error `e_tx` give
+    /// `Δf = (e_tx − e_rx) f_c` and `ε = e_rx`.
+    pub fn from_oscillators(
+        paths: Vec<Path>,
+        tx_ppm: f64,
+        rx_ppm: f64,
+        carrier_hz: f64,
+        snr_db: Option<f64>,
+    ) -> Self {
+        Self {
+            paths,
+            cfo_hz: (tx_ppm - rx_ppm) * 1e-6 * carrier_hz,
+            sfo_ppm: rx_ppm,
+            snr_db,
+        }
+    }
+}
+
+/// Link SNR over `bandwidth_hz` from the budget: `ERP − L − (kTB + NF)` with
+/// `kT = 1.380649e-23 · 290` W/Hz (−203.98 dBW/Hz). DTMB's band is 7.56 MHz.
+pub fn link_snr_db(
+    erp_dbw: f64,
+    path_loss_db: f64,
+    noise_figure_db: f64,
+    bandwidth_hz: f64,
+) -> f64 {
+    let ktb_dbw = 10.0 * (1.380_649e-23 * 290.0 * bandwidth_hz).log10();
+    erp_dbw - path_loss_db - ktb_dbw - noise_figure_db
+}
