@@ -413,7 +413,8 @@ fn the_layer_check_refuses_forbidden_imports() {
     assert!(c[0].contains(&"core".to_string()) && c[0].contains(&"world".to_string()));
 }
 
-/// The layer table read as a map, for the architecture document's diagram.
+/// The architecture document names every crate and every module of the table, so a new
+/// crate or module cannot land without its place in the map.
 #[test]
 fn the_architecture_document_lists_every_crate() {
     let doc = std::fs::read_to_string(root().join("docs/architecture.md")).unwrap();
@@ -429,7 +430,7 @@ fn the_architecture_document_lists_every_crate() {
         );
         for m in modules {
             assert!(
-                doc.contains(&format!("`{m}`")),
+                doc.contains(&format!("`{m}`")) || doc.contains(&format!("`{m}/`")),
                 "docs/architecture.md does not name `{m}`"
             );
         }
