@@ -127,7 +127,6 @@ impl CacheSlot {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::core::receiver_clock::{ClockTrack, ReceiverClock};
     use crate::gnss::measurement::{GnssConfig, GnssSource};
     use crate::measurement::{MeasurementBatch, SampleContext, Source, Truth};
 
@@ -142,15 +141,7 @@ mod tests {
 
     fn source(w: &World, rng: &TrialRng) -> GnssSource {
         let cfg = w.file.sensors.gnss.clone().unwrap();
-        let clock = Arc::new(ClockTrack::record(
-            ReceiverClock::new(
-                &w.file.receiver.clock,
-                &mut rng.stream("receiver/clock/init"),
-            ),
-            w.duration_s,
-            0.1,
-            &mut rng.stream("receiver/clock"),
-        ));
+        let clock = Arc::new(w.receiver_clock(rng));
         GnssSource::new(
             cfg,
             Arc::clone(&w.nav),
