@@ -361,7 +361,8 @@ impl FdChannel {
                 return;
             }
         }
-        self.process_impl::<false, S>(cfg, src, rx_start, out);
+        // SAFETY: the portable build (`AVX2 = false`) uses no intrinsics.
+        unsafe { self.process_impl::<false, S>(cfg, src, rx_start, out) };
     }
 
     /// [`FdChannel::process_impl`] compiled for AVX2 and FMA: the spectral loops run in
@@ -385,8 +386,11 @@ impl FdChannel {
 
     /// The engine; `AVX2` selects the intrinsics of the per-bin and interpolation passes
     /// and is true only inside [`FdChannel::process_avx2`], whose caller checked the CPU.
+    ///
+    /// # Safety
+    /// With `AVX2 = true` the CPU must support AVX2 and FMA; with `false` it is safe.
     #[inline(always)]
-    fn process_impl<const AVX2: bool, S: SampleSource + ?Sized>(
+    unsafe fn process_impl<const AVX2: bool, S: SampleSource + ?Sized>(
         &mut self,
         cfg: &ChannelConfig,
         src: &mut S,
@@ -511,8 +515,11 @@ impl FdChannel {
     }
 
     /// Computes the `B` outputs of the sub-block starting at receiver sample `a` into `dst`.
+    ///
+    /// # Safety
+    /// As [`FdChannel::process_impl`]: with `AVX2 = true` the CPU must support AVX2 and FMA.
     #[inline(always)]
-    fn sub_block<const AVX2: bool, S: SampleSource + ?Sized>(
+    unsafe fn sub_block<const AVX2: bool, S: SampleSource + ?Sized>(
         &mut self,
         cfg: &ChannelConfig,
         src: &mut S,
@@ -1010,7 +1017,8 @@ mod tests {
             }
             out
         };
-        let portable = run(&|fd, tx, a, o| fd.process_impl::<false, _>(&cfg, tx, a, o));
+        // SAFETY: the portable build uses no intrinsics.
+        let portable = run(&|fd, tx, a, o| unsafe { fd.process_impl::<false, _>(&cfg, tx, a, o) });
         assert!(portable.iter().any(|x| x.norm() > 0.1));
         #[cfg(target_arch = "x86_64")]
         if avx2_here("channel build avx2") {
