@@ -52,6 +52,7 @@ use crate::dtmb::sigmf::Annotation;
 use crate::dtmb::source::{DtmbLevel, DtmbSource, TowerSpec};
 use crate::dtmb::transmitter::{FrameSchedule, SampleSource, Transmitter, TxConfig};
 use crate::dtmb::DtmbError;
+use crate::measurement::Truth;
 use crate::world::scene::TransmitterKind;
 use crate::world::World;
 use num_complex::{Complex32, Complex64};
@@ -299,52 +300,13 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
         let rx_bias_s = clock.bias_s(t_s) + clock.isb_s(System::Dtmb, t_s);
         links.clear();
         for (i, spec) in specs.iter().enumerate() {
-            let (range_m, snr_ref_db, dopplers) = link.tower_link(i, &truth);
-            let tower_clock_s = spec.clock_offset_s + spec.clock_drift_s_per_s * t_s;
-            let no_scene_doppler = if world.scene.is_none() {
-                // The direct path's Doppler: the platform's velocity towards the tower.
-                let u = (spec.pos_enu_m - truth.enu.pos_enu_m).normalize();
-                truth.enu.vel_enu_mps.dot(&u) / lambda
-            } else {
-                0.0
-            };
-            let taps: Vec<(f64, Complex64, f64)> = link
-                .taps()
-                .iter()
-                .enumerate()
-                .filter(|(_, tp)| tp.gain.norm_sqr() > 0.0)
-                .map(|(p, tp)| {
-                    let d = if world.scene.is_none() {
-                        no_scene_doppler
-                    } else {
-                        dopplers[p]
-                    };
-                    (tp.delay_samples, tp.gain, d)
-                })
-                .collect();
-            // Received power: the paths combine coherently through the band's (flat)
-            // autocorrelation, sinc of their delay difference in samples.
-            let power: f64 = taps
-                .iter()
-                .flat_map(|a| taps.iter().map(move |b| (a, b)))
-                .map(|(a, b)| (a.1 * b.1.conj()).re * sinc(a.0 - b.0))
-                .sum();
-            let snr_db = snr_ref_db + 10.0 * power.max(1e-30).log10();
-            if j == 0 && i == me && power > 0.0 {
-                snr_first = snr_db;
+            let l = tower_block(
+                world, &mut link, i, spec, &truth, t_s, rx_bias_s, req.from_s, lambda, fs,
+            );
+            if j == 0 && i == me && l.power > 0.0 {
+                snr_first = l.snr_db;
             }
-            // x: transmitter sample minus recording sample of a path (no SFO).
-            let base = fs * (req.from_s - rx_bias_s - range_m / C_MPS + tower_clock_s);
-            let first_delay = taps.iter().map(|t| t.0).fold(f64::INFINITY, f64::min);
-            links.push(TowerBlock {
-                range_m,
-                snr_ref_db,
-                snr_db,
-                tower_clock_s,
-                base,
-                first_delay,
-                taps,
-            });
+            links.push(l);
         }
         // Each signal's channel: the paths of its towers, scaled to their link budgets.
         for sg in signals.iter_mut() {
@@ -418,34 +380,151 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
             }
         }
         crate::dtmb::noise::add_awgn(block, 1.0, &mut noise);
-        // Frame starts (first path) of each tower inside this block:
-        // n = (1 + ε)(k·N − x_first).
-        for (i, l) in links.iter().enumerate() {
-            if l.taps.is_empty() {
-                continue;
-            }
-            let x1 = l.base - l.first_delay;
-            let lo = start as f64;
-            let hi = lo + block.len() as f64;
-            let mut k = ((lo / (1.0 + eps) + x1) / n as f64).ceil() as i64;
-            loop {
-                let pos = (1.0 + eps) * (k as f64 * n as f64 - x1);
-                if pos >= hi {
-                    break;
-                }
-                if pos >= lo {
-                    annotations.push(frame_annotation(
-                        world, mode, &specs[i], l, k, pos, total, &truth, rx_bias_s,
-                    ));
-                }
-                k += 1;
-            }
+        for (l, spec) in links.iter().zip(&specs) {
+            annotate_frame_starts(
+                world,
+                mode,
+                spec,
+                l,
+                start,
+                block.len(),
+                n,
+                eps,
+                total,
+                &truth,
+                rx_bias_s,
+                &mut annotations,
+            );
         }
     }
     // SigMF lists annotations by sample; a tower's frames stay in order (stable sort).
     annotations.sort_by_key(|(a, _)| a.sample_start);
     let (annotations, annotation_extra): (Vec<_>, Vec<_>) = annotations.into_iter().unzip();
     let tower_ids: Vec<String> = group.iter().map(|o| o.id.clone()).collect();
+    let g = global_extra(world, req, t, mode, &tower_ids);
+    Ok(WorldIq {
+        samples,
+        annotations,
+        annotation_extra,
+        global_extra: g,
+        center_freq_hz: t.freq_hz,
+        mode,
+        tower: t.id.clone(),
+        towers: tower_ids,
+        snr_db: snr_first,
+    })
+}
+
+/// Tower `i`'s link during the block whose middle is at `t_s` (receiver clock): its
+/// range, link budget, clock and paths from the measurement-level link, with the received
+/// power of its coherently combined paths.
+#[allow(clippy::too_many_arguments)]
+fn tower_block(
+    world: &World,
+    link: &mut DtmbSource,
+    i: usize,
+    spec: &TowerSpec,
+    truth: &Truth,
+    t_s: f64,
+    rx_bias_s: f64,
+    from_s: f64,
+    lambda: f64,
+    fs: f64,
+) -> TowerBlock {
+    let (range_m, snr_ref_db, dopplers) = link.tower_link(i, truth);
+    let tower_clock_s = spec.clock_offset_s + spec.clock_drift_s_per_s * t_s;
+    let no_scene_doppler = if world.scene.is_none() {
+        // The direct path's Doppler: the platform's velocity towards the tower.
+        let u = (spec.pos_enu_m - truth.enu.pos_enu_m).normalize();
+        truth.enu.vel_enu_mps.dot(&u) / lambda
+    } else {
+        0.0
+    };
+    let taps: Vec<(f64, Complex64, f64)> = link
+        .taps()
+        .iter()
+        .enumerate()
+        .filter(|(_, tp)| tp.gain.norm_sqr() > 0.0)
+        .map(|(p, tp)| {
+            let d = if world.scene.is_none() {
+                no_scene_doppler
+            } else {
+                dopplers[p]
+            };
+            (tp.delay_samples, tp.gain, d)
+        })
+        .collect();
+    // Received power: the paths combine coherently through the band's (flat)
+    // autocorrelation, sinc of their delay difference in samples.
+    let power: f64 = taps
+        .iter()
+        .flat_map(|a| taps.iter().map(move |b| (a, b)))
+        .map(|(a, b)| (a.1 * b.1.conj()).re * sinc(a.0 - b.0))
+        .sum();
+    let snr_db = snr_ref_db + 10.0 * power.max(1e-30).log10();
+    // x: transmitter sample minus recording sample of a path (no SFO).
+    let base = fs * (from_s - rx_bias_s - range_m / C_MPS + tower_clock_s);
+    let first_delay = taps.iter().map(|t| t.0).fold(f64::INFINITY, f64::min);
+    TowerBlock {
+        range_m,
+        power,
+        snr_ref_db,
+        snr_db,
+        tower_clock_s,
+        base,
+        first_delay,
+        taps,
+    }
+}
+
+/// Annotates every frame start (first path) of one tower inside the block of recording
+/// samples `start .. start + len`: frame `k` starts at `n = (1 + ε)(k·N − x_first)`.
+#[allow(clippy::too_many_arguments)]
+fn annotate_frame_starts(
+    world: &World,
+    mode: PnMode,
+    spec: &TowerSpec,
+    l: &TowerBlock,
+    start: i64,
+    len: usize,
+    n: usize,
+    eps: f64,
+    total: usize,
+    truth: &Truth,
+    rx_bias_s: f64,
+    annotations: &mut Vec<(Annotation, Map<String, Value>)>,
+) {
+    if l.taps.is_empty() {
+        return;
+    }
+    let x1 = l.base - l.first_delay;
+    let lo = start as f64;
+    let hi = lo + len as f64;
+    let mut k = ((lo / (1.0 + eps) + x1) / n as f64).ceil() as i64;
+    loop {
+        let pos = (1.0 + eps) * (k as f64 * n as f64 - x1);
+        if pos >= hi {
+            break;
+        }
+        if pos >= lo {
+            annotations.push(frame_annotation(
+                world, mode, spec, l, k, pos, total, truth, rx_bias_s,
+            ));
+        }
+        k += 1;
+    }
+}
+
+/// The recording's `global` keys: a description, the world and trial it comes from,
+/// the towers, the PN mode and the start.
+fn global_extra(
+    world: &World,
+    req: &WorldIqRequest,
+    t: &crate::world::scene::Transmitter,
+    mode: PnMode,
+    tower_ids: &[String],
+) -> Map<String, Value> {
+    let name = &world.file.world.name;
     let mut g = Map::new();
     g.insert(
         "core:description".into(),
@@ -488,17 +567,7 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
     );
     g.insert("hybridnav:noise_power".into(), json!(1.0));
     g.insert("hybridnav:path_update".into(), json!("every frame"));
-    Ok(WorldIq {
-        samples,
-        annotations,
-        annotation_extra,
-        global_extra: g,
-        center_freq_hz: t.freq_hz,
-        mode,
-        tower: t.id.clone(),
-        towers: tower_ids,
-        snr_db: snr_first,
-    })
+    g
 }
 
 /// One transmitted signal of a recording: a network's (or a lone tower's) transmitter,
@@ -514,6 +583,8 @@ struct Signal {
 /// One tower's link during one block.
 struct TowerBlock {
     range_m: f64,
+    /// Received power of the combined paths relative to the link budget's.
+    power: f64,
     snr_ref_db: f64,
     snr_db: f64,
     tower_clock_s: f64,
