@@ -310,44 +310,10 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
         }
         // Each signal's channel: the paths of its towers, scaled to their link budgets.
         for sg in signals.iter_mut() {
-            sg.paths.clear();
             let members: Vec<usize> = (0..specs.len())
                 .filter(|&i| owner_of(i) == sg.owner)
                 .collect();
-            let latest_x = members
-                .iter()
-                .flat_map(|&i| links[i].taps.iter().map(move |tp| (i, tp.0)))
-                .map(|(i, d)| links[i].base - d)
-                .fold(f64::NEG_INFINITY, f64::max);
-            if sg.offset.is_none() && latest_x.is_finite() {
-                sg.offset = Some((latest_x.ceil() + DELAY_MARGIN_SAMPLES) as i64);
-            }
-            let off = sg.offset.unwrap_or(0) as f64;
-            for &i in &members {
-                let l = &links[i];
-                let amp = (10f64.powf(l.snr_ref_db / 10.0) / mode.nominal_frame_power()).sqrt();
-                for &(d, g, dop) in &l.taps {
-                    sg.paths.push(Path {
-                        delay_s: (off - (l.base - d)) / fs,
-                        gain: g * amp,
-                        doppler_hz: dop,
-                    });
-                }
-            }
-            if let Some(p) = sg
-                .paths
-                .iter()
-                .find(|p| !(p.delay_s >= 0.0 && p.delay_s < 1.0))
-            {
-                return Err(bad(
-                    "from_s",
-                    format!(
-                        "at {t_s:.4} s the path delay moved {:.0} samples from the recording's \
-                         start, beyond the {DELAY_MARGIN_SAMPLES} samples of margin: record fewer frames",
-                        p.delay_s * fs - DELAY_MARGIN_SAMPLES
-                    ),
-                ));
-            }
+            signal_paths(sg, &members, &links, mode, fs, t_s)?;
         }
         // Sum the signals, then the noise once.
         let start = (j * n) as i64;
@@ -568,6 +534,59 @@ fn global_extra(
     g.insert("hybridnav:noise_power".into(), json!(1.0));
     g.insert("hybridnav:path_update".into(), json!("every frame"));
     g
+}
+
+/// A signal's channel in one block: the paths of its towers (`members`, the network's
+/// towers or the lone tower), each scaled to its link budget and delayed relative to the
+/// recording's offset, fixed by the first block with a path.
+///
+/// # Errors
+/// When a path's delay has left the channel's window: the platform moved more than the
+/// margin towards or away from the tower during the recording.
+fn signal_paths(
+    sg: &mut Signal,
+    members: &[usize],
+    links: &[TowerBlock],
+    mode: PnMode,
+    fs: f64,
+    t_s: f64,
+) -> Result<(), DtmbError> {
+    sg.paths.clear();
+    let latest_x = members
+        .iter()
+        .flat_map(|&i| links[i].taps.iter().map(move |tp| (i, tp.0)))
+        .map(|(i, d)| links[i].base - d)
+        .fold(f64::NEG_INFINITY, f64::max);
+    if sg.offset.is_none() && latest_x.is_finite() {
+        sg.offset = Some((latest_x.ceil() + DELAY_MARGIN_SAMPLES) as i64);
+    }
+    let off = sg.offset.unwrap_or(0) as f64;
+    for &i in members {
+        let l = &links[i];
+        let amp = (10f64.powf(l.snr_ref_db / 10.0) / mode.nominal_frame_power()).sqrt();
+        for &(d, g, dop) in &l.taps {
+            sg.paths.push(Path {
+                delay_s: (off - (l.base - d)) / fs,
+                gain: g * amp,
+                doppler_hz: dop,
+            });
+        }
+    }
+    if let Some(p) = sg
+        .paths
+        .iter()
+        .find(|p| !(p.delay_s >= 0.0 && p.delay_s < 1.0))
+    {
+        return Err(bad(
+            "from_s",
+            format!(
+                "at {t_s:.4} s the path delay moved {:.0} samples from the recording's \
+                 start, beyond the {DELAY_MARGIN_SAMPLES} samples of margin: record fewer frames",
+                p.delay_s * fs - DELAY_MARGIN_SAMPLES
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// One transmitted signal of a recording: a network's (or a lone tower's) transmitter,
