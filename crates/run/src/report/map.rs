@@ -16,8 +16,11 @@ const MARGIN_PX: f64 = 50.0;
 
 struct View {
     min_e: f64,
+    max_e: f64,
+    min_n: f64,
     max_n: f64,
     scale: f64,
+    height_px: f64,
 }
 
 impl View {
@@ -26,6 +29,31 @@ impl View {
             MARGIN_PX + (e - self.min_e) * self.scale,
             MARGIN_PX + (self.max_n - n) * self.scale,
         )
+    }
+}
+
+impl View {
+    /// The view of `pts` with a 5 % margin (at least 1 m) on every side, `WIDTH_PX` wide.
+    fn fit(pts: &[[f64; 2]]) -> Self {
+        let (mut min_e, mut max_e, mut min_n, mut max_n) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+        for p in pts {
+            min_e = min_e.min(p[0]);
+            max_e = max_e.max(p[0]);
+            min_n = min_n.min(p[1]);
+            max_n = max_n.max(p[1]);
+        }
+        let pad = 0.05 * (max_e - min_e).max(max_n - min_n).max(20.0);
+        let (min_e, max_e, min_n, max_n) = (min_e - pad, max_e + pad, min_n - pad, max_n + pad);
+        let scale = (WIDTH_PX - 2.0 * MARGIN_PX) / (max_e - min_e);
+        let height_px = (max_n - min_n) * scale + 2.0 * MARGIN_PX + 30.0;
+        View {
+            min_e,
+            max_e,
+            min_n,
+            max_n,
+            scale,
+            height_px,
+        }
     }
 }
 
@@ -94,22 +122,8 @@ pub fn svg_with(world: &World, overlays: &[Overlay<'_>]) -> Result<String, Strin
             .iter()
             .flat_map(|s| s.polygon_enu_m.iter().copied()),
     );
-    let (mut min_e, mut max_e, mut min_n, mut max_n) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for p in &pts {
-        min_e = min_e.min(p[0]);
-        max_e = max_e.max(p[0]);
-        min_n = min_n.min(p[1]);
-        max_n = max_n.max(p[1]);
-    }
-    let pad = 0.05 * (max_e - min_e).max(max_n - min_n).max(20.0);
-    let (min_e, max_e, min_n, max_n) = (min_e - pad, max_e + pad, min_n - pad, max_n + pad);
-    let scale = (WIDTH_PX - 2.0 * MARGIN_PX) / (max_e - min_e);
-    let height_px = (max_n - min_n) * scale + 2.0 * MARGIN_PX + 30.0;
-    let v = View {
-        min_e,
-        max_n,
-        scale,
-    };
+    let v = View::fit(&pts);
+    let height_px = v.height_px;
 
     let mut svg = String::new();
     let _ = writeln!(
@@ -121,47 +135,7 @@ pub fn svg_with(world: &World, overlays: &[Overlay<'_>]) -> Result<String, Strin
         r##"<rect width="100%" height="100%" fill="#f7f5ef"/><text x="{MARGIN_PX}" y="22" font-size="15">{}</text>"##,
         escape(&world.file.world.name)
     );
-    for s in &cfg.surfaces {
-        let fill = match s.material {
-            crate::propagation::GroundMaterial::FreshWater
-            | crate::propagation::GroundMaterial::SeaWater => "#a6cee3",
-            crate::propagation::GroundMaterial::Paved => "#d9d9d9",
-            _ => "#e5dcc3",
-        };
-        polygon(
-            &mut svg,
-            &v,
-            &s.polygon_enu_m,
-            &format!(r#"fill="{fill}" stroke="none""#),
-        );
-    }
-    for f in &cfg.forests {
-        let opacity = 0.35 + 0.5 * f.foliage_density;
-        polygon(
-            &mut svg,
-            &v,
-            &f.polygon_enu_m,
-            &format!(r##"fill="#4d9a4d" fill-opacity="{opacity:.2}" stroke="none""##),
-        );
-    }
-    for b in &cfg.buildings {
-        // Darker for taller: the eye reads a canyon's depth from it.
-        let shade = (200.0 - (b.height_m.min(100.0) * 1.4)) as u8;
-        polygon(
-            &mut svg,
-            &v,
-            &b.footprint_enu_m,
-            &format!(r##"fill="rgb({shade},{shade},{shade})" stroke="#333" stroke-width="0.8""##),
-        );
-    }
-    for z in &cfg.indoor_zones {
-        polygon(
-            &mut svg,
-            &v,
-            &z.polygon_enu_m,
-            r##"fill="none" stroke="#d95f02" stroke-width="1.5" stroke-dasharray="5,3""##,
-        );
-    }
+    draw_scene(&mut svg, &v, &cfg);
     // Over a report's coloured estimates the truth is drawn in black, so that no
     // estimator's colour can be mistaken for it.
     let truth_colour = if overlays.is_empty() {
@@ -180,8 +154,8 @@ pub fn svg_with(world: &World, overlays: &[Overlay<'_>]) -> Result<String, Strin
         d.trim_end()
     );
     if !overlays.is_empty() {
-        let (x0, y0) = v.px(min_e, max_n);
-        let (x1, y1) = v.px(max_e, min_n);
+        let (x0, y0) = v.px(v.min_e, v.max_n);
+        let (x1, y1) = v.px(v.max_e, v.min_n);
         let _ = writeln!(
             svg,
             r#"<clipPath id="map-clip"><rect x="{x0:.1}" y="{y0:.1}" width="{:.1}" height="{:.1}"/></clipPath><g clip-path="url(#map-clip)">"#,
@@ -236,6 +210,62 @@ pub fn svg_with(world: &World, overlays: &[Overlay<'_>]) -> Result<String, Strin
         sy - 6.0
     );
 
+    draw_transmitters(&mut svg, &v, world);
+
+    draw_scale_and_north(&mut svg, &v);
+    svg.push_str("</svg>\n");
+    Ok(svg)
+}
+
+/// The scene under everything: surfaces, forests (denser is darker), buildings (taller
+/// is darker) and indoor zones (dashed).
+fn draw_scene(svg: &mut String, v: &View, cfg: &crate::propagation::SceneConfig) {
+    for s in &cfg.surfaces {
+        let fill = match s.material {
+            crate::propagation::GroundMaterial::FreshWater
+            | crate::propagation::GroundMaterial::SeaWater => "#a6cee3",
+            crate::propagation::GroundMaterial::Paved => "#d9d9d9",
+            _ => "#e5dcc3",
+        };
+        polygon(
+            svg,
+            v,
+            &s.polygon_enu_m,
+            &format!(r#"fill="{fill}" stroke="none""#),
+        );
+    }
+    for f in &cfg.forests {
+        let opacity = 0.35 + 0.5 * f.foliage_density;
+        polygon(
+            svg,
+            v,
+            &f.polygon_enu_m,
+            &format!(r##"fill="#4d9a4d" fill-opacity="{opacity:.2}" stroke="none""##),
+        );
+    }
+    for b in &cfg.buildings {
+        // Darker for taller: the eye reads a canyon's depth from it.
+        let shade = (200.0 - (b.height_m.min(100.0) * 1.4)) as u8;
+        polygon(
+            svg,
+            v,
+            &b.footprint_enu_m,
+            &format!(r##"fill="rgb({shade},{shade},{shade})" stroke="#333" stroke-width="0.8""##),
+        );
+    }
+    for z in &cfg.indoor_zones {
+        polygon(
+            svg,
+            v,
+            &z.polygon_enu_m,
+            r##"fill="none" stroke="#d95f02" stroke-width="1.5" stroke-dasharray="5,3""##,
+        );
+    }
+}
+
+/// Each transmitter as a labelled triangle, or, beyond the drawing (a TV tower
+/// kilometres away), as an arrow on the border pointing at it with its distance.
+fn draw_transmitters(svg: &mut String, v: &View, world: &World) {
     for t in &world.transmitters {
         let colour = match t.kind {
             TransmitterKind::Dtmb => "#1f78b4",
@@ -252,7 +282,7 @@ pub fn svg_with(world: &World, overlays: &[Overlay<'_>]) -> Result<String, Strin
                 .unwrap_or_default()
         );
         let (e, n) = (t.pos_enu_m.x, t.pos_enu_m.y);
-        if (min_e..=max_e).contains(&e) && (min_n..=max_n).contains(&n) {
+        if (v.min_e..=v.max_e).contains(&e) && (v.min_n..=v.max_n).contains(&n) {
             let (x, y) = v.px(e, n);
             let _ = writeln!(
                 svg,
@@ -269,10 +299,10 @@ pub fn svg_with(world: &World, overlays: &[Overlay<'_>]) -> Result<String, Strin
             );
         } else {
             // An arrow on the border, from the drawing's centre towards the transmitter.
-            let (ce, cn) = (0.5 * (min_e + max_e), 0.5 * (min_n + max_n));
+            let (ce, cn) = (0.5 * (v.min_e + v.max_e), 0.5 * (v.min_n + v.max_n));
             let (de, dn) = (e - ce, n - cn);
-            let k = ((0.5 * (max_e - min_e)) / de.abs().max(1e-9))
-                .min((0.5 * (max_n - min_n)) / dn.abs().max(1e-9));
+            let k = ((0.5 * (v.max_e - v.min_e)) / de.abs().max(1e-9))
+                .min((0.5 * (v.max_n - v.min_n)) / dn.abs().max(1e-9));
             let (be, bn) = (ce + de * k * 0.97, cn + dn * k * 0.97);
             let (x1, y1) = v.px(be, bn);
             let norm = de.hypot(dn).max(1e-9);
@@ -288,9 +318,13 @@ pub fn svg_with(world: &World, overlays: &[Overlay<'_>]) -> Result<String, Strin
             );
         }
     }
+}
 
+/// A scale bar of the largest 1-2-5 length under a quarter of the width, and a north
+/// arrow.
+fn draw_scale_and_north(svg: &mut String, v: &View) {
     // Scale bar: the largest 1-2-5 length under a quarter of the width.
-    let target_m = 0.25 * (max_e - min_e);
+    let target_m = 0.25 * (v.max_e - v.min_e);
     let mut bar_m = 1.0;
     for mag in [1.0, 10.0, 100.0, 1000.0, 10_000.0] {
         for m in [1.0, 2.0, 5.0] {
@@ -299,11 +333,11 @@ pub fn svg_with(world: &World, overlays: &[Overlay<'_>]) -> Result<String, Strin
             }
         }
     }
-    let y = height_px - 20.0;
+    let y = v.height_px - 20.0;
     let _ = writeln!(
         svg,
         r##"<line x1="{MARGIN_PX}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#000" stroke-width="3"/><text x="{MARGIN_PX}" y="{:.1}">{bar_m} m</text>"##,
-        MARGIN_PX + bar_m * scale,
+        MARGIN_PX + bar_m * v.scale,
         y - 6.0
     );
     let nx = WIDTH_PX - MARGIN_PX + 20.0;
@@ -317,6 +351,4 @@ pub fn svg_with(world: &World, overlays: &[Overlay<'_>]) -> Result<String, Strin
         MARGIN_PX + 16.0,
         MARGIN_PX - 4.0
     );
-    svg.push_str("</svg>\n");
-    Ok(svg)
 }
