@@ -141,87 +141,12 @@ impl SampleSource for Shifted<'_> {
 /// unknown tower id, a start outside the world's duration or a recording running past
 /// it, zero or too many frames, a trajectory or link that cannot be built.
 pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbError> {
-    let towers: Vec<_> = world
-        .transmitters
-        .iter()
-        .filter(|t| t.kind == TransmitterKind::Dtmb)
-        .collect();
-    let name = &world.file.world.name;
-    let Some(first) = towers.first() else {
-        return Err(bad(
-            "world",
-            format!(
-                "world {name:?} ({}) has no DTMB tower ([[transmitter]] with kind = \"dtmb\")",
-                world.path.display()
-            ),
-        ));
-    };
-    let t = match &req.tower {
-        None => *first,
-        Some(id) => *towers
-            .iter()
-            .find(|t| t.id.eq_ignore_ascii_case(id))
-            .ok_or_else(|| {
-                let ids: Vec<&str> = towers.iter().map(|t| t.id.as_str()).collect();
-                bad(
-                    "tower",
-                    format!(
-                        "world {name:?} has no DTMB tower {id:?}; its DTMB towers are {}",
-                        ids.join(", ")
-                    ),
-                )
-            })?,
-    };
-    if req.frames == 0 || req.frames > MAX_FRAMES {
-        return Err(bad(
-            "frames",
-            format!("must lie in 1..={MAX_FRAMES}, got {}", req.frames),
-        ));
-    }
+    let (t, group) = select_towers(world, req)?;
     let mode = t.pn_mode();
     let n = mode.frame_len();
     let fs = SAMPLE_RATE_HZ;
     let t_frame = mode.frame_duration_s();
     let dur = world.duration_s;
-    if !(req.from_s.is_finite() && req.from_s >= 0.0 && req.from_s < dur) {
-        return Err(bad(
-            "from_s",
-            format!(
-                "start {} s is outside the world's duration [0, {dur}) s",
-                req.from_s
-            ),
-        ));
-    }
-    let end_s = req.from_s + req.frames as f64 * t_frame;
-    if end_s > dur {
-        return Err(bad(
-            "from_s",
-            format!(
-                "{} frames from {} s end at {end_s:.4} s, after the world's duration {dur} s",
-                req.frames, req.from_s
-            ),
-        ));
-    }
-    // The requested tower and every DTMB tower on its carrier.
-    let group: Vec<_> = towers
-        .iter()
-        .filter(|o| o.freq_hz == t.freq_hz)
-        .copied()
-        .collect();
-    if let Some(o) = group.iter().find(|o| o.pn_mode() != mode) {
-        return Err(bad(
-            "tower",
-            format!(
-                "towers {} ({}) and {} ({}) share {:.0} MHz with different PN modes; a \
-                 recording holds one frame structure",
-                t.id,
-                mode.name(),
-                o.id,
-                o.pn_mode().name(),
-                t.freq_hz * 1e-6
-            ),
-        ));
-    }
     let rng = TrialRng::new(req.seed, req.trial);
     let trajectory = world
         .build_trajectory(&rng)
@@ -587,6 +512,101 @@ fn signal_paths(
         ));
     }
     Ok(())
+}
+
+/// The requested tower (the world's first DTMB tower by default) and every DTMB tower on
+/// its carrier, in the world file's order, after checking the request: a frame count in
+/// range, a recording inside the world's duration, one PN mode on the carrier.
+fn select_towers<'w>(
+    world: &'w World,
+    req: &WorldIqRequest,
+) -> Result<
+    (
+        &'w crate::world::scene::Transmitter,
+        Vec<&'w crate::world::scene::Transmitter>,
+    ),
+    DtmbError,
+> {
+    let towers: Vec<_> = world
+        .transmitters
+        .iter()
+        .filter(|t| t.kind == TransmitterKind::Dtmb)
+        .collect();
+    let name = &world.file.world.name;
+    let Some(first) = towers.first() else {
+        return Err(bad(
+            "world",
+            format!(
+                "world {name:?} ({}) has no DTMB tower ([[transmitter]] with kind = \"dtmb\")",
+                world.path.display()
+            ),
+        ));
+    };
+    let t = match &req.tower {
+        None => *first,
+        Some(id) => *towers
+            .iter()
+            .find(|t| t.id.eq_ignore_ascii_case(id))
+            .ok_or_else(|| {
+                let ids: Vec<&str> = towers.iter().map(|t| t.id.as_str()).collect();
+                bad(
+                    "tower",
+                    format!(
+                        "world {name:?} has no DTMB tower {id:?}; its DTMB towers are {}",
+                        ids.join(", ")
+                    ),
+                )
+            })?,
+    };
+    if req.frames == 0 || req.frames > MAX_FRAMES {
+        return Err(bad(
+            "frames",
+            format!("must lie in 1..={MAX_FRAMES}, got {}", req.frames),
+        ));
+    }
+    let mode = t.pn_mode();
+    let t_frame = mode.frame_duration_s();
+    let dur = world.duration_s;
+    if !(req.from_s.is_finite() && req.from_s >= 0.0 && req.from_s < dur) {
+        return Err(bad(
+            "from_s",
+            format!(
+                "start {} s is outside the world's duration [0, {dur}) s",
+                req.from_s
+            ),
+        ));
+    }
+    let end_s = req.from_s + req.frames as f64 * t_frame;
+    if end_s > dur {
+        return Err(bad(
+            "from_s",
+            format!(
+                "{} frames from {} s end at {end_s:.4} s, after the world's duration {dur} s",
+                req.frames, req.from_s
+            ),
+        ));
+    }
+    // The requested tower and every DTMB tower on its carrier.
+    let group: Vec<_> = towers
+        .iter()
+        .filter(|o| o.freq_hz == t.freq_hz)
+        .copied()
+        .collect();
+    if let Some(o) = group.iter().find(|o| o.pn_mode() != mode) {
+        return Err(bad(
+            "tower",
+            format!(
+                "towers {} ({}) and {} ({}) share {:.0} MHz with different PN modes; a \
+                 recording holds one frame structure",
+                t.id,
+                mode.name(),
+                o.id,
+                o.pn_mode().name(),
+                t.freq_hz * 1e-6
+            ),
+        ));
+    }
+    Ok((t, group))
 }
 
 /// One transmitted signal of a recording: a network's (or a lone tower's) transmitter,
