@@ -25,7 +25,7 @@ pub struct RawGnssObservation {
 }
 
 /// Raw observations a source logs beside its measurements when asked (see
-/// [`MeasurementBatch::raw`]).
+/// [`super::MeasurementBatch::raw`]).
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct RawLog {
     /// GNSS code, phase, Doppler and C/N0 per tracked satellite (RINEX observables).

@@ -1,6 +1,6 @@
 //! The interpolation kernel that defines DTMB's continuous-time waveform, shared by the
 //! exact time-domain channel ([`super::channel`]) and the fast frequency-domain one
-//! ([`super::fd_channel`]).
+//! (`fd_channel`).
 //!
 //! **Waveform.** The transmitted samples `x[m]` (7.56 Msps) define the continuous-time
 //! signal

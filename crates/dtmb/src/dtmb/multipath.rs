@@ -1,6 +1,6 @@
 //! What a DTMB channel is: its propagation paths, the carrier and sampling-frequency
 //! offsets, and the SNR, with the link budget that gives the SNR. Both channel engines
-//! ([`super::channel`], [`super::fd_channel`]) take this description.
+//! ([`super::channel`], `fd_channel`) take this description.
 
 use num_complex::Complex64;
 

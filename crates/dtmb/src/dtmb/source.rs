@@ -583,7 +583,7 @@ impl DtmbSource {
     /// and the Doppler of each path (Hz); the paths' excess delays and gains are left in
     /// [`DtmbSource::taps`] (the direct path alone, without Doppler, when the world has
     /// no scene). Shared by [`Source::sample`] and the world IQ recorder
-    /// ([`super::world_iq`]).
+    /// (`world::dtmb_iq`).
     pub fn tower_link(
         &mut self,
         ti: usize,

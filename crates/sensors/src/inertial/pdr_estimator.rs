@@ -71,7 +71,7 @@ pub struct PdrFilterConfig {
     #[serde(default = "d_ocxo_hm2")]
     pub range_difference_h_minus2_hz: f64,
     /// Duration of the static CFO calibration at the start (s); default 5, as
-    /// [`crate::dtmb::tps::STATIC_CALIBRATION_S`].
+    /// `dtmb::tps::STATIC_CALIBRATION_S`.
     #[serde(default = "d_calibration_s")]
     pub range_difference_calibration_s: f64,
     /// Random-walk intensity of the range-difference error that the oscillator does not
@@ -263,7 +263,7 @@ struct Anchor {
 /// Seed 002 observes `Δr_t = r_t − r_{t−1} + δ₃`, the increment against the previous
 /// estimate. The error of a TPS-CFO range difference is not white from epoch to epoch but
 /// the receiver oscillator's phase wander plus the integrated multipath Doppler
-/// ([`crate::dtmb::tps`]), so the filter carries it: the state is `[x, y, e, ė]`, the
+/// (`dtmb::tps`), so the filter carries it: the state is `[x, y, e, ė]`, the
 /// cumulative Δr is the measurement ([`RangeDifferenceModel`]) and between batches
 ///
 /// ```text

@@ -25,7 +25,7 @@ impl EpochCache {
     /// `max_table_bytes`: the GNSS links and the FM means at every epoch of the trajectory
     /// the trials of this seed drive. Only valid for a world whose truth does not depend
     /// on the trial (the sources check it epoch by epoch anyway, see
-    /// [`EpochTable::epoch`]).
+    /// [`crate::engine::cache::EpochTable::epoch`]).
     ///
     /// # Errors
     /// When the trajectory or the FM field cannot be built (the first trial would fail
