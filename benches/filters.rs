@@ -23,7 +23,6 @@ use hybridnav::fusion::models::{
 use hybridnav::fusion::particle::{
     ParticleBuffer, ParticleFilter, PseudorangeLikelihood, Resampling, SoaLikelihood,
 };
-use hybridnav::fusion::wls;
 use nalgebra::{SMatrix, SVector, Vector3};
 
 mod common;
@@ -113,8 +112,8 @@ fn bench_pf(c: &mut Criterion) {
     let layout = StateLayout {
         pos: [Some(0), Some(1), Some(2)],
         vel: [None; 3],
-        clock: [Some(3); wls::MAX_CLOCKS],
-        isb: [None; wls::MAX_CLOCKS],
+        clock: [Some(3); System::COUNT],
+        isb: [None; System::COUNT],
         drift: None,
     };
     let rows = emitters.map(|e| RangeRow {

@@ -93,7 +93,7 @@ impl ClockModel {
         3 + match (self, system) {
             (ClockModel::Shared, System::Bds) => 1,
             (ClockModel::Shared, _) => 0,
-            (ClockModel::PerSystem, s) => crate::fusion::wls::system_index(s) as u8,
+            (ClockModel::PerSystem, s) => s.index() as u8,
         }
     }
 }

@@ -16,7 +16,6 @@ use hybridnav::fusion::models::{
     StateLayout,
 };
 use hybridnav::fusion::particle::{ParticleBuffer, ParticleFilter, Resampling};
-use hybridnav::fusion::wls;
 use nalgebra::{DMatrix, DVector, SMatrix, SVector, Vector3};
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -38,8 +37,8 @@ fn range_layout() -> StateLayout {
     StateLayout {
         pos: [Some(0), Some(2), None],
         vel: [Some(1), Some(3), None],
-        clock: [None; wls::MAX_CLOCKS],
-        isb: [None; wls::MAX_CLOCKS],
+        clock: [None; System::COUNT],
+        isb: [None; System::COUNT],
         drift: None,
     }
 }

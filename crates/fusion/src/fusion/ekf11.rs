@@ -1606,7 +1606,7 @@ mod tests {
             let model = Pva11Clock::new(cfg).unwrap();
             let mut layout = StateLayout::ekf11();
             if !isb {
-                layout.isb = [None; crate::fusion::wls::MAX_CLOCKS];
+                layout.isb = [None; System::COUNT];
             }
             let gating = Gating {
                 chi2_prob: Some(chi2::cdf(CHI2_1DOF_P999, 1.0)),

@@ -116,11 +116,11 @@ pub(crate) fn gdop_of(
     ranges: &[RangeMeasurement],
     geometry: &mut Vec<(Vector3<f64>, usize)>,
 ) -> Option<f64> {
-    let mut present = [false; wls::MAX_CLOCKS];
+    let mut present = [false; System::COUNT];
     for m in ranges {
-        present[wls::system_index(m.system())] = true;
+        present[m.system().index()] = true;
     }
-    let mut map = [0usize; wls::MAX_CLOCKS];
+    let mut map = [0usize; System::COUNT];
     let mut n_clocks = 0;
     for (i, p) in present.iter().enumerate() {
         if *p {
@@ -132,7 +132,7 @@ pub(crate) fn gdop_of(
     geometry.extend(
         ranges
             .iter()
-            .map(|m| (m.emitter_pos_ecef_m, map[wls::system_index(m.system())])),
+            .map(|m| (m.emitter_pos_ecef_m, map[m.system().index()])),
     );
     wls::dop(rx, geometry, n_clocks).map(|d| d.gdop)
 }

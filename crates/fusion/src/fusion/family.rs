@@ -40,7 +40,6 @@ use crate::fusion::models::{
 use crate::fusion::particle::{ParticleBuffer, ParticleFilter, Resampling};
 use crate::fusion::preprocess::{ClockCorrectionConfig, FrontEnd};
 use crate::fusion::selection::ModeSelection;
-use crate::fusion::wls;
 use crate::measurement::SourceKind;
 use crate::measurement::{EpochOutcome, Estimate, Estimator};
 use crate::measurement::{MeasurementBatch, RangeMeasurement};
@@ -584,7 +583,7 @@ impl FamilyEstimator {
         if ekf_cfg.isb_bds.is_none() {
             // The inert ISB state is left out of the ranges; it keeps a unit variance so
             // that the sigma-point filters can factor the covariance.
-            layout.isb = [None; wls::MAX_CLOCKS];
+            layout.isb = [None; System::COUNT];
         }
         let gating = Gating {
             chi2_prob: ekf_cfg.gate_chi2.map(|g| chi2::cdf(g, 1.0)),

@@ -36,7 +36,6 @@
 
 use crate::core::System;
 use crate::fusion::ekf11::{Ekf11, Ekf11Config, N_STATES as N_EKF11};
-use crate::fusion::wls;
 use crate::measurement::RangeMeasurement;
 use crate::motion::singer::{singer_process_noise, singer_transition};
 use crate::motion::turning;
@@ -446,11 +445,11 @@ pub struct StateLayout {
     pub pos: [Option<usize>; 3],
     /// Indices of the velocity components, used by range rates.
     pub vel: [Option<usize>; 3],
-    /// Clock-bias state (m) of each system, indexed like [`wls::SYSTEMS`]; `None` when
+    /// Clock-bias state (m) of each system, indexed like [`System::ALL`]; `None` when
     /// that system's ranges have no clock term (a true range).
-    pub clock: [Option<usize>; wls::MAX_CLOCKS],
+    pub clock: [Option<usize>; System::COUNT],
     /// Inter-system-bias state (m) added to a system's ranges on top of its clock.
-    pub isb: [Option<usize>; wls::MAX_CLOCKS],
+    pub isb: [Option<usize>; System::COUNT],
     /// Clock-drift state (m/s) used by range rates.
     pub drift: Option<usize>,
 }
@@ -464,7 +463,7 @@ impl StateLayout {
         Self {
             pos: idx::POS.map(Some),
             vel: idx::VEL.map(Some),
-            clock: [c; wls::MAX_CLOCKS],
+            clock: [c; System::COUNT],
             isb: [None, Some(idx::ISB_BDS), None, None],
             drift: Some(idx::CLOCK_DRIFT),
         }
@@ -521,7 +520,7 @@ fn velocity<const N: usize>(layout: &StateLayout, x: &SVector<f64, N>) -> Vector
 /// The bias (m) a system's range carries in state `x`: its clock plus its inter-system
 /// bias.
 fn bias<const N: usize>(layout: &StateLayout, sys: System, x: &SVector<f64, N>) -> f64 {
-    let s = wls::system_index(sys);
+    let s = sys.index();
     layout.clock[s].map_or(0.0, |k| x[k]) + layout.isb[s].map_or(0.0, |k| x[k])
 }
 
@@ -598,7 +597,7 @@ impl<const N: usize, const M: usize> MeasurementModel<N, M> for Pseudoranges<N, 
                     h[(j, *k)] = -u[a];
                 }
             }
-            let s = wls::system_index(row.system);
+            let s = row.system.index();
             if let Some(k) = self.layout.clock[s] {
                 h[(j, k)] += 1.0;
             }
@@ -708,7 +707,7 @@ impl<const N: usize, const M: usize> MeasurementModel<N, M> for PseudorangesAndR
                     h[(k + j, i)] = -u[a];
                 }
             }
-            let s = wls::system_index(row.system);
+            let s = row.system.index();
             if let Some(i) = self.layout.clock[s] {
                 h[(j, i)] += 1.0;
             }

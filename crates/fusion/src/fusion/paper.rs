@@ -23,7 +23,7 @@
 //! # State
 //!
 //! The motion states of the paper's model, then one clock state (m) per system in
-//! [`wls::SYSTEMS`] order (GPS, BDS, DTMB, TC-OFDM):
+//! [`System::ALL`] order (GPS, BDS, DTMB, TC-OFDM):
 //!
 //! ```text
 //! seed 001 (N = 5 + 4):  [x, ẋ, y, ẏ, ÿ, b_GPS, b_BDS, b_DTMB, b_TCOFDM]   (Singer5)
@@ -77,7 +77,6 @@ use crate::fusion::models::{
 use crate::fusion::particle::{ParticleBuffer, ParticleFilter, PseudorangeLikelihood, Resampling};
 use crate::fusion::preprocess::FrontEnd;
 use crate::fusion::selection::ModeSelection;
-use crate::fusion::wls;
 use crate::measurement::SourceKind;
 use crate::measurement::{EpochOutcome, Estimate, Estimator};
 use crate::measurement::{MeasurementBatch, RangeMeasurement};
@@ -88,7 +87,7 @@ use serde::Deserialize;
 pub const PLANE_VARIANCE_M2: f64 = 1e-2;
 
 /// Number of clock states appended to a paper model's motion states.
-pub const N_CLOCKS: usize = wls::MAX_CLOCKS;
+pub const N_CLOCKS: usize = System::COUNT;
 
 /// Whether the receiver knows its clock offsets.
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
@@ -509,7 +508,7 @@ fn layout(pos: [Option<usize>; 3], vel: [Option<usize>; 3], nm: usize) -> StateL
         pos,
         vel,
         clock: std::array::from_fn(|s| Some(nm + s)),
-        isb: [None; wls::MAX_CLOCKS],
+        isb: [None; System::COUNT],
         drift: None,
     }
 }
@@ -657,7 +656,7 @@ where
             if self.clock_ready[s] {
                 continue;
             }
-            let sys = wls::SYSTEMS[s];
+            let sys = System::ALL[s];
             let n = self.rows.iter().filter(|(r, _)| r.system == sys).count();
             if n == 0 {
                 continue;

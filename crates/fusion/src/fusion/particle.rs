@@ -34,7 +34,6 @@
 //! [`PfUpdate`], so the caller sees the failure instead of a NaN estimate.
 
 use crate::fusion::models::{MeasurementModel, ProcessModel, Pseudoranges, RangeRow, StateLayout};
-use crate::fusion::wls;
 use nalgebra::{SMatrix, SVector};
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -478,7 +477,7 @@ impl PseudorangeLikelihood {
         self.pos_col = layout.pos;
         self.rows.clear();
         for (row, zj) in model.rows().iter().zip(z.iter()) {
-            let s = wls::system_index(row.system);
+            let s = row.system.index();
             self.rows.push(LikRow {
                 e: [
                     row.emitter_pos_m.x,
@@ -504,7 +503,7 @@ impl PseudorangeLikelihood {
 
     /// Adds one range `z_m` to the emitter of `row`, its clock columns taken from `layout`.
     pub fn push(&mut self, layout: &StateLayout, row: &RangeRow, z_m: f64) {
-        let s = wls::system_index(row.system);
+        let s = row.system.index();
         self.rows.push(LikRow {
             e: [
                 row.emitter_pos_m.x,
@@ -616,8 +615,8 @@ mod tests {
         let layout = StateLayout {
             pos: [Some(0), Some(1), Some(2)],
             vel: [None; 3],
-            clock: [Some(3); wls::MAX_CLOCKS],
-            isb: [None; wls::MAX_CLOCKS],
+            clock: [Some(3); System::COUNT],
+            isb: [None; System::COUNT],
             drift: None,
         };
         let row = |x: f64, y: f64| RangeRow {

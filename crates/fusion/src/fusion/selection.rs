@@ -46,8 +46,8 @@ pub enum ModeSelection {
 pub struct Admission {
     /// The mode's label, recorded per epoch (`"A"`, `"B"`, `"C"`, `"GPS+BDS"`, …).
     pub label: &'static str,
-    /// Systems whose ranges are admitted, indexed like [`wls::SYSTEMS`].
-    pub systems: [bool; wls::MAX_CLOCKS],
+    /// Systems whose ranges are admitted, indexed like [`System::ALL`].
+    pub systems: [bool; System::COUNT],
     /// Whether position fixes are admitted.
     pub fixes: bool,
 }
@@ -57,14 +57,14 @@ impl Admission {
     pub fn all() -> Self {
         Self {
             label: "",
-            systems: [true; wls::MAX_CLOCKS],
+            systems: [true; System::COUNT],
             fixes: true,
         }
     }
 
     /// True when ranges of `s` are admitted.
     pub fn admits(&self, s: System) -> bool {
-        self.systems[wls::system_index(s)]
+        self.systems[s.index()]
     }
 }
 
@@ -165,10 +165,10 @@ impl ModeSelector {
                 }
             }
         }
-        let idx = |s: System| wls::system_index(s);
+        let idx = |s: System| s.index();
         match &self.scheme {
             Scheme::Seamless => {
-                let mut systems = [false; wls::MAX_CLOCKS];
+                let mut systems = [false; System::COUNT];
                 let label = match seamless_mode(self.gps.len()) {
                     SeamlessMode::GpsBds => {
                         systems[idx(System::Gps)] = true;
@@ -200,7 +200,7 @@ impl ModeSelector {
                     rp_count: f64::from(self.rp_count),
                 };
                 let mode = fuzzy.decide(&inputs).mode;
-                let mut systems = [true; wls::MAX_CLOCKS];
+                let mut systems = [true; System::COUNT];
                 systems[idx(System::Dtmb)] = mode != Mode::A;
                 Admission {
                     label: match mode {

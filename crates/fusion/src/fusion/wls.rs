@@ -33,22 +33,13 @@ use crate::core::{Geodetic, System};
 use crate::measurement::RangeMeasurement;
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
-/// At most this many clock unknowns: one per [`System`].
-pub const MAX_CLOCKS: usize = System::COUNT;
-const MAX_UNKNOWNS: usize = 3 + MAX_CLOCKS;
+/// Position and at most one clock unknown per [`System`] (in [`System::ALL`] order).
+const MAX_UNKNOWNS: usize = 3 + System::COUNT;
 type NormalMatrix = SMatrix<f64, MAX_UNKNOWNS, MAX_UNKNOWNS>;
 type UnknownVector = SVector<f64, MAX_UNKNOWNS>;
 
 /// Smallest accepted ratio of a squared Cholesky pivot to its diagonal entry.
 const MIN_PIVOT_RATIO: f64 = 1e-12;
-
-/// The systems in the order used by [`WlsFix::clocks_m`].
-pub const SYSTEMS: [System; MAX_CLOCKS] = System::ALL;
-
-/// The index of a system in [`SYSTEMS`].
-pub fn system_index(s: System) -> usize {
-    s.index()
-}
 
 /// Options of [`solve`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -92,9 +83,9 @@ pub struct Dop {
 pub struct WlsFix {
     /// Receiver position (ECEF, m).
     pub pos_ecef_m: Vector3<f64>,
-    /// Clock offset (m) of each system in [`SYSTEMS`] order; `None` for a system with no
+    /// Clock offset (m) of each system in [`System::ALL`] order; `None` for a system with no
     /// measurement. With a shared clock every present system reports the same value.
-    pub clocks_m: [Option<f64>; MAX_CLOCKS],
+    pub clocks_m: [Option<f64>; System::COUNT],
     /// Formal covariance of the position (ECEF, m²), from the stated measurement sigmas.
     pub cov_pos_ecef_m2: Matrix3<f64>,
     /// Dilutions of precision of the geometry at the solution.
@@ -112,7 +103,7 @@ pub struct WlsFix {
 impl WlsFix {
     /// The clock offset of a system (m), if it had measurements.
     pub fn clock_m(&self, s: System) -> Option<f64> {
-        self.clocks_m[system_index(s)]
+        self.clocks_m[s.index()]
     }
 }
 
@@ -151,7 +142,7 @@ where
 {
     let iter = measurements.into_iter();
     // First pass: validate, find the systems present and the default starting point.
-    let mut present = [false; MAX_CLOCKS];
+    let mut present = [false; System::COUNT];
     let mut n = 0usize;
     let mut mean = Vector3::zeros();
     for (i, m) in iter.clone().enumerate() {
@@ -160,12 +151,12 @@ where
         if !finite || !m.sigma_m.is_finite() || m.sigma_m <= 0.0 {
             return Err(WlsError::InvalidMeasurement { index: i });
         }
-        present[system_index(m.system())] = true;
+        present[m.system().index()] = true;
         mean += m.emitter_pos_ecef_m;
         n += 1;
     }
     // Columns: 0..3 position, then one clock per present system (or one shared clock).
-    let mut clock_col = [None; MAX_CLOCKS];
+    let mut clock_col = [None; System::COUNT];
     let mut n_clocks = 0;
     for (s, &here) in present.iter().enumerate() {
         if here {
@@ -231,7 +222,7 @@ struct Accumulation {
 fn accumulate<'a>(
     iter: impl Iterator<Item = &'a RangeMeasurement>,
     est: &UnknownVector,
-    clock_col: &[Option<usize>; MAX_CLOCKS],
+    clock_col: &[Option<usize>; System::COUNT],
     n_unknowns: usize,
     with_geometry: bool,
 ) -> Option<Accumulation> {
@@ -248,7 +239,7 @@ fn accumulate<'a>(
         if d.is_nan() || d <= 1e-3 {
             return None;
         }
-        let col = clock_col[system_index(m.system())]?;
+        let col = clock_col[m.system().index()]?;
         let u = -los / d;
         let residual = m.pseudorange_m - (d + est[col]);
         let w = 1.0 / (m.sigma_m * m.sigma_m);
@@ -325,7 +316,7 @@ fn dop_of_geometry(
 fn finish<'a>(
     iter: impl Iterator<Item = &'a RangeMeasurement>,
     est: &UnknownVector,
-    clock_col: &[Option<usize>; MAX_CLOCKS],
+    clock_col: &[Option<usize>; System::COUNT],
     n_unknowns: usize,
     n_clocks: usize,
     n: usize,
@@ -338,7 +329,7 @@ fn finish<'a>(
         .inverse();
     let pos = Vector3::new(est[0], est[1], est[2]);
     let dop = dop_of_geometry(&acc.geometry, n_unknowns, &pos).ok_or(WlsError::SingularGeometry)?;
-    let mut clocks_m = [None; MAX_CLOCKS];
+    let mut clocks_m = [None; System::COUNT];
     for (slot, col) in clocks_m.iter_mut().zip(clock_col) {
         *slot = col.map(|c| est[c]);
     }
@@ -364,7 +355,7 @@ pub fn dop(
     emitters: &[(Vector3<f64>, usize)],
     n_clocks: usize,
 ) -> Option<Dop> {
-    if n_clocks == 0 || n_clocks > MAX_CLOCKS || emitters.len() < 3 + n_clocks {
+    if n_clocks == 0 || n_clocks > System::COUNT || emitters.len() < 3 + n_clocks {
         return None;
     }
     let mut geometry = NormalMatrix::zeros();
@@ -454,7 +445,7 @@ mod tests {
     fn reference_accumulate(
         ms: &[RangeMeasurement],
         est: &UnknownVector,
-        clock_col: &[Option<usize>; MAX_CLOCKS],
+        clock_col: &[Option<usize>; System::COUNT],
         n_unknowns: usize,
     ) -> Accumulation {
         let pos = Vector3::new(est[0], est[1], est[2]);
@@ -467,7 +458,7 @@ mod tests {
         for m in ms {
             let los = m.emitter_pos_ecef_m - pos;
             let d = los.norm();
-            let col = clock_col[system_index(m.system())].unwrap();
+            let col = clock_col[m.system().index()].unwrap();
             let mut h = UnknownVector::zeros();
             h.fixed_rows_mut::<3>(0).copy_from(&(-los / d));
             h[col] = 1.0;
@@ -520,11 +511,11 @@ mod tests {
                     m
                 })
                 .collect();
-            let mut present = [false; MAX_CLOCKS];
+            let mut present = [false; System::COUNT];
             for m in &ms {
-                present[system_index(m.system())] = true;
+                present[m.system().index()] = true;
             }
-            let mut clock_col = [None; MAX_CLOCKS];
+            let mut clock_col = [None; System::COUNT];
             let mut n_clocks = 0;
             for (c, here) in clock_col.iter_mut().zip(present) {
                 if here {
@@ -549,7 +540,7 @@ mod tests {
             );
             // dop() with one shared clock against the reference geometry.
             let tagged: Vec<_> = ms.iter().map(|m| (m.emitter_pos_ecef_m, 0)).collect();
-            let shared = [Some(3); MAX_CLOCKS];
+            let shared = [Some(3); System::COUNT];
             let got = dop(&rx, &tagged, 1);
             let want = dop_of_geometry(
                 &reference_accumulate(

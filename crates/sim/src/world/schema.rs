@@ -290,7 +290,7 @@ pub struct BuildContext<'a> {
     /// The clock term (m) of each system's ranges declared by `[sensors.emitters]`,
     /// indexed like [`crate::core::System::ALL`]: what a paper estimator with
     /// `clocks = "known"` is assumed to know.
-    pub emitter_clocks_m: Option<[f64; crate::fusion::wls::MAX_CLOCKS]>,
+    pub emitter_clocks_m: Option<[f64; System::COUNT]>,
 }
 
 fn one() -> u64 {
