@@ -17,10 +17,10 @@ use hybridnav::inertial::ins_estimator::{InsEstimator, InsFilterConfig};
 use hybridnav::inertial::source::{local_earth_of, ImuSource};
 use hybridnav::inertial::strapdown::NavState;
 use hybridnav::inertial::LocalEarth;
-use hybridnav::measurement::Estimator;
-use hybridnav::measurement::ImuSample;
-use hybridnav::measurement::{Measurement, MeasurementBatch, PositionFix, RangeMeasurement};
-use hybridnav::measurement::{SampleContext, Source};
+use hybridnav::measurement::{
+    Estimator, ImuSample, Measurement, MeasurementBatch, PositionFix, RangeMeasurement,
+    SampleContext, Source,
+};
 use hybridnav::motion::TrajectoryConfig;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 

@@ -15,8 +15,7 @@
 use super::{write_text, RecordedBatch, Recording};
 use crate::core::geodesy::azimuth_elevation;
 use crate::core::{Geodetic, GpsTime, System};
-use crate::measurement::Measurement;
-use crate::measurement::SourceKind;
+use crate::measurement::{Measurement, SourceKind};
 use crate::world::World;
 use nalgebra::Vector3;
 use std::fmt::Write;

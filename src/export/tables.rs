@@ -14,8 +14,7 @@
 use super::Recording;
 use crate::io::atomic::write_atomic;
 use crate::io::table::{Table, Values};
-use crate::measurement::Measurement;
-use crate::measurement::Truth;
+use crate::measurement::{Measurement, Truth};
 use crate::world::World;
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};

@@ -560,8 +560,7 @@ fn world_iq(
 /// it gives no measurement.
 fn source_cn0_dbhz(world: &str, seed: u64, t_s: f64) -> Option<f64> {
     use hybridnav::core::SimTime;
-    use hybridnav::measurement::{Measurement, MeasurementBatch};
-    use hybridnav::measurement::{SampleContext, Source};
+    use hybridnav::measurement::{Measurement, MeasurementBatch, SampleContext, Source};
     let w = hybridnav::world::load_world(&crate::common::repo().join(world)).unwrap();
     let rng = TrialRng::new(seed, 0);
     let mut setup = w.build_trial(&rng).unwrap();

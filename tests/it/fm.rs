@@ -8,9 +8,9 @@ use hybridnav::fm::field::synthesize_stations;
 use hybridnav::fm::kriging::{empirical_variogram, fit_variogram, FitOptions};
 use hybridnav::fm::wknn::locate;
 use hybridnav::fm::*;
-use hybridnav::measurement::Estimate;
-use hybridnav::measurement::{Measurement, MeasurementBatch};
-use hybridnav::measurement::{SampleContext, Source, Truth};
+use hybridnav::measurement::{
+    Estimate, Measurement, MeasurementBatch, SampleContext, Source, Truth,
+};
 use hybridnav::motion::TruthState;
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use rand::Rng;

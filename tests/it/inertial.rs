@@ -675,14 +675,14 @@ fn bad_imu_input_gives_clear_messages() {
 // ---------------------------------------------------------------------------------------
 
 use hybridnav::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System};
-use hybridnav::engine::trial::TrialSetup;
-use hybridnav::engine::trial::{simulate, EstimatorTrace};
+use hybridnav::engine::trial::{simulate, EstimatorTrace, TrialSetup};
 use hybridnav::inertial::ins_estimator::{InsEstimator, InsFilterConfig};
 use hybridnav::inertial::pdr_estimator::{PdrEstimator, PdrFilterConfig};
 use hybridnav::inertial::source::{local_earth_of, ImuSource, PdrSensorConfig, PdrSource};
-use hybridnav::measurement::{EpochOutcome, Estimate, Estimator};
-use hybridnav::measurement::{Measurement, MeasurementBatch, RangeMeasurement};
-use hybridnav::measurement::{SampleContext, Source};
+use hybridnav::measurement::{
+    EpochOutcome, Estimate, Estimator, Measurement, MeasurementBatch, RangeMeasurement,
+    SampleContext, Source,
+};
 
 /// Seed 002's site, Lianhua Lake Park, Wuhan.
 fn wuhan() -> EnuFrame {

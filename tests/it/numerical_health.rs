@@ -18,8 +18,7 @@
 
 use hybridnav::core::{SimTime, TrialRng};
 use hybridnav::engine::trial::simulate;
-use hybridnav::measurement::{Measurement, MeasurementBatch};
-use hybridnav::measurement::{SampleContext, Source};
+use hybridnav::measurement::{Measurement, MeasurementBatch, SampleContext, Source};
 use hybridnav::world::load_world;
 use nalgebra::Vector3;
 

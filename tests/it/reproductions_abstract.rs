@@ -5,8 +5,7 @@
 use hybridnav::beacons::{EmittersConfig, EmittersSource};
 use hybridnav::core::{EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng};
 use hybridnav::engine::trial::{truth_at, EstimatorTrace, TrialResult};
-use hybridnav::measurement::MeasurementBatch;
-use hybridnav::measurement::{SampleContext, Source};
+use hybridnav::measurement::{MeasurementBatch, SampleContext, Source};
 use hybridnav::motion::TrajectoryConfig;
 use hybridnav::world::trial::run_trial;
 use hybridnav::world::{load_world, parse_world, World};

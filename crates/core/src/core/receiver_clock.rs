@@ -42,8 +42,7 @@
 //! seconds; it is 0 for GPS and for systems not listed.
 
 use crate::core::config::check;
-use crate::core::ConfigIssue;
-use crate::core::System;
+use crate::core::{ConfigIssue, System};
 use nalgebra::{Matrix2, Vector2};
 use rand::Rng;
 use rand_distr::StandardNormal;

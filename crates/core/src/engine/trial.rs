@@ -3,11 +3,7 @@
 use super::queue::{EventKind, EventQueue};
 use crate::core::{EnuFrame, GpsTime, SimTime, System};
 use crate::engine::health::{HealthConfig, HealthMonitor, Verdict};
-use crate::measurement::Estimate;
-use crate::measurement::Estimator;
-use crate::measurement::MeasurementBatch;
-use crate::measurement::Source;
-use crate::measurement::{SampleContext, Truth};
+use crate::measurement::{Estimate, Estimator, MeasurementBatch, SampleContext, Source, Truth};
 use crate::motion::Trajectory;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -265,12 +261,10 @@ pub fn simulate_observed(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::core::Geodetic;
-    use crate::core::TrialRng;
-    use crate::measurement::Source;
-    use crate::measurement::SourceKind;
-    use crate::measurement::{EpochOutcome, Estimator};
-    use crate::measurement::{Measurement, PositionFix};
+    use crate::core::{Geodetic, TrialRng};
+    use crate::measurement::{
+        EpochOutcome, Estimator, Measurement, PositionFix, Source, SourceKind,
+    };
     use crate::motion::TrajectoryConfig;
     use nalgebra::Matrix3;
     use std::sync::{Arc, Mutex};

@@ -40,12 +40,14 @@ use crate::core::config::check;
 use crate::core::geodesy::{azimuth_elevation_with, ecef_to_enu_rotation};
 use crate::core::receiver_clock::ClockTrack;
 use crate::core::rng::StreamRng;
-use crate::core::ConfigIssue;
-use crate::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng, C_MPS};
+use crate::core::{
+    ConfigIssue, EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng, C_MPS,
+};
 use crate::dtmb::multipath::{link_snr_db, ChannelConfig, Path};
-use crate::measurement::SourceKind;
-use crate::measurement::{Measurement, MeasurementBatch, RangeDifference, RangeMeasurement};
-use crate::measurement::{SampleContext, Source};
+use crate::measurement::{
+    Measurement, MeasurementBatch, RangeDifference, RangeMeasurement, SampleContext, Source,
+    SourceKind,
+};
 use crate::propagation::pathloss::{extended_hata_db, HataEnvironment, Model, ValidityLog};
 use crate::propagation::{
     Emitter, LinkParams, LinkPaths, Polarisation, Scene, ShadowingConfig, ShadowingField,

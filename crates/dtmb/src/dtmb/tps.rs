@@ -363,8 +363,7 @@ impl TpsErrorModel {
 mod tests {
     use super::*;
     use crate::core::receiver_clock::{ClockConfig, Oscillator, ReceiverClock};
-    use crate::core::GpsTime;
-    use crate::core::TrialRng;
+    use crate::core::{GpsTime, TrialRng};
     use crate::dtmb::channel::Channel;
     use crate::dtmb::frame::{BodyModulator, CarrierMode, Qam};
     use crate::dtmb::multipath::{ChannelConfig, Path};

@@ -23,13 +23,10 @@
 //! The source is [`TcofdmSource`] (name `"tcofdm"`, emitters of [`System::Tcofdm`]).
 
 use crate::core::receiver_clock::ClockTrack;
-use crate::core::ConfigIssue;
-use crate::core::{EmitterId, EnuFrame, SimTime, System, TrialRng};
+use crate::core::{ConfigIssue, EmitterId, EnuFrame, SimTime, System, TrialRng};
 use crate::dtmb::source::{DtmbLevel, DtmbSensorConfig, DtmbSource, Environment, TowerSpec};
 use crate::dtmb::PnMode;
-use crate::measurement::MeasurementBatch;
-use crate::measurement::SourceKind;
-use crate::measurement::{SampleContext, Source};
+use crate::measurement::{MeasurementBatch, SampleContext, Source, SourceKind};
 use crate::propagation::{Scene, ShadowingConfig};
 use nalgebra::Vector3;
 use rand::Rng;

@@ -1,18 +1,14 @@
 //! The GNSS estimators of seed 000's comparison: the 11-state EKF behind its front end,
 //! and weighted least squares, each implementing [`Estimator`].
 
-use crate::core::GpsTime;
-use crate::core::System;
+use crate::core::{GpsTime, System};
 use crate::fusion::ekf11::{Ekf11, Ekf11Config, IsbConfig, RejectReason, UpdateOutcome};
 use crate::fusion::preprocess::{ClockCorrectionConfig, FrontEnd};
 use crate::fusion::selection::ModeSelection;
 use crate::fusion::wls::{self, WlsOptions};
-use crate::measurement::EpochOutcome;
-use crate::measurement::Estimate;
-use crate::measurement::Estimator;
-use crate::measurement::MeasurementBatch;
-use crate::measurement::RangeMeasurement;
-use crate::measurement::SourceKind;
+use crate::measurement::{
+    EpochOutcome, Estimate, Estimator, MeasurementBatch, RangeMeasurement, SourceKind,
+};
 use nalgebra::Vector3;
 
 /// Seed 000's EKF driven epoch by epoch: initialised from a weighted-least-squares fix,

@@ -40,9 +40,9 @@ use crate::fusion::models::{
 use crate::fusion::particle::{ParticleBuffer, ParticleFilter, Resampling};
 use crate::fusion::preprocess::{ClockCorrectionConfig, FrontEnd};
 use crate::fusion::selection::ModeSelection;
-use crate::measurement::SourceKind;
-use crate::measurement::{EpochOutcome, Estimate, Estimator};
-use crate::measurement::{MeasurementBatch, RangeMeasurement};
+use crate::measurement::{
+    EpochOutcome, Estimate, Estimator, MeasurementBatch, RangeMeasurement, SourceKind,
+};
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use serde::Deserialize;
 

@@ -21,9 +21,9 @@
 use crate::core::{EmitterId, GpsTime, System};
 use crate::fusion::selection::{Admission, ModeSelection, ModeSelector};
 use crate::fusion::wls::{self, WlsOptions};
-use crate::measurement::EpochOutcome;
-use crate::measurement::SourceKind;
-use crate::measurement::{Measurement, MeasurementBatch, PositionFix, RangeMeasurement};
+use crate::measurement::{
+    EpochOutcome, Measurement, MeasurementBatch, PositionFix, RangeMeasurement, SourceKind,
+};
 use nalgebra::Vector3;
 use serde::Deserialize;
 

@@ -19,8 +19,7 @@ use crate::fusion::mode::{
     seamless_mode, FuzzyConfig, FuzzyInputs, FuzzySystem, Mode, SeamlessMode,
 };
 use crate::fusion::wls;
-use crate::measurement::SourceKind;
-use crate::measurement::{Measurement, MeasurementBatch};
+use crate::measurement::{Measurement, MeasurementBatch, SourceKind};
 use nalgebra::Vector3;
 use serde::Deserialize;
 

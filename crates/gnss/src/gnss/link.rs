@@ -64,8 +64,7 @@
 //! measurement.
 
 use crate::core::config::check_range;
-use crate::core::ConfigIssue;
-use crate::core::{System, C_MPS};
+use crate::core::{ConfigIssue, System, C_MPS};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, PI};
 

@@ -48,10 +48,10 @@ use crate::gnss::ephemeris::sagnac_rotate;
 use crate::gnss::link::{Signal, TrackingConfig};
 use crate::gnss::rinex_nav::NavData;
 use crate::gnss::visibility::{scene_effect, LinkClass};
-use crate::measurement::RawGnssObservation;
-use crate::measurement::SourceKind;
-use crate::measurement::{Measurement, MeasurementBatch, RangeMeasurement};
-use crate::measurement::{SampleContext, Source, Truth};
+use crate::measurement::{
+    Measurement, MeasurementBatch, RangeMeasurement, RawGnssObservation, SampleContext, Source,
+    SourceKind, Truth,
+};
 use crate::propagation::{LinkPaths, Scene};
 use nalgebra::Vector3;
 use rand::Rng;

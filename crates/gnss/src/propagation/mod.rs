@@ -41,8 +41,7 @@ pub use scene::{
 };
 pub use shadowing::{ShadowingConfig, ShadowingField};
 
-use crate::core::ConfigIssue;
-use crate::core::C_MPS;
+use crate::core::{ConfigIssue, C_MPS};
 use index::Aabb;
 use los::{point_in_polygon, PrismSet};
 use nalgebra::Vector3;

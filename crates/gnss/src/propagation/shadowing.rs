@@ -45,8 +45,7 @@
 //! in the survey and in the walk. A study that wants a new city per trial passes a trial's
 //! own stream to [`ShadowingField::new`].
 
-use crate::core::ConfigIssue;
-use crate::core::TrialRng;
+use crate::core::{ConfigIssue, TrialRng};
 use rand::seq::SliceRandom;
 use rand::Rng;
 use serde::{Deserialize, Serialize};

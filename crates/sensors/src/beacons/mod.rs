@@ -31,11 +31,10 @@
 //! never the truth.
 
 use crate::core::rng::StreamRng;
-use crate::core::ConfigIssue;
-use crate::core::{EmitterId, EnuFrame, SimTime, System, TrialRng};
-use crate::measurement::SourceKind;
-use crate::measurement::{Measurement, MeasurementBatch, RangeMeasurement};
-use crate::measurement::{SampleContext, Source};
+use crate::core::{ConfigIssue, EmitterId, EnuFrame, SimTime, System, TrialRng};
+use crate::measurement::{
+    Measurement, MeasurementBatch, RangeMeasurement, SampleContext, Source, SourceKind,
+};
 use nalgebra::Vector3;
 use rand::Rng;
 use rand_distr::StandardNormal;

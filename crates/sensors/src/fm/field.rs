@@ -35,8 +35,7 @@
 
 use crate::core::config::check;
 use crate::core::rng::StreamRng;
-use crate::core::ConfigIssue;
-use crate::core::TrialRng;
+use crate::core::{ConfigIssue, TrialRng};
 use crate::propagation::pathloss::{extended_hata_db, HataEnvironment, Model, ValidityLog};
 use crate::propagation::{
     Emitter, LinkParams, LinkPaths, Polarisation, Scene, ShadowingConfig, ShadowingField,

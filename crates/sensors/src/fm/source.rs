@@ -27,12 +27,11 @@ use super::survey::SurveyConfig;
 use super::wknn::{locate, Constraint, ConstraintConfig, WknnConfig, WknnScratch};
 use crate::core::config::check;
 use crate::core::rng::StreamRng;
-use crate::core::ConfigIssue;
-use crate::core::{EnuFrame, SimTime, TrialRng};
+use crate::core::{ConfigIssue, EnuFrame, SimTime, TrialRng};
 use crate::engine::cache::EpochTable;
-use crate::measurement::SourceKind;
-use crate::measurement::{Measurement, MeasurementBatch, PositionFix};
-use crate::measurement::{SampleContext, Source, Truth};
+use crate::measurement::{
+    Measurement, MeasurementBatch, PositionFix, SampleContext, Source, SourceKind, Truth,
+};
 use crate::propagation::pathloss::ValidityLog;
 use crate::propagation::Scene;
 use serde::Deserialize;

@@ -5,9 +5,9 @@
 
 use crate::core::{EnuFrame, System};
 use crate::fusion::wls::{self, WlsOptions};
-use crate::measurement::EpochOutcome;
-use crate::measurement::SourceKind;
-use crate::measurement::{Measurement, MeasurementBatch, RangeMeasurement};
+use crate::measurement::{
+    EpochOutcome, Measurement, MeasurementBatch, RangeMeasurement, SourceKind,
+};
 use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
 
 /// A velocity from pseudorange rates at a known receiver position, by weighted least

@@ -41,8 +41,7 @@
 //! Units in the configuration are the datasheet units (°/√h, °/h, m/s/√h, m/s²); the
 //! resolved [`ImuSpec`] is in SI.
 
-use crate::core::ConfigIssue;
-use crate::core::StreamRng;
+use crate::core::{ConfigIssue, StreamRng};
 use crate::measurement::ImuSample;
 use nalgebra::{Matrix3, Vector3};
 use rand::Rng;

@@ -15,13 +15,12 @@ use super::source::local_earth_of;
 use super::strapdown::NavState;
 use super::LocalEarth;
 use crate::core::config::check_range;
-use crate::core::ConfigIssue;
-use crate::core::{EnuFrame, GpsTime, System};
+use crate::core::{ConfigIssue, EnuFrame, GpsTime, System};
 use crate::fusion::wls::{self, WlsOptions};
-use crate::measurement::ImuSample;
-use crate::measurement::SourceKind;
-use crate::measurement::{EpochOutcome, Estimate, Estimator};
-use crate::measurement::{Measurement, MeasurementBatch, RangeMeasurement};
+use crate::measurement::{
+    EpochOutcome, Estimate, Estimator, ImuSample, Measurement, MeasurementBatch, RangeMeasurement,
+    SourceKind,
+};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 

@@ -14,8 +14,7 @@
 //! field plus ferromagnetic anomalies, `crate::magnetic`); [`Magnetometer::measure`] reads
 //! the constant field of the configuration.
 
-use crate::core::ConfigIssue;
-use crate::core::StreamRng;
+use crate::core::{ConfigIssue, StreamRng};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use rand::Rng;
 use rand_distr::StandardNormal;

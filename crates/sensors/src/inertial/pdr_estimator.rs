@@ -9,13 +9,11 @@
 //! position.
 
 use crate::core::config::check_range;
-use crate::core::ConfigIssue;
-use crate::core::{EnuFrame, GpsTime, System};
+use crate::core::{ConfigIssue, EnuFrame, GpsTime, System};
 use crate::fusion::models::MeasurementModel;
-use crate::measurement::SourceKind;
-use crate::measurement::{EpochOutcome, Estimate, Estimator};
 use crate::measurement::{
-    Measurement, MeasurementBatch, RangeDifference, RangeMeasurement, StepEvent,
+    EpochOutcome, Estimate, Estimator, Measurement, MeasurementBatch, RangeDifference,
+    RangeMeasurement, SourceKind, StepEvent,
 };
 use nalgebra::{Matrix2, Matrix3, Matrix4, SMatrix, SVector, Vector2, Vector3};
 use serde::{Deserialize, Serialize};

@@ -69,11 +69,10 @@ use super::imu::{Imu, ImuConfig};
 use super::magnetometer::{Magnetometer, MagnetometerConfig};
 use super::pdr::{Ahrs, Pdr, PdrConfig};
 use super::LocalEarth;
-use crate::core::ConfigIssue;
-use crate::core::{EnuFrame, SimTime, TrialRng};
-use crate::measurement::SourceKind;
-use crate::measurement::{Measurement, MeasurementBatch, StepEvent};
-use crate::measurement::{SampleContext, Source};
+use crate::core::{ConfigIssue, EnuFrame, SimTime, TrialRng};
+use crate::measurement::{
+    Measurement, MeasurementBatch, SampleContext, Source, SourceKind, StepEvent,
+};
 use crate::motion::{Trajectory, TruthState};
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};

@@ -39,8 +39,7 @@
 //! local values can give them with [`EarthField::from_elements`].
 
 use super::MagneticError;
-use crate::core::ConfigIssue;
-use crate::core::Geodetic;
+use crate::core::{ConfigIssue, Geodetic};
 use nalgebra::Vector3;
 
 /// The IGRF reference radius a (m).

@@ -49,8 +49,7 @@
 use super::landmark::{Candidate, FEATURE_LEN, IMAGE_COLUMNS};
 use super::MagneticError;
 use crate::core::config::check_range;
-use crate::core::ConfigIssue;
-use crate::core::StreamRng;
+use crate::core::{ConfigIssue, StreamRng};
 use rand::Rng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};

@@ -30,13 +30,12 @@ use super::landmark::{
 };
 use super::snn::{SnnClassifier, SnnConfig, SnnScratch};
 use crate::core::config::check;
-use crate::core::ConfigIssue;
-use crate::core::{EnuFrame, GpsTime, SimTime, TrialRng};
+use crate::core::{ConfigIssue, EnuFrame, GpsTime, SimTime, TrialRng};
 use crate::inertial::attitude::{PlatformConfig, PlatformTruth};
 use crate::inertial::magnetometer::{Magnetometer, MagnetometerConfig};
-use crate::measurement::SourceKind;
-use crate::measurement::{Measurement, MeasurementBatch, PositionFix};
-use crate::measurement::{SampleContext, Source};
+use crate::measurement::{
+    Measurement, MeasurementBatch, PositionFix, SampleContext, Source, SourceKind,
+};
 use crate::motion::Trajectory;
 use nalgebra::{Matrix3, Vector3};
 use rand::Rng;
