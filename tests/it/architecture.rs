@@ -164,14 +164,12 @@ fn violations(edges: &[Edge]) -> Vec<String> {
         let (Some((from_crate, from_layer)), Some((to_crate, to_layer))) =
             (layer_of(&e.from), layer_of(&e.to))
         else {
-            // `crate::X` where X is not a module of the table: a crate-root item (such
-            // as the facade's re-exports) would be one; none exists, so flag it.
-            if layer_of(&e.from).is_some() && !is_crate_root_item(&e.to) {
-                v.push(format!(
-                    "{}: {} -> {}: not a module of the layer table",
-                    e.at, e.from, e.to
-                ));
-            }
+            // Every crate root holds only modules, so `crate::X` must name one of the
+            // table (edges are only ever read from the table's modules).
+            v.push(format!(
+                "{}: {} -> {}: not a module of the layer table",
+                e.at, e.from, e.to
+            ));
             continue;
         };
         if to_layer >= from_layer {
@@ -194,11 +192,6 @@ fn violations(edges: &[Edge]) -> Vec<String> {
         }
     }
     v
-}
-
-/// Names a crate root may define besides its modules (none today).
-fn is_crate_root_item(_name: &str) -> bool {
-    false
 }
 
 fn all_edges() -> Vec<Edge> {

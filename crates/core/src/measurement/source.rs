@@ -36,18 +36,6 @@ pub enum SourceKind {
 }
 
 impl SourceKind {
-    /// Every kind, in declaration order.
-    pub const ALL: [SourceKind; 8] = [
-        SourceKind::Gnss,
-        SourceKind::Emitters,
-        SourceKind::Dtmb,
-        SourceKind::Tcofdm,
-        SourceKind::Fm,
-        SourceKind::Magnetic,
-        SourceKind::Imu,
-        SourceKind::Pdr,
-    ];
-
     /// The name world files and outputs use.
     pub const fn name(self) -> &'static str {
         match self {
@@ -60,11 +48,6 @@ impl SourceKind {
             SourceKind::Imu => "imu",
             SourceKind::Pdr => "pdr",
         }
-    }
-
-    /// The kind a world file names, if any.
-    pub fn from_name(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|k| k.name() == name)
     }
 }
 
