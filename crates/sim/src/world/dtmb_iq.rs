@@ -144,7 +144,6 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
     let (t, group) = select_towers(world, req)?;
     let mode = t.pn_mode();
     let n = mode.frame_len();
-    let fs = SAMPLE_RATE_HZ;
     let t_frame = mode.frame_duration_s();
     let dur = world.duration_s;
     let rng = TrialRng::new(req.seed, req.trial);
@@ -204,7 +203,6 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
         }
     }
     let mut noise = rng.stream(&format!("dtmb/iq/{}/noise", specs[me].id));
-    let lambda = C_MPS / t.freq_hz;
     let total = req.frames * n;
     let mut samples = vec![Complex32::default(); total];
     let mut extra = vec![Complex32::default(); n];
@@ -226,7 +224,7 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
         links.clear();
         for (i, spec) in specs.iter().enumerate() {
             let l = tower_block(
-                world, &mut link, i, spec, &truth, t_s, rx_bias_s, req.from_s, lambda, fs,
+                world, &mut link, i, spec, &truth, t_s, rx_bias_s, req.from_s,
             );
             if j == 0 && i == me && l.power > 0.0 {
                 snr_first = l.snr_db;
@@ -238,7 +236,7 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
             let members: Vec<usize> = (0..specs.len())
                 .filter(|&i| owner_of(i) == sg.owner)
                 .collect();
-            signal_paths(sg, &members, &links, mode, fs, t_s)?;
+            signal_paths(sg, &members, &links, mode, t_s)?;
         }
         // Sum the signals, then the noise once.
         let start = (j * n) as i64;
@@ -319,9 +317,10 @@ fn tower_block(
     t_s: f64,
     rx_bias_s: f64,
     from_s: f64,
-    lambda: f64,
-    fs: f64,
 ) -> TowerBlock {
+    // Every tower of a recording is on the requested tower's carrier.
+    let lambda = C_MPS / spec.freq_hz;
+    let fs = SAMPLE_RATE_HZ;
     let (range_m, snr_ref_db, dopplers) = link.tower_link(i, truth);
     let tower_clock_s = spec.clock_offset_s + spec.clock_drift_s_per_s * t_s;
     let no_scene_doppler = if world.scene.is_none() {
@@ -473,9 +472,9 @@ fn signal_paths(
     members: &[usize],
     links: &[TowerBlock],
     mode: PnMode,
-    fs: f64,
     t_s: f64,
 ) -> Result<(), DtmbError> {
+    let fs = SAMPLE_RATE_HZ;
     sg.paths.clear();
     let latest_x = members
         .iter()
