@@ -703,7 +703,7 @@ fn dtmb_iq_from_a_world_is_valid_sigmf() {
         .args(["-c", "import sigmf"])
         .output();
     if !matches!(probe, Ok(ref o) if o.status.success()) {
-        eprintln!("skipped: the sigmf Python package is not installed (CI installs it)");
+        crate::common::skip("the sigmf Python package is not installed (CI installs it)");
         return;
     }
     let script = r#"

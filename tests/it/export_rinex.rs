@@ -228,7 +228,7 @@ fn run_tools(world: &Path, out: &Path) {
         .output()
         .is_err()
     {
-        eprintln!("skipped: rnx2rtkp not found (Debian package rtklib; .ci/run installs it)");
+        crate::common::skip("rnx2rtkp not found (Debian package rtklib; .ci/run installs it)");
         return;
     }
     export(world, out);

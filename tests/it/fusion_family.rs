@@ -397,12 +397,12 @@ fn ekf_and_ukf_match_filterpy_on_a_recorded_sequence() {
     match status {
         Ok(s) if s.success() => {}
         Ok(s) if s.code() == Some(3) => {
-            println!("skipped: filterpy not installed");
+            crate::common::skip("filterpy not installed");
             return;
         }
         Ok(s) => panic!("the filterpy script failed: {s}"),
         Err(_) => {
-            println!("skipped: filterpy not installed (no python3)");
+            crate::common::skip("filterpy not installed (no python3)");
             return;
         }
     }

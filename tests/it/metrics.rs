@@ -33,12 +33,14 @@ fn evo(truth: &std::path::Path, est: &std::path::Path, out: &std::path::Path) ->
     match status {
         Ok(s) if s.success() => {}
         Ok(s) if s.code() == Some(3) => {
-            println!("skipped: evo is not installed (pip install evo) — ATE/RPE not cross-checked");
+            crate::common::skip(
+                "evo is not installed (pip install evo) — ATE/RPE not cross-checked",
+            );
             return None;
         }
         Ok(s) => panic!("the evo script failed: {s}"),
         Err(_) => {
-            println!("skipped: python3 not found — ATE/RPE not cross-checked against evo");
+            crate::common::skip("python3 not found — ATE/RPE not cross-checked against evo");
             return None;
         }
     }

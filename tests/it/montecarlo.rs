@@ -381,12 +381,12 @@ print("OK", len(p))
             let text = String::from_utf8_lossy(&o.stdout);
             assert!(o.status.success(), "{text}{}", stderr(&o));
             if text.starts_with("SKIP") {
-                println!("skipped: pandas/pyarrow not installed ({})", text.trim());
+                crate::common::skip(&format!("pandas/pyarrow not installed ({})", text.trim()));
             } else {
                 assert!(text.starts_with("OK"), "{text}");
             }
         }
-        Err(e) => println!("skipped: python3 not found ({e})"),
+        Err(e) => crate::common::skip(&format!("python3 not found ({e})")),
     }
     let _ = std::fs::remove_dir_all(&d);
 }

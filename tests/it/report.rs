@@ -67,7 +67,7 @@ print(len(svgs))
             assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
             assert_eq!(String::from_utf8_lossy(&o.stdout).trim(), "6");
         }
-        Err(e) => println!("skipped: python3 not found ({e}); SVGs not parsed as XML"),
+        Err(e) => crate::common::skip(&format!("python3 not found ({e}); SVGs not parsed as XML")),
     }
 
     // Headless Chromium loads it: the DOM it builds holds every chart.
@@ -75,7 +75,7 @@ print(len(svgs))
         .into_iter()
         .find(|p| std::path::Path::new(p).exists());
     let Some(chromium) = chromium else {
-        println!("skipped: Chromium not installed (CI installs Debian's chromium)");
+        crate::common::skip("Chromium not installed (CI installs Debian's chromium)");
         let _ = std::fs::remove_dir_all(&d);
         return;
     };
