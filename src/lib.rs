@@ -20,3 +20,4 @@ pub use hybridnav_sim::world;
 pub mod cli;
 pub mod export;
 pub mod layout;
+pub mod reproduce;

@@ -70,6 +70,31 @@ pub enum Command {
     /// Transmitter-layout design: coverage, GDOP and predicted accuracy over a grid, and
     /// the choice of new transmitter sites (`--place K --candidates FILE`).
     Layout(LayoutArgs),
+    /// Run the paper worlds and print each paper's table with hybridnav's figure beside
+    /// the published one, their ratio, and whether each ordering the paper claims holds.
+    Reproduce(ReproduceArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct ReproduceArgs {
+    /// Papers to run, by world name or prefix (seed000-beihang, seed000-kehui, seed001,
+    /// seed002, seed003, seed004); all when none is given.
+    pub papers: Vec<String>,
+    /// Trials per world.
+    #[arg(long, default_value_t = crate::reproduce::DEFAULT_TRIALS)]
+    pub trials: u64,
+    /// Master seed.
+    #[arg(long, default_value_t = crate::reproduce::DEFAULT_SEED)]
+    pub seed: u64,
+    /// Also write the tables as Markdown to this file (docs/reproductions-tables.md).
+    #[arg(long, value_name = "FILE")]
+    pub markdown: Option<PathBuf>,
+    /// The directory the paper worlds' paths (`worlds/…`) are relative to.
+    #[arg(long, default_value = ".", value_name = "DIR")]
+    pub root: PathBuf,
+    /// Worker threads (default: every core).
+    #[arg(long)]
+    pub threads: Option<usize>,
 }
 
 #[derive(Debug, Args)]
@@ -301,6 +326,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Fm(FmCommand::Survey { world, out, seed }) => cmd_fm_survey(&world, &out, seed),
         Command::Export(a) => cmd_export(&a),
         Command::Layout(a) => Ok(crate::layout::run(&a.request())?),
+        Command::Reproduce(a) => cmd_reproduce(&a),
         Command::Presets => {
             for p in crate::world::presets::PRESETS {
                 println!("{}\n  {}", p.name, p.about);
@@ -311,6 +337,36 @@ pub fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
     }
+}
+
+fn cmd_reproduce(a: &ReproduceArgs) -> Result<()> {
+    use crate::reproduce;
+    if !(1..=crate::world::schema::MAX_TRIALS).contains(&a.trials) {
+        anyhow::bail!(
+            "--trials must be 1 to {}, got {}",
+            crate::world::schema::MAX_TRIALS,
+            a.trials
+        );
+    }
+    let papers = reproduce::select(&a.papers).map_err(anyhow::Error::msg)?;
+    let threads = a.threads.unwrap_or_else(|| {
+        std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
+    });
+    let mut results = Vec::with_capacity(papers.len());
+    for p in papers {
+        eprintln!("running {} ({} trials)", p.world, a.trials);
+        results.push(
+            reproduce::run_paper(&a.root, p, a.trials, a.seed, threads.max(1))
+                .map_err(anyhow::Error::msg)?,
+        );
+    }
+    print!("{}", reproduce::text(&results));
+    if let Some(path) = &a.markdown {
+        write_atomic(path, reproduce::markdown(&results).as_bytes())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        println!("wrote {}", path.display());
+    }
+    Ok(())
 }
 
 fn cmd_export(a: &ExportArgs) -> Result<()> {

@@ -34,7 +34,8 @@ const MODULES: &[(&str, &str, u8)] = &[
     ("montecarlo", "crates/run", 9),
     ("export", ".", 9),
     ("layout", ".", 9),
-    ("cli", ".", 10),
+    ("reproduce", ".", 10),
+    ("cli", ".", 11),
 ];
 
 /// `(crate directory, the workspace crates it may depend on)`.

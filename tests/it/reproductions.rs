@@ -150,3 +150,34 @@ fn seed004_bupt_rekf_beats_ekf_ckf_stf_on_the_ins_error_state() {
     let rel = (h("CKF").sigma3 - h("EKF").sigma3).abs() / h("EKF").sigma3;
     assert!(rel < 1e-6, "CKF and EKF differ by {rel}");
 }
+
+/// `docs/reproductions-tables.md` is `hybridnav reproduce --markdown`'s output for the
+/// default trials and seed: regenerated here, it must match the committed file byte for
+/// byte (a change that moves a paper figure must regenerate the tables).
+#[test]
+fn the_committed_reproduction_tables_are_current() {
+    use hybridnav::reproduce;
+    let root = crate::common::repo();
+    let results: Vec<_> = reproduce::select(&[])
+        .expect("every paper")
+        .into_iter()
+        .map(|p| {
+            reproduce::run_paper(
+                &root,
+                p,
+                reproduce::DEFAULT_TRIALS,
+                reproduce::DEFAULT_SEED,
+                2,
+            )
+            .expect("paper world runs")
+        })
+        .collect();
+    let fresh = reproduce::markdown(&results);
+    let committed = std::fs::read_to_string(root.join("docs/reproductions-tables.md"))
+        .expect("docs/reproductions-tables.md is committed");
+    assert!(
+        fresh == committed,
+        "docs/reproductions-tables.md is stale: run `cargo run --release -- reproduce --markdown docs/reproductions-tables.md`\n{}",
+        reproduce::text(&results)
+    );
+}

@@ -19,6 +19,11 @@
 //!   `false_alarm^window_epochs` = 10⁻⁴⁰ with the defaults; a filter whose noise model is
 //!   merely optimistic by a factor of a few stays well below the bound.
 //!
+//! The watch judges scoring instants, not batches: everything an estimator did since the
+//! previous instant, summed over its sources (see [`HealthMonitor`]). A non-finite
+//! outcome is caught at the batch that produced it ([`is_non_finite`]), so no NaN ever
+//! reaches a source.
+//!
 //! On either, the engine sets `numerical_failure` on the epoch record (with its time and
 //! the estimator's name), drops the epoch's estimate and calls
 //! [`crate::measurement::Estimator::reset`].
@@ -57,27 +62,40 @@ pub enum Verdict {
     Diverged,
 }
 
-/// Sources whose runs of out-of-bound epochs are counted apart; more share the last.
-const SOURCE_SLOTS: usize = 8;
-
 /// One estimator's divergence watch over a trial.
 ///
-/// The run of out-of-bound epochs is counted per source: an estimator that takes two
-/// sources (GNSS and a DTMB tower, say) may have diverged in what one of them sees while
-/// the other's single range still fits, and alternating batches must not hide it.
+/// The watch judges one **scoring instant** at a time (see
+/// [`crate::engine::trial::Scoring`]): the outcome of every batch the estimator processed
+/// since the previous instant, summed (measurements used and gated, NIS and its
+/// dimension). An estimator that takes two sources (GNSS and a DTMB tower, say) is thus
+/// judged on everything it saw: a tower it gates while the satellites fit is an outlier
+/// rejected, not a divergence, and a divergence in what one source sees still shows in the
+/// sum (its gated or out-of-bound measurements weigh as they did).
 #[derive(Clone, Debug)]
 pub struct HealthMonitor {
     cfg: HealthConfig,
-    runs: [u32; SOURCE_SLOTS],
+    run: u32,
     /// χ²_dof(1 − false_alarm) for dof = index, NaN until first needed.
     bound: [f64; CACHED_DOF + 1],
+}
+
+/// Whether an outcome carries a non-finite number: a position, velocity or covariance of
+/// its estimate, or its NIS. Such an outcome must never reach a source or a record.
+pub fn is_non_finite(out: &EpochOutcome) -> bool {
+    let finite_estimate = out.estimate.is_none_or(|e| {
+        e.pos_ecef_m.iter().all(|v| v.is_finite())
+            && e.cov_pos_m2.iter().all(|v| v.is_finite())
+            && e.vel_ecef_mps
+                .is_none_or(|v| v.iter().all(|x| x.is_finite()))
+    });
+    !finite_estimate || !out.nis_sum.is_finite()
 }
 
 impl HealthMonitor {
     pub fn new(cfg: HealthConfig) -> Self {
         Self {
             cfg,
-            runs: [0; SOURCE_SLOTS],
+            run: 0,
             bound: [f64::NAN; CACHED_DOF + 1],
         }
     }
@@ -95,48 +113,39 @@ impl HealthMonitor {
         }
     }
 
-    /// Checks one epoch's outcome of a single-source estimator; see [`Self::check_source`].
+    /// Checks one scoring instant's outcome (every batch since the previous instant,
+    /// summed); after a verdict other than `Healthy` the watch starts afresh (the
+    /// estimator is reset).
     pub fn check(&mut self, out: &EpochOutcome) -> Verdict {
-        self.check_source(0, out)
-    }
-
-    /// Checks one epoch's outcome, from the batch of source `source` (the engine's source
-    /// index); after a verdict other than `Healthy` the watch starts afresh (the estimator
-    /// is reset).
-    pub fn check_source(&mut self, source: usize, out: &EpochOutcome) -> Verdict {
-        let slot = source.min(SOURCE_SLOTS - 1);
-        let finite_estimate = out.estimate.is_none_or(|e| {
-            e.pos_ecef_m.iter().all(|v| v.is_finite())
-                && e.cov_pos_m2.iter().all(|v| v.is_finite())
-                && e.vel_ecef_mps
-                    .is_none_or(|v| v.iter().all(|x| x.is_finite()))
-        });
-        if !finite_estimate || !out.nis_sum.is_finite() {
-            self.runs = [0; SOURCE_SLOTS];
+        if is_non_finite(out) {
+            self.run = 0;
             return Verdict::NonFinite;
         }
         // A filter that has drifted far enough can still fit a few of the measurements it
         // is given (those whose lines of sight are blind to its error) and refuse the
-        // rest: the NIS of what it accepts looks normal. So an epoch in which the gate
-        // refused at least half of the measurements offered, or three or more and at
-        // least a quarter, counts as out of bounds too. A consistent filter gates 0.1 %
-        // of its measurements (the χ²(1) gate at 0.999); a run of ten such epochs is what
-        // a wrong state does, or an environment whose outliers persist for ten seconds on
-        // a quarter of the sky, which the shipped worlds do not have.
+        // rest: the NIS of what it accepts looks normal. So an instant in which the gate
+        // refused at least two measurements and at least half of those offered, or three
+        // or more and at least a quarter, counts as out of bounds too. A consistent filter
+        // gates 0.1 % of its measurements (the χ²(1) gate at 0.999); a run of ten such
+        // instants is what a wrong state does, or an environment whose outliers persist
+        // for ten seconds on a quarter of the sky, which the shipped worlds do not have.
+        // One measurement refused is never enough: with two DTMB towers and one of them
+        // NLOS-biased, refusing the biased one is the gate doing its job, and a filter
+        // whose state had gone wrong would refuse both.
         let offered = out.used + out.rejected_gate;
-        let mostly_gated = out.rejected_gate > 0 && 2 * out.rejected_gate >= offered
+        let mostly_gated = out.rejected_gate >= 2 && 2 * out.rejected_gate >= offered
             || out.rejected_gate >= 3 && 4 * out.rejected_gate >= offered;
         let nis_outside =
             !out.nis_unwatched && out.nis_dof > 0 && out.nis_sum > self.bound(out.nis_dof);
         let outside = nis_outside || mostly_gated;
         let informative = out.nis_dof > 0 || out.rejected_gate > 0;
         if outside {
-            self.runs[slot] += 1;
+            self.run += 1;
         } else if informative {
-            self.runs[slot] = 0;
+            self.run = 0;
         }
-        if self.runs[slot] >= self.cfg.window_epochs.max(1) {
-            self.runs = [0; SOURCE_SLOTS];
+        if self.run >= self.cfg.window_epochs.max(1) {
+            self.run = 0;
             return Verdict::Diverged;
         }
         Verdict::Healthy
@@ -236,34 +245,30 @@ mod tests {
         assert_eq!(m.check(&epoch(f64::NAN, 4)), Verdict::NonFinite);
     }
 
-    /// Two sources: the out-of-bound GNSS epochs count up although each is followed by a
-    /// DTMB epoch that fits.
+    /// One NLOS-biased tower of two refused, instant after instant, while the other fits:
+    /// the gate at work, never a divergence. Both refused: caught after the window.
     #[test]
-    fn runs_are_counted_per_source() {
+    fn one_gated_tower_of_two_is_not_a_divergence_but_both_are() {
         let mut m = HealthMonitor::new(HealthConfig {
             window_epochs: 3,
             false_alarm: 1e-4,
         });
-        let bad_gnss = EpochOutcome {
-            rejected: 4,
-            rejected_gate: 4,
-            ..epoch(2.0, 6)
+        let one_of_two = EpochOutcome {
+            rejected: 1,
+            rejected_gate: 1,
+            ..epoch(0.4, 1)
         };
-        let good_dtmb = epoch(0.5, 1);
-        assert_eq!(m.check_source(0, &bad_gnss), Verdict::Healthy);
-        assert_eq!(m.check_source(1, &good_dtmb), Verdict::Healthy);
-        assert_eq!(m.check_source(0, &bad_gnss), Verdict::Healthy);
-        assert_eq!(m.check_source(1, &good_dtmb), Verdict::Healthy);
-        assert_eq!(m.check_source(0, &bad_gnss), Verdict::Diverged);
-        // The same alternation through one stream never accumulates.
-        let mut one = HealthMonitor::new(HealthConfig {
-            window_epochs: 3,
-            false_alarm: 1e-4,
-        });
-        for _ in 0..10 {
-            assert_eq!(one.check(&bad_gnss), Verdict::Healthy);
-            assert_eq!(one.check(&good_dtmb), Verdict::Healthy);
+        for _ in 0..100 {
+            assert_eq!(m.check(&one_of_two), Verdict::Healthy);
         }
+        let both = EpochOutcome {
+            rejected: 2,
+            rejected_gate: 2,
+            ..EpochOutcome::default()
+        };
+        assert_eq!(m.check(&both), Verdict::Healthy);
+        assert_eq!(m.check(&both), Verdict::Healthy);
+        assert_eq!(m.check(&both), Verdict::Diverged);
     }
 
     /// A filter that fits three of its eight ranges and gates the other five has an NIS

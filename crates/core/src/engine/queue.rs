@@ -13,6 +13,8 @@ use std::collections::BinaryHeap;
 pub enum EventKind {
     /// Source number `0` takes its next sample.
     Sample(usize),
+    /// A scoring instant of a periodic scoring grid (see `engine::trial::Scoring`).
+    Score,
     /// The trial ends.
     End,
 }
@@ -52,6 +54,11 @@ impl EventQueue {
         self.heap
             .pop()
             .map(|Reverse((t, seq, kind))| Event { t, seq, kind })
+    }
+
+    /// The time of the earliest pending event.
+    pub fn peek_time(&self) -> Option<SimTime> {
+        self.heap.peek().map(|Reverse((t, _, _))| *t)
     }
 
     /// Number of pending events.

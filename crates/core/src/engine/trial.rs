@@ -2,8 +2,10 @@
 
 use super::queue::{EventKind, EventQueue};
 use crate::core::{EnuFrame, GpsTime, SimTime, System};
-use crate::engine::health::{HealthConfig, HealthMonitor, Verdict};
-use crate::measurement::{Estimate, Estimator, MeasurementBatch, SampleContext, Source, Truth};
+use crate::engine::health::{is_non_finite, HealthConfig, HealthMonitor, Verdict};
+use crate::measurement::{
+    EpochOutcome, Estimate, Estimator, MeasurementBatch, SampleContext, Source, SourceKind, Truth,
+};
 use crate::motion::Trajectory;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -15,6 +17,79 @@ pub struct TrialSetup {
     pub sources: Vec<Box<dyn Source>>,
     pub estimators: Vec<Box<dyn Estimator>>,
     pub end: SimTime,
+    /// When the estimators are scored.
+    pub scoring: Scoring,
+}
+
+/// The instants at which every estimator of a world is scored.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ScoringInstants {
+    /// Every instant at which a source of one of these kinds produced a scored batch
+    /// (every kind when empty): the GNSS epochs, typically.
+    Sources(Vec<SourceKind>),
+    /// A fixed grid: `first`, `first + period`, … up to the end of the trial.
+    Periodic { first: SimTime, period: SimTime },
+}
+
+/// How a trial's estimators are scored: **one record per estimator per scoring instant**,
+/// the same instants for every estimator of the world, so that every statistic compares
+/// the estimators epoch for epoch (paired), whatever sources each one consumes.
+///
+/// At an instant the record holds the estimate after every batch of that instant (all
+/// sources' batches at one time are processed before the instant is scored); an estimator
+/// that processed no batch since the previous instant is scored with its latest estimate
+/// as it stands (a receiver's output held between its own updates). The record's counters
+/// (measurements used and gated, NIS and its dimension, GDOP, numerical failures) sum or
+/// take the last value over the batches since the previous instant, so nothing an
+/// estimator did between two instants is lost.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scoring {
+    pub instants: ScoringInstants,
+    /// An estimate counts as *available* only while its estimator used a measurement
+    /// within this many seconds; older ones are scored as coasting (see
+    /// [`EpochRecord::since_update_s`]).
+    pub coast_limit_s: f64,
+}
+
+impl Scoring {
+    /// The default coast limit (s): a user's setting rather than a model parameter, set to
+    /// the divergence watch's window (ten 1 Hz epochs), beyond which an estimate that has
+    /// seen no measurement is a prediction, not a fix.
+    pub const DEFAULT_COAST_LIMIT_S: f64 = 10.0;
+
+    /// Scoring at every scored batch of any source (the engine's behaviour for worlds that
+    /// name no anchor source), with the default coast limit.
+    pub fn every_batch() -> Self {
+        Self {
+            instants: ScoringInstants::Sources(Vec::new()),
+            coast_limit_s: Self::DEFAULT_COAST_LIMIT_S,
+        }
+    }
+
+    /// The default for a trial with these sources: the GNSS epochs (or seeds 001/003's
+    /// emitter epochs) when there are any, else every scored batch.
+    pub fn default_for(kinds: impl IntoIterator<Item = SourceKind>) -> Self {
+        let anchors: Vec<SourceKind> = kinds
+            .into_iter()
+            .filter(|k| matches!(k, SourceKind::Gnss | SourceKind::Emitters))
+            .fold(Vec::new(), |mut v, k| {
+                if !v.contains(&k) {
+                    v.push(k);
+                }
+                v
+            });
+        Self {
+            instants: ScoringInstants::Sources(anchors),
+            coast_limit_s: Self::DEFAULT_COAST_LIMIT_S,
+        }
+    }
+
+    fn scores_batches_of(&self, kind: SourceKind) -> bool {
+        match &self.instants {
+            ScoringInstants::Sources(kinds) => kinds.is_empty() || kinds.contains(&kind),
+            ScoringInstants::Periodic { .. } => false,
+        }
+    }
 }
 
 /// One estimator's record at one measurement epoch.
@@ -58,6 +133,12 @@ pub struct EpochRecord {
     /// The integration mode chosen this epoch (mode-selecting estimators only). Borrowed
     /// from the selector's static labels while simulating, so recording allocates nothing.
     pub mode: Option<Cow<'static, str>>,
+    /// Seconds since the estimator last used a measurement (0 when it used one at this
+    /// instant; absent when it never has). An estimate counts as available only while this
+    /// is within the world's coast limit ([`Scoring::coast_limit_s`]); one with a positive
+    /// value is coasting on its own prediction or held since its last update.
+    #[serde(default)]
+    pub since_update_s: Option<f64>,
 }
 
 /// Everything one estimator did in one trial.
@@ -131,6 +212,40 @@ pub trait BatchObserver {
     fn batch(&mut self, truth: &Truth, batch: &MeasurementBatch);
 }
 
+/// What one estimator did since the previous scoring instant.
+#[derive(Default)]
+struct Pending {
+    /// The outcomes of its batches, summed (the estimate is the last one's).
+    sum: EpochOutcome,
+    /// Whether it processed any batch.
+    processed: bool,
+}
+
+impl Pending {
+    fn add(&mut self, out: &EpochOutcome) {
+        let s = &mut self.sum;
+        s.estimate = out.estimate;
+        s.used += out.used;
+        s.rejected += out.rejected;
+        s.gdop = out.gdop.or(s.gdop);
+        s.numerical_failure |= out.numerical_failure;
+        s.nis_sum += out.nis_sum;
+        s.nis_count += out.nis_count;
+        s.nis_dof += out.nis_dof;
+        s.rejected_gate += out.rejected_gate;
+        s.mode = out.mode.or(s.mode);
+        s.nis_unwatched |= out.nis_unwatched;
+        self.processed = true;
+    }
+}
+
+/// The satellites tracked at the current instant, from its last GNSS batch.
+#[derive(Clone, Copy, Default)]
+struct Tracked {
+    n_gps: u32,
+    n_bds: u32,
+}
+
 /// [`simulate`] with an optional [`BatchObserver`].
 pub fn simulate_observed(
     frame: &EnuFrame,
@@ -138,18 +253,22 @@ pub fn simulate_observed(
     setup: &mut TrialSetup,
     mut observer: Option<&mut dyn BatchObserver>,
 ) -> Vec<EstimatorTrace> {
-    let mut queue = EventQueue::with_capacity(setup.sources.len() + 1);
+    let mut queue = EventQueue::with_capacity(setup.sources.len() + 2);
     for (i, s) in setup.sources.iter().enumerate() {
         queue.schedule(s.first_sample(), EventKind::Sample(i));
     }
     queue.schedule(setup.end, EventKind::End);
+    if let ScoringInstants::Periodic { first, .. } = setup.scoring.instants {
+        queue.schedule(first, EventKind::Score);
+    }
 
-    let mut latest: Vec<Option<Estimate>> = vec![None; setup.estimators.len()];
-    let mut health: Vec<HealthMonitor> = setup
-        .estimators
-        .iter()
+    let n_est = setup.estimators.len();
+    let mut latest: Vec<Option<Estimate>> = vec![None; n_est];
+    let mut health: Vec<HealthMonitor> = (0..n_est)
         .map(|_| HealthMonitor::new(HealthConfig::default()))
         .collect();
+    let mut pending: Vec<Pending> = (0..n_est).map(|_| Pending::default()).collect();
+    let mut last_update: Vec<Option<SimTime>> = vec![None; n_est];
     let mut traces: Vec<EstimatorTrace> = setup
         .estimators
         .iter()
@@ -165,61 +284,108 @@ pub fn simulate_observed(
         .iter()
         .map(|s| {
             let kind = s.kind();
-            (0..setup.estimators.len())
+            (0..n_est)
                 .filter(|&k| setup.estimators[k].consumes(kind))
                 .collect()
         })
+        .collect();
+    let scoring_source: Vec<bool> = setup
+        .sources
+        .iter()
+        .map(|s| setup.scoring.scores_batches_of(s.kind()))
         .collect();
     let mut batch = MeasurementBatch::default();
     if observer.as_ref().is_some_and(|o| o.wants_raw()) {
         batch.raw = Some(crate::measurement::RawLog::default());
     }
+    // Whether the instant being processed is a scoring instant, and what it tracked.
+    let mut score_now = false;
+    let mut tracked = Tracked::default();
 
     while let Some(ev) = queue.pop() {
-        let source_idx = match ev.kind {
+        match ev.kind {
             EventKind::End => break,
-            EventKind::Sample(i) => i,
-        };
-        let truth = truth_at(frame, start, setup.trajectory.as_ref(), ev.t);
-        batch.items.clear();
-        if let Some(raw) = batch.raw.as_mut() {
-            raw.clear();
+            EventKind::Score => {
+                score_now = true;
+                if let ScoringInstants::Periodic { period, .. } = setup.scoring.instants {
+                    queue.schedule(SimTime(ev.t.0 + period.0.max(1)), EventKind::Score);
+                }
+            }
+            EventKind::Sample(source_idx) => {
+                let truth = truth_at(frame, start, setup.trajectory.as_ref(), ev.t);
+                batch.items.clear();
+                if let Some(raw) = batch.raw.as_mut() {
+                    raw.clear();
+                }
+                batch.unscored = false;
+                batch.source = setup.sources[source_idx].kind();
+                let ctx = SampleContext {
+                    truth: &truth,
+                    estimates: &latest,
+                };
+                let source = &mut setup.sources[source_idx];
+                if let Some(next) = source.sample(&ctx, &mut batch) {
+                    queue.schedule(next, EventKind::Sample(source_idx));
+                }
+                if let Some(o) = observer.as_mut() {
+                    o.batch(&truth, &batch);
+                }
+                // An empty batch is no epoch unless the source says so (a GNSS epoch with
+                // every satellite blocked is one); it still ends its instant below.
+                if !batch.items.is_empty() || source.empty_batches_are_epochs() {
+                    if !batch.unscored && scoring_source[source_idx] {
+                        score_now = true;
+                    }
+                    if matches!(batch.source, SourceKind::Gnss | SourceKind::Emitters) {
+                        let count = |sys: System| {
+                            batch.ranges().filter(|r| r.emitter.system == sys).count() as u32
+                        };
+                        tracked = Tracked {
+                            n_gps: count(System::Gps),
+                            n_bds: count(System::Bds),
+                        };
+                    }
+                    for &k in &subscribers[source_idx] {
+                        let est = &mut setup.estimators[k];
+                        let mut out = est.process(&batch);
+                        // A non-finite outcome is reported at once and the estimator reset: it
+                        // never hands a NaN on to a source or a record.
+                        if is_non_finite(&out) {
+                            out = EpochOutcome {
+                                numerical_failure: true,
+                                ..EpochOutcome::default()
+                            };
+                            est.reset();
+                        } else if out.used > 0 {
+                            last_update[k] = Some(ev.t);
+                        }
+                        latest[k] = est.latest();
+                        pending[k].add(&out);
+                    }
+                }
+            }
         }
-        batch.unscored = false;
-        let ctx = SampleContext {
-            truth: &truth,
-            estimates: &latest,
-        };
-        let source = &mut setup.sources[source_idx];
-        if let Some(next) = source.sample(&ctx, &mut batch) {
-            queue.schedule(next, EventKind::Sample(source_idx));
-        }
-        if let Some(o) = observer.as_mut() {
-            o.batch(&truth, &batch);
-        }
-        if batch.items.is_empty() && !source.empty_batches_are_epochs() {
+        // Score once every event of the instant has been processed.
+        if !score_now || queue.peek_time() == Some(ev.t) {
             continue;
         }
-        let count = |sys: System| batch.ranges().filter(|r| r.emitter.system == sys).count() as u32;
-        let (n_gps, n_bds) = (count(System::Gps), count(System::Bds));
+        score_now = false;
+        let truth = truth_at(frame, start, setup.trajectory.as_ref(), ev.t);
         let truth_ecef_m = [truth.pos_ecef_m.x, truth.pos_ecef_m.y, truth.pos_ecef_m.z];
-        for &k in &subscribers[source_idx] {
-            let est = &mut setup.estimators[k];
-            let mut out = est.process(&batch);
-            // A diverged estimator is reported at this epoch and reset; it never hands
-            // a non-finite estimate on (see `fusion::health`).
-            let verdict = health[k].check_source(source_idx, &out);
-            if verdict != Verdict::Healthy {
-                out.numerical_failure = true;
-                out.estimate = None;
-                if verdict == Verdict::NonFinite {
-                    (out.nis_sum, out.nis_count, out.nis_dof) = (0.0, 0, 0);
-                }
-                est.reset();
+        for k in 0..n_est {
+            let p = std::mem::take(&mut pending[k]);
+            let mut out = p.sum;
+            if !p.processed {
+                out.estimate = latest[k];
             }
-            latest[k] = est.latest();
-            if batch.unscored {
-                continue;
+            // The divergence watch judges the instant as a whole (see `engine::health`).
+            if p.processed && health[k].check(&out) != Verdict::Healthy {
+                out.numerical_failure = true;
+                setup.estimators[k].reset();
+                latest[k] = setup.estimators[k].latest();
+            }
+            if out.numerical_failure {
+                out.estimate = None;
             }
             let (err_3d_m, err_h_m, nees_pos) = match &out.estimate {
                 Some(e) => {
@@ -234,8 +400,8 @@ pub fn simulate_observed(
                 est_ecef_m: out
                     .estimate
                     .map(|e| [e.pos_ecef_m.x, e.pos_ecef_m.y, e.pos_ecef_m.z]),
-                n_gps,
-                n_bds,
+                n_gps: tracked.n_gps,
+                n_bds: tracked.n_bds,
                 err_3d_m,
                 err_h_m,
                 nees_pos,
@@ -252,6 +418,7 @@ pub fn simulate_observed(
                 nis_dof: out.nis_dof,
                 rejected_gate: out.rejected_gate,
                 mode: out.mode.map(Cow::Borrowed),
+                since_update_s: last_update[k].map(|u| (ev.t.0 - u.0) as f64 * 1e-9),
             });
         }
     }
@@ -348,6 +515,7 @@ mod tests {
             })],
             estimators: vec![Box::new(Echo(None))],
             end: SimTime::from_seconds(3.0),
+            scoring: Scoring::every_batch(),
         };
         let start = GpsTime::from_ns(0);
         let traces = simulate(
@@ -441,6 +609,7 @@ mod tests {
                 healthy_again: false,
             })],
             end: SimTime::from_seconds(30.0),
+            scoring: Scoring::every_batch(),
         };
         let traces = simulate(
             &EnuFrame::new(Geodetic::from_deg(40.0, 116.0, 0.0)),

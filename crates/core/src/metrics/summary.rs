@@ -13,12 +13,20 @@ pub struct EstimatorSummary {
     pub error_3d_m: Option<ErrorStats>,
     /// Statistics of the horizontal position error.
     pub error_h_m: Option<ErrorStats>,
-    /// Share of measurement epochs with an estimate.
+    /// Share of scoring epochs with an *available* estimate: one whose estimator used a
+    /// measurement within the world's coast limit (`[scoring] coast_limit_s`).
     pub availability: f64,
-    /// Measurement epochs over all trials.
+    /// Scoring epochs over all trials (the same instants for every estimator of a world).
     pub epochs: usize,
     /// Epochs without an estimate.
     pub epochs_without_fix: usize,
+    /// Epochs with an estimate, within the coast limit, at which the estimator used no
+    /// measurement (it coasted on its prediction or held its last fix); they count as
+    /// available.
+    pub coasting_epochs: usize,
+    /// Epochs with an estimate older than the coast limit: not available, although their
+    /// errors are in the statistics above.
+    pub stale_epochs: usize,
     /// Mean position NEES (3 degrees of freedom; 3 for a consistent filter).
     pub mean_nees_pos: Option<f64>,
     /// Epochs where the estimator reported a numerical failure (a non-finite state or a
@@ -102,15 +110,25 @@ impl Summary {
         );
         let _ = writeln!(
             s,
-            "{:<16} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7}",
-            "estimator", "1σ", "2σ", "3σ", "rmse", "ATE", "ATE rms", "RPE", "RPE rms", "avail"
+            "{:<16} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7} {:>7}",
+            "estimator",
+            "1σ",
+            "2σ",
+            "3σ",
+            "rmse",
+            "ATE",
+            "ATE rms",
+            "RPE",
+            "RPE rms",
+            "avail",
+            "coast"
         );
         let f = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |x| format!("{x:.2}"));
         for e in &self.estimators {
             let x = e.error_3d_m.as_ref();
             let _ = writeln!(
                 s,
-                "{:<16} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6.1}%",
+                "{:<16} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6.1}% {:>6.1}%",
                 e.name,
                 f(x.map(|x| x.sigma1)),
                 f(x.map(|x| x.sigma2)),
@@ -120,12 +138,13 @@ impl Summary {
                 f(e.ate_m.as_ref().map(|a| a.rmse)),
                 f(e.rpe_m.as_ref().map(|a| a.mean)),
                 f(e.rpe_m.as_ref().map(|a| a.rmse)),
-                100.0 * e.availability
+                100.0 * e.availability,
+                100.0 * e.coasting_epochs as f64 / e.epochs.max(1) as f64
             );
         }
         let _ = writeln!(
             s,
-            "(metres; σ-levels: 3-D error percentiles 68.27/95.45/99.73 % over all epochs of all trials;\n ATE/RPE: mean and RMSE, TUM definitions in ECEF, no alignment, RPE over 1 s)"
+            "(metres; σ-levels: 3-D error percentiles 68.27/95.45/99.73 % over all epochs of all trials;\n ATE/RPE: mean and RMSE, TUM definitions in ECEF, no alignment, RPE over 1 s;\n avail: epochs with an estimate that used a measurement within the coast limit; coast: of all epochs, those\n available without a measurement at that instant; every estimator is scored at the same instants)"
         );
         s
     }

@@ -4,14 +4,17 @@ use crate::engine::trial::TrialResult;
 use std::io::Write;
 
 /// The header of `epochs.csv`.
-const EPOCHS_CSV_HEADER: &str = "trial,estimator,t_s,err_3d_m,err_h_m,nees_pos,pos_sigma_m,used,rejected,rejected_gate,mean_nis,gdop,mode,numerical_failure\n";
+const EPOCHS_CSV_HEADER: &str = "trial,estimator,t_s,err_3d_m,err_h_m,nees_pos,pos_sigma_m,used,rejected,rejected_gate,mean_nis,gdop,mode,numerical_failure,since_update_s\n";
 
 /// `epochs.csv`, written a trial at a time: every estimator's epochs of every trial (one
 /// row per trial, estimator and epoch; empty cells where an estimator had no estimate),
 /// for pandas and spreadsheets.
 ///
 /// Columns: `trial, estimator, t_s, err_3d_m, err_h_m, nees_pos, pos_sigma_m, used,
-/// rejected, rejected_gate, mean_nis, gdop, mode, numerical_failure`. Trials are pushed in
+/// rejected, rejected_gate, mean_nis, gdop, mode, numerical_failure, since_update_s`
+/// (seconds since the estimator last used a measurement: 0 at an update, positive while it
+/// coasts, empty before its first). Every estimator has a row at each of the world's
+/// scoring instants, the same for all (see `engine::trial::Scoring`). Trials are pushed in
 /// trial order; within one, rows follow the world's estimator order, then time, so the
 /// file is identical for any thread count.
 pub struct EpochsCsv<W: Write> {
@@ -54,7 +57,7 @@ impl<W: Write> EpochsCsv<W> {
                 self.line.clear();
                 let _ = writeln!(
                     self.line,
-                    "{},{},{:.3},{},{},{},{},{},{},{},{},{},{},{}",
+                    "{},{},{:.3},{},{},{},{},{},{},{},{},{},{},{},{}",
                     r.trial,
                     name,
                     e.t_s,
@@ -68,7 +71,8 @@ impl<W: Write> EpochsCsv<W> {
                     Opt(e.mean_nis),
                     Opt(e.gdop),
                     e.mode.as_deref().unwrap_or(""),
-                    u8::from(e.numerical_failure)
+                    u8::from(e.numerical_failure),
+                    Opt(e.since_update_s)
                 );
                 self.w.write_all(self.line.as_bytes())?;
             }
@@ -114,6 +118,7 @@ const PARQUET_SCHEMA: &str = "message hybridnav_epochs {
   OPTIONAL DOUBLE mean_nis;
   OPTIONAL DOUBLE nis;
   OPTIONAL DOUBLE gdop;
+  OPTIONAL DOUBLE since_update_s;
   OPTIONAL BYTE_ARRAY mode (UTF8);
   REQUIRED INT32 n_gps;
   REQUIRED INT32 n_bds;
@@ -187,7 +192,7 @@ pub struct TrialsParquet<W: Write + Send> {
 fn new_columns() -> Vec<Column> {
     let mut c = vec![Column::I64(Vec::new()), Column::Str(Vec::new())];
     c.extend((0..7).map(|_| Column::F64(Vec::new())));
-    c.extend((0..13).map(|_| Column::OptF64(Vec::new(), Vec::new())));
+    c.extend((0..14).map(|_| Column::OptF64(Vec::new(), Vec::new())));
     c.push(Column::OptStr(Vec::new(), Vec::new()));
     c.extend((0..6).map(|_| Column::I32(Vec::new())));
     c.push(Column::Bool(Vec::new()));
@@ -286,6 +291,7 @@ impl<W: Write + Send> TrialsParquet<W> {
                     e.mean_nis,
                     e.nis,
                     e.gdop,
+                    e.since_update_s,
                 ] {
                     next().push_opt(x);
                 }

@@ -53,12 +53,19 @@ impl RunReducer {
     /// As [`RunReducer::new`], keeping `chunk` errors per metric in memory before a
     /// sorted run is spilled to disk (tests use tiny chunks).
     pub fn with_chunk(world: &World, spill_dir: &Path, chunk: usize) -> Self {
+        // The coast limit does not depend on the trial's sources (only the default
+        // instants do).
+        let coast_limit_s = world.scoring(std::iter::empty()).coast_limit_s;
         Self {
             estimators: world
                 .file
                 .estimators
                 .iter()
-                .map(|e| EstimatorAcc::new(&e.name, spill_dir, chunk))
+                .map(|e| {
+                    let mut acc = EstimatorAcc::new(&e.name, spill_dir, chunk);
+                    acc.coast_limit_s = coast_limit_s;
+                    acc
+                })
                 .collect(),
             warnings: BTreeSet::new(),
             first: None,
@@ -133,6 +140,11 @@ struct EstimatorAcc {
     rpe_al: SortedSpill,
     epochs: usize,
     without: usize,
+    /// Epochs with an estimate whose estimator had used no measurement at that instant
+    /// (within the coast limit), and epochs with one older than the limit.
+    coasting: usize,
+    stale: usize,
+    coast_limit_s: f64,
     failures: usize,
     first_failures: Vec<FailureEpoch>,
     nees_sum: f64,
@@ -160,6 +172,9 @@ impl EstimatorAcc {
             rpe_al: spill(),
             epochs: 0,
             without: 0,
+            coasting: 0,
+            stale: 0,
+            coast_limit_s: crate::engine::trial::Scoring::DEFAULT_COAST_LIMIT_S,
             failures: 0,
             first_failures: Vec::new(),
             nees_sum: 0.0,
@@ -193,6 +208,14 @@ impl EstimatorAcc {
                     self.e3.push(a)?;
                     self.eh.push(b)?;
                     self.trial_errs.push(a);
+                    match ep.since_update_s {
+                        Some(age) if age <= self.coast_limit_s => {
+                            if age > 0.0 {
+                                self.coasting += 1;
+                            }
+                        }
+                        _ => self.stale += 1,
+                    }
                 }
                 _ => self.without += 1,
             }
@@ -249,7 +272,8 @@ impl EstimatorAcc {
         }
         let n_ep = trace.epochs.len();
         if n_ep > 0 {
-            let with = trace.epochs.iter().filter(|e| e.err_3d_m.is_some()).count();
+            let limit = self.coast_limit_s;
+            let with = trace.epochs.iter().filter(|e| available(e, limit)).count();
             pt.availability.push(with as f64 / n_ep as f64);
         }
         Ok(())
@@ -275,12 +299,14 @@ impl EstimatorAcc {
             error_3d_m: error_stats(&mut self.e3)?,
             error_h_m: error_stats(&mut self.eh)?,
             availability: if self.epochs > 0 {
-                (self.epochs - self.without) as f64 / self.epochs as f64
+                (self.epochs - self.without - self.stale) as f64 / self.epochs as f64
             } else {
                 0.0
             },
             epochs: self.epochs,
             epochs_without_fix: self.without,
+            coasting_epochs: self.coasting,
+            stale_epochs: self.stale,
             mean_nees_pos: (self.nees_n > 0).then(|| self.nees_sum / self.nees_n as f64),
             numerical_failures: self.failures,
             first_failures: self.first_failures,
@@ -300,6 +326,13 @@ impl EstimatorAcc {
         };
         Ok((summary, cdf))
     }
+}
+
+/// Whether an epoch's estimate counts as available: there is one, and its estimator used a
+/// measurement within the coast limit (an estimate that has only been predicted or held
+/// for longer is not a fix, however close it happens to be).
+fn available(ep: &crate::engine::trial::EpochRecord, coast_limit_s: f64) -> bool {
+    ep.err_3d_m.is_some() && ep.since_update_s.is_some_and(|a| a <= coast_limit_s)
 }
 
 /// The trajectory of one trial's estimator: times, truth and estimate of the epochs with

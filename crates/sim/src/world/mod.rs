@@ -17,7 +17,7 @@ pub mod visibility;
 use crate::core::receiver_clock::{ClockTrack, ReceiverClock};
 use crate::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng};
 use crate::dtmb::{DtmbSource, TowerSpec};
-use crate::engine::trial::TrialSetup;
+use crate::engine::trial::{Scoring, ScoringInstants, TrialSetup};
 use crate::gnss::measurement::{GnssSource, SceneView, Shielding, ShieldingRule};
 use crate::gnss::rinex_nav::{parse_nav, read_nav_file, NavData};
 use crate::inertial::source::{ImuSource, PdrSource};
@@ -248,6 +248,25 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
                 crate::world::schema::MAX_TRIALS,
                 file.montecarlo.trials
             ),
+        ));
+    }
+
+    let sc = &file.scoring;
+    if let Some(r) = sc.rate_hz {
+        ctx.in_range("scoring.rate_hz", r, 1e-3..=1e3, "a scoring rate (Hz)")?;
+    }
+    if let Some(c) = sc.coast_limit_s {
+        ctx.in_range(
+            "scoring.coast_limit_s",
+            c,
+            0.0..=86_400.0,
+            "a coast limit (s)",
+        )?;
+    }
+    if sc.rate_hz.is_some() && sc.sources.is_some() {
+        return Err(ctx.err(
+            "scoring.sources",
+            "give either a scoring rate_hz or the sources whose epochs are scored, not both",
         ));
     }
 
@@ -1063,12 +1082,38 @@ impl World {
             .iter()
             .map(|e| e.build(&ctx))
             .collect::<Result<Vec<_>, _>>()?;
+        let scoring = self.scoring(sources.iter().map(|s| s.kind()));
         Ok(TrialSetup {
             trajectory,
             sources,
             estimators,
             end,
+            scoring,
         })
+    }
+
+    /// When this world's estimators are scored, for a trial with sources of these kinds
+    /// (the `[scoring]` table, or the default: the GNSS epochs).
+    pub fn scoring(&self, kinds: impl IntoIterator<Item = SourceKind>) -> Scoring {
+        let sc = &self.file.scoring;
+        let mut s = match (&sc.sources, sc.rate_hz) {
+            (_, Some(rate_hz)) => Scoring {
+                instants: ScoringInstants::Periodic {
+                    first: SimTime(0),
+                    period: SimTime::from_seconds(1.0 / rate_hz),
+                },
+                coast_limit_s: Scoring::DEFAULT_COAST_LIMIT_S,
+            },
+            (Some(list), None) => Scoring {
+                instants: ScoringInstants::Sources(list.clone()),
+                coast_limit_s: Scoring::DEFAULT_COAST_LIMIT_S,
+            },
+            (None, None) => Scoring::default_for(kinds),
+        };
+        if let Some(c) = sc.coast_limit_s {
+            s.coast_limit_s = c;
+        }
+        s
     }
 
     /// A human-readable summary for `hybridnav check`.

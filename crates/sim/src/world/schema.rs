@@ -52,6 +52,27 @@ pub struct WorldFile {
     pub estimators: Vec<EstimatorSpec>,
     #[serde(default)]
     pub montecarlo: MonteCarloSection,
+    #[serde(default)]
+    pub scoring: ScoringSection,
+}
+
+/// `[scoring]`: when every estimator of the world is scored (one record per estimator per
+/// instant, the same instants for all; see `engine::trial::Scoring`).
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScoringSection {
+    /// A fixed scoring rate (Hz) from the start of the trial. Without it, the instants are
+    /// the epochs of the `sources` below.
+    #[serde(default)]
+    pub rate_hz: Option<f64>,
+    /// The sources whose epochs are the scoring instants; by default the GNSS receiver's
+    /// (or seeds 001/003's emitters'), and every source's when the world has neither.
+    #[serde(default)]
+    pub sources: Option<Vec<crate::measurement::SourceKind>>,
+    /// Seconds an estimate stays *available* after its estimator last used a measurement
+    /// (default 10 s); older estimates are scored as coasting.
+    #[serde(default)]
+    pub coast_limit_s: Option<f64>,
 }
 
 /// `[world]`: name, place, time and navigation data.

@@ -1,0 +1,354 @@
+//! `hybridnav reproduce`: runs the paper worlds and prints each paper's table with the
+//! simulated figure beside the published one, their ratio, and whether each ordering the
+//! paper claims holds.
+//!
+//! A figure counts as reproduced when the ratio simulated / published lies within
+//! [½, 2] (the factor the project holds its reproductions to). The tables that
+//! `docs/reproductions.md` quotes are this command's `--markdown` output for the default
+//! trials and seed, generated and never edited by hand; a test regenerates them and fails
+//! when the committed file is stale.
+
+pub mod papers;
+
+use crate::montecarlo::store::Shard;
+use crate::montecarlo::{run_trials, summarise, EstimatorSummary, RunOptions, Summary};
+use crate::world::load_world;
+use papers::{Metric, Paper, PAPERS};
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// Trials per world when none are given: the count docs/reproductions.md quotes.
+pub const DEFAULT_TRIALS: u64 = 20;
+/// The seed when none is given.
+pub const DEFAULT_SEED: u64 = 1;
+
+/// The ratio band within which a simulated figure counts as reproducing a published one.
+pub const WITHIN: f64 = 2.0;
+
+/// One figure, simulated beside published.
+#[derive(Clone, Debug)]
+pub struct FigureResult {
+    pub row: &'static str,
+    pub metric: Metric,
+    pub paper_m: f64,
+    /// `None` when the estimator has no such statistic (no estimate in any epoch).
+    pub simulated_m: Option<f64>,
+}
+
+impl FigureResult {
+    /// simulated / published.
+    pub fn ratio(&self) -> Option<f64> {
+        self.simulated_m.map(|s| s / self.paper_m)
+    }
+
+    /// Whether the simulated figure is within a factor [`WITHIN`] of the paper's.
+    pub fn within(&self) -> bool {
+        self.ratio()
+            .is_some_and(|r| (1.0 / WITHIN..=WITHIN).contains(&r))
+    }
+}
+
+/// One claimed ordering and whether it holds.
+#[derive(Clone, Debug)]
+pub struct OrderingResult {
+    pub metric: Metric,
+    /// `(estimator, simulated value)` in the claimed ascending order.
+    pub values: Vec<(&'static str, Option<f64>)>,
+}
+
+impl OrderingResult {
+    /// Whether every value is present and strictly ascending.
+    pub fn holds(&self) -> bool {
+        self.values.windows(2).all(|w| match (w[0].1, w[1].1) {
+            (Some(a), Some(b)) => a < b,
+            _ => false,
+        })
+    }
+}
+
+/// One paper's reproduction.
+#[derive(Clone, Debug)]
+pub struct PaperResult {
+    pub paper: &'static Paper,
+    pub trials: u64,
+    pub seed: u64,
+    pub figures: Vec<FigureResult>,
+    pub orderings: Vec<OrderingResult>,
+}
+
+/// The value of `metric` on one estimator's summary line.
+pub fn metric_of(e: &EstimatorSummary, metric: Metric) -> Option<f64> {
+    let e3 = e.error_3d_m.as_ref();
+    let eh = e.error_h_m.as_ref();
+    match metric {
+        Metric::Sigma1 => e3.map(|x| x.sigma1),
+        Metric::Sigma2 => e3.map(|x| x.sigma2),
+        Metric::Sigma3 => e3.map(|x| x.sigma3),
+        Metric::Mean => e3.map(|x| x.mean),
+        Metric::Std => e3.map(|x| x.std),
+        Metric::Rmse => e3.map(|x| x.rmse),
+        Metric::AteMean => e.ate_m.as_ref().map(|x| x.mean),
+        Metric::AteRmse => e.ate_m.as_ref().map(|x| x.rmse),
+        Metric::RpeMean => e.rpe_m.as_ref().map(|x| x.mean),
+        Metric::RpeRmse => e.rpe_m.as_ref().map(|x| x.rmse),
+        Metric::Horizontal1 => eh.map(|x| x.sigma1),
+        Metric::Horizontal2 => eh.map(|x| x.sigma2),
+    }
+}
+
+/// Scores one paper against a run's summary.
+///
+/// # Errors
+/// When the world has no estimator of a name the paper's table needs.
+pub fn score(paper: &'static Paper, s: &Summary) -> Result<PaperResult, String> {
+    let find = |name: &str| {
+        s.estimators
+            .iter()
+            .find(|e| e.name == name)
+            .ok_or_else(|| format!("{} has no estimator named {name:?}", paper.world))
+    };
+    let figures = paper
+        .figures
+        .iter()
+        .map(|f| {
+            Ok(FigureResult {
+                row: f.row,
+                metric: f.metric,
+                paper_m: f.paper_m,
+                simulated_m: metric_of(find(f.estimator)?, f.metric),
+            })
+        })
+        .collect::<Result<Vec<_>, String>>()?;
+    let orderings = paper
+        .orderings
+        .iter()
+        .map(|o| {
+            Ok(OrderingResult {
+                metric: o.metric,
+                values: o
+                    .ascending
+                    .iter()
+                    .map(|n| Ok((*n, metric_of(find(n)?, o.metric))))
+                    .collect::<Result<Vec<_>, String>>()?,
+            })
+        })
+        .collect::<Result<Vec<_>, String>>()?;
+    Ok(PaperResult {
+        paper,
+        trials: s.trials,
+        seed: s.seed,
+        figures,
+        orderings,
+    })
+}
+
+/// The papers named by `ids` (a world's stem, or any unambiguous prefix such as
+/// `seed003`), every paper when `ids` is empty.
+///
+/// # Errors
+/// An unknown or ambiguous name, with the list of names.
+pub fn select(ids: &[String]) -> Result<Vec<&'static Paper>, String> {
+    if ids.is_empty() {
+        return Ok(PAPERS.iter().collect());
+    }
+    let names = || PAPERS.iter().map(|p| p.id).collect::<Vec<_>>().join(", ");
+    ids.iter()
+        .map(|id| {
+            let hits: Vec<&Paper> = PAPERS
+                .iter()
+                .filter(|p| p.id == id || p.id.starts_with(id.as_str()))
+                .collect();
+            match hits.as_slice() {
+                [one] => Ok(*one),
+                [] => Err(format!("unknown paper {id:?}; expected one of {}", names())),
+                _ => Err(format!(
+                    "{id:?} names several papers ({}); expected one of {}",
+                    hits.iter().map(|p| p.id).collect::<Vec<_>>().join(", "),
+                    names()
+                )),
+            }
+        })
+        .collect()
+}
+
+/// Runs one paper's world (`root` is the repository, where the world files live) and
+/// scores it.
+///
+/// # Errors
+/// A world that does not load or run, or lacks an estimator the table needs.
+pub fn run_paper(
+    root: &Path,
+    paper: &'static Paper,
+    trials: u64,
+    seed: u64,
+    threads: usize,
+) -> Result<PaperResult, String> {
+    let world = load_world(&root.join(paper.world)).map_err(|e| e.to_string())?;
+    let opts = RunOptions {
+        trials,
+        seed,
+        threads,
+        progress: false,
+        shard: Shard::WHOLE,
+    };
+    let results = run_trials(&world, &opts)?;
+    let summary = summarise(&world, &opts, &results)?;
+    score(paper, &summary)
+}
+
+fn fmt_opt(v: Option<f64>, digits: usize) -> String {
+    v.map_or_else(|| "-".to_string(), |x| format!("{x:.digits$}"))
+}
+
+fn tick(ok: bool) -> &'static str {
+    if ok {
+        "✓"
+    } else {
+        "✗"
+    }
+}
+
+fn ordering_text(o: &OrderingResult) -> String {
+    let names: Vec<&str> = o.values.iter().map(|v| v.0).collect();
+    let vals: Vec<String> = o.values.iter().map(|v| fmt_opt(v.1, 2)).collect();
+    format!(
+        "{}: {} ({})",
+        o.metric.label(),
+        names.join(" < "),
+        vals.join(" < ")
+    )
+}
+
+/// The plain-text tables printed by `hybridnav reproduce`.
+pub fn text(results: &[PaperResult]) -> String {
+    let mut s = String::new();
+    for r in results {
+        let _ = writeln!(
+            s,
+            "{}\n{} — {} trial(s), seed {}",
+            r.paper.title, r.paper.world, r.trials, r.seed
+        );
+        if !r.figures.is_empty() {
+            let _ = writeln!(
+                s,
+                "  {:<20} {:<12} {:>10} {:>10} {:>7}",
+                "row", "figure", "paper", "hybridnav", "ratio"
+            );
+            for f in &r.figures {
+                let _ = writeln!(
+                    s,
+                    "  {:<20} {:<12} {:>10.2} {:>10} {:>7} {}",
+                    f.row,
+                    f.metric.label(),
+                    f.paper_m,
+                    fmt_opt(f.simulated_m, 2),
+                    fmt_opt(f.ratio(), 2),
+                    tick(f.within())
+                );
+            }
+            let n = r.figures.iter().filter(|f| f.within()).count();
+            let _ = writeln!(s, "  within 2×: {n} of {}", r.figures.len());
+        }
+        for o in &r.orderings {
+            let _ = writeln!(s, "  {} {}", tick(o.holds()), ordering_text(o));
+        }
+        s.push('\n');
+    }
+    let _ = writeln!(s, "{}", totals(results));
+    s
+}
+
+fn totals(results: &[PaperResult]) -> String {
+    let figs: Vec<&FigureResult> = results.iter().flat_map(|r| &r.figures).collect();
+    let ords: Vec<&OrderingResult> = results.iter().flat_map(|r| &r.orderings).collect();
+    format!(
+        "{} of {} figures within 2× of the papers; {} of {} claimed orderings hold",
+        figs.iter().filter(|f| f.within()).count(),
+        figs.len(),
+        ords.iter().filter(|o| o.holds()).count(),
+        ords.len()
+    )
+}
+
+/// The same tables in Markdown, for docs/reproductions-tables.md.
+pub fn markdown(results: &[PaperResult]) -> String {
+    let mut s = String::from(
+        "<!-- Generated by `hybridnav reproduce --markdown docs/reproductions-tables.md`; do not edit by hand. -->\n\n# Reproduced tables\n\n",
+    );
+    if let Some(r) = results.first() {
+        let _ = writeln!(
+            s,
+            "Every paper world at {} trials, seed {}. A figure is ✓ when hybridnav's value is within a factor of 2 of the paper's; an ordering is ✓ when it holds. Explanations of the figures outside 2× are in `docs/reproductions.md`.\n",
+            r.trials, r.seed
+        );
+    }
+    for r in results {
+        let _ = writeln!(s, "## {}\n\n`{}`\n", r.paper.title, r.paper.world);
+        if !r.figures.is_empty() {
+            s.push_str("| row | figure | paper (m) | hybridnav (m) | ratio | within 2× |\n|---|---|---:|---:|---:|:-:|\n");
+            for f in &r.figures {
+                let _ = writeln!(
+                    s,
+                    "| {} | {} | {:.2} | {} | {} | {} |",
+                    f.row,
+                    f.metric.label(),
+                    f.paper_m,
+                    fmt_opt(f.simulated_m, 2),
+                    fmt_opt(f.ratio(), 2),
+                    tick(f.within())
+                );
+            }
+            s.push('\n');
+        }
+        for o in &r.orderings {
+            let _ = writeln!(s, "- {} {}", tick(o.holds()), ordering_text(o));
+        }
+        s.push('\n');
+    }
+    let _ = writeln!(s, "**{}.**", totals(results));
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_tables_hold_the_papers_56_figures() {
+        let n: usize = PAPERS.iter().map(|p| p.figures.len()).sum();
+        assert_eq!(n, 21 + 21 + 4 + 4 + 6);
+        assert!(PAPERS
+            .iter()
+            .all(|p| p.figures.iter().all(|f| f.paper_m > 0.0)));
+    }
+
+    #[test]
+    fn selection_by_stem_and_prefix() {
+        assert_eq!(
+            select(&["seed003".into()]).unwrap()[0].id,
+            "seed003-seamless"
+        );
+        assert!(select(&["seed000".into()]).unwrap_err().contains("several"));
+        assert!(select(&["nope".into()])
+            .unwrap_err()
+            .contains("expected one of"));
+        assert_eq!(select(&[]).unwrap().len(), PAPERS.len());
+    }
+
+    #[test]
+    fn within_two_and_orderings() {
+        let f = |sim: f64| FigureResult {
+            row: "r",
+            metric: Metric::Mean,
+            paper_m: 10.0,
+            simulated_m: Some(sim),
+        };
+        assert!(f(5.0).within() && f(20.0).within() && f(12.0).within());
+        assert!(!f(4.99).within() && !f(20.01).within());
+        let o = |a: f64, b: f64| OrderingResult {
+            metric: Metric::Mean,
+            values: vec![("a", Some(a)), ("b", Some(b))],
+        };
+        assert!(o(1.0, 2.0).holds() && !o(2.0, 1.0).holds() && !o(1.0, 1.0).holds());
+    }
+}

@@ -1,0 +1,227 @@
+//! The five papers' published tables, as data: each figure with the world-file estimator
+//! that reproduces it, and each ordering the paper claims.
+//!
+//! The values are the papers' own (`../shared/seeds/`, summarised in
+//! `../shared/reference/seeds.md`); nothing here is a simulated number.
+
+/// A statistic of one estimator's `summary.json` line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Metric {
+    /// 68.27 / 95.45 / 99.73 % percentiles of the 3-D error (seed 000's σ-levels).
+    Sigma1,
+    Sigma2,
+    Sigma3,
+    /// Mean and RMSE of the absolute trajectory error (TUM, ECEF, no alignment).
+    AteMean,
+    AteRmse,
+    /// Mean and RMSE of the relative pose error over Δ = 1 s.
+    RpeMean,
+    RpeRmse,
+    /// Mean and standard deviation of the error over every epoch of every trial
+    /// (seeds 001 and 003 report these).
+    Mean,
+    Std,
+    /// RMSE of the 3-D error.
+    Rmse,
+    /// The 68.27 / 95.45 % percentiles of the horizontal error (seed 002 reports 68 % and
+    /// 95 % of the horizontal error).
+    Horizontal1,
+    Horizontal2,
+}
+
+impl Metric {
+    /// The column label.
+    pub fn label(self) -> &'static str {
+        match self {
+            Metric::Sigma1 => "1σ",
+            Metric::Sigma2 => "2σ",
+            Metric::Sigma3 => "3σ",
+            Metric::AteMean => "mean ATE",
+            Metric::AteRmse => "RMSE ATE",
+            Metric::RpeMean => "mean RPE",
+            Metric::RpeRmse => "RMSE RPE",
+            Metric::Mean => "mean",
+            Metric::Std => "std",
+            Metric::Rmse => "RMSE",
+            Metric::Horizontal1 => "68 % horiz.",
+            Metric::Horizontal2 => "95 % horiz.",
+        }
+    }
+}
+
+/// One published figure.
+#[derive(Clone, Copy, Debug)]
+pub struct Figure {
+    /// The paper's row name.
+    pub row: &'static str,
+    /// The estimator of the world file that runs the paper's system of that row.
+    pub estimator: &'static str,
+    pub metric: Metric,
+    /// The paper's value (m).
+    pub paper_m: f64,
+}
+
+/// An ordering a paper claims: `ascending[0] < ascending[1] < …` in `metric`.
+#[derive(Clone, Copy, Debug)]
+pub struct Ordering {
+    pub metric: Metric,
+    pub ascending: &'static [&'static str],
+}
+
+/// One paper table and the world that reproduces it.
+#[derive(Clone, Copy, Debug)]
+pub struct Paper {
+    /// The name `hybridnav reproduce` takes (the world file's stem).
+    pub id: &'static str,
+    pub title: &'static str,
+    /// The world file, relative to the repository.
+    pub world: &'static str,
+    pub figures: &'static [Figure],
+    pub orderings: &'static [Ordering],
+}
+
+const fn fig(row: &'static str, estimator: &'static str, metric: Metric, paper_m: f64) -> Figure {
+    Figure {
+        row,
+        estimator,
+        metric,
+        paper_m,
+    }
+}
+
+use Metric::*;
+
+/// Seed 000's table for one site: three rows × (1σ, 2σ, 3σ, mean ATE, RMSE ATE, mean RPE,
+/// RMSE RPE).
+macro_rules! seed000_rows {
+    ($( $row:literal => $est:literal : [$s1:expr, $s2:expr, $s3:expr, $am:expr, $ar:expr, $rm:expr, $rr:expr] ),* $(,)?) => {
+        &[ $(
+            fig($row, $est, Sigma1, $s1),
+            fig($row, $est, Sigma2, $s2),
+            fig($row, $est, Sigma3, $s3),
+            fig($row, $est, AteMean, $am),
+            fig($row, $est, AteRmse, $ar),
+            fig($row, $est, RpeMean, $rm),
+            fig($row, $est, RpeRmse, $rr),
+        )* ]
+    };
+}
+
+/// Every paper table hybridnav reproduces, in the papers' order.
+pub const PAPERS: &[Paper] = &[
+    Paper {
+        id: "seed000-beihang",
+        title: "Seed 000 site 1 — Beihang campus (Cong et al., Sensors 2018, Table 5)",
+        world: "worlds/seed000-beihang.toml",
+        figures: seed000_rows![
+            "GPS" => "GPS": [29.49, 74.51, 87.46, 24.52, 32.45, 16.61, 21.72],
+            "GPS + DTMB" => "GPS+DTMB": [14.46, 28.50, 35.31, 13.53, 15.57, 13.38, 15.80],
+            "Proposed" => "Proposed": [10.56, 22.57, 27.80, 9.90, 11.23, 10.92, 12.29],
+        ],
+        orderings: &[
+            Ordering {
+                metric: Sigma3,
+                ascending: &["Proposed", "GPS+DTMB", "GPS"],
+            },
+            Ordering {
+                metric: AteMean,
+                ascending: &["Proposed", "GPS+DTMB", "GPS"],
+            },
+        ],
+    },
+    Paper {
+        id: "seed000-kehui",
+        title: "Seed 000 site 2 — Kehui Road (Cong et al., Sensors 2018, Table 6)",
+        world: "worlds/seed000-kehui.toml",
+        figures: seed000_rows![
+            "GPS" => "GPS": [6.47, 96.89, 416.60, 21.60, 53.42, 5.57, 25.93],
+            "GPS + DTMB" => "GPS+DTMB": [6.45, 71.31, 262.80, 11.78, 27.32, 5.68, 25.76],
+            "Proposed" => "Proposed": [6.42, 28.23, 60.23, 7.88, 11.87, 2.79, 4.84],
+        ],
+        orderings: &[
+            Ordering {
+                metric: Sigma2,
+                ascending: &["Proposed", "GPS+DTMB", "GPS"],
+            },
+            Ordering {
+                metric: Sigma3,
+                ascending: &["Proposed", "GPS+DTMB", "GPS"],
+            },
+            Ordering {
+                metric: AteMean,
+                ascending: &["Proposed", "GPS+DTMB", "GPS"],
+            },
+        ],
+    },
+    Paper {
+        id: "seed001-pf2d",
+        title: "Seed 001 — GPS + DTMB particle filter (2-D simulation)",
+        world: "worlds/seed001-pf2d.toml",
+        figures: &[
+            fig("10 particles", "PF-10", Mean, 138.66),
+            fig("10 particles", "PF-10", Std, 126.30),
+            fig("20 particles", "PF-20", Mean, 97.36),
+            fig("20 particles", "PF-20", Std, 70.66),
+        ],
+        orderings: &[Ordering {
+            metric: Mean,
+            ascending: &["PF-20", "PF-10"],
+        }],
+    },
+    Paper {
+        id: "seed002-lianhua",
+        title: "Seed 002 — PDR with magnetic landmarks and DTMB, Lianhua Lake (Remote Sensing 2023)",
+        world: "worlds/seed002-lianhua.toml",
+        figures: &[
+            fig("PDR", "PDR", Horizontal1, 8.77),
+            fig("PDR", "PDR", Horizontal2, 12.84),
+            fig("Proposed", "Proposed", Horizontal1, 2.84),
+            fig("Proposed", "Proposed", Horizontal2, 3.98),
+        ],
+        orderings: &[
+            Ordering {
+                metric: Horizontal1,
+                ascending: &["Proposed", "PDR"],
+            },
+            Ordering {
+                metric: Horizontal2,
+                ascending: &["Proposed", "PDR"],
+            },
+        ],
+    },
+    Paper {
+        id: "seed003-seamless",
+        title: "Seed 003 — GPS/BeiDou/DTMB seamless positioning, EKF vs PF (Sensors and Materials 2018, Table 2)",
+        world: "worlds/seed003-seamless.toml",
+        figures: &[
+            fig("EKF", "EKF", Mean, 11.2065),
+            fig("EKF", "EKF", Std, 5.4361),
+            fig("PF, 100 particles", "PF-100", Mean, 5.3601),
+            fig("PF, 100 particles", "PF-100", Std, 3.1325),
+            fig("PF, 500 particles", "PF-500", Mean, 2.8736),
+            fig("PF, 500 particles", "PF-500", Std, 1.7603),
+        ],
+        orderings: &[Ordering {
+            metric: Mean,
+            ascending: &["PF-500", "PF-100", "EKF"],
+        }],
+    },
+    Paper {
+        id: "seed004-bupt",
+        title: "Seed 004 — relative-entropy KF for INS/TC-OFDM/GNSS, BUPT campus (2018)",
+        world: "worlds/seed004-bupt.toml",
+        // The paper gives its comparison as figures of error against time, not as a
+        // table: only its orderings are checked.
+        figures: &[],
+        orderings: &[
+            Ordering {
+                metric: Rmse,
+                ascending: &["RE-KF", "CKF", "EKF"],
+            },
+            Ordering {
+                metric: Rmse,
+                ascending: &["RE-KF", "STF"],
+            },
+        ],
+    },
+];
