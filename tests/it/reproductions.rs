@@ -181,3 +181,36 @@ fn the_committed_reproduction_tables_are_current() {
         reproduce::text(&results)
     );
 }
+
+/// Scoring is paired: on a world whose estimators consume different sources (GPS alone,
+/// GPS+DTMB, GPS+DTMB+FM), every estimator has one record per scoring instant, the same
+/// instants for all, in increasing time; so the 3-D error RMSE and the unaligned ATE RMSE,
+/// computed over the same epochs, agree.
+#[test]
+fn every_estimator_is_scored_at_the_same_instants() {
+    let w = load_world(&crate::common::repo().join("worlds/seed000-beihang.toml")).unwrap();
+    let t = hybridnav::world::trial::run_trial(&w, 1, 0).expect("trial runs");
+    let times: Vec<Vec<f64>> = t
+        .estimators
+        .iter()
+        .map(|e| e.epochs.iter().map(|r| r.t_s).collect())
+        .collect();
+    assert!(times.len() >= 3);
+    for (e, ts) in t.estimators.iter().zip(&times) {
+        assert_eq!(ts, &times[0], "{} is scored at other instants", e.name);
+        assert!(ts.windows(2).all(|w| w[0] < w[1]), "{}", e.name);
+    }
+    let s = run("worlds/seed000-beihang.toml", 2, 1);
+    for e in &s.estimators {
+        assert_eq!(e.epochs, s.estimators[0].epochs, "{}", e.name);
+        if let (Some(err), Some(ate)) = (&e.error_3d_m, &e.ate_m) {
+            assert!(
+                (err.rmse - ate.rmse).abs() < 1e-9 * err.rmse,
+                "{}: error RMSE {} against ATE RMSE {}",
+                e.name,
+                err.rmse,
+                ate.rmse
+            );
+        }
+    }
+}

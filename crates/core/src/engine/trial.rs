@@ -500,6 +500,131 @@ mod tests {
         fn reset(&mut self) {}
     }
 
+    /// A source of fixes every `period` until `stop`, then silence.
+    struct Stopping {
+        period: i64,
+        stop: i64,
+    }
+
+    impl Source for Stopping {
+        fn kind(&self) -> SourceKind {
+            SourceKind::Fm
+        }
+        fn first_sample(&self) -> SimTime {
+            SimTime(0)
+        }
+        fn sample(
+            &mut self,
+            ctx: &SampleContext<'_>,
+            out: &mut MeasurementBatch,
+        ) -> Option<SimTime> {
+            out.t = ctx.truth.t;
+            out.items.push(Measurement::Position(PositionFix {
+                pos_ecef_m: ctx.truth.pos_ecef_m,
+                cov_m2: Matrix3::identity(),
+                support: 0,
+            }));
+            let next = ctx.truth.sim.0 + self.period;
+            (next < self.stop).then_some(SimTime(next))
+        }
+    }
+
+    /// Two estimators fed by sources of different rates (4 Hz and 1 Hz) are scored at the
+    /// same periodic instants, once each, with the counters of every batch since the
+    /// previous instant summed; once the sources stop, the held estimates age and say so.
+    #[test]
+    fn every_estimator_is_scored_once_per_instant_and_ages_after_its_last_update() {
+        struct Named(Echo, &'static str, SourceKind);
+        impl Estimator for Named {
+            fn name(&self) -> &str {
+                self.1
+            }
+            fn consumes(&self, source: SourceKind) -> bool {
+                source == self.2
+            }
+            fn process(&mut self, batch: &MeasurementBatch) -> EpochOutcome {
+                self.0.process(batch)
+            }
+            fn latest(&self) -> Option<Estimate> {
+                self.0.latest()
+            }
+            fn reset(&mut self) {}
+        }
+        struct As(Stopping, SourceKind);
+        impl Source for As {
+            fn kind(&self) -> SourceKind {
+                self.1
+            }
+            fn first_sample(&self) -> SimTime {
+                self.0.first_sample()
+            }
+            fn sample(
+                &mut self,
+                ctx: &SampleContext<'_>,
+                out: &mut MeasurementBatch,
+            ) -> Option<SimTime> {
+                self.0.sample(ctx, out)
+            }
+        }
+        let traj = TrajectoryConfig::Static {
+            position_enu_m: [0.0, 0.0, 0.0],
+            duration_s: 10.0,
+        };
+        let s = 1_000_000_000;
+        let mut setup = TrialSetup {
+            trajectory: traj.build(&mut TrialRng::new(0, 0).stream("t")).unwrap(),
+            sources: vec![
+                Box::new(As(
+                    Stopping {
+                        period: s / 4,
+                        stop: 3 * s,
+                    },
+                    SourceKind::Fm,
+                )),
+                Box::new(As(
+                    Stopping {
+                        period: s,
+                        stop: 5 * s,
+                    },
+                    SourceKind::Magnetic,
+                )),
+            ],
+            estimators: vec![
+                Box::new(Named(Echo(None), "fast", SourceKind::Fm)),
+                Box::new(Named(Echo(None), "slow", SourceKind::Magnetic)),
+            ],
+            end: SimTime::from_seconds(9.5),
+            scoring: Scoring {
+                instants: ScoringInstants::Periodic {
+                    first: SimTime(0),
+                    period: SimTime(s),
+                },
+                coast_limit_s: 2.0,
+            },
+        };
+        let traces = simulate(
+            &EnuFrame::new(Geodetic::from_deg(40.0, 116.0, 0.0)),
+            GpsTime::from_ns(0),
+            &mut setup,
+        );
+        let times = |k: usize| -> Vec<f64> { traces[k].epochs.iter().map(|e| e.t_s).collect() };
+        let expected: Vec<f64> = (0..10).map(f64::from).collect();
+        assert_eq!(times(0), expected);
+        assert_eq!(times(1), expected);
+        // The 4 Hz estimator's instants after the first sum the batches since the last
+        // (its source stops after 2.75 s).
+        let used: Vec<u32> = traces[0].epochs.iter().map(|e| e.used).collect();
+        assert_eq!(used, [1, 4, 4, 3, 0, 0, 0, 0, 0, 0]);
+        // Its last update was at 2.75 s; the 1 Hz one's at 4 s.
+        let age = |k: usize, i: usize| traces[k].epochs[i].since_update_s.unwrap();
+        assert_eq!(age(0, 2), 0.0);
+        assert!((age(0, 3) - 0.25).abs() < 1e-12 && (age(0, 9) - 6.25).abs() < 1e-12);
+        assert_eq!(age(1, 4), 0.0);
+        assert_eq!(age(1, 9), 5.0);
+        // Held estimates keep their error records (the estimate exists) while they age.
+        assert!(traces[0].epochs.iter().all(|e| e.err_3d_m == Some(0.0)));
+    }
+
     #[test]
     fn estimates_close_the_loop_at_the_next_event() {
         let seen = Arc::new(Mutex::new(Vec::new()));
