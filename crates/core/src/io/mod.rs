@@ -1,5 +1,7 @@
-//! Writing results: atomic files, tables, and the external sort behind exact percentiles.
+//! Reading and writing files: bounded reads of inputs, atomic files, tables, and the
+//! external sort behind exact percentiles.
 
 pub mod atomic;
+pub mod read;
 pub mod spill;
 pub mod table;
