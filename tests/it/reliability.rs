@@ -767,10 +767,12 @@ mod fuzz_entries {
     include!("../../fuzz/entries.rs");
 }
 
-/// Fuzzing that keeps paying: every input of every target's corpus (`fuzz/corpus/T/`) and
-/// every crash the fuzzer saved (`fuzz/artifacts/T/`, none so far) runs through the
-/// target's own code on every `cargo test`, so a fixed finding stays fixed without a
-/// nightly compiler. Each input must return (not panic) within seconds.
+/// Fuzzing that keeps paying: every input kept for a target in `fuzz/replay/T/` (the
+/// seeds, the minimised corpus and every crash found, committed) — and, on a machine that
+/// fuzzed, the working corpus `fuzz/corpus/T/` and the crashes `fuzz/artifacts/T/` (both
+/// git-ignored) — runs through the target's own code on every `cargo test`, so a fixed
+/// finding stays fixed without a nightly compiler. Each input must return (not panic)
+/// within seconds.
 #[test]
 fn the_fuzz_corpora_and_crashes_replay_without_a_panic() {
     let targets: [(&str, fn(&[u8])); 6] = [
@@ -793,15 +795,12 @@ fn the_fuzz_corpora_and_crashes_replay_without_a_panic() {
     );
     for (name, entry) in targets {
         let mut inputs = Vec::new();
-        for dir in [
-            fuzz.join("corpus").join(name),
-            fuzz.join("artifacts").join(name),
-        ] {
+        for dir in ["replay", "corpus", "artifacts"].map(|d| fuzz.join(d).join(name)) {
             if let Ok(rd) = std::fs::read_dir(&dir) {
                 inputs.extend(rd.flatten().map(|e| e.path()).filter(|p| p.is_file()));
             }
         }
-        assert!(!inputs.is_empty(), "{name}: no corpus");
+        assert!(!inputs.is_empty(), "{name}: nothing in fuzz/replay/{name}");
         inputs.sort();
         for p in inputs {
             let data = std::fs::read(&p).unwrap();

@@ -50,10 +50,12 @@ impl OutputSet {
                 "parquet" => set.parquet = true,
                 "trials" => set.trials = true,
                 "all" => set = OutputSet::ALL,
-                _ => return Err(format!(
+                _ => {
+                    return Err(format!(
                     "--outputs: {name:?} is not an output; expected a comma-separated list of {}",
                     Self::NAMES.join(", ")
-                )),
+                ))
+                }
             }
         }
         Ok(set)
