@@ -41,6 +41,9 @@ pub enum Command {
         /// If OUT holds a run, rename it aside to OUT.previous-K first.
         #[arg(long)]
         force: bool,
+        /// Outputs to write, as `run --outputs` (summary.json and run.json always).
+        #[arg(long, default_value = "all", value_name = "LIST")]
+        outputs: String,
     },
     /// Validate a world file, print a summary of it and the link visibility along its
     /// trajectory (share of links LOS / through foliage / NLOS / lost per system).
@@ -260,7 +263,8 @@ pub fn run(cli: Cli) -> Result<()> {
             out,
             quiet,
             force,
-        } => cmd_merge(&dirs, &out, quiet, force),
+            outputs,
+        } => cmd_merge(&dirs, &out, quiet, force, &outputs),
         Command::Check { world, map, step } => {
             let w = load_world(&world)?;
             print!("{}", w.summary());
@@ -495,7 +499,8 @@ fn resolved(path: &Path) -> PathBuf {
     }
 }
 
-fn cmd_merge(dirs: &[PathBuf], out: &Path, quiet: bool, force: bool) -> Result<()> {
+fn cmd_merge(dirs: &[PathBuf], out: &Path, quiet: bool, force: bool, outputs: &str) -> Result<()> {
+    let outputs = OutputSet::parse(outputs).map_err(anyhow::Error::msg)?;
     // The output must be none of the inputs, neither inside one (its trials would be
     // written among a shard's) nor around one (--force would move the shard aside).
     let out_real = resolved(out);
@@ -541,7 +546,7 @@ fn cmd_merge(dirs: &[PathBuf], out: &Path, quiet: bool, force: bool) -> Result<(
         Takeover::Fresh
     };
     let dir = take_out(out, how)?;
-    let written = merge_into(&world, &plan, &dir).map_err(anyhow::Error::msg)?;
+    let written = merge_into(&world, &plan, &dir, outputs).map_err(anyhow::Error::msg)?;
     report_written(&written, quiet);
     Ok(())
 }

@@ -704,10 +704,15 @@ fn a_rerun_loses_nothing_and_never_shows_old_outputs() {
         "--out",
         &s(&x),
     ]);
+    // The old run's trial files count until it has been moved aside.
+    let aside = d.join("x.previous-1");
+    let start = Instant::now();
+    while !aside.exists() && start.elapsed() < Duration::from_secs(60) {
+        std::thread::sleep(Duration::from_millis(5));
+    }
     wait_for_trials(&x, 1);
     child.kill().unwrap();
     let _ = child.wait();
-    let aside = d.join("x.previous-1");
     let moved = snapshot(&aside);
     for (name, bytes) in &old {
         if name != ".hybridnav.lock" {

@@ -337,12 +337,19 @@ impl Outputs {
 }
 
 /// Merges the shard directories `dirs` (their manifests agree and together they hold
-/// every trial) into `out`: copies each trial file and writes the outputs of the whole
-/// run, streaming the trials in order as [`run_into`] does. Returns the merged summary.
+/// every trial) into `out`: copies each trial file (checking its stamp against its
+/// shard's manifest, and stamping the copy as the whole run's) and writes the outputs of
+/// the whole run, streaming the trials in order as [`run_into`] does; `outputs` as
+/// [`run_into_with`]. Returns the merged summary.
 ///
 /// # Errors
 /// A message naming the directory, file or manifest key at fault.
-pub fn merge_into(world: &World, plan: &store::MergePlan, out: &RunDir) -> Result<Written, String> {
+pub fn merge_into(
+    world: &World,
+    plan: &store::MergePlan,
+    out: &RunDir,
+    outputs: OutputSet,
+) -> Result<Written, String> {
     let opts = RunOptions {
         trials: plan.manifest.trials,
         seed: plan.manifest.seed,
@@ -355,14 +362,17 @@ pub fn merge_into(world: &World, plan: &store::MergePlan, out: &RunDir) -> Resul
     let manifest = opts.manifest(world);
     out.write_manifest(&manifest).map_err(|e| e.to_string())?;
     let stamp = manifest.stamp();
-    let mut outputs = Outputs::create(world, &out.root, OutputSet::ALL)?;
+    let which = outputs;
+    let mut outputs = Outputs::create(world, &out.root, which)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.threads)
         .build()
         .map_err(|e| format!("cannot start worker threads: {e}"))?;
     let copy = |i: u64| {
         let r = plan.read(i)?;
-        out.write_trial(&stamp, &r).map_err(|e| e.to_string())?;
+        if which.trials {
+            out.write_trial(&stamp, &r).map_err(|e| e.to_string())?;
+        }
         Ok(r)
     };
     in_windows(&pool, 0..opts.trials, &copy, &mut |t| outputs.push(&t))?;
