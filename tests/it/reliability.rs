@@ -775,7 +775,8 @@ mod fuzz_entries {
 /// within seconds.
 #[test]
 fn the_fuzz_corpora_and_crashes_replay_without_a_panic() {
-    let targets: [(&str, fn(&[u8])); 6] = [
+    type Entry = fn(&[u8]);
+    let targets: [(&str, Entry); 6] = [
         ("world_file", fuzz_entries::world_file),
         ("rinex_nav", fuzz_entries::rinex_nav),
         ("sp3", fuzz_entries::sp3),

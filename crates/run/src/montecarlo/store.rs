@@ -367,14 +367,9 @@ impl Lock {
             .truncate(false)
             .open(&path)
             .map_err(io)?;
-        let taken = if exclusive {
-            f.try_lock()
-        } else {
-            f.try_lock_shared()
-        };
-        match taken {
-            Ok(()) => {}
-            Err(std::fs::TryLockError::WouldBlock) => {
+        match crate::io::lock::try_lock(&f, exclusive) {
+            Ok(true) => {}
+            Ok(false) => {
                 let holder = std::fs::read_to_string(&path).unwrap_or_default();
                 let holder = holder.trim();
                 let who = if holder.is_empty() {
@@ -388,7 +383,7 @@ impl Lock {
                     root.display()
                 )));
             }
-            Err(std::fs::TryLockError::Error(e)) => return Err(io(e)),
+            Err(e) => return Err(io(e)),
         }
         if exclusive {
             let me = format!(
