@@ -277,8 +277,8 @@ fn survey_epochs_are_capped_and_candidates_parse_in_linear_time() {
     let all = parse_candidates_from(text.as_bytes(), "c.csv", &region).unwrap();
     let took = start.elapsed();
     assert_eq!(all.len(), 200_000);
-    // Linear: 200 000 rows in well under the quadratic parser's 31 s (≈ 0.2 s here in a
-    // release build; the bound leaves room for a loaded machine).
+    // Linear: 200 000 rows in well under the quadratic parser's 31 s (under a second here
+    // in a release build; the bound leaves room for a loaded machine).
     assert!(
         took < Duration::from_secs(5),
         "200 000 candidates took {took:?}"
