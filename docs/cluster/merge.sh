@@ -5,4 +5,5 @@
 set -eu
 RESULTS=${RESULTS:-./results}
 HYBRIDNAV=${HYBRIDNAV:-hybridnav}
-exec "$HYBRIDNAV" merge "$RESULTS"/task-* --out "$RESULTS/merged"
+# MERGE_OUTPUTS: what the merged run writes (`merge --outputs`; default all).
+exec "$HYBRIDNAV" merge "$RESULTS"/task-* --out "$RESULTS/merged" --outputs "${MERGE_OUTPUTS:-all}"

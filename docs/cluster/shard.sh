@@ -11,6 +11,8 @@
 #   SHARDS    number of shards N (= array size / completions)
 #   RESULTS   shared directory every task can write (default ./results)
 #   THREADS   worker threads per task (default: all the task's cores)
+#   OUTPUTS   what each task writes (`run --outputs`; default all; keep `trials`, which
+#             the merge reads), e.g. summary,trials for a run of 10⁶ trials
 #   HYBRIDNAV the binary (default: hybridnav on PATH)
 set -eu
 : "${TRIALS:?set TRIALS, the trials of the whole run}"
@@ -24,6 +26,7 @@ mkdir -p "$RESULTS"
 set -- run "$WORLD" --trials "$TRIALS" --shard "auto/$SHARDS" --out "$OUT" --quiet
 if [ -n "${SEED:-}" ]; then set -- "$@" --seed "$SEED"; fi
 if [ -n "${THREADS:-}" ]; then set -- "$@" --threads "$THREADS"; fi
+if [ -n "${OUTPUTS:-}" ]; then set -- "$@" --outputs "$OUTPUTS"; fi
 # A directory with a manifest is this task's earlier attempt: continue it.
 if [ -f "$OUT/run.json" ]; then set -- "$@" --resume; fi
 exec "$HYBRIDNAV" "$@"

@@ -1,11 +1,7 @@
 //! The world-file loader on arbitrary text: it must return a world or an error naming a
 //! line, never panic, hang or allocate without bound.
+//! The body is `fuzz/entries.rs`, which the corpus replay test runs too.
 #![no_main]
-use libfuzzer_sys::fuzz_target;
-use std::path::Path;
+include!("../entries.rs");
 
-fuzz_target!(|data: &[u8]| {
-    if let Ok(text) = std::str::from_utf8(data) {
-        let _ = hybridnav::world::parse_world(text, Path::new("fuzz.toml"));
-    }
-});
+libfuzzer_sys::fuzz_target!(|data: &[u8]| world_file(data));

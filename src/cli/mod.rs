@@ -5,8 +5,8 @@ use crate::io::atomic::write_atomic;
 use crate::layout::metrics::ClockModel;
 use crate::layout::place::Objective;
 use crate::layout::LayoutRequest;
-use crate::montecarlo::store::{MergePlan, RunDir, Shard};
-use crate::montecarlo::{merge_into, run_into, RunOptions};
+use crate::montecarlo::store::{MergePlan, RunDir, Shard, Takeover};
+use crate::montecarlo::{merge_into, run_into_with, OutputSet, RunOptions};
 use crate::world::load_world;
 use anyhow::{bail, Context, Result};
 use clap::builder::{PossibleValuesParser, TypedValueParser};
@@ -32,12 +32,18 @@ pub enum Command {
         /// The shards' output directories.
         #[arg(required = true)]
         dirs: Vec<PathBuf>,
-        /// Output directory of the merged run.
+        /// Output directory of the merged run (not one of the shards, nor inside one).
         #[arg(long)]
         out: PathBuf,
         /// No table.
         #[arg(long)]
         quiet: bool,
+        /// If OUT holds a run, rename it aside to OUT.previous-K first.
+        #[arg(long)]
+        force: bool,
+        /// Outputs to write, as `run --outputs` (summary.json and run.json always).
+        #[arg(long, default_value = "all", value_name = "LIST")]
+        outputs: String,
     },
     /// Validate a world file, print a summary of it and the link visibility along its
     /// trajectory (share of links LOS / through foliage / NLOS / lost per system).
@@ -208,8 +214,17 @@ pub struct RunArgs {
     #[arg(long, value_name = "K/N")]
     pub shard: Option<String>,
     /// Continue the interrupted run in OUT: keep the trials it finished, run the rest.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "force")]
     pub resume: bool,
+    /// If OUT holds another run, rename it aside to OUT.previous-K (K the first free
+    /// number) and start afresh; without it (or --resume) such an OUT is refused.
+    #[arg(long)]
+    pub force: bool,
+    /// Outputs to write, comma-separated: summary, report, epochs, parquet, trials, or
+    /// all. summary.json and run.json are always written; without `trials` the run cannot
+    /// be resumed or merged.
+    #[arg(long, default_value = "all", value_name = "LIST")]
+    pub outputs: String,
     /// Also export each trial this run ran as datasets (formats as `export --format`) to
     /// OUT/datasets/trial-NNNNNN/.
     #[arg(long, value_name = "FORMATS")]
@@ -268,7 +283,13 @@ fn default_world() -> PathBuf {
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Run(a) => cmd_run(a),
-        Command::Merge { dirs, out, quiet } => cmd_merge(&dirs, &out, quiet),
+        Command::Merge {
+            dirs,
+            out,
+            quiet,
+            force,
+            outputs,
+        } => cmd_merge(&dirs, &out, quiet, force, &outputs),
         Command::Check { world, map, step } => {
             let w = load_world(&world)?;
             print!("{}", w.summary());
@@ -405,6 +426,10 @@ fn cmd_run(a: RunArgs) -> Result<()> {
         ),
         None => None,
     };
+    let outputs = OutputSet::parse(&a.outputs).map_err(anyhow::Error::msg)?;
+    if a.shard.is_some() && !outputs.trials {
+        bail!("--shard needs `trials` in --outputs: merge reads the shards' trial files");
+    }
     let world = load_world(&path)?;
     let trials = a.trials.unwrap_or(world.file.montecarlo.trials);
     if !(1..=crate::world::schema::MAX_TRIALS).contains(&trials) {
@@ -434,9 +459,14 @@ fn cmd_run(a: RunArgs) -> Result<()> {
         progress: !a.quiet,
         shard,
     };
-    let dir = RunDir::create(&a.out)
-        .with_context(|| format!("cannot write to output directory {}", a.out.display()))?;
-    let written = run_into(&world, &opts, &dir, a.resume).map_err(anyhow::Error::msg)?;
+    let how = match (a.resume, a.force) {
+        (true, _) => Takeover::Resume,
+        (false, true) => Takeover::Force,
+        (false, false) => Takeover::Fresh,
+    };
+    let dir = take_out(&a.out, how)?;
+    let written =
+        run_into_with(&world, &opts, &dir, a.resume, outputs).map_err(anyhow::Error::msg)?;
     report_written(&written, a.quiet);
     if let Some(formats) = datasets {
         // Each trial is simulated again with a recorder; it depends only on (seed, trial),
@@ -484,7 +514,70 @@ fn report_written(written: &crate::montecarlo::Written, quiet: bool) {
     }
 }
 
-fn cmd_merge(dirs: &[PathBuf], out: &Path, quiet: bool) -> Result<()> {
+/// Takes the output directory `out` over for a run or merge ([`RunDir::take`]), saying
+/// where a run it held was moved.
+fn take_out(out: &Path, how: Takeover) -> Result<RunDir> {
+    use crate::montecarlo::store::StoreError;
+    let (dir, aside) = RunDir::take(out, how).map_err(|e| match e {
+        StoreError::Refused(m) => anyhow::Error::msg(m),
+        e => anyhow::Error::msg(format!(
+            "cannot write to output directory {}: {e}",
+            out.display()
+        )),
+    })?;
+    if let Some(aside) = aside {
+        eprintln!(
+            "note: the run {} held was moved aside to {}",
+            out.display(),
+            aside.display()
+        );
+    }
+    Ok(dir)
+}
+
+/// `path` made absolute with symbolic links resolved, also when its last components do
+/// not exist yet (they are appended to the nearest existing ancestor, resolved).
+fn resolved(path: &Path) -> PathBuf {
+    let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let mut tail = Vec::new();
+    let mut head = abs.as_path();
+    loop {
+        if let Ok(real) = head.canonicalize() {
+            return tail.iter().rev().fold(real, |p, c| p.join(c));
+        }
+        match (head.parent(), head.file_name()) {
+            (Some(parent), Some(name)) => {
+                tail.push(name.to_os_string());
+                head = parent;
+            }
+            _ => return abs,
+        }
+    }
+}
+
+fn cmd_merge(dirs: &[PathBuf], out: &Path, quiet: bool, force: bool, outputs: &str) -> Result<()> {
+    let outputs = OutputSet::parse(outputs).map_err(anyhow::Error::msg)?;
+    // The output must be none of the inputs, neither inside one (its trials would be
+    // written among a shard's) nor around one (--force would move the shard aside).
+    let out_real = resolved(out);
+    for d in dirs {
+        let d_real = resolved(d);
+        if out_real.starts_with(&d_real) || d_real.starts_with(&out_real) {
+            bail!(
+                "merge: --out {} {} the input {}; write the merged run to a directory of \
+                 its own (the shards are left as they are)",
+                out.display(),
+                if out_real == d_real {
+                    "is"
+                } else if out_real.starts_with(&d_real) {
+                    "is inside"
+                } else {
+                    "contains"
+                },
+                d.display()
+            );
+        }
+    }
     let plan = MergePlan::new(dirs).map_err(anyhow::Error::msg)?;
     let manifest = &plan.manifest;
     // The outputs need the world (its frame, scene and estimators): it must still be the
@@ -503,9 +596,13 @@ fn cmd_merge(dirs: &[PathBuf], out: &Path, quiet: bool) -> Result<()> {
             manifest.world_hash
         );
     }
-    let dir = RunDir::create(out)
-        .with_context(|| format!("cannot write to output directory {}", out.display()))?;
-    let written = merge_into(&world, &plan, &dir).map_err(anyhow::Error::msg)?;
+    let how = if force {
+        Takeover::Force
+    } else {
+        Takeover::Fresh
+    };
+    let dir = take_out(out, how)?;
+    let written = merge_into(&world, &plan, &dir, outputs).map_err(anyhow::Error::msg)?;
     report_written(&written, quiet);
     Ok(())
 }

@@ -245,8 +245,11 @@ pub fn write(world: &World, rec: &Recording, dir: &Path) -> Result<Vec<PathBuf>,
     let bytes = if world.nav_source == BUILTIN_EPHEMERIS_NAME {
         BUILTIN_EPHEMERIS.as_bytes().to_vec()
     } else {
-        std::fs::read(&world.nav_source)
-            .map_err(|e| format!("cannot copy the navigation file {}: {e}", world.nav_source))?
+        crate::io::read::read_bytes(
+            std::path::Path::new(&world.nav_source),
+            crate::io::read::RINEX_NAV,
+        )
+        .map_err(|e| format!("cannot copy the navigation file {}: {e}", world.nav_source))?
     };
     write_atomic(&nav, &bytes).map_err(|e| e.to_string())?;
     Ok(vec![obs, nav])

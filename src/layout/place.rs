@@ -117,9 +117,10 @@ pub fn parse_candidates(
     path: &Path,
     region: &super::grid::Region,
 ) -> Result<Vec<Candidate>, String> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("{}: cannot read the candidates file: {e}", path.display()))?;
-    parse_candidates_text(&text, &path.display().to_string(), region)
+    let cannot =
+        |e: std::io::Error| format!("{}: cannot read the candidates file: {e}", path.display());
+    let reader = crate::io::read::reader(path, crate::io::read::CANDIDATES).map_err(cannot)?;
+    parse_candidates_from(reader, &path.display().to_string(), region)
 }
 
 /// [`parse_candidates`] on text, `name` naming it in messages.
@@ -131,10 +132,40 @@ pub fn parse_candidates_text(
     name: &str,
     region: &super::grid::Region,
 ) -> Result<Vec<Candidate>, String> {
+    parse_candidates_from(text.as_bytes(), name, region)
+}
+
+/// [`parse_candidates`] on a stream, read one line at a time: time is linear in the
+/// file's length (ids are checked for duplicates in a hash map) and the first bad line
+/// is reported without reading further.
+///
+/// # Errors
+/// As [`parse_candidates`].
+pub fn parse_candidates_from(
+    mut input: impl std::io::BufRead,
+    name: &str,
+    region: &super::grid::Region,
+) -> Result<Vec<Candidate>, String> {
     let mut out: Vec<Candidate> = Vec::new();
-    for (k, raw) in text.lines().enumerate() {
-        let line_no = k + 1;
+    let mut first_line: std::collections::HashMap<String, usize> = std::collections::HashMap::new();
+    let mut bytes: Vec<u8> = Vec::new();
+    let mut line_no = 0;
+    loop {
+        bytes.clear();
+        let n = input
+            .read_until(b'\n', &mut bytes)
+            .map_err(|e| format!("{name}: cannot read the candidates file: {e}"))?;
+        if n == 0 {
+            break;
+        }
+        line_no += 1;
         let err = |m: String| format!("{name}:{line_no}: {m}");
+        let raw = std::str::from_utf8(&bytes).map_err(|e| {
+            err(format!(
+                "byte {} of the line: not UTF-8 text; save the file as UTF-8",
+                e.valid_up_to() + 1
+            ))
+        })?;
         let line = raw.trim();
         if line.is_empty() || line.starts_with('#') {
             continue;
@@ -203,12 +234,12 @@ pub fn parse_candidates_text(
                 band
             )));
         }
-        if let Some(prev) = out.iter().find(|c| c.id == id) {
+        if let Some(prev) = first_line.get(&id) {
             return Err(err(format!(
-                "duplicate candidate id {id:?} (first on line {})",
-                prev.line
+                "duplicate candidate id {id:?} (first on line {prev})"
             )));
         }
+        first_line.insert(id.clone(), line_no);
         out.push(Candidate {
             id,
             east_m,

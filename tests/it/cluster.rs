@@ -147,8 +147,10 @@ fn the_templates_agree_with_the_scripts_they_run() {
         .lines()
         .find_map(|l| l.strip_prefix("#SBATCH --array=1-"))
         .expect("an --array line");
+    // SHARDS defaults to the array's size (a submission that overrides --array on the
+    // command line exports SHARDS with it, as .ci/slurm-test does).
     assert!(
-        sbatch.contains(&format!("export SHARDS={array}")),
+        sbatch.contains(&format!("export SHARDS=${{SHARDS:-{array}}}")),
         "{array}"
     );
     assert!(sbatch.contains("docs/cluster/shard.sh"));
@@ -198,4 +200,44 @@ fn the_templates_agree_with_the_scripts_they_run() {
             .unwrap();
         assert!(o.status.success(), "{}", stderr(&o));
     }
+}
+
+/// A task requeued into a results directory that holds another run's shard (the run was
+/// resubmitted with another seed without clearing `RESULTS`) is refused, naming the
+/// difference, and leaves that shard as it was: nothing is mixed.
+#[test]
+fn a_task_resubmitted_with_another_seed_does_not_mix_runs() {
+    let base = tmp_dir("cluster-mix");
+    let results = base.join("results");
+    let slurm = |seed: &str| {
+        let mut c = script(
+            "shard.sh",
+            &results,
+            &[
+                ("SLURM_ARRAY_TASK_ID", "1".to_string()),
+                ("SLURM_ARRAY_TASK_MIN", "1".to_string()),
+                ("SLURM_ARRAY_TASK_COUNT", SHARDS.to_string()),
+            ],
+        );
+        c.env("SEED", seed);
+        c.output().expect("run shard.sh")
+    };
+    let o = slurm(SEED);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let task = results.join("task-1");
+    let before: Vec<(String, Vec<u8>)> = ["run.json", "summary.json", "epochs.csv"]
+        .iter()
+        .map(|f| (f.to_string(), std::fs::read(task.join(f)).unwrap()))
+        .collect();
+    let o = slurm("4");
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("holds a different run (seed 4 vs 3)"), "{e}");
+    for (f, bytes) in before {
+        assert!(
+            std::fs::read(task.join(&f)).unwrap() == bytes,
+            "{f} changed"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&base);
 }

@@ -182,11 +182,13 @@ fn merging_shards_of_different_seeds_or_worlds_is_refused() {
         &["cannot merge", "seed002-lianhua.toml"],
     );
     // A directory that is not a run.
+    let elsewhere = tmp_dir("mc-mismatch-out");
     refused(
-        &["merge", &s(&d), "--out", &s(&d.join("m"))],
+        &["merge", &s(&d), "--out", &s(&elsewhere.join("m"))],
         &["no run.json"],
     );
     let _ = std::fs::remove_dir_all(&d);
+    let _ = std::fs::remove_dir_all(&elsewhere);
 }
 
 /// Kills a real run with SIGKILL once it has finished a few trials, resumes it, and
@@ -388,5 +390,466 @@ print("OK", len(p))
         }
         Err(e) => crate::common::skip(&format!("python3 not found ({e})")),
     }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// Every file under `dir` (relative name → bytes) but the lock file, for "nothing
+/// changed" checks.
+fn snapshot(dir: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    let mut out = std::collections::BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if e.file_name() != ".hybridnav.lock" {
+                // The lock file names the last process that held the directory.
+                let name = p.strip_prefix(dir).unwrap().display().to_string();
+                out.insert(name, std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    out
+}
+
+/// Starts `hybridnav args…` in the background (no output).
+fn spawn(args: &[&str]) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_hybridnav"))
+        .args(args)
+        .current_dir(repo())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start hybridnav")
+}
+
+/// Waits (at most 2 min) until `dir` holds at least `n` trial files.
+fn wait_for_trials(dir: &Path, n: usize) {
+    let start = Instant::now();
+    while trial_files(dir).len() < n && start.elapsed() < Duration::from_secs(120) {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// Defect 1 of issue 28: `merge s1 s2 --out s1` deleted shard s1's trials and rewrote its
+/// manifest. Now an output that is an input, inside one or around one is refused before
+/// anything is touched, the shard stays byte for byte as it was and still resumes.
+#[test]
+fn merge_onto_one_of_its_inputs_is_refused_and_the_shard_is_untouched() {
+    let d = tmp_dir("mc-merge-onto-input");
+    let s = |x: &Path| x.to_str().unwrap().to_string();
+    let (s1, s2) = (d.join("s1"), d.join("s2"));
+    for (k, dir) in [("1/2", &s1), ("2/2", &s2)] {
+        ok(hybridnav(&[
+            "run",
+            "--trials",
+            "4",
+            "--seed",
+            "3",
+            "--shard",
+            k,
+            "--threads",
+            "1",
+            "--quiet",
+            "--out",
+            &s(dir),
+        ]));
+    }
+    let before = snapshot(&s1);
+    for (out, says) in [
+        (s1.clone(), "is the input"),
+        (s1.join("merged"), "is inside the input"),
+        (d.clone(), "contains the input"),
+        // The same directory by another spelling.
+        (s1.join("..").join("s1"), "is the input"),
+    ] {
+        let e = refused(&["merge", &s(&s1), &s(&s2), "--out", &s(&out)], &[says]);
+        assert!(e.contains("s1"), "{e}");
+        let e = refused(
+            &["merge", &s(&s1), &s(&s2), "--out", &s(&out), "--force"],
+            &[says],
+        );
+        assert!(e.contains("s1"), "{e}");
+    }
+    assert!(
+        before == snapshot(&s1),
+        "the refused merges changed shard s1"
+    );
+    assert!(!s1.join("merged").exists());
+    // The shard is still a shard: resuming it is accepted and changes nothing.
+    ok(hybridnav(&[
+        "run",
+        "--trials",
+        "4",
+        "--seed",
+        "3",
+        "--shard",
+        "1/2",
+        "--threads",
+        "1",
+        "--quiet",
+        "--resume",
+        "--out",
+        &s(&s1),
+    ]));
+    let after = snapshot(&s1);
+    for (name, bytes) in &before {
+        if name != ".hybridnav.lock" {
+            assert!(after.get(name) == Some(bytes), "{name} changed on resume");
+        }
+    }
+    // A merge to a directory of its own works.
+    ok(hybridnav(&[
+        "merge",
+        &s(&s1),
+        &s(&s2),
+        "--quiet",
+        "--out",
+        &s(&d.join("m")),
+    ]));
+    assert_eq!(trial_files(&d.join("m")).len(), 4);
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// Defect 2 of issue 28: two runs shared one directory (a seed-2 run killed in a seed-1
+/// directory, resumed: 15 of 60 trials were seed 1's). Now: a second process is refused
+/// while the first holds the directory (naming its pid); a run into a directory that
+/// holds another run is refused without --force; and a trial file of another run found
+/// on resume is refused, naming the key that differs.
+#[test]
+fn two_runs_never_share_an_output_directory() {
+    let d = tmp_dir("mc-two-runs");
+    let s = |x: &Path| x.to_str().unwrap().to_string();
+    let world = "worlds/seed004-bupt.toml";
+    let x = d.join("x");
+    let mut child = spawn(&[
+        "run",
+        world,
+        "--trials",
+        "12",
+        "--seed",
+        "1",
+        "--threads",
+        "1",
+        "--quiet",
+        "--out",
+        &s(&x),
+    ]);
+    wait_for_trials(&x, 1);
+    let pid = format!("pid {}", child.id());
+    // While it runs: every other writer of x is refused, naming the holder.
+    for args in [
+        vec!["run", world, "--trials", "12", "--seed", "2", "--force"],
+        vec!["run", world, "--trials", "12", "--seed", "1", "--resume"],
+        vec!["run", world, "--trials", "12", "--seed", "2"],
+    ] {
+        let mut a = args.clone();
+        a.extend(["--quiet", "--out", x.to_str().unwrap()]);
+        refused(&a, &["is in use by another hybridnav process", &pid]);
+    }
+    // A merge reading it as a shard is refused too: it is being written.
+    refused(
+        &["merge", &s(&x), "--out", &s(&d.join("m"))],
+        &["is in use by another hybridnav process", &pid],
+    );
+    child.kill().unwrap();
+    let _ = child.wait();
+    let seed1 = trial_files(&x);
+    assert!(!seed1.is_empty() && seed1.len() < 12, "{seed1:?}");
+    // The kill released the lock; a seed-2 run into the seed-1 directory is refused …
+    refused(
+        &[
+            "run",
+            world,
+            "--trials",
+            "12",
+            "--seed",
+            "2",
+            "--quiet",
+            "--out",
+            &s(&x),
+        ],
+        &[
+            "holds a run of world",
+            "seed 1, 12 trials",
+            "--resume",
+            "--force",
+        ],
+    );
+    // … and resuming it as seed 2 names the difference.
+    refused(
+        &[
+            "run",
+            world,
+            "--trials",
+            "12",
+            "--seed",
+            "2",
+            "--resume",
+            "--quiet",
+            "--out",
+            &s(&x),
+        ],
+        &["seed 2 vs 1"],
+    );
+    // A trial of another run copied in (the mix of the defect) is found by its stamp.
+    let y = d.join("y");
+    ok(hybridnav(&[
+        "run",
+        world,
+        "--trials",
+        "12",
+        "--seed",
+        "2",
+        "--threads",
+        "1",
+        "--quiet",
+        "--out",
+        &s(&y),
+    ]));
+    let foreign = "trial-000011.json.gz";
+    assert!(!seed1.iter().any(|t| t == foreign));
+    std::fs::copy(
+        y.join("trials").join(foreign),
+        x.join("trials").join(foreign),
+    )
+    .unwrap();
+    refused(
+        &[
+            "run",
+            world,
+            "--trials",
+            "12",
+            "--seed",
+            "1",
+            "--resume",
+            "--quiet",
+            "--out",
+            &s(&x),
+        ],
+        &[foreign, "belongs to another run (seed 2, not 1)"],
+    );
+    assert!(!x.join("summary.json").exists());
+    std::fs::remove_file(x.join("trials").join(foreign)).unwrap();
+    ok(hybridnav(&[
+        "run",
+        world,
+        "--trials",
+        "12",
+        "--seed",
+        "1",
+        "--resume",
+        "--quiet",
+        "--out",
+        &s(&x),
+    ]));
+    let single = d.join("single");
+    ok(hybridnav(&[
+        "run",
+        world,
+        "--trials",
+        "12",
+        "--seed",
+        "1",
+        "--quiet",
+        "--out",
+        &s(&single),
+    ]));
+    assert_same_run(&x, &single);
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// Defects 3 and 4 of issue 28: rerunning without --resume silently deleted every
+/// finished trial (18 → 2), and a new run left the previous run's outputs in place until
+/// it finished. Now the rerun is refused; with --force the old run is renamed aside
+/// whole, byte for byte; and a new attempt's directory never holds the old outputs.
+#[test]
+fn a_rerun_loses_nothing_and_never_shows_old_outputs() {
+    let d = tmp_dir("mc-rerun");
+    let s = |x: &Path| x.to_str().unwrap().to_string();
+    let world = "worlds/seed004-bupt.toml";
+    let x = d.join("x");
+    ok(hybridnav(&[
+        "run",
+        world,
+        "--trials",
+        "6",
+        "--quiet",
+        "--out",
+        &s(&x),
+    ]));
+    let old = snapshot(&x);
+    assert_eq!(trial_files(&x).len(), 6);
+    let e = refused(
+        &["run", world, "--trials", "2", "--quiet", "--out", &s(&x)],
+        &["holds a run", "6 trial file(s), complete", "--force"],
+    );
+    assert!(!e.contains("panicked"));
+    assert!(old == snapshot(&x), "a refused rerun changed the directory");
+
+    // --force: the old run moves to x.previous-1 whole; a run killed right after it
+    // started shows no output of the old one beside its own manifest.
+    let mut child = spawn(&[
+        "run",
+        world,
+        "--trials",
+        "12",
+        "--threads",
+        "1",
+        "--seed",
+        "9",
+        "--force",
+        "--quiet",
+        "--out",
+        &s(&x),
+    ]);
+    // The old run's trial files count until it has been moved aside.
+    let aside = d.join("x.previous-1");
+    let start = Instant::now();
+    while !aside.exists() && start.elapsed() < Duration::from_secs(60) {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    wait_for_trials(&x, 1);
+    child.kill().unwrap();
+    let _ = child.wait();
+    let moved = snapshot(&aside);
+    for (name, bytes) in &old {
+        if name != ".hybridnav.lock" {
+            assert!(
+                moved.get(name) == Some(bytes),
+                "{name} was not moved aside intact"
+            );
+        }
+    }
+    assert!(std::fs::read_to_string(x.join("run.json"))
+        .unwrap()
+        .contains("\"seed\": 9"));
+    for f in [
+        "summary.json",
+        "epochs.csv",
+        "trials.parquet",
+        "report.html",
+    ] {
+        assert!(
+            !x.join(f).exists(),
+            "{f} of the old run beside the new manifest"
+        );
+    }
+
+    // A resumed attempt removes its earlier outputs before its first trial: a complete
+    // run that lost half its trial files, resumed and killed at its first new trial.
+    let z = d.join("z");
+    ok(hybridnav(&[
+        "run",
+        world,
+        "--trials",
+        "12",
+        "--quiet",
+        "--out",
+        &s(&z),
+    ]));
+    for t in trial_files(&z).iter().skip(2) {
+        std::fs::remove_file(z.join("trials").join(t)).unwrap();
+    }
+    let mut child = spawn(&[
+        "run",
+        world,
+        "--trials",
+        "12",
+        "--threads",
+        "1",
+        "--resume",
+        "--quiet",
+        "--out",
+        &s(&z),
+    ]);
+    wait_for_trials(&z, 3);
+    child.kill().unwrap();
+    let _ = child.wait();
+    if trial_files(&z).len() < 12 {
+        for f in [
+            "summary.json",
+            "epochs.csv",
+            "trials.parquet",
+            "report.html",
+        ] {
+            assert!(
+                !z.join(f).exists(),
+                "{f} survived the start of a new attempt"
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// Issue 27, item 4: `--outputs` writes less, and what it writes is what the full run
+/// writes, byte for byte.
+#[test]
+fn outputs_selects_the_files_and_changes_none_of_their_bytes() {
+    let d = tmp_dir("mc-outputs");
+    let s = |x: &Path| x.to_str().unwrap().to_string();
+    let (full, part) = (d.join("full"), d.join("part"));
+    ok(hybridnav(&[
+        "run",
+        "--trials",
+        "2",
+        "--quiet",
+        "--out",
+        &s(&full),
+    ]));
+    let o = ok(hybridnav(&[
+        "run",
+        "--trials",
+        "2",
+        "--outputs",
+        "summary,epochs",
+        "--out",
+        &s(&part),
+    ]));
+    let printed = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        printed.contains("epochs.csv") && !printed.contains("report.html"),
+        "{printed}"
+    );
+    for f in ["summary.json", "epochs.csv", "run.json"] {
+        assert!(
+            std::fs::read(full.join(f)).unwrap() == std::fs::read(part.join(f)).unwrap(),
+            "{f} differs"
+        );
+    }
+    for f in ["trials.parquet", "report.html"] {
+        assert!(!part.join(f).exists(), "{f} written though not asked for");
+    }
+    assert!(trial_files(&part).is_empty());
+    refused(
+        &[
+            "run",
+            "--trials",
+            "2",
+            "--outputs",
+            "summary,csv",
+            "--out",
+            &s(&d.join("b")),
+        ],
+        &[
+            "\"csv\" is not an output",
+            "summary, report, epochs, parquet, trials",
+        ],
+    );
+    refused(
+        &[
+            "run",
+            "--trials",
+            "2",
+            "--shard",
+            "1/2",
+            "--outputs",
+            "summary",
+            "--out",
+            &s(&d.join("c")),
+        ],
+        &["--shard needs `trials`"],
+    );
     let _ = std::fs::remove_dir_all(&d);
 }

@@ -613,3 +613,207 @@ fn the_epoch_cache_changes_no_output_byte() {
     }
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// Defect 7 of issue 28 (the parts of input handling): CR-only line endings gave an empty
+/// message, non-UTF-8 input reported `:0:0:`, and an OS error was printed twice. Each now
+/// names the line and column of the first offending byte, and the OS error once.
+#[test]
+fn cr_only_and_non_utf8_worlds_are_located_and_os_errors_printed_once() {
+    let d = tmp_dir("rel-text");
+    let text = std::fs::read_to_string(repo().join("worlds/default.toml")).unwrap();
+    let first_line_chars = text.lines().next().unwrap().chars().count();
+    std::fs::write(d.join("cr.toml"), text.replace('\n', "\r")).unwrap();
+    let o = hybridnav(&["check", &s(&d.join("cr.toml"))]);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    let at = format!("cr.toml:1:{}: a carriage return", first_line_chars + 1);
+    assert!(e.contains(&at), "expected {at:?} in: {e}");
+    // A byte 0xff in the middle of line 5 (after its 3rd character).
+    let mut bytes = Vec::new();
+    for (k, line) in text.split_inclusive('\n').enumerate() {
+        if k == 4 {
+            let cut = line.char_indices().nth(3).unwrap().0;
+            bytes.extend_from_slice(&line.as_bytes()[..cut]);
+            bytes.push(0xff);
+            bytes.extend_from_slice(&line.as_bytes()[cut..]);
+        } else {
+            bytes.extend_from_slice(line.as_bytes());
+        }
+    }
+    std::fs::write(d.join("latin1.toml"), bytes).unwrap();
+    let o = hybridnav(&["check", &s(&d.join("latin1.toml"))]);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(
+        e.contains("latin1.toml:5:4: not UTF-8 text (byte 0xff)"),
+        "{e}"
+    );
+    // One OS error, printed once.
+    for args in [
+        vec![
+            "ephemeris",
+            "positions",
+            "--nav",
+            "/nonexistent/brdc.nav",
+            "--start",
+            "2020-01-01T00:00:00",
+            "--end",
+            "2020-01-01T00:01:00",
+            "--step",
+            "60",
+        ],
+        vec!["check", "/nonexistent/world.toml"],
+        vec![
+            "run",
+            "/nonexistent/world.toml",
+            "--out",
+            "/nonexistent/out",
+        ],
+    ] {
+        let o = hybridnav(&args);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{e}");
+        assert_eq!(
+            e.matches("No such file or directory").count(),
+            1,
+            "{args:?}: {e}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// Defect 8 of issue 28: atomic writes did not flush the directory after the rename, so
+/// a finished file could vanish on power loss. Watched with strace: every rename of a
+/// run's files into the output directory is followed by an fsync of that directory.
+#[test]
+fn every_rename_into_the_run_directory_is_followed_by_a_directory_fsync() {
+    if Command::new("strace").arg("-V").output().is_err() {
+        crate::common::skip("strace is not installed (CI installs it in .ci/slurm-test)");
+        return;
+    }
+    let d = tmp_dir("rel-fsync");
+    let out = d.join("out");
+    let log = d.join("strace.log");
+    let o = Command::new("strace")
+        .args([
+            "-f",
+            "-y",
+            "-qq",
+            "-e",
+            "trace=rename,renameat,renameat2,fsync",
+            "-o",
+        ])
+        .arg(&log)
+        .arg(env!("CARGO_BIN_EXE_hybridnav"))
+        .args(["run", "--trials", "2", "--threads", "1", "--quiet", "--out"])
+        .arg(&out)
+        .current_dir(repo())
+        .output()
+        .unwrap();
+    if !o.status.success() && stderr(&o).contains("PTRACE") {
+        crate::common::skip("ptrace is not permitted here");
+        return;
+    }
+    assert!(o.status.success(), "{}", stderr(&o));
+    let trace = std::fs::read_to_string(&log).unwrap();
+    let dir = std::fs::canonicalize(&out).unwrap().display().to_string();
+    let mut renamed = Vec::new();
+    let lines: Vec<&str> = trace.lines().collect();
+    for (k, line) in lines.iter().enumerate() {
+        if !line.contains("rename") || line.contains("= -1") {
+            continue;
+        }
+        // The destination: the last quoted path of the call.
+        let dest = line.rsplit('"').nth(1).unwrap_or("");
+        let parent = Path::new(dest).parent().map(|p| p.display().to_string());
+        let Some(parent) = parent.filter(|p| p.starts_with(&dir)) else {
+            continue;
+        };
+        let pid = line.split_whitespace().next().unwrap_or("");
+        let synced = lines[k + 1..].iter().any(|l| {
+            l.split_whitespace().next() == Some(pid)
+                && l.contains("fsync(")
+                && l.contains(&format!("<{parent}>"))
+        });
+        assert!(synced, "no fsync of {parent} after: {line}");
+        renamed.push(dest.to_string());
+    }
+    for f in [
+        "summary.json",
+        "epochs.csv",
+        "trials.parquet",
+        "report.html",
+        "run.json",
+    ] {
+        assert!(
+            renamed.iter().any(|r| r.ends_with(&format!("/{f}"))),
+            "{f} was not seen renamed: {renamed:?}"
+        );
+    }
+    assert!(
+        renamed
+            .iter()
+            .filter(|r| r.contains("/trials/trial-"))
+            .count()
+            == 2,
+        "{renamed:?}"
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// The fuzz targets' bodies, compiled here on stable Rust.
+#[allow(dead_code)]
+mod fuzz_entries {
+    include!("../../fuzz/entries.rs");
+}
+
+/// Fuzzing that keeps paying: every input kept for a target in `fuzz/replay/T/` (the
+/// seeds, the minimised corpus and every crash found, committed) — and, on a machine that
+/// fuzzed, the working corpus `fuzz/corpus/T/` and the crashes `fuzz/artifacts/T/` (both
+/// git-ignored) — runs through the target's own code on every `cargo test`, so a fixed
+/// finding stays fixed without a nightly compiler. Each input must return (not panic)
+/// within seconds.
+#[test]
+fn the_fuzz_corpora_and_crashes_replay_without_a_panic() {
+    type Entry = fn(&[u8]);
+    let targets: [(&str, Entry); 6] = [
+        ("world_file", fuzz_entries::world_file),
+        ("rinex_nav", fuzz_entries::rinex_nav),
+        ("sp3", fuzz_entries::sp3),
+        ("layout_candidates", fuzz_entries::layout_candidates),
+        ("sigmf_fmdb", fuzz_entries::sigmf_fmdb),
+        ("cli_args", fuzz_entries::cli_args),
+    ];
+    let fuzz = repo().join("fuzz");
+    let scratch = std::env::temp_dir().join(format!("hybridnav-fuzz-{}", std::process::id()));
+    // Every target of fuzz/Cargo.toml is replayed.
+    let manifest = std::fs::read_to_string(fuzz.join("Cargo.toml")).unwrap();
+    let declared = manifest.matches("[[bin]]").count();
+    assert_eq!(
+        declared,
+        targets.len(),
+        "a fuzz target is not replayed here"
+    );
+    for (name, entry) in targets {
+        let mut inputs = Vec::new();
+        for dir in ["replay", "corpus", "artifacts"].map(|d| fuzz.join(d).join(name)) {
+            if let Ok(rd) = std::fs::read_dir(&dir) {
+                inputs.extend(rd.flatten().map(|e| e.path()).filter(|p| p.is_file()));
+            }
+        }
+        assert!(!inputs.is_empty(), "{name}: nothing in fuzz/replay/{name}");
+        inputs.sort();
+        for p in inputs {
+            let data = std::fs::read(&p).unwrap();
+            let start = Instant::now();
+            entry(&data);
+            let took = start.elapsed();
+            assert!(
+                took < Duration::from_secs(20),
+                "{}: took {took:?}",
+                p.display()
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&scratch);
+}

@@ -1,6 +1,8 @@
 //! Atomic file output: write to a temporary file in the destination's directory, flush it
-//! to disk, then rename it over the destination. A reader (or a resumed run) sees either
-//! the old file or the complete new one, never a torn write.
+//! to disk, rename it over the destination, then flush the directory. A reader (or a
+//! resumed run) sees either the old file or the complete new one, never a torn write; and
+//! once [`AtomicFile::commit`] returns, the new name survives a power loss too (POSIX
+//! makes a rename durable only when the directory holding it is synced: `fsync(2)`).
 
 use std::fs;
 use std::io::{self, BufWriter, Write};
@@ -66,7 +68,8 @@ impl AtomicFile {
         named(&self.path, e)
     }
 
-    /// Flushes the file to disk and renames it over the destination.
+    /// Flushes the file to disk, renames it over the destination and flushes the
+    /// directory (so the rename itself is on disk when this returns).
     ///
     /// # Errors
     /// Any I/O error (a full disk shows here at the latest), naming the destination; the
@@ -82,7 +85,7 @@ impl AtomicFile {
             let _ = fs::remove_file(&self.tmp);
             return Err(named(&self.path, e));
         }
-        Ok(())
+        sync_dir(&self.path).map_err(|e| named(&self.path, e))
     }
 }
 
@@ -144,6 +147,25 @@ pub fn remove_stale_temporaries(dir: &Path) -> io::Result<usize> {
         }
     }
     Ok(removed)
+}
+
+/// Flushes the directory that holds `path` to disk, making a rename or a new name in it
+/// durable. Where directories cannot be opened for this (not Unix), nothing is done.
+///
+/// # Errors
+/// The OS error of opening or syncing the directory.
+pub fn sync_dir(path: &Path) -> io::Result<()> {
+    #[cfg(unix)]
+    {
+        let dir = path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        fs::File::open(dir)?.sync_all()?;
+    }
+    #[cfg(not(unix))]
+    let _ = path;
+    Ok(())
 }
 
 fn named(path: &Path, e: io::Error) -> io::Error {

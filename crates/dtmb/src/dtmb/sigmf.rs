@@ -205,11 +205,14 @@ pub fn read_sigmf(base: &Path) -> Result<SigmfRecording, DtmbError> {
         path: mp.clone(),
         reason,
     };
-    let text = std::fs::read_to_string(&meta_path).map_err(|e| DtmbError::Io {
-        path: mp.clone(),
-        source: e,
-    })?;
-    let meta: Value = serde_json::from_str(&text).map_err(|e| bad(format!("not JSON: {e}")))?;
+    let text =
+        crate::io::read::read_bytes(&meta_path, crate::io::read::SIGMF_META).map_err(|e| {
+            DtmbError::Io {
+                path: mp.clone(),
+                source: e,
+            }
+        })?;
+    let meta: Value = serde_json::from_slice(&text).map_err(|e| bad(format!("not JSON: {e}")))?;
     let global = meta
         .get("global")
         .ok_or_else(|| bad("no \"global\" object".into()))?;
@@ -255,10 +258,13 @@ pub fn read_sigmf(base: &Path) -> Result<SigmfRecording, DtmbError> {
             });
         }
     }
-    let bytes = std::fs::read(&data_path).map_err(|e| DtmbError::Io {
-        path: data_path.display().to_string(),
-        source: e,
-    })?;
+    let bytes =
+        crate::io::read::read_bytes(&data_path, crate::io::read::SIGMF_DATA).map_err(|e| {
+            DtmbError::Io {
+                path: data_path.display().to_string(),
+                source: e,
+            }
+        })?;
     let samples = match format {
         SampleFormat::Cf32 => {
             if bytes.len() % 8 != 0 {

@@ -137,10 +137,13 @@ pub struct NavData {
 /// [`parse_nav`].
 pub fn read_nav_file(path: &Path) -> Result<NavData, RinexError> {
     let file = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| RinexError::Io {
-        file: file.clone(),
-        source,
-    })?;
+    let bytes =
+        crate::io::read::read_bytes(path, crate::io::read::RINEX_NAV).map_err(|source| {
+            RinexError::Io {
+                file: file.clone(),
+                source,
+            }
+        })?;
     // RINEX is ASCII; bytes beyond it are replaced rather than rejected so that a stray
     // byte in a comment does not make a whole file unreadable. A replaced byte inside a
     // data field still fails that field's parse with a line number.

@@ -115,10 +115,11 @@ impl Sp3Data {
 /// [`Sp3Error::Io`] when the file cannot be read, otherwise as [`parse_sp3`].
 pub fn read_sp3_file(path: &Path) -> Result<Sp3Data, Sp3Error> {
     let file = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| Sp3Error::Io {
-        file: file.clone(),
-        source,
-    })?;
+    let bytes =
+        crate::io::read::read_bytes(path, crate::io::read::SP3).map_err(|source| Sp3Error::Io {
+            file: file.clone(),
+            source,
+        })?;
     parse_sp3(&String::from_utf8_lossy(&bytes), &file)
 }
 

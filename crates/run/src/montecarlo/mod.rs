@@ -19,8 +19,9 @@ pub use crate::metrics::summary::{AcrossTrials, EstimatorSummary, FailureEpoch, 
 use crate::world::trial::run_trial;
 use crate::world::World;
 use indicatif::{ProgressBar, ProgressStyle};
+pub use outputs::OutputSet;
 use rayon::prelude::*;
-use store::{Manifest, RunDir, Shard, STORE_FORMAT};
+use store::{Manifest, RunDir, Shard, Stamp, STORE_FORMAT};
 
 /// How to run.
 #[derive(Clone, Copy, Debug)]
@@ -74,21 +75,39 @@ pub fn run_trials(world: &World, opts: &RunOptions) -> Result<Vec<TrialResult>, 
     Ok(all)
 }
 
-/// Runs the trials of `opts.shard` into `dir` and writes the run's outputs there: the
-/// manifest first, each trial's file as soon as it finishes, then `epochs.csv`,
-/// `trials.parquet`, `report.html` and, last, `summary.json`, streamed as the trials come
-/// in trial order. With `resume`, the trials the directory already holds are read back
-/// instead of run (after checking that its manifest is this run's); without it, any older
-/// trial files there are removed first.
+/// Runs the trials of `opts.shard` into `dir` and writes every output there; see
+/// [`run_into_with`].
 ///
 /// # Errors
-/// A message naming the file or the manifest key that stops the run. Trial files finished
-/// before the error stay complete and readable: `--resume` continues from them.
+/// As [`run_into_with`].
 pub fn run_into(
     world: &World,
     opts: &RunOptions,
     dir: &RunDir,
     resume: bool,
+) -> Result<Written, String> {
+    run_into_with(world, opts, dir, resume, OutputSet::ALL)
+}
+
+/// Runs the trials of `opts.shard` into `dir` and writes the run's outputs there: the
+/// outputs of an earlier attempt are removed first (`summary.json` first), then the
+/// manifest is written, each trial's file as soon as it finishes (stamped with the run's
+/// world hash, seed, trial count and shard), then `epochs.csv`, `trials.parquet`,
+/// `report.html` and, last, `summary.json`, streamed as the trials come in trial order —
+/// those of `outputs` (`summary.json` and `run.json` always). With `resume`, the trials
+/// the directory already holds are read back instead of run, after checking that its
+/// manifest and each trial's stamp are this run's; without it, any older trial files
+/// there are removed first.
+///
+/// # Errors
+/// A message naming the file or the manifest key that stops the run. Trial files finished
+/// before the error stay complete and readable: `--resume` continues from them.
+pub fn run_into_with(
+    world: &World,
+    opts: &RunOptions,
+    dir: &RunDir,
+    resume: bool,
+    outputs: OutputSet,
 ) -> Result<Written, String> {
     let manifest = opts.manifest(world);
     let existing = dir.read_manifest().map_err(|e| e.to_string())?;
@@ -113,11 +132,26 @@ pub fn run_into(
     } else {
         dir.clear_trials().map_err(|e| e.to_string())?;
     }
+    dir.remove_outputs().map_err(|e| e.to_string())?;
     dir.write_manifest(&manifest).map_err(|e| e.to_string())?;
-    let mut out = Outputs::create(world, &dir.root)?;
+    let mut out = Outputs::create(world, &dir.root, outputs)?;
     let has = |i: u64| resume && dir.trial_path(i).is_file();
-    execute(world, opts, Some(dir), &has, &mut |t| out.push(&t))?;
+    let store = Store {
+        dir,
+        stamp: manifest.stamp(),
+        write: outputs.trials,
+    };
+    execute(world, opts, Some(&store), &has, &mut |t| out.push(&t))?;
     out.finish(world, opts)
+}
+
+/// Where [`execute`] reads stored trials from and writes finished ones to.
+struct Store<'a> {
+    dir: &'a RunDir,
+    /// The stamp the run's trial files carry.
+    stamp: Stamp,
+    /// Whether finished trials are written (`--outputs` without `trials` does not).
+    write: bool,
 }
 
 /// Where trials go, in trial order.
@@ -166,7 +200,7 @@ fn in_windows(
 fn execute(
     world: &World,
     opts: &RunOptions,
-    dir: Option<&RunDir>,
+    dir: Option<&Store<'_>>,
     stored: &(dyn Fn(u64) -> bool + Sync),
     sink: &mut Sink<'_>,
 ) -> Result<(), String> {
@@ -189,14 +223,14 @@ fn execute(
         .progress_chars("=> "),
     );
     let one = |i: u64| -> Result<TrialResult, String> {
-        if let Some(dir) = dir.filter(|_| stored(i)) {
-            if let Some(r) = dir.read_trial(i).map_err(|e| e.to_string())? {
+        if let Some(s) = dir.filter(|_| stored(i)) {
+            if let Some(r) = s.dir.read_trial(&s.stamp, i).map_err(|e| e.to_string())? {
                 return Ok(r);
             }
         }
         let r = run_trial(world, opts.seed, i).map_err(|e| format!("trial {i}: {e}"))?;
-        if let Some(dir) = dir {
-            dir.write_trial(&r).map_err(|e| e.to_string())?;
+        if let Some(s) = dir.filter(|s| s.write) {
+            s.dir.write_trial(&s.stamp, &r).map_err(|e| e.to_string())?;
         }
         Ok(r)
     };
@@ -213,33 +247,49 @@ fn execute(
 /// The outputs of a run, written as its trials stream past in trial order.
 struct Outputs {
     dir: std::path::PathBuf,
-    csv: outputs::EpochsCsv<AtomicFile>,
-    parquet: outputs::TrialsParquet<AtomicFile>,
+    csv: Option<outputs::EpochsCsv<AtomicFile>>,
+    parquet: Option<outputs::TrialsParquet<AtomicFile>>,
+    report: bool,
     reducer: reduce::RunReducer,
 }
 
 impl Outputs {
-    fn create(world: &World, dir: &std::path::Path) -> Result<Self, String> {
+    fn create(world: &World, dir: &std::path::Path, which: OutputSet) -> Result<Self, String> {
         let open = |name: &str| AtomicFile::create(&dir.join(name)).map_err(|e| e.to_string());
-        let csv = outputs::EpochsCsv::new(open("epochs.csv")?).map_err(|e| e.to_string())?;
-        let parquet = outputs::TrialsParquet::new(open("trials.parquet")?, &world.frame)
-            .map_err(|e| format!("writing {}: {e}", dir.join("trials.parquet").display()))?;
+        let csv = if which.epochs {
+            Some(outputs::EpochsCsv::new(open("epochs.csv")?).map_err(|e| e.to_string())?)
+        } else {
+            None
+        };
+        let parquet = if which.parquet {
+            Some(
+                outputs::TrialsParquet::new(open("trials.parquet")?, &world.frame).map_err(
+                    |e| format!("writing {}: {e}", dir.join("trials.parquet").display()),
+                )?,
+            )
+        } else {
+            None
+        };
         Ok(Self {
             dir: dir.to_path_buf(),
             csv,
             parquet,
+            report: which.report,
             reducer: reduce::RunReducer::new(world, dir),
         })
     }
 
     fn push(&mut self, t: &TrialResult) -> Result<(), String> {
         let path = |n: &str| self.dir.join(n).display().to_string();
-        self.csv
-            .push(t)
-            .map_err(|e| format!("writing {}: {e}", path("epochs.csv")))?;
-        self.parquet
-            .push(t)
-            .map_err(|e| format!("writing {}: {e}", path("trials.parquet")))?;
+        if let Some(csv) = &mut self.csv {
+            csv.push(t)
+                .map_err(|e| format!("writing {}: {e}", path("epochs.csv")))?;
+        }
+        if let Some(parquet) = &mut self.parquet {
+            parquet
+                .push(t)
+                .map_err(|e| format!("writing {}: {e}", path("trials.parquet")))?;
+        }
         self.reducer.push(t)
     }
 
@@ -249,50 +299,57 @@ impl Outputs {
         let dir = self.dir;
         let path = |n: &str| dir.join(n);
         let commit = |f: AtomicFile| f.commit().map_err(|e| e.to_string());
-        commit(
-            self.csv
-                .finish()
-                .map_err(|e| format!("writing {}: {e}", path("epochs.csv").display()))?,
-        )?;
-        commit(
-            self.parquet
-                .finish()
-                .map_err(|e| format!("writing {}: {e}", path("trials.parquet").display()))?,
-        )?;
+        let mut files = Vec::new();
+        if let Some(csv) = self.csv {
+            commit(
+                csv.finish()
+                    .map_err(|e| format!("writing {}: {e}", path("epochs.csv").display()))?,
+            )?;
+            files.push(path("epochs.csv"));
+        }
+        if let Some(parquet) = self.parquet {
+            commit(
+                parquet
+                    .finish()
+                    .map_err(|e| format!("writing {}: {e}", path("trials.parquet").display()))?,
+            )?;
+            files.push(path("trials.parquet"));
+        }
         let reduce::Reduced {
             summary,
             first,
             cdfs,
         } = self.reducer.finish(world, opts)?;
-        let report = crate::report::html(world, &summary, first.as_ref(), &cdfs)?;
-        crate::io::atomic::write_atomic(&path("report.html"), report.as_bytes())
-            .map_err(|e| e.to_string())?;
+        if self.report {
+            let report = crate::report::html(world, &summary, first.as_ref(), &cdfs)?;
+            crate::io::atomic::write_atomic(&path("report.html"), report.as_bytes())
+                .map_err(|e| e.to_string())?;
+            files.push(path("report.html"));
+        }
         let mut json = serde_json::to_string_pretty(&summary)
             .map_err(|e| format!("encoding summary.json: {e}"))?;
         json.push('\n');
         crate::io::atomic::write_atomic(&path("summary.json"), json.as_bytes())
             .map_err(|e| e.to_string())?;
-        Ok(Written {
-            summary,
-            files: [
-                "summary.json",
-                "epochs.csv",
-                "trials.parquet",
-                "report.html",
-            ]
-            .map(path)
-            .to_vec(),
-        })
+        files.insert(0, path("summary.json"));
+        Ok(Written { summary, files })
     }
 }
 
 /// Merges the shard directories `dirs` (their manifests agree and together they hold
-/// every trial) into `out`: copies each trial file and writes the outputs of the whole
-/// run, streaming the trials in order as [`run_into`] does. Returns the merged summary.
+/// every trial) into `out`: copies each trial file (checking its stamp against its
+/// shard's manifest, and stamping the copy as the whole run's) and writes the outputs of
+/// the whole run, streaming the trials in order as [`run_into`] does; `outputs` as
+/// [`run_into_with`]. Returns the merged summary.
 ///
 /// # Errors
 /// A message naming the directory, file or manifest key at fault.
-pub fn merge_into(world: &World, plan: &store::MergePlan, out: &RunDir) -> Result<Written, String> {
+pub fn merge_into(
+    world: &World,
+    plan: &store::MergePlan,
+    out: &RunDir,
+    outputs: OutputSet,
+) -> Result<Written, String> {
     let opts = RunOptions {
         trials: plan.manifest.trials,
         seed: plan.manifest.seed,
@@ -301,16 +358,21 @@ pub fn merge_into(world: &World, plan: &store::MergePlan, out: &RunDir) -> Resul
         shard: Shard::WHOLE,
     };
     out.clear_trials().map_err(|e| e.to_string())?;
-    out.write_manifest(&opts.manifest(world))
-        .map_err(|e| e.to_string())?;
-    let mut outputs = Outputs::create(world, &out.root)?;
+    out.remove_outputs().map_err(|e| e.to_string())?;
+    let manifest = opts.manifest(world);
+    out.write_manifest(&manifest).map_err(|e| e.to_string())?;
+    let stamp = manifest.stamp();
+    let which = outputs;
+    let mut outputs = Outputs::create(world, &out.root, which)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.threads)
         .build()
         .map_err(|e| format!("cannot start worker threads: {e}"))?;
     let copy = |i: u64| {
         let r = plan.read(i)?;
-        out.write_trial(&r).map_err(|e| e.to_string())?;
+        if which.trials {
+            out.write_trial(&stamp, &r).map_err(|e| e.to_string())?;
+        }
         Ok(r)
     };
     in_windows(&pool, 0..opts.trials, &copy, &mut |t| outputs.push(&t))?;

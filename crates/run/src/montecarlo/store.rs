@@ -1,15 +1,25 @@
 //! A run's directory: its manifest, one file per finished trial, and the merge of shards.
 //!
 //! ```text
+//! OUT/.hybridnav.lock            the advisory lock of the process writing OUT (its pid)
 //! OUT/run.json                   the manifest: world (name, file, hash), seed, trials, shard
 //! OUT/trials/trial-000042.json.gz  trial 42's records (gzip'd JSON: `zcat` reads it),
-//!                                written atomically when it finishes
+//!                                stamped with the run's world hash, seed, trial count
+//!                                and shard, written atomically when it finishes
 //! OUT/summary.json …             the outputs, computed from the trial files alone
 //! ```
 //!
 //! Because every output is a function of the manifest and the trial files, a run that was
 //! interrupted and resumed (`--resume`), or run as shards and merged, writes the same bytes
 //! as one uninterrupted run.
+//!
+//! A directory belongs to one run. The process writing it holds an advisory lock
+//! (`flock(2)` on `OUT/.hybridnav.lock`) from start to end, so a second run or merge into
+//! it is refused with the holder's pid; a run into a directory that holds another run is
+//! refused unless `--resume` (the same run) or `--force` (the old run is first renamed
+//! aside whole, [`Takeover::Force`]); a resume checks every trial file's stamp, so trials
+//! of two runs are never mixed; and the outputs of the previous attempt are removed
+//! before the first trial runs, so no old summary sits beside a new manifest.
 
 use crate::engine::trial::TrialResult;
 use crate::io::atomic::write_atomic;
@@ -18,7 +28,19 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 /// The version of the trial-file and manifest layout; a resume or merge refuses others.
-pub const STORE_FORMAT: u32 = 2;
+pub const STORE_FORMAT: u32 = 3;
+
+/// The lock file in a run directory.
+pub const LOCK_FILE: &str = ".hybridnav.lock";
+
+/// The outputs a run writes from its trials, removed when a new attempt starts
+/// (`summary.json` first: a directory with a summary is a complete run).
+pub const OUTPUT_FILES: [&str; 4] = [
+    "summary.json",
+    "report.html",
+    "epochs.csv",
+    "trials.parquet",
+];
 
 /// Deflate level of the trial files: the fastest, which still shrinks a trial's JSON
 /// about 4.8× (a Beihang trial: 1.8 MB → 0.38 MB) for ~10 % of the trial's own time; the
@@ -169,7 +191,90 @@ pub struct Manifest {
     pub shard: Shard,
 }
 
+/// What every trial file carries of its run, so that a trial of one run is never taken
+/// for a trial of another: checked whenever a trial file is read back (resume, merge).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Stamp {
+    pub format: u32,
+    pub world_hash: String,
+    pub seed: u64,
+    /// Trials of the whole run.
+    pub trials: u64,
+    pub shard: Shard,
+}
+
+impl Stamp {
+    /// Why `found` (a trial file's stamp) is not this run's, naming each differing key.
+    fn mismatch(&self, found: &Stamp) -> Option<String> {
+        let mut why = Vec::new();
+        if self.format != found.format {
+            why.push(format!(
+                "store format {}, not {}",
+                found.format, self.format
+            ));
+        }
+        if self.world_hash != found.world_hash {
+            why.push(format!(
+                "world hash {}, not {}",
+                short(&found.world_hash),
+                short(&self.world_hash)
+            ));
+        }
+        if self.seed != found.seed {
+            why.push(format!("seed {}, not {}", found.seed, self.seed));
+        }
+        if self.trials != found.trials {
+            why.push(format!("{} trials, not {}", found.trials, self.trials));
+        }
+        if self.shard != found.shard {
+            why.push(format!("shard {}, not {}", found.shard, self.shard));
+        }
+        (!why.is_empty()).then(|| why.join(", "))
+    }
+}
+
+/// A trial file as written: the stamp, then the trial.
+#[derive(Serialize)]
+struct TrialFileOut<'a> {
+    stamp: &'a Stamp,
+    trial: &'a TrialResult,
+}
+
+/// A trial file as read back.
+#[derive(Deserialize)]
+struct TrialFileIn {
+    stamp: Stamp,
+    trial: TrialResult,
+}
+
 impl Manifest {
+    /// The stamp this run's trial files carry.
+    pub fn stamp(&self) -> Stamp {
+        Stamp {
+            format: self.format,
+            world_hash: self.world_hash.clone(),
+            seed: self.seed,
+            trials: self.trials,
+            shard: self.shard,
+        }
+    }
+
+    /// One line for messages: world, seed, trials, shard.
+    pub fn describe(&self) -> String {
+        format!(
+            "world {} ({}), seed {}, {} trials{}",
+            self.world,
+            self.world_file,
+            self.seed,
+            self.trials,
+            if self.shard.is_whole() {
+                String::new()
+            } else {
+                format!(", shard {}", self.shard)
+            }
+        )
+    }
+
     /// Why `other` (a directory's manifest) is not a continuation of or a sibling shard
     /// of `self`, or `None` when it is. Names each differing key.
     pub fn mismatch(&self, other: &Manifest, compare_shard: bool) -> Option<String> {
@@ -223,23 +328,162 @@ pub enum StoreError {
     Refused(String),
 }
 
-/// A run's output directory.
+/// How a run takes its output directory over.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Takeover {
+    /// A new run: the directory must not hold a run (no manifest, summary or trial file).
+    Fresh,
+    /// `--resume`: continue the run the directory holds (its manifest is checked by the
+    /// run).
+    Resume,
+    /// `--force`: a run the directory holds is first renamed aside whole, to
+    /// `OUT.previous-K` (K the smallest free number), and the new run starts empty.
+    Force,
+}
+
+/// The advisory lock of a run directory: an exclusive `flock(2)` on its [`LOCK_FILE`]
+/// (shared when a merge reads the directory), released when the last clone of the
+/// [`RunDir`] is dropped or the process ends — also by `kill -9`, so a killed run never
+/// leaves a stale lock.
+#[derive(Debug)]
+struct Lock {
+    _file: std::fs::File,
+}
+
+impl Lock {
+    /// Takes the lock of `root`, exclusive for a writer, shared for a reader; on success a
+    /// writer records its pid in the file.
+    fn take(root: &Path, exclusive: bool) -> Result<Self, StoreError> {
+        use std::io::{Seek, Write};
+        let path = root.join(LOCK_FILE);
+        let io = |source| StoreError::Io {
+            path: path.clone(),
+            source,
+        };
+        let mut f = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .map_err(io)?;
+        match crate::io::lock::try_lock(&f, exclusive) {
+            Ok(true) => {}
+            Ok(false) => {
+                let holder = std::fs::read_to_string(&path).unwrap_or_default();
+                let holder = holder.trim();
+                let who = if holder.is_empty() {
+                    "another hybridnav process".to_string()
+                } else {
+                    format!("another hybridnav process ({holder})")
+                };
+                return Err(StoreError::Refused(format!(
+                    "{} is in use by {who}: one directory, one run; wait for it to end or \
+                     choose another --out",
+                    root.display()
+                )));
+            }
+            Err(e) => return Err(io(e)),
+        }
+        if exclusive {
+            let me = format!(
+                "pid {} on {}\n",
+                std::process::id(),
+                std::fs::read_to_string("/proc/sys/kernel/hostname")
+                    .map(|h| h.trim().to_string())
+                    .unwrap_or_else(|_| "this host".into())
+            );
+            f.set_len(0)
+                .and_then(|()| f.rewind())
+                .and_then(|()| f.write_all(me.as_bytes()))
+                .map_err(io)?;
+        }
+        Ok(Self { _file: f })
+    }
+}
+
+/// What a directory holds of a run, for the refusal of a fresh run into it.
+fn holds_run(root: &Path) -> Option<String> {
+    let manifest = root.join("run.json").is_file();
+    let summary = root.join("summary.json").is_file();
+    let trials = std::fs::read_dir(root.join("trials"))
+        .map(|d| {
+            d.flatten()
+                .filter(|e| e.file_name().to_string_lossy().starts_with("trial-"))
+                .count()
+        })
+        .unwrap_or(0);
+    if !(manifest || summary || trials > 0) {
+        return None;
+    }
+    let what = match RunDir::existing(root).read_manifest() {
+        Ok(Some(m)) => format!("a run of {}", m.describe()),
+        Ok(None) => "a run's outputs".to_string(),
+        Err(e) => format!("an unreadable run ({e})"),
+    };
+    Some(format!(
+        "{what}: {trials} trial file(s), {}",
+        if summary { "complete" } else { "unfinished" }
+    ))
+}
+
+/// A run's output directory, locked by this process while any clone of it lives.
 #[derive(Clone, Debug)]
 pub struct RunDir {
     pub root: PathBuf,
+    lock: Option<std::sync::Arc<Lock>>,
 }
 
 impl RunDir {
-    /// Opens (and creates) `root` and its `trials/` folder.
+    /// Opens (and creates) `root` and its `trials/` folder for a run, taking its lock.
+    /// Equivalent to [`RunDir::take`] with [`Takeover::Resume`]: nothing in the
+    /// directory is refused or moved (the caller checks the manifest).
     ///
     /// # Errors
-    /// When the directory cannot be created or written (checked by writing a probe file,
-    /// so an unwritable directory is reported before any trial runs, not after).
+    /// As [`RunDir::take`].
     pub fn create(root: &Path) -> Result<Self, StoreError> {
+        Self::take(root, Takeover::Resume).map(|(d, _)| d)
+    }
+
+    /// Takes `root` over for a run or a merge: creates it, takes its lock (refused, with
+    /// the holder's pid, while another process holds it), then applies `how` to a run the
+    /// directory already holds — refuse ([`Takeover::Fresh`]), keep
+    /// ([`Takeover::Resume`]) or rename aside ([`Takeover::Force`]; the new path is
+    /// returned). Creates `trials/`, removes temporaries that dead processes left, and
+    /// checks that the directory is writable (by writing a probe file, so an unwritable
+    /// directory is reported before any trial runs, not after).
+    ///
+    /// # Errors
+    /// [`StoreError::Refused`] naming the lock holder or the run the directory holds; I/O
+    /// errors naming the path.
+    pub fn take(root: &Path, how: Takeover) -> Result<(Self, Option<PathBuf>), StoreError> {
         let io = |path: &Path| {
             let path = path.to_path_buf();
             move |source| StoreError::Io { path, source }
         };
+        std::fs::create_dir_all(root).map_err(io(root))?;
+        let mut lock = Lock::take(root, true)?;
+        let mut aside = None;
+        if let Some(what) = holds_run(root) {
+            match how {
+                Takeover::Resume => {}
+                Takeover::Fresh => {
+                    return Err(StoreError::Refused(format!(
+                        "{} holds {what}; continue it with --resume, move it aside with \
+                         --force (it is renamed, not deleted), or choose another --out",
+                        root.display()
+                    )))
+                }
+                Takeover::Force => {
+                    let to = move_aside(root)?;
+                    std::fs::create_dir_all(root).map_err(io(root))?;
+                    // The moved directory's lock goes with it; the new one is taken
+                    // before the old one is released.
+                    lock = Lock::take(root, true)?;
+                    aside = Some(to);
+                }
+            }
+        }
         let trials = root.join("trials");
         std::fs::create_dir_all(&trials).map_err(io(&trials))?;
         // A process killed mid-write leaves hidden temporary files; the run that takes
@@ -250,16 +494,52 @@ impl RunDir {
         let probe = root.join(".hybridnav-write-probe");
         write_atomic(&probe, b"").map_err(io(&probe))?;
         let _ = std::fs::remove_file(&probe);
-        Ok(Self {
-            root: root.to_path_buf(),
-        })
+        Ok((
+            Self {
+                root: root.to_path_buf(),
+                lock: Some(std::sync::Arc::new(lock)),
+            },
+            aside,
+        ))
     }
 
-    /// Opens an existing run directory for reading (merge), without creating anything.
+    /// Opens an existing run directory for reading, without creating or locking anything.
     pub fn existing(root: &Path) -> Self {
         Self {
             root: root.to_path_buf(),
+            lock: None,
         }
+    }
+
+    /// Opens an existing run directory for reading (a merge's input) under a shared lock,
+    /// so that a shard still being written is refused rather than read half-done.
+    ///
+    /// # Errors
+    /// [`StoreError::Refused`] naming the process writing it; I/O errors of the lock file
+    /// (a directory that cannot hold one, e.g. read-only, is read without a lock).
+    pub fn for_reading(root: &Path) -> Result<Self, StoreError> {
+        let lock = match Lock::take(root, false) {
+            Ok(l) => Some(std::sync::Arc::new(l)),
+            Err(StoreError::Io { source, .. })
+                if matches!(
+                    source.kind(),
+                    std::io::ErrorKind::PermissionDenied | std::io::ErrorKind::ReadOnlyFilesystem
+                ) =>
+            {
+                None
+            }
+            Err(StoreError::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
+                return Err(StoreError::Refused(format!(
+                    "{}: no such directory",
+                    root.display()
+                )))
+            }
+            Err(e) => return Err(e),
+        };
+        Ok(Self {
+            root: root.to_path_buf(),
+            lock,
+        })
     }
 
     pub fn manifest_path(&self) -> PathBuf {
@@ -278,12 +558,12 @@ impl RunDir {
     /// When the file exists but cannot be read or parsed.
     pub fn read_manifest(&self) -> Result<Option<Manifest>, StoreError> {
         let path = self.manifest_path();
-        let text = match std::fs::read_to_string(&path) {
+        let text = match crate::io::read::read_bytes(&path, crate::io::read::RUN_MANIFEST) {
             Ok(t) => t,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
             Err(source) => return Err(StoreError::Io { path, source }),
         };
-        serde_json::from_str(&text)
+        serde_json::from_slice(&text)
             .map(Some)
             .map_err(|e| StoreError::Parse {
                 path,
@@ -307,17 +587,52 @@ impl RunDir {
         write_atomic(&path, text.as_bytes()).map_err(|source| StoreError::Io { path, source })
     }
 
-    /// Writes one finished trial atomically.
+    /// Removes the outputs of an earlier attempt ([`OUTPUT_FILES`], `summary.json` first,
+    /// and `datasets/`), so that nothing of it sits beside the new run's manifest.
     ///
     /// # Errors
     /// I/O errors, naming the file.
-    pub fn write_trial(&self, r: &TrialResult) -> Result<(), StoreError> {
+    pub fn remove_outputs(&self) -> Result<(), StoreError> {
+        for name in OUTPUT_FILES {
+            let path = self.root.join(name);
+            match std::fs::remove_file(&path) {
+                Ok(()) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(source) => return Err(StoreError::Io { path, source }),
+            }
+        }
+        let datasets = self.root.join("datasets");
+        match std::fs::remove_dir_all(&datasets) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(source) => {
+                return Err(StoreError::Io {
+                    path: datasets,
+                    source,
+                })
+            }
+        }
+        crate::io::atomic::sync_dir(&self.root.join(OUTPUT_FILES[0])).map_err(|source| {
+            StoreError::Io {
+                path: self.root.clone(),
+                source,
+            }
+        })
+    }
+
+    /// Writes one finished trial atomically, stamped with `stamp`.
+    ///
+    /// # Errors
+    /// I/O errors, naming the file.
+    pub fn write_trial(&self, stamp: &Stamp, r: &TrialResult) -> Result<(), StoreError> {
         let path = self.trial_path(r.trial);
         use std::io::Write;
-        let text = serde_json::to_vec(r).map_err(|e| StoreError::Parse {
-            path: path.clone(),
-            what: "trial file",
-            message: e.to_string(),
+        let text = serde_json::to_vec(&TrialFileOut { stamp, trial: r }).map_err(|e| {
+            StoreError::Parse {
+                path: path.clone(),
+                what: "trial file",
+                message: e.to_string(),
+            }
         })?;
         // The gzip header carries no time stamp or name (flate2 writes zeros), so the
         // bytes depend on the trial alone and merged runs stay byte-identical.
@@ -335,13 +650,15 @@ impl RunDir {
         write_atomic(&path, &bytes).map_err(|source| StoreError::Io { path, source })
     }
 
-    /// Reads trial `trial`; `Ok(None)` when it has not been written.
+    /// Reads trial `trial`, checking that its stamp is `stamp` (the trial belongs to this
+    /// run); `Ok(None)` when it has not been written.
     ///
     /// # Errors
-    /// When the file exists but cannot be read, does not parse, or holds another trial.
-    pub fn read_trial(&self, trial: u64) -> Result<Option<TrialResult>, StoreError> {
+    /// When the file exists but cannot be read, does not parse, holds another trial, or
+    /// belongs to another run (the message names the keys that differ).
+    pub fn read_trial(&self, stamp: &Stamp, trial: u64) -> Result<Option<TrialResult>, StoreError> {
         let path = self.trial_path(trial);
-        let bytes = match std::fs::read(&path) {
+        let bytes = match crate::io::read::read_bytes(&path, crate::io::read::TRIAL_FILE) {
             Ok(b) => b,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
             Err(source) => return Err(StoreError::Io { path, source }),
@@ -353,22 +670,31 @@ impl RunDir {
                 what: "trial file",
                 message: format!("not gzip'd JSON: {e}"),
             })?;
-        let r: TrialResult = serde_json::from_slice(&text).map_err(|e| StoreError::Parse {
+        let f: TrialFileIn = serde_json::from_slice(&text).map_err(|e| StoreError::Parse {
             path: path.clone(),
             what: "trial file",
-            message: e.to_string(),
+            message: format!(
+                "{e} (a trial file of store format {STORE_FORMAT} starts with its run's stamp)"
+            ),
         })?;
-        if r.trial != trial {
+        if let Some(why) = stamp.mismatch(&f.stamp) {
+            return Err(StoreError::Refused(format!(
+                "{}: this trial belongs to another run ({why}); a directory holds one run's \
+                 trials — remove the file, or run into another --out",
+                path.display()
+            )));
+        }
+        if f.trial.trial != trial {
             return Err(StoreError::Parse {
                 path,
                 what: "trial file",
-                message: format!("it holds trial {}, not {trial}", r.trial),
+                message: format!("it holds trial {}, not {trial}", f.trial.trial),
             });
         }
-        Ok(Some(r))
+        Ok(Some(f.trial))
     }
 
-    /// Removes every trial file (a fresh run into a directory that held an older one).
+    /// Removes every trial file.
     ///
     /// # Errors
     /// I/O errors, naming the file.
@@ -392,6 +718,53 @@ impl RunDir {
         }
         Ok(removed)
     }
+
+    /// Whether this process holds the directory's lock.
+    pub fn is_locked(&self) -> bool {
+        self.lock.is_some()
+    }
+}
+
+/// Renames `root` (which holds a run) to `root.previous-K`, K the smallest number free:
+/// the name is reserved by creating an empty directory (which fails if it exists), and
+/// the rename replaces that empty directory atomically, so the old run is moved whole —
+/// never mixed with the new one, never half-moved — and nothing else is overwritten.
+fn move_aside(root: &Path) -> Result<PathBuf, StoreError> {
+    let name = root
+        .file_name()
+        .filter(|n| !n.is_empty())
+        .ok_or_else(|| {
+            StoreError::Refused(format!(
+                "--force: {} cannot be moved aside (name the directory itself, not . or /)",
+                root.display()
+            ))
+        })?
+        .to_string_lossy()
+        .into_owned();
+    for k in 1..10_000 {
+        let to = root.with_file_name(format!("{name}.previous-{k}"));
+        match std::fs::create_dir(&to) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(source) => return Err(StoreError::Io { path: to, source }),
+        }
+        if let Err(source) = std::fs::rename(root, &to) {
+            let _ = std::fs::remove_dir(&to);
+            return Err(StoreError::Io {
+                path: root.to_path_buf(),
+                source,
+            });
+        }
+        crate::io::atomic::sync_dir(&to).map_err(|source| StoreError::Io {
+            path: to.clone(),
+            source,
+        })?;
+        return Ok(to);
+    }
+    Err(StoreError::Refused(format!(
+        "--force: {name}.previous-1 … 9999 all exist beside {}; remove some",
+        root.display()
+    )))
 }
 
 /// Which shard directory holds each trial of a run to merge; the trials themselves are
@@ -400,7 +773,9 @@ impl RunDir {
 pub struct MergePlan {
     /// The merged run's manifest (the shards', with the whole run as its shard).
     pub manifest: Manifest,
-    dirs: Vec<RunDir>,
+    /// Each input directory (locked shared while the plan lives) and the stamp its trial
+    /// files must carry.
+    dirs: Vec<(RunDir, Stamp)>,
     /// `owner[i]`: the index in `dirs` of the directory holding trial `i`.
     owner: Vec<u32>,
 }
@@ -421,8 +796,9 @@ impl MergePlan {
             ));
         }
         let mut owner: Vec<u32> = Vec::new();
+        let mut opened = Vec::with_capacity(dirs.len());
         for (k, d) in dirs.iter().enumerate() {
-            let dir = RunDir::existing(d);
+            let dir = RunDir::for_reading(d)?;
             let m = dir.read_manifest()?.ok_or_else(|| {
                 StoreError::Refused(format!(
                     "{}: no run.json here; not the output directory of `hybridnav run`",
@@ -464,6 +840,7 @@ impl MergePlan {
                 }
                 *slot = k as u32;
             }
+            opened.push((dir, m.stamp()));
         }
         let (_, mut manifest) = first.expect("at least one directory was read");
         let missing: Vec<u64> = (0..manifest.trials)
@@ -484,9 +861,14 @@ impl MergePlan {
         manifest.shard = Shard::WHOLE;
         Ok(Self {
             manifest,
-            dirs: dirs.iter().map(|d| RunDir::existing(d)).collect(),
+            dirs: opened,
             owner,
         })
+    }
+
+    /// The input directories.
+    pub fn inputs(&self) -> impl Iterator<Item = &Path> {
+        self.dirs.iter().map(|(d, _)| d.root.as_path())
     }
 
     /// Reads trial `i` from the directory that holds it.
@@ -494,8 +876,8 @@ impl MergePlan {
     /// # Errors
     /// When the file cannot be read or parsed, or vanished since the plan was made.
     pub fn read(&self, i: u64) -> Result<TrialResult, String> {
-        let dir = &self.dirs[self.owner[i as usize] as usize];
-        dir.read_trial(i)
+        let (dir, stamp) = &self.dirs[self.owner[i as usize] as usize];
+        dir.read_trial(stamp, i)
             .map_err(|e| e.to_string())?
             .ok_or_else(|| format!("{} vanished during the merge", dir.trial_path(i).display()))
     }

@@ -262,10 +262,13 @@ impl FingerprintDb {
     /// Reads a database and checks it was built for `expected`.
     pub fn load(path: &Path, expected: &WorldTag) -> Result<Self, FmError> {
         let p = path.display().to_string();
-        let text = std::fs::read(path).map_err(|e| FmError::Io {
-            path: p.clone(),
-            message: e.to_string(),
-        })?;
+        let text =
+            crate::io::read::read_bytes(path, crate::io::read::FM_DATABASE).map_err(|e| {
+                FmError::Io {
+                    path: p.clone(),
+                    message: e.to_string(),
+                }
+            })?;
         let file: DbFile = serde_json::from_slice(&text).map_err(|e| FmError::Io {
             path: p.clone(),
             message: format!(

@@ -168,12 +168,19 @@ fn fnv_hex(bytes: &[u8]) -> String {
 /// A [`WorldError`] for a missing or unreadable file, a syntax error, an unknown key, a
 /// value of the wrong type or an impossible value.
 pub fn load_world(path: &Path) -> Result<World, WorldError> {
-    let text = std::fs::read_to_string(path).map_err(|e| WorldError {
-        file: path.to_path_buf(),
-        line: 0,
-        column: 0,
-        key: String::new(),
-        message: format!("cannot read the world file: {e}"),
+    use crate::io::read::{read_text, TextError, WORLD};
+    let text = read_text(path, WORLD).map_err(|e| {
+        let (line, column, message) = match e {
+            TextError::Io(e) => (0, 0, format!("cannot read the world file: {e}")),
+            TextError::NotText(e) => (e.line, e.column, e.message),
+        };
+        WorldError {
+            file: path.to_path_buf(),
+            line,
+            column,
+            key: String::new(),
+            message,
+        }
     })?;
     parse_world(&text, path)
 }

@@ -52,19 +52,34 @@ impl EpochVisibility {
     }
 }
 
+/// The most epochs a visibility survey (`hybridnav check --step`) visits: each traces
+/// every link through the scene, so 10⁵ epochs already take minutes on a large scene;
+/// the survey is a summary, and a coarser step shows the same shares.
+pub const MAX_SURVEY_EPOCHS: f64 = 100_000.0;
+
 /// Visibility every `step_s` along the trajectory of trial 0 of the world's seed (a
 /// deterministic trajectory is the same in every trial; a stochastic one is shown for one
 /// draw).
 ///
 /// # Errors
-/// When the trajectory cannot be built.
+/// When the trajectory cannot be built, or the step would survey more than
+/// [`MAX_SURVEY_EPOCHS`] epochs (checked before anything is computed).
 pub fn survey(world: &World, step_s: f64) -> Result<Vec<EpochVisibility>, String> {
-    let trajectory = world.build_trajectory(&TrialRng::new(world.file.montecarlo.seed, 0))?;
     let step_s = if step_s.is_finite() && step_s > 0.0 {
         step_s
     } else {
         1.0
     };
+    let epochs = (world.duration_s / step_s).floor() + 1.0;
+    if epochs > MAX_SURVEY_EPOCHS {
+        return Err(format!(
+            "--step {step_s} s over duration_s = {} s would survey {epochs:.3e} epochs; \
+             expected at most {MAX_SURVEY_EPOCHS} (use --step {:.2e} or coarser)",
+            world.duration_s,
+            1.01 * world.duration_s / (MAX_SURVEY_EPOCHS - 1.0)
+        ));
+    }
+    let trajectory = world.build_trajectory(&TrialRng::new(world.file.montecarlo.seed, 0))?;
     let gnss = world.file.sensors.gnss.as_ref();
     let mut paths = LinkPaths::new();
     let mut out = Vec::new();
