@@ -89,6 +89,18 @@ impl FamilyKind {
 pub enum ResamplingKind {
     Systematic,
     Stratified,
+    Residual,
+}
+
+impl ResamplingKind {
+    /// The particle filter's scheme of this name.
+    pub fn scheme(self) -> Resampling {
+        match self {
+            ResamplingKind::Systematic => Resampling::Systematic,
+            ResamplingKind::Stratified => Resampling::Stratified,
+            ResamplingKind::Residual => Resampling::Residual,
+        }
+    }
 }
 
 /// `[estimator.options]`: the tuning of the family's filters. The process model's tuning
@@ -661,10 +673,7 @@ impl FamilyEstimator {
             ),
             FamilyKind::Pf => {
                 let buf = ParticleBuffer::new(cfg.particles).map_err(|e| e.to_string())?;
-                let resampling = match cfg.resampling {
-                    ResamplingKind::Systematic => Resampling::Systematic,
-                    ResamplingKind::Stratified => Resampling::Stratified,
-                };
+                let resampling = cfg.resampling.scheme();
                 // The filter never resamples inside an update: the estimator resamples once
                 // per epoch, with regularisation (see `regularise`).
                 let mut pf =

@@ -33,6 +33,7 @@
 //! its particles, resets the weights to uniform and reports `degenerate = true` in the
 //! [`PfUpdate`], so the caller sees the failure instead of a NaN estimate.
 
+use crate::core::System;
 use crate::fusion::models::{MeasurementModel, ProcessModel, Pseudoranges, RangeRow, StateLayout};
 use nalgebra::{SMatrix, SVector};
 use rand::Rng;
@@ -60,6 +61,25 @@ pub enum Resampling {
     Systematic,
     /// `u_i ~ U[i/N, (i+1)/N)` independently (Kitagawa 1996). O(N).
     Stratified,
+    /// Residual resampling (Liu & Chen, "Sequential Monte Carlo methods for dynamic
+    /// systems", *JASA* 93, 1998, §3): `⌊N w_i⌋` copies of particle `i` deterministically,
+    /// then the `R = N − Σ⌊N w_i⌋` remaining slots drawn from the residual weights
+    /// `(N w_i − ⌊N w_i⌋) / R`, here systematically. O(N).
+    Residual,
+}
+
+/// Which member of the particle-filter family runs (see the module documentation).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PfVariant {
+    /// Plain sampling-importance-resampling: the process noise is the only diversity.
+    Sir,
+    /// The regularised PF: each resampling is followed by a Gaussian kernel jitter with
+    /// the optimal bandwidth, shaped by the cloud's covariance.
+    Regularised,
+    /// The Rao-Blackwellised PF: the clock states are carried by a Kalman filter per
+    /// particle (their means in the clock columns, their common variance beside), the
+    /// rest is sampled and regularised as in [`PfVariant::Regularised`].
+    RaoBlackwellised,
 }
 
 /// The storage of `n` particles of dimension `N`, allocated once.
@@ -155,18 +175,34 @@ pub struct PfUpdate {
     pub degenerate: bool,
 }
 
-/// The SIR particle filter (see the module documentation).
+/// The clock states a Rao-Blackwellised filter carries in closed form: one Kalman filter
+/// per particle, whose mean is the particle's clock column and whose variance is common
+/// to every particle (it depends only on the ranges' σ, not on the particle's position).
+#[derive(Clone, Debug, PartialEq)]
+struct RbClocks {
+    /// The clock column of each system in [`System::ALL`] order.
+    cols: [Option<usize>; System::COUNT],
+    /// The Kalman variance (m²) of each system's clock; infinite for a flat prior (a clock
+    /// not yet seen), zero for a known one.
+    var_m2: [f64; System::COUNT],
+}
+
+/// The particle-filter family (see the module documentation).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ParticleFilter<const N: usize> {
     buf: ParticleBuffer<N>,
     resampling: Resampling,
     neff_threshold: f64,
+    variant: PfVariant,
+    /// The components drawn by sampling (false: carried by the per-particle Kalman filter).
+    sampled: [bool; N],
+    rb: Option<RbClocks>,
 }
 
 impl<const N: usize> ParticleFilter<N> {
-    /// A filter over the particles of `buf`, resampling with `resampling` when `N_eff`
-    /// falls below `neff_threshold · N` (seed 001 resamples below a fixed count; ⅔ or ½
-    /// of `N` is common; 1 resamples every step, 0 never).
+    /// A SIR filter over the particles of `buf`, resampling with `resampling` when `N_eff`
+    /// falls below `neff_threshold · N` (seed 001 resamples below a fixed count; ½ of `N`
+    /// is the common choice; 1 resamples every step, 0 never).
     ///
     /// # Errors
     /// When the threshold is outside [0, 1].
@@ -184,7 +220,60 @@ impl<const N: usize> ParticleFilter<N> {
             buf,
             resampling,
             neff_threshold,
+            variant: PfVariant::Sir,
+            sampled: [true; N],
+            rb: None,
         })
+    }
+
+    /// The regularised filter: every resampling is followed by the kernel jitter.
+    pub fn regularised(mut self) -> Self {
+        self.variant = PfVariant::Regularised;
+        self
+    }
+
+    /// The Rao-Blackwellised filter: the clock of system `s` (column `clock_cols[s]`) is
+    /// carried by a Kalman filter per particle, with a flat prior until
+    /// [`Self::set_clock_prior`] says otherwise; the other components are sampled and
+    /// regularised.
+    ///
+    /// # Errors
+    /// A clock column outside the state.
+    pub fn rao_blackwellised(
+        mut self,
+        clock_cols: [Option<usize>; System::COUNT],
+    ) -> Result<Self, ParticleError> {
+        if clock_cols.iter().flatten().any(|&k| k >= N) {
+            return Err(ParticleError::InvalidParameter(format!(
+                "a clock column is outside the {N}-state"
+            )));
+        }
+        for &k in clock_cols.iter().flatten() {
+            self.sampled[k] = false;
+        }
+        self.variant = PfVariant::RaoBlackwellised;
+        self.rb = Some(RbClocks {
+            cols: clock_cols,
+            var_m2: [f64::INFINITY; System::COUNT],
+        });
+        Ok(self)
+    }
+
+    /// Sets the Kalman prior of system `s`'s clock on every particle: mean `mean_m`,
+    /// variance `var_m2` (0: known; infinite: flat). No effect on a filter that is not
+    /// Rao-Blackwellised or a system without a clock column.
+    pub fn set_clock_prior(&mut self, s: usize, mean_m: f64, var_m2: f64) {
+        if let Some(rb) = &mut self.rb {
+            if let Some(k) = rb.cols.get(s).copied().flatten() {
+                rb.var_m2[s] = var_m2;
+                self.buf.column_mut(k).fill(mean_m);
+            }
+        }
+    }
+
+    /// Which member of the family this is.
+    pub fn variant(&self) -> PfVariant {
+        self.variant
     }
 
     /// Gives the particle storage back.
@@ -202,7 +291,9 @@ impl<const N: usize> ParticleFilter<N> {
         &mut self.buf
     }
 
-    /// Draws every particle from `N(mean, cov)` with uniform weights.
+    /// Draws every particle from `N(mean, cov)` with uniform weights. A component carried
+    /// by the Kalman filters (Rao-Blackwellised clocks) is set to its mean instead; its
+    /// variance is [`Self::set_clock_prior`]'s.
     ///
     /// # Errors
     /// A non-finite input or a covariance with a negative eigenvalue; the particles are
@@ -216,7 +307,7 @@ impl<const N: usize> ParticleFilter<N> {
         if !mean.iter().all(|v| v.is_finite()) {
             return Err(ParticleError::NonFinite);
         }
-        let g = psd_factor(cov)?;
+        let g = psd_factor(&self.mask(cov))?;
         for i in 0..self.buf.n {
             let w = SVector::<f64, N>::from_fn(|_, _| rng.sample(StandardNormal));
             self.buf.set(i, &(mean + g * w));
@@ -225,13 +316,24 @@ impl<const N: usize> ParticleFilter<N> {
         Ok(())
     }
 
-    /// Moves every particle through `model` over `dt_s` seconds and adds process noise.
+    /// `m` with the rows and columns of the components that are not sampled set to zero.
+    fn mask(&self, m: &SMatrix<f64, N, N>) -> SMatrix<f64, N, N> {
+        SMatrix::<f64, N, N>::from_fn(|i, j| {
+            if self.sampled[i] && self.sampled[j] {
+                m[(i, j)]
+            } else {
+                0.0
+            }
+        })
+    }
+
+    /// Moves every particle through `model` over `dt_s` seconds and adds process noise
+    /// (to the sampled components; the Kalman-carried clocks' variances grow by their
+    /// `Q` instead).
     ///
     /// # Errors
     /// An invalid interval, a `Q` with a negative eigenvalue or a non-finite particle;
-    /// particles already moved keep their new values only when no error is returned (on
-    /// error the whole cloud is restored from the scratch copy is *not* attempted: the
-    /// error means the model is unusable and the caller must reinitialise).
+    /// the error means the model is unusable and the caller must reinitialise.
     pub fn predict<P: ProcessModel<N>, R: Rng + ?Sized>(
         &mut self,
         model: &P,
@@ -243,7 +345,15 @@ impl<const N: usize> ParticleFilter<N> {
         }
         // Q is evaluated at the weighted mean: the models here have state-independent
         // noise, and a per-particle factorisation would cost N³ per particle.
-        let g = psd_factor(&model.q(&self.mean(), dt_s))?;
+        let q = model.q(&self.mean(), dt_s);
+        let g = psd_factor(&self.mask(&q))?;
+        if let Some(rb) = &mut self.rb {
+            for (s, col) in rb.cols.iter().enumerate() {
+                if let Some(k) = *col {
+                    rb.var_m2[s] += q[(k, k)].max(0.0);
+                }
+            }
+        }
         let noisy = g.iter().any(|v| *v != 0.0);
         for i in 0..self.buf.n {
             let mut x = model.f(&self.buf.get(i), dt_s);
@@ -260,7 +370,8 @@ impl<const N: usize> ParticleFilter<N> {
     }
 
     /// Weights the particles by measurement `z` of any `model` (a gather per particle),
-    /// then resamples if `N_eff` is below the threshold.
+    /// then resamples if `N_eff` is below the threshold. Not for a Rao-Blackwellised
+    /// filter, whose clocks take ranges only ([`Self::update_ranges`]).
     pub fn update<H: MeasurementModel<N, M>, const M: usize, R: Rng + ?Sized>(
         &mut self,
         model: &H,
@@ -283,6 +394,22 @@ impl<const N: usize> ParticleFilter<N> {
     ) -> PfUpdate {
         self.buf.log_lik.fill(0.0);
         lik.add_log_likelihood(&self.buf.cols, &mut self.buf.log_lik);
+        self.finish_update(rng)
+    }
+
+    /// Weights the particles by an epoch's pseudoranges: the column-wise likelihood, or
+    /// for a Rao-Blackwellised filter the clocks' marginal likelihood and Kalman update
+    /// (see the module documentation); then resamples if `N_eff` is below the threshold.
+    pub fn update_ranges<R: Rng + ?Sized>(
+        &mut self,
+        lik: &PseudorangeLikelihood,
+        rng: &mut R,
+    ) -> PfUpdate {
+        self.buf.log_lik.fill(0.0);
+        match &mut self.rb {
+            Some(rb) => rb_update::<N>(rb, lik, &mut self.buf.cols, &mut self.buf.log_lik),
+            None => SoaLikelihood::<N>::add_log_likelihood(lik, &self.buf.cols, &mut self.buf.log_lik),
+        }
         self.finish_update(rng)
     }
 
@@ -321,7 +448,12 @@ impl<const N: usize> ParticleFilter<N> {
         let n_eff = 1.0 / sq;
         let resampled = n_eff < self.neff_threshold * b.n as f64;
         if resampled {
-            self.resample(rng);
+            match self.variant {
+                PfVariant::Sir => self.resample(rng),
+                PfVariant::Regularised | PfVariant::RaoBlackwellised => {
+                    self.resample_regularised(rng)
+                }
+            }
         }
         PfUpdate {
             n_eff,
@@ -339,26 +471,55 @@ impl<const N: usize> ParticleFilter<N> {
     pub fn resample<R: Rng + ?Sized>(&mut self, rng: &mut R) {
         let b = &mut self.buf;
         let n = b.n;
-        let inv_n = 1.0 / n as f64;
-        let mut c = 0.0;
-        for (s, w) in b.scratch.iter_mut().zip(&b.weights) {
-            c += w;
-            *s = c;
-        }
-        // Rounding can leave the last cumulative weight a hair below 1; the last
-        // particle must catch every uniform up to 1.
-        b.scratch[n - 1] = f64::INFINITY;
-        let u0: f64 = rng.random::<f64>();
-        let mut j = 0;
-        for i in 0..n {
-            let u = match self.resampling {
-                Resampling::Systematic => (i as f64 + u0) * inv_n,
-                Resampling::Stratified => (i as f64 + rng.random::<f64>()) * inv_n,
-            };
-            while b.scratch[j] < u {
-                j += 1;
+        match self.resampling {
+            Resampling::Systematic | Resampling::Stratified => {
+                let stratified = self.resampling == Resampling::Stratified;
+                cumulative(&b.weights, &mut b.scratch);
+                let u0: f64 = rng.random::<f64>();
+                let inv_n = 1.0 / n as f64;
+                let mut j = 0;
+                for i in 0..n {
+                    let u = if stratified {
+                        (i as f64 + rng.random::<f64>()) * inv_n
+                    } else {
+                        (i as f64 + u0) * inv_n
+                    };
+                    while b.scratch[j] < u {
+                        j += 1;
+                    }
+                    b.idx[i] = j;
+                }
             }
-            b.idx[i] = j;
+            Resampling::Residual => {
+                let nf = n as f64;
+                let mut filled = 0;
+                for (i, w) in b.weights.iter().enumerate() {
+                    let copies = ((nf * w).floor() as usize).min(n - filled);
+                    b.idx[filled..filled + copies].fill(i);
+                    filled += copies;
+                }
+                let rest = n - filled;
+                if rest > 0 {
+                    // The residual weights N w_i − ⌊N w_i⌋, unnormalised; the uniforms
+                    // are scaled by their total instead.
+                    let mut c = 0.0;
+                    for (s, w) in b.scratch.iter_mut().zip(&b.weights) {
+                        c += nf * w - (nf * w).floor();
+                        *s = c;
+                    }
+                    let total = c;
+                    b.scratch[n - 1] = f64::INFINITY;
+                    let u0: f64 = rng.random::<f64>();
+                    let mut j = 0;
+                    for slot in 0..rest {
+                        let u = (slot as f64 + u0) / rest as f64 * total;
+                        while b.scratch[j] < u {
+                            j += 1;
+                        }
+                        b.idx[filled + slot] = j;
+                    }
+                }
+            }
         }
         for k in 0..N {
             let col = &mut b.cols[k * n..(k + 1) * n];
@@ -367,7 +528,41 @@ impl<const N: usize> ParticleFilter<N> {
                 *dst = b.scratch[src];
             }
         }
-        b.weights.fill(inv_n);
+        b.weights.fill(1.0 / n as f64);
+    }
+
+    /// Resamples, then moves every particle by the regularisation kernel (Musso, Oudjane
+    /// & Le Gland, "Improving regularised particle filters", in Doucet, de Freitas &
+    /// Gordon (eds.), *Sequential Monte Carlo Methods in Practice*, Springer 2001, ch. 12,
+    /// §12.2.3): `x_i ← x_i + h_opt D ε_i`, `ε_i ~ N(0, I)`, where `D Dᵀ` is the weighted
+    /// covariance of the sampled components before resampling and
+    /// `h_opt = (4 / (N (n + 2)))^{1/(n + 4)}` the bandwidth that minimises the mean
+    /// integrated squared error of a Gaussian kernel for a Gaussian density of dimension
+    /// `n` (here the rank of the sampled covariance).
+    pub fn resample_regularised<R: Rng + ?Sized>(&mut self, rng: &mut R) {
+        let cov = self.mask(&self.sample_covariance());
+        self.resample(rng);
+        let Ok(d) = psd_factor(&cov) else {
+            return;
+        };
+        let rank = (0..N).filter(|&k| d[(k, k)] != 0.0).count();
+        if rank == 0 {
+            return;
+        }
+        let (nf, nd) = (self.buf.n as f64, rank as f64);
+        let h = (4.0 / (nf * (nd + 2.0))).powf(1.0 / (nd + 4.0));
+        let g = d * h;
+        for i in 0..self.buf.n {
+            let w = SVector::<f64, N>::from_fn(|k, _| {
+                if self.sampled[k] {
+                    rng.sample(StandardNormal)
+                } else {
+                    0.0
+                }
+            });
+            let x = self.buf.get(i) + g * w;
+            self.buf.set(i, &x);
+        }
     }
 
     /// The weighted mean `Σ w_i x_i` (seed 001 eq. 10).
@@ -378,15 +573,193 @@ impl<const N: usize> ParticleFilter<N> {
         })
     }
 
-    /// The weighted covariance `Σ w_i (x_i − x̂)(x_i − x̂)ᵀ`.
-    pub fn covariance(&self) -> SMatrix<f64, N, N> {
+    /// The weighted covariance of the cloud, `Σ w_i (x_i − x̂)(x_i − x̂)ᵀ`, column by column.
+    fn sample_covariance(&self) -> SMatrix<f64, N, N> {
         let m = self.mean();
+        let b = &self.buf;
         let mut p = SMatrix::<f64, N, N>::zeros();
-        for i in 0..self.buf.n {
-            let d = self.buf.get(i) - m;
-            p += d * d.transpose() * self.buf.weights[i];
+        for k in 0..N {
+            for l in 0..=k {
+                let (ck, cl) = (b.column(k), b.column(l));
+                let (mk, ml) = (m[k], m[l]);
+                let s: f64 = ck
+                    .iter()
+                    .zip(cl)
+                    .zip(&b.weights)
+                    .map(|((x, y), w)| w * (x - mk) * (y - ml))
+                    .sum();
+                p[(k, l)] = s;
+                p[(l, k)] = s;
+            }
         }
         p
+    }
+
+    /// The covariance of the estimate: the cloud's weighted covariance, plus, for a
+    /// Rao-Blackwellised clock, its Kalman variance (law of total variance); a clock
+    /// still under a flat prior contributes only its spread.
+    pub fn covariance(&self) -> SMatrix<f64, N, N> {
+        let mut p = self.sample_covariance();
+        if let Some(rb) = &self.rb {
+            for (s, col) in rb.cols.iter().enumerate() {
+                if let Some(k) = *col {
+                    if rb.var_m2[s].is_finite() {
+                        p[(k, k)] += rb.var_m2[s];
+                    }
+                }
+            }
+        }
+        p
+    }
+
+    /// The Kalman variance (m²) of system `s`'s clock in a Rao-Blackwellised filter
+    /// (infinite under a flat prior); `None` for other filters or systems.
+    pub fn clock_variance_m2(&self, s: usize) -> Option<f64> {
+        let rb = self.rb.as_ref()?;
+        rb.cols.get(s).copied().flatten().map(|_| rb.var_m2[s])
+    }
+}
+
+/// The running sums of `w` into `out`, the last set to +∞ (rounding can leave the true
+/// total a hair below 1; the last particle must catch every uniform up to it).
+fn cumulative(w: &[f64], out: &mut [f64]) {
+    let mut c = 0.0;
+    for (s, w) in out.iter_mut().zip(w) {
+        c += w;
+        *s = c;
+    }
+    if let Some(last) = out.last_mut() {
+        *last = f64::INFINITY;
+    }
+}
+
+/// The Rao-Blackwellised weight update of an epoch's ranges.
+///
+/// For a system `s` with ranges `j`, weights `w_j = 1/σ_j²`, `W = Σ w_j`, and a particle
+/// whose clock has Kalman mean `m_i` and the common variance `P`, the residuals
+/// `r_ij = z_j − ‖e_j − p_i‖ − m_i` have the joint covariance `R + P 1 1ᵀ`; by the
+/// Sherman–Morrison identity their log-density is, up to a term common to all particles,
+///
+/// ```text
+/// log p(z_s | p_i) = −½ (B_i − A_i² / (1/P + W)),   A_i = Σ w_j r_ij,  B_i = Σ w_j r_ij²
+/// m_i ← m_i + A_i / (1/P + W),                      P ← 1 / (1/P + W)
+/// ```
+///
+/// the second line being the Kalman update of the clock given the particle's position.
+/// `1/P = 0` (a flat prior) gives the profile likelihood about the weighted mean residual;
+/// `P = 0` (a known clock) gives the plain likelihood and leaves `m_i` alone.
+fn rb_update<const N: usize>(
+    rb: &mut RbClocks,
+    lik: &PseudorangeLikelihood,
+    cols: &mut [f64],
+    out: &mut [f64],
+) {
+    let n = out.len();
+    if cols.len() < N * n {
+        out.fill(f64::NAN);
+        return;
+    }
+    let marginal = |c: Option<usize>| c.is_some() && rb.cols.contains(&c);
+    let mut sum_w = [0.0; System::COUNT];
+    for r in &lik.rows {
+        for (s, c) in rb.cols.iter().enumerate() {
+            if c.is_some() && *c == r.clock_col {
+                sum_w[s] += -2.0 * r.neg_half_inv_var;
+            }
+        }
+    }
+    let zeros = [0.0; BLOCK];
+    let mut start = 0;
+    while start < n {
+        let end = (start + BLOCK).min(n);
+        let len = end - start;
+        {
+            let col = |k: Option<usize>| {
+                k.filter(|&k| k < N)
+                    .map(|k| &cols[k * n + start..k * n + end])
+            };
+            let p = |a: usize| col(lik.pos_col[a]).unwrap_or(&zeros[..len]);
+            let (px, py, pz) = (p(0), p(1), p(2));
+            // Ranges whose clock is sampled (none in the paper models) take the plain terms.
+            for r in lik.rows.iter().filter(|r| !marginal(r.clock_col)) {
+                range_terms(
+                    &mut out[start..end],
+                    px,
+                    py,
+                    pz,
+                    col(r.clock_col),
+                    col(r.isb_col),
+                    r,
+                );
+            }
+        }
+        for s in 0..System::COUNT {
+            let Some(k) = rb.cols[s] else {
+                continue;
+            };
+            if sum_w[s] == 0.0 {
+                continue;
+            }
+            let mut a = [0.0; BLOCK];
+            let mut b = [0.0; BLOCK];
+            {
+                let col = |k: Option<usize>| {
+                    k.filter(|&k| k < N)
+                        .map(|k| &cols[k * n + start..k * n + end])
+                };
+                let p = |a: usize| col(lik.pos_col[a]).unwrap_or(&zeros[..len]);
+                let (px, py, pz) = (p(0), p(1), p(2));
+                let m = &cols[k * n + start..k * n + end];
+                for r in lik.rows.iter().filter(|r| r.clock_col == Some(k)) {
+                    let isb = col(r.isb_col).unwrap_or(&zeros[..len]);
+                    clock_residual_sums(&mut a[..len], &mut b[..len], px, py, pz, isb, m, r);
+                }
+            }
+            let gain = 1.0 / (1.0 / rb.var_m2[s] + sum_w[s]);
+            let m = &mut cols[k * n + start..k * n + end];
+            for i in 0..len {
+                out[start + i] += -0.5 * (b[i] - a[i] * a[i] * gain);
+                m[i] += a[i] * gain;
+            }
+        }
+        start = end;
+    }
+    for s in 0..System::COUNT {
+        if rb.cols[s].is_some() && sum_w[s] > 0.0 {
+            rb.var_m2[s] = 1.0 / (1.0 / rb.var_m2[s] + sum_w[s]);
+        }
+    }
+}
+
+/// One range's contribution to a system's clock sums `A_i`, `B_i` over a block.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn clock_residual_sums(
+    a: &mut [f64],
+    b: &mut [f64],
+    px: &[f64],
+    py: &[f64],
+    pz: &[f64],
+    isb: &[f64],
+    m: &[f64],
+    r: &LikRow,
+) {
+    let [ex, ey, ez] = r.e;
+    let (z, w) = (r.z_m, -2.0 * r.neg_half_inv_var);
+    let n = a.len();
+    let (b, px, py, pz, isb, m) = (
+        &mut b[..n],
+        &px[..n],
+        &py[..n],
+        &pz[..n],
+        &isb[..n],
+        &m[..n],
+    );
+    for i in 0..n {
+        let (dx, dy, dz) = (ex - px[i], ey - py[i], ez - pz[i]);
+        let res = z - (dx * dx + dy * dy + dz * dz).sqrt() - isb[i] - m[i];
+        a[i] += w * res;
+        b[i] += w * res * res;
     }
 }
 
@@ -607,7 +980,7 @@ impl<const N: usize> SoaLikelihood<N> for PseudorangeLikelihood {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::core::{System, TrialRng};
+    use crate::core::TrialRng;
     use crate::fusion::models::{RangeRow, StateLayout};
     use nalgebra::Vector3;
 

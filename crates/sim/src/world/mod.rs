@@ -750,7 +750,9 @@ fn check_estimator(
         FilterKind::Pdr => needs(file.sensors.pdr.is_some(), "step events: add [sensors.pdr]")?,
         _ => {}
     }
-    let kalman = e.filter == FilterKind::Ekf11 || e.filter.family().is_some();
+    // The particle filters only the paper models run take the family's options too.
+    let paper_pf = matches!(e.filter, FilterKind::Sir | FilterKind::Rbpf);
+    let kalman = e.filter == FilterKind::Ekf11 || e.filter.family().is_some() || paper_pf;
     if !kalman {
         let extra = [
             ("options", e.options.is_some()),
@@ -769,7 +771,7 @@ fn check_estimator(
             ));
         }
     }
-    if e.options.is_some() && e.filter.family().is_none() {
+    if e.options.is_some() && e.filter.family().is_none() && !paper_pf {
         return Err(ctx.err(
             &at("options"),
             "[estimator.options] tunes the filters ekf, ukf, ckf, stf, rekf and pf",
@@ -805,9 +807,15 @@ fn check_estimator(
         cfg.validate()
             .map_err(|m| ctx.err(&at("ekf"), m.to_string()))?;
     }
-    e.build(build_ctx)
-        .map(|_| ())
-        .map_err(|m| ctx.err(&at("filter"), m))
+    // An option's own complaint ("options.particles: …") points at that option.
+    e.build(build_ctx).map(|_| ()).map_err(|m| {
+        let key = m
+            .split(':')
+            .next()
+            .filter(|k| k.starts_with("options.") && !k.contains(' '))
+            .map_or_else(|| at("filter"), at);
+        ctx.err(&key, m)
+    })
 }
 
 impl World {

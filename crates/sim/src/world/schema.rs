@@ -214,8 +214,13 @@ pub enum FilterKind {
     Stf,
     /// Seed 004's relative-entropy Kalman filter.
     Rekf,
-    /// The SIR particle filter.
+    /// The particle filter: regularised on the paper models, the family's on seed 000's.
     Pf,
+    /// The plain SIR particle filter (the papers' own, seeds 001 and 003; paper models).
+    Sir,
+    /// The Rao-Blackwellised particle filter, clocks by a Kalman filter per particle
+    /// (paper models).
+    Rbpf,
 }
 
 impl FilterKind {
@@ -228,7 +233,12 @@ impl FilterKind {
             FilterKind::Stf => FamilyKind::Stf,
             FilterKind::Rekf => FamilyKind::Rekf,
             FilterKind::Pf => FamilyKind::Pf,
-            FilterKind::Ekf11 | FilterKind::Wls | FilterKind::Ins | FilterKind::Pdr => return None,
+            FilterKind::Ekf11
+            | FilterKind::Wls
+            | FilterKind::Ins
+            | FilterKind::Pdr
+            | FilterKind::Sir
+            | FilterKind::Rbpf => return None,
         })
     }
 }
@@ -348,17 +358,15 @@ impl EstimatorSpec {
                 aleph_threshold: cfg.rekf_aleph_threshold,
                 residual_gate_c: gate.or(Some(3.0)),
             },
-            FilterKind::Pf => PaperFilter::Pf {
+            FilterKind::Pf | FilterKind::Sir | FilterKind::Rbpf => PaperFilter::Pf {
                 particles: cfg.particles,
-                resampling: match cfg.resampling {
-                    crate::fusion::family::ResamplingKind::Systematic => {
-                        crate::fusion::particle::Resampling::Systematic
-                    }
-                    crate::fusion::family::ResamplingKind::Stratified => {
-                        crate::fusion::particle::Resampling::Stratified
-                    }
-                },
+                resampling: cfg.resampling.scheme(),
                 neff_threshold: cfg.neff_threshold,
+                variant: match self.filter {
+                    FilterKind::Sir => crate::fusion::particle::PfVariant::Sir,
+                    FilterKind::Rbpf => crate::fusion::particle::PfVariant::RaoBlackwellised,
+                    _ => crate::fusion::particle::PfVariant::Regularised,
+                },
             },
             other @ (FilterKind::Ekf11 | FilterKind::Wls | FilterKind::Ins | FilterKind::Pdr) => {
                 return Err(format!(
@@ -437,6 +445,12 @@ impl EstimatorSpec {
                 )?,
             ),
             FilterKind::Wls => Box::new(WlsEstimator::new(&self.name, &self.sources)),
+            FilterKind::Sir | FilterKind::Rbpf => {
+                return Err(format!(
+                    "filter \"{}\" runs on a paper process model ([estimator.process] model = \"singer_2d\" or \"plane_turning\"); on seed 000's model use filter = \"pf\"",
+                    format!("{:?}", self.filter).to_lowercase()
+                ))
+            }
             FilterKind::Ins => {
                 let imu = ctx
                     .imu
