@@ -45,7 +45,13 @@ pub struct EstimatorSummary {
     pub modes: BTreeMap<String, f64>,
     /// How much each statistic varies from trial to trial: the 95 % confidence interval
     /// (Student t) of the mean over trials of each trial's own value.
-    pub across_trials: AcrossTrials,
+    pub across_trials: AcrossTrials,    /// The posterior Cramér–Rao bound on the position RMSE (m) of the estimator's model
+    /// in this world (paper models only; `fusion::pcrlb`): no estimator can do better.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pcrlb_pos_rmse_m: Option<f64>,
+    /// `rmse / pcrlb_pos_rmse_m`: 1 for an efficient estimator.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub efficiency: Option<f64>,
 }
 
 /// An epoch at which an estimator reported a numerical failure.
@@ -100,15 +106,22 @@ impl Summary {
             "{} — {} trial(s), seed {}",
             self.world, self.trials, self.seed
         );
-        let _ = writeln!(
+        // The efficiency column appears only when some estimator has a bound.
+        let bounded = self.estimators.iter().any(|e| e.efficiency.is_some());
+        let _ = write!(
             s,
             "{:<16} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7}",
             "estimator", "1σ", "2σ", "3σ", "rmse", "ATE", "ATE rms", "RPE", "RPE rms", "avail"
         );
+        let _ = if bounded {
+            writeln!(s, " {:>8} {:>10}", "PCRLB", "rmse/PCRLB")
+        } else {
+            writeln!(s)
+        };
         let f = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |x| format!("{x:.2}"));
         for e in &self.estimators {
             let x = e.error_3d_m.as_ref();
-            let _ = writeln!(
+            let _ = write!(
                 s,
                 "{:<16} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6.1}%",
                 e.name,
@@ -122,11 +135,22 @@ impl Summary {
                 f(e.rpe_m.as_ref().map(|a| a.rmse)),
                 100.0 * e.availability
             );
+            let _ = if bounded {
+                writeln!(s, " {:>8} {:>10}", f(e.pcrlb_pos_rmse_m), f(e.efficiency))
+            } else {
+                writeln!(s)
+            };
         }
         let _ = writeln!(
             s,
             "(metres; σ-levels: 3-D error percentiles 68.27/95.45/99.73 % over all epochs of all trials;\n ATE/RPE: mean and RMSE, TUM definitions in ECEF, no alignment, RPE over 1 s)"
         );
+        if bounded {
+            let _ = writeln!(
+                s,
+                "(PCRLB: the posterior Cramér–Rao bound on the position RMSE of the estimator's model)"
+            );
+        }
         s
     }
 }

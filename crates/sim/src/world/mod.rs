@@ -4,6 +4,7 @@
 //! errors through the spans serde reports, value checks made after deserialisation through
 //! [`locate`], which maps a key path back to the text.
 
+pub mod bound;
 pub mod cache;
 pub mod dtmb_iq;
 pub mod fm;
