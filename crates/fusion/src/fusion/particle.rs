@@ -248,6 +248,14 @@ impl<const N: usize> ParticleFilter<N> {
                 "a clock column is outside the {N}-state"
             )));
         }
+        let mut seen = [false; N];
+        for &k in clock_cols.iter().flatten() {
+            if std::mem::replace(&mut seen[k], true) {
+                return Err(ParticleError::InvalidParameter(format!(
+                    "state {k} is the clock of two systems: each needs its own column"
+                )));
+            }
+        }
         for &k in clock_cols.iter().flatten() {
             self.sampled[k] = false;
         }
@@ -1098,5 +1106,153 @@ mod tests {
             1.5
         )
         .is_err());
+    }
+
+    /// A static receiver with a random-walk clock: state `[x, y, z, b]`.
+    struct StaticClock {
+        clock_q_m2ps: f64,
+    }
+
+    impl ProcessModel<4> for StaticClock {
+        fn f(&self, x: &SVector<f64, 4>, _dt_s: f64) -> SVector<f64, 4> {
+            *x
+        }
+        fn jacobian(&self, _x: &SVector<f64, 4>, _dt_s: f64) -> SMatrix<f64, 4, 4> {
+            SMatrix::<f64, 4, 4>::identity()
+        }
+        fn q(&self, _x: &SVector<f64, 4>, dt_s: f64) -> SMatrix<f64, 4, 4> {
+            let mut q = SMatrix::<f64, 4, 4>::zeros();
+            q[(3, 3)] = self.clock_q_m2ps * dt_s;
+            q
+        }
+    }
+
+    /// When the sampled part is known exactly (a receiver at a known point) the model is
+    /// linear-Gaussian in the clock, and the Rao-Blackwellised filter's clock mean and
+    /// variance must be the textbook Kalman filter's, epoch after epoch.
+    #[test]
+    fn rao_blackwellised_clock_equals_the_kalman_filter_when_all_is_linear() {
+        use crate::fusion::linear_kf::LinearKf;
+        use nalgebra::{DMatrix, DVector};
+        let m = model();
+        let pos = Vector3::new(10.0, -20.0, 5.0);
+        let model_q = StaticClock { clock_q_m2ps: 4.0 };
+        let mut pf = ParticleFilter::new(
+            ParticleBuffer::<4>::new(64).unwrap(),
+            Resampling::Systematic,
+            0.5,
+        )
+        .unwrap()
+        .rao_blackwellised(std::array::from_fn(|s| {
+            (s == System::Dtmb.index()).then_some(3)
+        }))
+        .unwrap();
+        let mut rng = TrialRng::new(5, 0).stream("test/rbpf");
+        let x0 = SVector::<f64, 4>::new(pos.x, pos.y, pos.z, 0.0);
+        pf.init_gaussian(&x0, &SMatrix::<f64, 4, 4>::zeros(), &mut rng)
+            .unwrap();
+        let s = System::Dtmb.index();
+        pf.set_clock_prior(s, 100.0, 400.0);
+        let mut kf = LinearKf::new(DVector::from_vec(vec![100.0]), DMatrix::from_element(1, 1, 400.0))
+            .unwrap();
+        let mut lik = PseudorangeLikelihood::with_capacity(3);
+        let mut nrng = TrialRng::new(5, 1).stream("test/rbpf/noise");
+        for epoch in 0..30 {
+            let b_true = 130.0 + epoch as f64;
+            let mut z = SVector::<f64, 3>::zeros();
+            for (j, row) in m.rows().iter().enumerate() {
+                let n: f64 = nrng.sample(StandardNormal);
+                z[j] = (row.emitter_pos_m - pos).norm() + b_true + row.sigma_m * n;
+            }
+            pf.predict(&model_q, 1.0, &mut rng).unwrap();
+            lik.set(&m, &z);
+            pf.update_ranges(&lik, &mut rng);
+            kf.predict(&DMatrix::identity(1, 1), &DMatrix::from_element(1, 1, 4.0))
+                .unwrap();
+            let zk = DVector::from_iterator(
+                3,
+                m.rows()
+                    .iter()
+                    .zip(z.iter())
+                    .map(|(r, zj)| zj - (r.emitter_pos_m - pos).norm()),
+            );
+            let r = DMatrix::from_diagonal(&DVector::from_iterator(
+                3,
+                m.rows().iter().map(|r| r.sigma_m * r.sigma_m),
+            ));
+            kf.update(&zk, &DMatrix::from_element(3, 1, 1.0), &r).unwrap();
+            let (mean, var) = (pf.mean()[3], pf.clock_variance_m2(s).unwrap());
+            let (km, kv) = (kf.state()[0], kf.covariance()[(0, 0)]);
+            assert!((mean - km).abs() <= 1e-9 * km.abs().max(1.0), "{epoch}: {mean} vs {km}");
+            assert!((var - kv).abs() <= 1e-9 * kv, "{epoch}: {var} vs {kv}");
+            // Every particle carries the same clock, and the position stayed known.
+            assert!(pf.particles().column(3).iter().all(|b| (b - mean).abs() < 1e-9));
+            assert_eq!(pf.particles().column(0)[0], pos.x);
+        }
+    }
+
+    /// Each scheme is unbiased: the expected number of copies of particle i is N w_i, so
+    /// the mean of the resampled cloud, averaged over many draws, is the weighted mean;
+    /// the check allows 5 standard errors of that average.
+    #[test]
+    fn every_resampling_scheme_preserves_the_weighted_mean() {
+        let n = 50;
+        let draws = 4000;
+        let values: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin() * 10.0 + i as f64).collect();
+        let raw: Vec<f64> = (0..n).map(|i| ((i * 7919) % 13) as f64 + 0.25).collect();
+        let total: f64 = raw.iter().sum();
+        let weights: Vec<f64> = raw.iter().map(|w| w / total).collect();
+        let target: f64 = values.iter().zip(&weights).map(|(v, w)| v * w).sum();
+        for scheme in [Resampling::Systematic, Resampling::Stratified, Resampling::Residual] {
+            let mut rng = TrialRng::new(9, 0).stream("test/resampling");
+            let mut pf =
+                ParticleFilter::new(ParticleBuffer::<1>::new(n).unwrap(), scheme, 1.0).unwrap();
+            let (mut sum, mut sum_sq) = (0.0, 0.0);
+            for _ in 0..draws {
+                pf.particles_mut().column_mut(0).copy_from_slice(&values);
+                pf.particles_mut().weights.copy_from_slice(&weights);
+                pf.resample(&mut rng);
+                let m = pf.particles().column(0).iter().sum::<f64>() / n as f64;
+                sum += m;
+                sum_sq += m * m;
+            }
+            let avg = sum / draws as f64;
+            let var = (sum_sq / draws as f64 - avg * avg).max(0.0);
+            let se = (var / draws as f64).sqrt().max(1e-12);
+            assert!(
+                (avg - target).abs() <= 5.0 * se + 1e-9,
+                "{scheme:?}: {avg} vs {target} (se {se})"
+            );
+        }
+    }
+
+    /// The regularisation kernel with the shrinkage keeps the cloud's mean and
+    /// covariance (up to Monte Carlo error) and spreads duplicated particles apart.
+    #[test]
+    fn regularised_resampling_keeps_the_moments_and_separates_duplicates() {
+        let mut rng = TrialRng::new(11, 0).stream("test/rpf");
+        let mut pf = ParticleFilter::new(
+            ParticleBuffer::<4>::new(20_000).unwrap(),
+            Resampling::Systematic,
+            0.5,
+        )
+        .unwrap()
+        .regularised();
+        let mean = SVector::<f64, 4>::new(1.0, -2.0, 3.0, 100.0);
+        let cov = SMatrix::<f64, 4, 4>::from_diagonal(&SVector::<f64, 4>::new(4.0, 9.0, 1.0, 25.0));
+        pf.init_gaussian(&mean, &cov, &mut rng).unwrap();
+        let (m0, c0) = (pf.mean(), pf.covariance());
+        pf.resample_regularised(&mut rng);
+        let (m1, c1) = (pf.mean(), pf.covariance());
+        for k in 0..4 {
+            let sd = c0[(k, k)].sqrt();
+            assert!((m1[k] - m0[k]).abs() < 0.05 * sd, "mean {k}");
+            assert!((c1[(k, k)] / c0[(k, k)] - 1.0).abs() < 0.05, "variance {k}");
+        }
+        let col = pf.particles().column(0);
+        let mut sorted = col.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        sorted.dedup();
+        assert_eq!(sorted.len(), col.len(), "no two particles coincide after the kernel");
     }
 }
