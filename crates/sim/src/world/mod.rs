@@ -810,12 +810,12 @@ fn check_estimator(
     }
     // An option's own complaint ("options.particles: …") points at that option.
     e.build(build_ctx).map(|_| ()).map_err(|m| {
-        let key = m
-            .split(':')
-            .next()
-            .filter(|k| k.starts_with("options.") && !k.contains(' '))
-            .map_or_else(|| at("filter"), at);
-        ctx.err(&key, m)
+        match m.split_once(": ") {
+            Some((k, rest)) if k.starts_with("options.") && !k.contains(' ') => {
+                ctx.err(&at(k), rest)
+            }
+            _ => ctx.err(&at("filter"), m),
+        }
     })
 }
 
