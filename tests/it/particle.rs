@@ -9,7 +9,9 @@ use hybridnav::fusion::kalman::Ekf;
 use hybridnav::fusion::models::{
     ConstantVelocity, MeasurementModel, PositionFixModel, Pseudoranges, RangeRow, StateLayout,
 };
-use hybridnav::fusion::particle::{ParticleBuffer, ParticleFilter, PseudorangeLikelihood, Resampling};
+use hybridnav::fusion::particle::{
+    ParticleBuffer, ParticleFilter, PseudorangeLikelihood, Resampling,
+};
 use hybridnav::fusion::pcrlb::bound_sequence;
 use nalgebra::{DMatrix, SMatrix, SVector, Vector3};
 use rand::Rng;
@@ -60,9 +62,8 @@ fn normal4(rng: &mut StreamRng) -> V4 {
 
 /// The three members of the family on the same buffers.
 fn family(n: usize) -> [ParticleFilter<4>; 3] {
-    let make = |scheme| {
-        ParticleFilter::new(ParticleBuffer::<4>::new(n).unwrap(), scheme, 0.5).unwrap()
-    };
+    let make =
+        |scheme| ParticleFilter::new(ParticleBuffer::<4>::new(n).unwrap(), scheme, 0.5).unwrap();
     [
         make(Resampling::Systematic),
         make(Resampling::Stratified).regularised(),
@@ -85,16 +86,21 @@ fn no_particle_filter_allocates_per_epoch() {
         isb: [None; System::COUNT],
         drift: None,
     };
-    let rows: Vec<RangeRow> = [(3000.0, 0.0), (0.0, 4000.0), (-2500.0, -2500.0), (800.0, -3900.0)]
-        .iter()
-        .map(|&(x, y)| RangeRow {
-            emitter_pos_m: Vector3::new(x, y, 300.0),
-            emitter_vel_mps: Vector3::zeros(),
-            system: System::Dtmb,
-            sigma_m: 5.0,
-            sigma_rate_mps: 1.0,
-        })
-        .collect();
+    let rows: Vec<RangeRow> = [
+        (3000.0, 0.0),
+        (0.0, 4000.0),
+        (-2500.0, -2500.0),
+        (800.0, -3900.0),
+    ]
+    .iter()
+    .map(|&(x, y)| RangeRow {
+        emitter_pos_m: Vector3::new(x, y, 300.0),
+        emitter_vel_mps: Vector3::zeros(),
+        system: System::Dtmb,
+        sigma_m: 5.0,
+        sigma_rate_mps: 1.0,
+    })
+    .collect();
     let model = ConstantVelocity::<4>::new(0.5).unwrap();
     let truth = Vector3::new(10.0, 20.0, 0.0);
     for mut pf in family(2000) {
@@ -112,7 +118,11 @@ fn no_particle_filter_allocates_per_epoch() {
             lik.clear(layout.pos);
             for r in &rows {
                 let n: f64 = rng.sample(StandardNormal);
-                lik.push(&layout, r, (r.emitter_pos_m - truth).norm() + 50.0 + 5.0 * n);
+                lik.push(
+                    &layout,
+                    r,
+                    (r.emitter_pos_m - truth).norm() + 50.0 + 5.0 * n,
+                );
             }
             pf.update_ranges(&lik, rng);
             pf.resample(rng);
@@ -136,7 +146,8 @@ fn no_particle_filter_allocates_per_epoch() {
 #[test]
 fn particle_filters_approach_the_bound_as_n_grows() {
     let cv = ConstantVelocity::<4>::new(0.2).unwrap();
-    let fix = PositionFixModel::<4, 2>::new([0, 2], SMatrix::<f64, 2, 2>::identity() * 4.0).unwrap();
+    let fix =
+        PositionFixModel::<4, 2>::new([0, 2], SMatrix::<f64, 2, 2>::identity() * 4.0).unwrap();
     let x0 = V4::new(0.0, 1.0, 0.0, 0.5);
     let p0 = M4::from_diagonal(&V4::new(9.0, 1.0, 9.0, 1.0));
     let (runs, steps) = (8, 20);
@@ -161,9 +172,17 @@ fn particle_filters_approach_the_bound_as_n_grows() {
                 let mut x = x0 + p0.cholesky().unwrap().l() * normal4(&mut rng);
                 let mut kf = Ekf::new(x0, p0).unwrap();
                 let mut prng = trial.stream("test/pf_bound/particles");
-                let pf = ParticleFilter::new(ParticleBuffer::<4>::new(n).unwrap(), Resampling::Systematic, 0.5)
-                    .unwrap();
-                let mut pf = if variant == "sir" { pf } else { pf.regularised() };
+                let pf = ParticleFilter::new(
+                    ParticleBuffer::<4>::new(n).unwrap(),
+                    Resampling::Systematic,
+                    0.5,
+                )
+                .unwrap();
+                let mut pf = if variant == "sir" {
+                    pf
+                } else {
+                    pf.regularised()
+                };
                 pf.init_gaussian(&x0, &p0, &mut prng).unwrap();
                 let gq = hybridnav::fusion::models::ProcessModel::q(&cv, &x0, 1.0)
                     .cholesky()
@@ -179,7 +198,10 @@ fn particle_filters_approach_the_bound_as_n_grows() {
                     kf.update(&fix, &z);
                     // The KF's covariance is the bound.
                     let p = kf.covariance();
-                    assert!((p[(0, 0)] - bound[(0, 0)]).abs() < 1e-9 * bound[(0, 0)], "epoch {k}");
+                    assert!(
+                        (p[(0, 0)] - bound[(0, 0)]).abs() < 1e-9 * bound[(0, 0)],
+                        "epoch {k}"
+                    );
                     pf.predict(&cv, 1.0, &mut prng).unwrap();
                     assert!(!pf.update(&fix, &z, &mut prng).degenerate);
                     let m = pf.mean();
@@ -192,13 +214,23 @@ fn particle_filters_approach_the_bound_as_n_grows() {
         let lx: Vec<f64> = counts.iter().map(|n| (*n as f64).ln()).collect();
         let ly: Vec<f64> = excess.iter().map(|e| e.ln()).collect();
         let (mx, my) = (lx.iter().sum::<f64>() / 3.0, ly.iter().sum::<f64>() / 3.0);
-        let slope = lx.iter().zip(&ly).map(|(x, y)| (x - mx) * (y - my)).sum::<f64>()
+        let slope = lx
+            .iter()
+            .zip(&ly)
+            .map(|(x, y)| (x - mx) * (y - my))
+            .sum::<f64>()
             / lx.iter().map(|x| (x - mx).powi(2)).sum::<f64>();
         let bound_mse = bounds.iter().map(|b| b[(0, 0)] + b[(2, 2)]).sum::<f64>() / steps as f64;
         eprintln!("{variant}: bound MSE {bound_mse:.3} m², excess {excess:?}, slope {slope:.2}");
-        assert!(slope <= -0.5, "{variant}: excess over the bound falls with slope {slope}");
+        assert!(
+            slope <= -0.5,
+            "{variant}: excess over the bound falls with slope {slope}"
+        );
         // At 4000 particles the filter is within 5 % of the bound's MSE.
-        assert!(excess[2] < 0.05 * bound_mse, "{variant}: {excess:?} vs {bound_mse}");
+        assert!(
+            excess[2] < 0.05 * bound_mse,
+            "{variant}: {excess:?} vs {bound_mse}"
+        );
     }
     let _ = Pseudoranges::<4, 1>::new;
     let _ = <PositionFixModel<4, 2> as MeasurementModel<4, 2>>::r;
@@ -221,7 +253,12 @@ fn bad_particle_filter_input_is_refused_with_its_place_and_range() {
     let dir = std::env::temp_dir().join(format!("hybridnav-it-particle-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let cases = [
-        ("options = { particles = 100 }", "options = { particles = 0 }", ":92:25:", "expected 2 to 1 000 000"),
+        (
+            "options = { particles = 100 }",
+            "options = { particles = 0 }",
+            ":92:25:",
+            "expected 2 to 1 000 000",
+        ),
         (
             "options = { particles = 100 }",
             "options = { particles = 100, neff_threshold = 1.5 }",
@@ -254,7 +291,10 @@ fn bad_particle_filter_input_is_refused_with_its_place_and_range() {
         assert_eq!(out.status.code(), Some(2), "case {i}: {err}");
         assert!(err.contains(&format!("bad{i}.toml")), "case {i}: {err}");
         assert!(err.contains(place), "case {i}: expected {place} in {err}");
-        assert!(err.contains(expect), "case {i}: expected {expect:?} in {err}");
+        assert!(
+            err.contains(expect),
+            "case {i}: expected {expect:?} in {err}"
+        );
         assert!(!err.contains("panicked"), "case {i}: {err}");
     }
     let _ = std::fs::remove_dir_all(&dir);

@@ -45,7 +45,8 @@ pub struct EstimatorSummary {
     pub modes: BTreeMap<String, f64>,
     /// How much each statistic varies from trial to trial: the 95 % confidence interval
     /// (Student t) of the mean over trials of each trial's own value.
-    pub across_trials: AcrossTrials,    /// The posterior Cramér–Rao bound on the position RMSE (m) of the estimator's model
+    pub across_trials: AcrossTrials,
+    /// The posterior Cramér–Rao bound on the position RMSE (m) of the estimator's model
     /// in this world (paper models only; `fusion::pcrlb`): no estimator can do better.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pcrlb_pos_rmse_m: Option<f64>,

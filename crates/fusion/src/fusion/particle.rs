@@ -416,7 +416,9 @@ impl<const N: usize> ParticleFilter<N> {
         self.buf.log_lik.fill(0.0);
         match &mut self.rb {
             Some(rb) => rb_update::<N>(rb, lik, &mut self.buf.cols, &mut self.buf.log_lik),
-            None => SoaLikelihood::<N>::add_log_likelihood(lik, &self.buf.cols, &mut self.buf.log_lik),
+            None => {
+                SoaLikelihood::<N>::add_log_likelihood(lik, &self.buf.cols, &mut self.buf.log_lik)
+            }
         }
         self.finish_update(rng)
     }
@@ -1153,8 +1155,11 @@ mod tests {
             .unwrap();
         let s = System::Dtmb.index();
         pf.set_clock_prior(s, 100.0, 400.0);
-        let mut kf = LinearKf::new(DVector::from_vec(vec![100.0]), DMatrix::from_element(1, 1, 400.0))
-            .unwrap();
+        let mut kf = LinearKf::new(
+            DVector::from_vec(vec![100.0]),
+            DMatrix::from_element(1, 1, 400.0),
+        )
+        .unwrap();
         let mut lik = PseudorangeLikelihood::with_capacity(3);
         let mut nrng = TrialRng::new(5, 1).stream("test/rbpf/noise");
         for epoch in 0..30 {
@@ -1180,13 +1185,21 @@ mod tests {
                 3,
                 m.rows().iter().map(|r| r.sigma_m * r.sigma_m),
             ));
-            kf.update(&zk, &DMatrix::from_element(3, 1, 1.0), &r).unwrap();
+            kf.update(&zk, &DMatrix::from_element(3, 1, 1.0), &r)
+                .unwrap();
             let (mean, var) = (pf.mean()[3], pf.clock_variance_m2(s).unwrap());
             let (km, kv) = (kf.state()[0], kf.covariance()[(0, 0)]);
-            assert!((mean - km).abs() <= 1e-9 * km.abs().max(1.0), "{epoch}: {mean} vs {km}");
+            assert!(
+                (mean - km).abs() <= 1e-9 * km.abs().max(1.0),
+                "{epoch}: {mean} vs {km}"
+            );
             assert!((var - kv).abs() <= 1e-9 * kv, "{epoch}: {var} vs {kv}");
             // Every particle carries the same clock, and the position stayed known.
-            assert!(pf.particles().column(3).iter().all(|b| (b - mean).abs() < 1e-9));
+            assert!(pf
+                .particles()
+                .column(3)
+                .iter()
+                .all(|b| (b - mean).abs() < 1e-9));
             assert_eq!(pf.particles().column(0)[0], pos.x);
         }
     }
@@ -1198,12 +1211,18 @@ mod tests {
     fn every_resampling_scheme_preserves_the_weighted_mean() {
         let n = 50;
         let draws = 4000;
-        let values: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin() * 10.0 + i as f64).collect();
+        let values: Vec<f64> = (0..n)
+            .map(|i| (i as f64 * 0.37).sin() * 10.0 + i as f64)
+            .collect();
         let raw: Vec<f64> = (0..n).map(|i| ((i * 7919) % 13) as f64 + 0.25).collect();
         let total: f64 = raw.iter().sum();
         let weights: Vec<f64> = raw.iter().map(|w| w / total).collect();
         let target: f64 = values.iter().zip(&weights).map(|(v, w)| v * w).sum();
-        for scheme in [Resampling::Systematic, Resampling::Stratified, Resampling::Residual] {
+        for scheme in [
+            Resampling::Systematic,
+            Resampling::Stratified,
+            Resampling::Residual,
+        ] {
             let mut rng = TrialRng::new(9, 0).stream("test/resampling");
             let mut pf =
                 ParticleFilter::new(ParticleBuffer::<1>::new(n).unwrap(), scheme, 1.0).unwrap();
@@ -1253,6 +1272,10 @@ mod tests {
         let mut sorted = col.to_vec();
         sorted.sort_by(f64::total_cmp);
         sorted.dedup();
-        assert_eq!(sorted.len(), col.len(), "no two particles coincide after the kernel");
+        assert_eq!(
+            sorted.len(),
+            col.len(),
+            "no two particles coincide after the kernel"
+        );
     }
 }

@@ -61,7 +61,9 @@ pub fn bound_step(
     let m = DMatrix::<f64>::identity(n, n) + info * &pred;
     let lu = m.lu();
     // B⁻ M⁻¹ = (M⁻ᵀ B⁻ᵀ)ᵀ = (Mᵀ \ B⁻)ᵀ since B⁻ is symmetric.
-    let mt = lu.solve(&DMatrix::<f64>::identity(n, n)).ok_or("singular I + J B")?;
+    let mt = lu
+        .solve(&DMatrix::<f64>::identity(n, n))
+        .ok_or("singular I + J B")?;
     let out = &pred * mt;
     Ok((&out + out.transpose()) * 0.5)
 }
@@ -152,8 +154,9 @@ impl PaperBound {
                 clocks,
                 clock_noise_m2ps,
             } => {
-                let m = PlaneTurning::new(*attenuation_per_s, *turn_rate_rad_per_s, *noise_var_m2ps4)
-                    .map_err(|e| e.to_string())?;
+                let m =
+                    PlaneTurning::new(*attenuation_per_s, *turn_rate_rad_per_s, *noise_var_m2ps4)
+                        .map_err(|e| e.to_string())?;
                 let x0 = SVector::<f64, 9>::from(*initial_state);
                 (
                     dyn_of(&m.jacobian(&x0, dt_s)),
@@ -207,7 +210,12 @@ impl PaperBound {
 
     /// Adds one trial's epoch `k`: the receiver's true ENU position and the ranges'
     /// emitters (ENU), systems and σ.
-    pub fn add(&mut self, k: usize, truth_enu_m: &Vector3<f64>, ranges: &[(Vector3<f64>, System, f64)]) {
+    pub fn add(
+        &mut self,
+        k: usize,
+        truth_enu_m: &Vector3<f64>,
+        ranges: &[(Vector3<f64>, System, f64)],
+    ) {
         let Some(sum) = self.sums.get_mut(k) else {
             return;
         };
@@ -270,7 +278,17 @@ mod tests {
         let q = DMatrix::from_row_slice(
             3,
             3,
-            &[0.25 / 4.0, 0.5 / 2.0, 0.0, 0.5 / 2.0, 0.5, 0.0, 0.0, 0.0, 0.0],
+            &[
+                0.25 / 4.0,
+                0.5 / 2.0,
+                0.0,
+                0.5 / 2.0,
+                0.5,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+            ],
         );
         let p0 = DMatrix::from_diagonal(&DVector::from_vec(vec![100.0, 4.0, 2500.0]));
         let mut kf = LinearKf::new(DVector::zeros(3), p0.clone()).unwrap();

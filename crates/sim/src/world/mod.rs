@@ -809,14 +809,14 @@ fn check_estimator(
             .map_err(|m| ctx.err(&at("ekf"), m.to_string()))?;
     }
     // An option's own complaint ("options.particles: …") points at that option.
-    e.build(build_ctx).map(|_| ()).map_err(|m| {
-        match m.split_once(": ") {
+    e.build(build_ctx)
+        .map(|_| ())
+        .map_err(|m| match m.split_once(": ") {
             Some((k, rest)) if k.starts_with("options.") && !k.contains(' ') => {
                 ctx.err(&at(k), rest)
             }
             _ => ctx.err(&at("filter"), m),
-        }
-    })
+        })
 }
 
 impl World {
