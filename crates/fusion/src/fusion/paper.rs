@@ -240,6 +240,8 @@ pub enum PaperFilter {
         resampling: Resampling,
         neff_threshold: f64,
         variant: PfVariant,
+        /// Draw from the linearised optimal proposal instead of the process model.
+        linearised: bool,
     },
 }
 
@@ -363,6 +365,7 @@ impl<const N: usize> Core<N> {
                 resampling,
                 neff_threshold,
                 variant,
+                ..
             } => {
                 let buf = ParticleBuffer::<N>::new(particles).map_err(|e| e.to_string())?;
                 let pf = ParticleFilter::new(buf, resampling, neff_threshold)
@@ -446,6 +449,9 @@ pub struct PaperEstimator<P, const NM: usize, const N: usize> {
     /// Set by a reset: the next epoch restarts the filter from a least-squares fix of its
     /// ranges when they determine one.
     recover: bool,
+    /// A particle filter with the linearised proposal: the epoch's prediction only moves
+    /// the cloud by `f`, and the update draws the process noise.
+    linearised: bool,
 }
 
 /// A particle filter whose effective sample size stays below this fraction of its
@@ -632,6 +638,13 @@ where
             p0,
             collapse_run: 0,
             recover: false,
+            linearised: matches!(
+                filter,
+                PaperFilter::Pf {
+                    linearised: true,
+                    ..
+                }
+            ),
         };
         est.set_rb_clock_priors();
         Ok(est)
@@ -967,6 +980,7 @@ where
             Core::Sigma(f) => f.predict(&self.model, dt).is_ok(),
             Core::Stf(f, fading) => fading.predict(f, &self.model, dt).is_ok(),
             Core::Rekf(f) => f.predict(&self.model, dt).is_ok(),
+            Core::Pf(p) if self.linearised => p.propagate(&self.model, dt).is_ok(),
             Core::Pf(p) => p.predict(&self.model, dt, &mut self.rng).is_ok(),
         };
         if !predicted {
@@ -1005,7 +1019,11 @@ where
                         .iter()
                         .all(|(r, _)| ready_before[r.system.index()]);
                     if known {
-                        let (x, cov) = (p.mean(), p.covariance());
+                        let (x, mut cov) = (p.mean(), p.covariance());
+                        if self.linearised {
+                            // The cloud has moved by f only; the prediction adds Q.
+                            cov += self.model.q(&x, dt);
+                        }
                         if let Some((nis, dof)) =
                             linearised_nis(&self.layout, self.plane_up_m, &x, &cov, &self.rows)
                         {
@@ -1016,7 +1034,19 @@ where
                     for (row, z) in &self.rows {
                         self.lik.push(&self.layout, row, *z);
                     }
-                    let up = p.update_ranges(&self.lik, &mut self.rng);
+                    let up = if self.linearised {
+                        let q = self.model.q(&p.mean(), dt);
+                        match p.update_linearised(&q, &self.lik, &mut self.rng) {
+                            Ok(up) => up,
+                            Err(_) => {
+                                Estimator::reset(self);
+                                out.numerical_failure = true;
+                                return out;
+                            }
+                        }
+                    } else {
+                        p.update_ranges(&self.lik, &mut self.rng)
+                    };
                     let n = p.particles().len() as f64;
                     if up.degenerate {
                         // Every weight underflowed: the cloud has lost the measurements.

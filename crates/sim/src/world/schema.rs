@@ -367,6 +367,7 @@ impl EstimatorSpec {
                     FilterKind::Rbpf => crate::fusion::particle::PfVariant::RaoBlackwellised,
                     _ => crate::fusion::particle::PfVariant::Regularised,
                 },
+                linearised: cfg.pf_proposal == crate::fusion::family::ProposalKind::Linearised,
             },
             other @ (FilterKind::Ekf11 | FilterKind::Wls | FilterKind::Ins | FilterKind::Pdr) => {
                 return Err(format!(
