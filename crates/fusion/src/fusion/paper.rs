@@ -755,7 +755,7 @@ where
             for (row, z) in &self.rows {
                 let d = pos - row.emitter_pos_m;
                 let r = d.norm();
-                if !(r > 0.0) {
+                if r.is_nan() || r <= 0.0 {
                     return;
                 }
                 let mut a = SVector::<f64, MAX_UNKNOWNS>::zeros();

@@ -498,7 +498,7 @@ impl<const N: usize> ParticleFilter<N> {
         for (j, r) in lik.rows.iter().enumerate() {
             let d = p_mean - Vector3::from(r.e);
             let dist = d.norm();
-            if !(dist > 0.0) {
+            if dist.is_nan() || dist <= 0.0 {
                 return bootstrap(self, rng);
             }
             for a in 0..3 {
@@ -869,11 +869,11 @@ fn rb_update<const N: usize>(
                 );
             }
         }
-        for s in 0..System::COUNT {
+        for (s, &w_sum) in sum_w.iter().enumerate() {
             let Some(k) = rb.cols[s] else {
                 continue;
             };
-            if sum_w[s] == 0.0 {
+            if w_sum == 0.0 {
                 continue;
             }
             let mut a = [0.0; BLOCK];
@@ -891,7 +891,7 @@ fn rb_update<const N: usize>(
                     clock_residual_sums(&mut a[..len], &mut b[..len], px, py, pz, isb, m, r);
                 }
             }
-            let gain = 1.0 / (1.0 / rb.var_m2[s] + sum_w[s]);
+            let gain = 1.0 / (1.0 / rb.var_m2[s] + w_sum);
             let m = &mut cols[k * n + start..k * n + end];
             for i in 0..len {
                 out[start + i] += -0.5 * (b[i] - a[i] * a[i] * gain);
@@ -900,9 +900,9 @@ fn rb_update<const N: usize>(
         }
         start = end;
     }
-    for s in 0..System::COUNT {
-        if rb.cols[s].is_some() && sum_w[s] > 0.0 {
-            rb.var_m2[s] = 1.0 / (1.0 / rb.var_m2[s] + sum_w[s]);
+    for ((var, col), w_sum) in rb.var_m2.iter_mut().zip(&rb.cols).zip(&sum_w) {
+        if col.is_some() && *w_sum > 0.0 {
+            *var = 1.0 / (1.0 / *var + w_sum);
         }
     }
 }
