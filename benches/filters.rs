@@ -8,7 +8,9 @@
 //! * the SIR particle filter with 6 pseudoranges at 100, 500 and 10 000 particles: the
 //!   likelihood alone and a whole epoch (predict, weight, N_eff-threshold resampling), in
 //!   particle·measurement likelihood terms per second; baseline
-//!   `benches/python/pf_bench.py`.
+//!   `benches/python/pf_bench.py`;
+//! * the regularised and Rao-Blackwellised particle filters on the same scene, a whole
+//!   epoch each, and the regularised resampling step alone.
 //!
 //! Run: `cargo bench --bench filters -- --warm-up-time 1 --measurement-time 3`.
 
@@ -159,6 +161,52 @@ fn bench_pf(c: &mut Criterion) {
             b.iter(|| {
                 pf.predict(&RandomWalk, 1.0, &mut rng).expect("valid");
                 black_box(pf.update_soa(&lik, &mut rng))
+            })
+        });
+        // The other members of the family on the same buffers and ranges: the
+        // regularised PF (kernel jitter after each resampling) and the Rao-Blackwellised
+        // PF (the clock column carried by a Kalman filter per particle), each a whole
+        // epoch with N_eff < N/2 resampling; and the regularised resampling step alone,
+        // forced every iteration (its worst case).
+        let prior = SMatrix::<f64, 4, 4>::identity() * 100.0;
+        let mut rpf = ParticleFilter::new(
+            ParticleBuffer::<4>::new(n).expect("n > 0"),
+            Resampling::Systematic,
+            0.5,
+        )
+        .expect("valid threshold")
+        .regularised();
+        rpf.init_gaussian(&truth, &prior, &mut rng)
+            .expect("valid prior");
+        group.bench_function(format!("regularised epoch N={n}"), |b| {
+            b.iter(|| {
+                rpf.predict(&RandomWalk, 1.0, &mut rng).expect("valid");
+                black_box(rpf.update_ranges(&lik, &mut rng))
+            })
+        });
+        group.bench_function(format!("regularised resampling N={n}"), |b| {
+            b.iter(|| {
+                rpf.resample_regularised(&mut rng);
+                black_box(rpf.particles().column(0)[0])
+            })
+        });
+        let mut rbpf = ParticleFilter::new(
+            ParticleBuffer::<4>::new(n).expect("n > 0"),
+            Resampling::Systematic,
+            0.5,
+        )
+        .expect("valid threshold")
+        .rao_blackwellised(std::array::from_fn(|s| {
+            (s == System::Gps.index()).then_some(3)
+        }))
+        .expect("one clock column");
+        rbpf.init_gaussian(&truth, &prior, &mut rng)
+            .expect("valid prior");
+        rbpf.set_clock_prior(System::Gps.index(), truth[3], 100.0);
+        group.bench_function(format!("rao-blackwellised epoch N={n}"), |b| {
+            b.iter(|| {
+                rbpf.predict(&RandomWalk, 1.0, &mut rng).expect("valid");
+                black_box(rbpf.update_ranges(&lik, &mut rng))
             })
         });
     }

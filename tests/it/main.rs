@@ -23,6 +23,7 @@ mod metrics;
 mod montecarlo;
 mod motion_models;
 mod numerical_health;
+mod particle;
 mod propagation;
 mod reliability;
 mod report;

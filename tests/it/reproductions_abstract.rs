@@ -95,9 +95,12 @@ fn report(paper: &str, rows: &[(&str, f64, f64, Stats)], trials: u64) {
     }
 }
 
-/// Both worlds load, name the papers' rows, run 100 epochs at 1 Hz without a numerical
-/// failure, and seed 003's seamless scheme picks GPS + BDS + DTMB at every epoch (three GPS
-/// satellites: "between zero and four").
+/// Both worlds load, name the papers' rows first (the regularised and Rao-Blackwellised
+/// rows follow), run 100 epochs at 1 Hz, and seed 003's seamless scheme picks GPS + BDS +
+/// DTMB at every epoch (three GPS satellites: "between zero and four"). The EKF and the
+/// 500-particle regularised and Rao-Blackwellised filters have no numerical failure; the
+/// particle filters short of particles (the papers' SIR rows, 100 particles) may diverge,
+/// which their NIS and N_eff now report: every other epoch has an error and a NEES.
 #[test]
 fn abstract_worlds_load_and_run_the_papers_rows() {
     for (file, rows) in [
@@ -107,24 +110,26 @@ fn abstract_worlds_load_and_run_the_papers_rows() {
         let world = load_world(&world_path(file)).expect(file);
         let r = run_trial(&world, 1, 0).unwrap();
         let names: Vec<&str> = r.estimators.iter().map(|e| e.name.as_str()).collect();
-        assert_eq!(names, rows, "{file}");
+        assert_eq!(&names[..rows.len()], rows, "{file}");
         for e in &r.estimators {
             assert_eq!(e.epochs.len(), 100, "{file} {}", e.name);
             assert!((e.epochs[0].t_s - 1.0).abs() < 1e-9);
-            assert!(e
-                .epochs
-                .iter()
-                .all(|x| !x.numerical_failure && x.err_3d_m.is_some()));
-            assert!(e
-                .epochs
-                .iter()
-                .all(|x| x.nees_pos.is_some_and(|n| n >= 0.0)));
+            if ["EKF", "RPF-500", "RBPF-500"].contains(&e.name.as_str()) {
+                assert!(
+                    e.epochs.iter().all(|x| !x.numerical_failure),
+                    "{file} {}",
+                    e.name
+                );
+            }
+            let healthy = || e.epochs.iter().filter(|x| !x.numerical_failure);
+            assert!(healthy().all(|x| x.err_3d_m.is_some()), "{file} {}", e.name);
+            assert!(healthy().all(|x| x.nees_pos.is_some_and(|n| n >= 0.0)));
             if file.starts_with("seed003") {
                 assert!(e
                     .epochs
                     .iter()
                     .all(|x| x.mode.as_deref() == Some("GPS+BDS+DTMB")));
-                assert!(e.epochs.iter().all(|x| x.used == 6));
+                assert!(healthy().all(|x| x.used == 6), "{file} {}", e.name);
             }
         }
     }

@@ -54,6 +54,13 @@ pub struct EstimatorSummary {
     /// How much each statistic varies from trial to trial: the 95 % confidence interval
     /// (Student t) of the mean over trials of each trial's own value.
     pub across_trials: AcrossTrials,
+    /// The posterior Cramér–Rao bound on the position RMSE (m) of the estimator's model
+    /// in this world (paper models only; `fusion::pcrlb`): no estimator can do better.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pcrlb_pos_rmse_m: Option<f64>,
+    /// `rmse / pcrlb_pos_rmse_m`: 1 for an efficient estimator.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub efficiency: Option<f64>,
 }
 
 /// An epoch at which an estimator reported a numerical failure.
@@ -108,7 +115,9 @@ impl Summary {
             "{} — {} trial(s), seed {}",
             self.world, self.trials, self.seed
         );
-        let _ = writeln!(
+        // The efficiency column appears only when some estimator has a bound.
+        let bounded = self.estimators.iter().any(|e| e.efficiency.is_some());
+        let _ = write!(
             s,
             "{:<16} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7} {:>7}",
             "estimator",
@@ -123,10 +132,15 @@ impl Summary {
             "avail",
             "coast"
         );
+        let _ = if bounded {
+            writeln!(s, " {:>8} {:>10}", "PCRLB", "rmse/PCRLB")
+        } else {
+            writeln!(s)
+        };
         let f = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |x| format!("{x:.2}"));
         for e in &self.estimators {
             let x = e.error_3d_m.as_ref();
-            let _ = writeln!(
+            let _ = write!(
                 s,
                 "{:<16} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6.1}% {:>6.1}%",
                 e.name,
@@ -141,11 +155,22 @@ impl Summary {
                 100.0 * e.availability,
                 100.0 * e.coasting_epochs as f64 / e.epochs.max(1) as f64
             );
+            let _ = if bounded {
+                writeln!(s, " {:>8} {:>10}", f(e.pcrlb_pos_rmse_m), f(e.efficiency))
+            } else {
+                writeln!(s)
+            };
         }
         let _ = writeln!(
             s,
             "(metres; σ-levels: 3-D error percentiles 68.27/95.45/99.73 % over all epochs of all trials;\n ATE/RPE: mean and RMSE, TUM definitions in ECEF, no alignment, RPE over 1 s;\n avail: epochs with an estimate that used a measurement within the coast limit; coast: of all epochs, those\n available without a measurement at that instant; every estimator is scored at the same instants)"
         );
+        if bounded {
+            let _ = writeln!(
+                s,
+                "(PCRLB: the posterior Cramér–Rao bound on the position RMSE of the estimator's model)"
+            );
+        }
         s
     }
 }

@@ -89,6 +89,26 @@ impl FamilyKind {
 pub enum ResamplingKind {
     Systematic,
     Stratified,
+    Residual,
+}
+
+/// Where a particle filter draws its particles from (`[estimator.options] pf_proposal`).
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ProposalKind {
+    Prior,
+    Linearised,
+}
+
+impl ResamplingKind {
+    /// The particle filter's scheme of this name.
+    pub fn scheme(self) -> Resampling {
+        match self {
+            ResamplingKind::Systematic => Resampling::Systematic,
+            ResamplingKind::Stratified => Resampling::Stratified,
+            ResamplingKind::Residual => Resampling::Residual,
+        }
+    }
 }
 
 /// `[estimator.options]`: the tuning of the family's filters. The process model's tuning
@@ -124,6 +144,11 @@ pub struct FamilyConfig {
     /// pseudoranges only, and a Doppler an order of magnitude more precise than the
     /// process noise collapses a bootstrap filter's weights onto one particle.
     pub pf_use_rates: bool,
+    /// PF on the paper models: the proposal particles are drawn from — `"prior"` (the
+    /// process model, the bootstrap filter; default) or `"linearised"` (the process noise
+    /// conditioned on the epoch's ranges linearised at the predicted mean,
+    /// [`crate::fusion::particle::ParticleFilter::update_linearised`]).
+    pub pf_proposal: ProposalKind,
     /// A position 1-σ (m, from the trace of the position covariance) beyond which the
     /// filter is declared diverged and reset. Default 100 km.
     pub divergence_pos_sigma_m: f64,
@@ -150,6 +175,7 @@ impl Default for FamilyConfig {
             resampling: ResamplingKind::Systematic,
             neff_threshold: 0.5,
             pf_use_rates: false,
+            pf_proposal: ProposalKind::Prior,
             divergence_pos_sigma_m: 1e5,
             divergence_residual_nis: 400.0,
         }
@@ -661,10 +687,7 @@ impl FamilyEstimator {
             ),
             FamilyKind::Pf => {
                 let buf = ParticleBuffer::new(cfg.particles).map_err(|e| e.to_string())?;
-                let resampling = match cfg.resampling {
-                    ResamplingKind::Systematic => Resampling::Systematic,
-                    ResamplingKind::Stratified => Resampling::Stratified,
-                };
+                let resampling = cfg.resampling.scheme();
                 // The filter never resamples inside an update: the estimator resamples once
                 // per epoch, with regularisation (see `regularise`).
                 let mut pf =

@@ -12,6 +12,7 @@ pub mod mode;
 pub mod models;
 pub mod paper;
 pub mod particle;
+pub mod pcrlb;
 pub mod preprocess;
 pub mod selection;
 pub mod wls;

@@ -74,7 +74,9 @@ use crate::fusion::kalman::{
 use crate::fusion::models::{
     PlaneTurning, ProcessModel, Pseudoranges, RangeRow, Singer5, StateLayout,
 };
-use crate::fusion::particle::{ParticleBuffer, ParticleFilter, PseudorangeLikelihood, Resampling};
+use crate::fusion::particle::{
+    ParticleBuffer, ParticleFilter, PfVariant, PseudorangeLikelihood, Resampling,
+};
 use crate::fusion::preprocess::FrontEnd;
 use crate::fusion::selection::ModeSelection;
 use crate::measurement::{
@@ -229,12 +231,17 @@ pub enum PaperFilter {
         aleph_threshold: f64,
         residual_gate_c: Option<f64>,
     },
-    /// The SIR particle filter of seed 001 §4 / seed 003 §2.3: `particles`, the resampling
-    /// scheme, and the fraction θ of N below which N_eff triggers resampling.
+    /// A particle filter ([`crate::fusion::particle`]): `particles`, the resampling
+    /// scheme, the fraction θ of N below which N_eff triggers resampling, and the member
+    /// of the family — SIR as in seed 001 §4 / seed 003 §2.3, regularised, or
+    /// Rao-Blackwellised over the clock states.
     Pf {
         particles: usize,
         resampling: Resampling,
         neff_threshold: f64,
+        variant: PfVariant,
+        /// Draw from the linearised optimal proposal instead of the process model.
+        linearised: bool,
     },
 }
 
@@ -357,10 +364,20 @@ impl<const N: usize> Core<N> {
                 particles,
                 resampling,
                 neff_threshold,
+                variant,
+                ..
             } => {
                 let buf = ParticleBuffer::<N>::new(particles).map_err(|e| e.to_string())?;
-                let mut pf = ParticleFilter::new(buf, resampling, neff_threshold)
+                let pf = ParticleFilter::new(buf, resampling, neff_threshold)
                     .map_err(|e| e.to_string())?;
+                let mut pf = match variant {
+                    PfVariant::Sir => pf,
+                    PfVariant::Regularised => pf.regularised(),
+                    // The clock states are the last N_CLOCKS, one per system.
+                    PfVariant::RaoBlackwellised => pf
+                        .rao_blackwellised(std::array::from_fn(|s| Some(N - N_CLOCKS + s)))
+                        .map_err(|e| e.to_string())?,
+                };
                 pf.init_gaussian(&x0, &p0, rng).map_err(|e| e.to_string())?;
                 Core::Pf(Box::new(pf))
             }
@@ -426,7 +443,26 @@ pub struct PaperEstimator<P, const NM: usize, const N: usize> {
     /// The prior the filter started from, to restart it after a divergence.
     x0: SVector<f64, N>,
     p0: SMatrix<f64, N, N>,
+    /// Consecutive epochs in which a particle filter's N_eff collapsed below
+    /// [`COLLAPSE_FRACTION`] of its particles.
+    collapse_run: u32,
+    /// Set by a reset: the next epoch restarts the filter from a least-squares fix of its
+    /// ranges when they determine one.
+    recover: bool,
+    /// A particle filter with the linearised proposal: the epoch's prediction only moves
+    /// the cloud by `f`, and the update draws the process noise.
+    linearised: bool,
 }
+
+/// A particle filter whose effective sample size stays below this fraction of its
+/// particles for [`COLLAPSE_EPOCHS`] consecutive epochs is declared diverged: its weight
+/// sits on a handful of particles far in the likelihood's tail. (A filter whose cloud
+/// matches the likelihood keeps N_eff near N/2 or above; the fraction is a detector's
+/// choice, not a paper's value.)
+pub const COLLAPSE_FRACTION: f64 = 0.02;
+
+/// See [`COLLAPSE_FRACTION`]; the engine's divergence watch uses the same window.
+pub const COLLAPSE_EPOCHS: u32 = 10;
 
 /// Builds the estimator for a paper `spec` (not [`ProcessSpec::PvaClock`]).
 ///
@@ -583,7 +619,7 @@ where
         }
         let mut rng = ctx.rng.stream(&format!("estimator/{name}/paper"));
         let core = Core::new(filter, x0, p0, &mut rng)?;
-        Ok(Self {
+        let mut est = Self {
             name: name.to_string(),
             model,
             layout,
@@ -600,7 +636,32 @@ where
             geometry: Vec::with_capacity(64),
             x0,
             p0,
-        })
+            collapse_run: 0,
+            recover: false,
+            linearised: matches!(
+                filter,
+                PaperFilter::Pf {
+                    linearised: true,
+                    ..
+                }
+            ),
+        };
+        est.set_rb_clock_priors();
+        Ok(est)
+    }
+
+    /// A Rao-Blackwellised filter's clock priors: the declared offsets with zero variance
+    /// for known clocks, a flat prior for estimated ones (the first ranges of a system
+    /// then set its clock exactly, per particle).
+    fn set_rb_clock_priors(&mut self) {
+        if let Core::Pf(pf) = &mut self.core {
+            for s in 0..N_CLOCKS {
+                match self.clocks {
+                    ClockMode::Known => pf.set_clock_prior(s, self.x0[NM + s], 0.0),
+                    ClockMode::Estimated => pf.set_clock_prior(s, 0.0, f64::INFINITY),
+                }
+            }
+        }
     }
 
     /// The ENU position of a state (the plane's height for a 2-D model).
@@ -646,6 +707,117 @@ where
         }
     }
 
+    /// Restarts the filter after a divergence from the weighted least-squares fix of this
+    /// epoch's ranges (Gauss–Newton from the current estimate over the position
+    /// components and, for estimated clocks, the clock of each system with ranges): the
+    /// position is drawn from the fix and its covariance `(AᵀWA)⁻¹`, every other state
+    /// from the prior around the current estimate; estimated clocks are then initialised
+    /// from the ranges as at the start. Nothing happens when the ranges do not determine a
+    /// fix (fewer ranges than unknowns, a singular geometry or no convergence).
+    fn restart_from_least_squares(&mut self) {
+        const MAX_UNKNOWNS: usize = 3 + N_CLOCKS;
+        type Normal = SMatrix<f64, MAX_UNKNOWNS, MAX_UNKNOWNS>;
+        let (mut x, _) = self.moments();
+        if !x.iter().all(|v| v.is_finite()) {
+            x = self.x0;
+        }
+        // Unknown i is state component states[i]; the first n_pos are positions along
+        // axes[i].
+        let mut states = [0usize; MAX_UNKNOWNS];
+        let mut axes = [0usize; 3];
+        let mut n = 0;
+        for (a, k) in self.layout.pos.iter().enumerate() {
+            if let Some(k) = *k {
+                states[n] = k;
+                axes[n] = a;
+                n += 1;
+            }
+        }
+        let n_pos = n;
+        if self.clocks == ClockMode::Estimated {
+            for s in 0..N_CLOCKS {
+                let sys = System::ALL[s];
+                if self.rows.iter().any(|(r, _)| r.system == sys) {
+                    states[n] = NM + s;
+                    n += 1;
+                }
+            }
+        }
+        if n_pos == 0 || self.rows.len() < n {
+            return;
+        }
+        let mut normal = Normal::identity();
+        let mut converged = false;
+        for _ in 0..20 {
+            let mut ata = Normal::zeros();
+            let mut atb = SVector::<f64, MAX_UNKNOWNS>::zeros();
+            let pos = position_of(&self.layout, self.plane_up_m, &x);
+            for (row, z) in &self.rows {
+                let d = pos - row.emitter_pos_m;
+                let r = d.norm();
+                if r.is_nan() || r <= 0.0 {
+                    return;
+                }
+                let mut a = SVector::<f64, MAX_UNKNOWNS>::zeros();
+                for i in 0..n_pos {
+                    a[i] = d[axes[i]] / r;
+                }
+                let clock = NM + row.system.index();
+                for i in n_pos..n {
+                    if states[i] == clock {
+                        a[i] = 1.0;
+                    }
+                }
+                let w = 1.0 / (row.sigma_m * row.sigma_m);
+                ata += a * a.transpose() * w;
+                atb += a * ((z - r - x[clock]) * w);
+            }
+            for i in n..MAX_UNKNOWNS {
+                ata[(i, i)] = 1.0;
+            }
+            let Some(chol) = ata.cholesky() else {
+                return;
+            };
+            let dx = chol.solve(&atb);
+            for i in 0..n {
+                x[states[i]] += dx[i];
+            }
+            normal = ata;
+            if !dx.iter().all(|v| v.is_finite()) {
+                return;
+            }
+            if dx.norm() < 1e-4 {
+                converged = true;
+                break;
+            }
+        }
+        let Some(cov_ls) = normal.try_inverse() else {
+            return;
+        };
+        if !converged || !cov_ls.iter().all(|v| v.is_finite()) {
+            return;
+        }
+        let mut p = self.p0;
+        for i in 0..n_pos {
+            for k in 0..N {
+                p[(states[i], k)] = 0.0;
+                p[(k, states[i])] = 0.0;
+            }
+        }
+        for i in 0..n_pos {
+            for j in 0..n_pos {
+                p[(states[i], states[j])] = cov_ls[(i, j)];
+            }
+        }
+        let restarted = match &mut self.core {
+            Core::Pf(pf) => pf.init_gaussian(&x, &p, &mut self.rng).is_ok(),
+            kalman => kalman.restart(x, p),
+        };
+        if restarted {
+            self.set_rb_clock_priors();
+        }
+    }
+
     /// Initialises the clock of every system that has ranges this epoch and no clock yet
     /// (estimated clocks only).
     fn initialise_clocks(&mut self) {
@@ -673,6 +845,8 @@ where
                 (sum / n as f64, var / (n * n) as f64)
             };
             match &mut self.core {
+                // The Kalman filter of each particle takes the clock from a flat prior.
+                Core::Pf(pf) if pf.variant() == PfVariant::RaoBlackwellised => {}
                 Core::Pf(pf) => {
                     use rand::Rng;
                     let len = pf.particles().len();
@@ -702,6 +876,54 @@ where
             }
         }
     }
+}
+
+/// The normalised innovation squared of an epoch's ranges against the predicted moments
+/// `(x, P)` of a particle cloud, and its degrees of freedom: the ranges are taken one at
+/// a time through the EKF's update, each linearised at the state the previous one left,
+/// so that `Σ ν_j² / S_j` is the NIS of the whole epoch (the chain rule of a Gaussian
+/// density). `None` when a range is degenerate (receiver at the emitter) or a variance is
+/// unusable.
+fn linearised_nis<const N: usize>(
+    layout: &StateLayout,
+    plane_up_m: Option<f64>,
+    x: &SVector<f64, N>,
+    cov: &SMatrix<f64, N, N>,
+    rows: &[(RangeRow, f64)],
+) -> Option<(f64, u32)> {
+    let (mut x, mut p) = (*x, *cov);
+    let (mut nis, mut dof) = (0.0, 0);
+    for (row, z) in rows {
+        let d = position_of(layout, plane_up_m, &x) - row.emitter_pos_m;
+        let r = d.norm();
+        if !(r > 0.0 && r.is_finite()) {
+            return None;
+        }
+        let mut h = SVector::<f64, N>::zeros();
+        for (a, k) in layout.pos.iter().enumerate() {
+            if let Some(k) = *k {
+                h[k] = d[a] / r;
+            }
+        }
+        let mut predicted = r;
+        let s = row.system.index();
+        for k in [layout.clock[s], layout.isb[s]].into_iter().flatten() {
+            h[k] += 1.0;
+            predicted += x[k];
+        }
+        let ph = p * h;
+        let var = h.dot(&ph) + row.sigma_m * row.sigma_m;
+        if !(var > 0.0 && var.is_finite()) {
+            return None;
+        }
+        let nu = z - predicted;
+        nis += nu * nu / var;
+        dof += 1;
+        let gain = ph / var;
+        x += gain * nu;
+        p -= gain * ph.transpose();
+    }
+    Some((nis, dof))
 }
 
 /// The smallest variance (m²) a reported position covariance has along any axis.
@@ -758,6 +980,7 @@ where
             Core::Sigma(f) => f.predict(&self.model, dt).is_ok(),
             Core::Stf(f, fading) => fading.predict(f, &self.model, dt).is_ok(),
             Core::Rekf(f) => f.predict(&self.model, dt).is_ok(),
+            Core::Pf(p) if self.linearised => p.propagate(&self.model, dt).is_ok(),
             Core::Pf(p) => p.predict(&self.model, dt, &mut self.rng).is_ok(),
         };
         if !predicted {
@@ -766,6 +989,10 @@ where
             return out;
         }
         self.load_rows();
+        if std::mem::take(&mut self.recover) {
+            self.restart_from_least_squares();
+        }
+        let ready_before = self.clock_ready;
         self.initialise_clocks();
         if let Core::Stf(f, fading) = &mut self.core {
             // The fading factor of this epoch, from all its pseudoranges at the prediction.
@@ -784,15 +1011,60 @@ where
         match &mut self.core {
             Core::Pf(p) => {
                 if !self.rows.is_empty() {
+                    // The innovations of the predicted cloud's moments, for the engine's
+                    // divergence watch and the records (only once every clock the ranges
+                    // refer to has a prior).
+                    let known = self
+                        .rows
+                        .iter()
+                        .all(|(r, _)| ready_before[r.system.index()]);
+                    if known {
+                        let (x, mut cov) = (p.mean(), p.covariance());
+                        if self.linearised {
+                            // The cloud has moved by f only; the prediction adds Q.
+                            cov += self.model.q(&x, dt);
+                        }
+                        if let Some((nis, dof)) =
+                            linearised_nis(&self.layout, self.plane_up_m, &x, &cov, &self.rows)
+                        {
+                            out.record_nis(nis, dof);
+                        }
+                    }
                     self.lik.clear(self.layout.pos);
                     for (row, z) in &self.rows {
                         self.lik.push(&self.layout, row, *z);
                     }
-                    let up = p.update_soa(&self.lik, &mut self.rng);
-                    if up.degenerate {
-                        out.rejected += self.rows.len() as u32;
+                    let up = if self.linearised {
+                        let q = self.model.q(&p.mean(), dt);
+                        match p.update_linearised(&q, &self.lik, &mut self.rng) {
+                            Ok(up) => up,
+                            Err(_) => {
+                                Estimator::reset(self);
+                                out.numerical_failure = true;
+                                return out;
+                            }
+                        }
                     } else {
-                        out.used += self.rows.len() as u32;
+                        p.update_ranges(&self.lik, &mut self.rng)
+                    };
+                    let n = p.particles().len() as f64;
+                    if up.degenerate {
+                        // Every weight underflowed: the cloud has lost the measurements.
+                        out.rejected += self.rows.len() as u32;
+                        Estimator::reset(self);
+                        out.numerical_failure = true;
+                        return out;
+                    }
+                    out.used += self.rows.len() as u32;
+                    if up.n_eff < COLLAPSE_FRACTION * n {
+                        self.collapse_run += 1;
+                    } else {
+                        self.collapse_run = 0;
+                    }
+                    if self.collapse_run >= COLLAPSE_EPOCHS {
+                        Estimator::reset(self);
+                        out.numerical_failure = true;
+                        return out;
                     }
                 }
             }
@@ -864,6 +1136,9 @@ where
             kalman => kalman.restart(centre, self.p0),
         };
         debug_assert!(restarted, "the prior was valid at build time");
+        self.set_rb_clock_priors();
+        self.collapse_run = 0;
+        self.recover = true;
     }
 }
 

@@ -105,8 +105,17 @@ impl RunReducer {
     pub fn finish(self, world: &World, opts: &RunOptions) -> Result<Reduced, String> {
         let mut estimators = Vec::with_capacity(self.estimators.len());
         let mut cdfs = Vec::with_capacity(self.estimators.len());
-        for acc in self.estimators {
-            let (s, cdf) = acc.finish().map_err(|e| e.to_string())?;
+        // The PCRLB of each estimator's model over the run's truth trajectories
+        // (world::bound), and each estimator's efficiency against it.
+        let bounds = world.pcrlb_pos_rmse_m(opts.seed, opts.trials);
+        for (i, acc) in self.estimators.into_iter().enumerate() {
+            let (mut s, cdf) = acc.finish().map_err(|e| e.to_string())?;
+            s.pcrlb_pos_rmse_m = bounds.get(i).copied().flatten();
+            s.efficiency = s
+                .pcrlb_pos_rmse_m
+                .zip(s.error_3d_m.as_ref().map(|x| x.rmse))
+                .filter(|(b, _)| *b > 0.0)
+                .map(|(b, rmse)| rmse / b);
             estimators.push(s);
             cdfs.push(cdf);
         }
@@ -323,6 +332,8 @@ impl EstimatorAcc {
                 .collect(),
             across_trials: self.per_trial.intervals(),
             name: self.name,
+            pcrlb_pos_rmse_m: None,
+            efficiency: None,
         };
         Ok((summary, cdf))
     }

@@ -4,6 +4,7 @@
 //! errors through the spans serde reports, value checks made after deserialisation through
 //! [`locate`], which maps a key path back to the text.
 
+pub mod bound;
 pub mod cache;
 pub mod dtmb_iq;
 pub mod fm;
@@ -776,7 +777,9 @@ fn check_estimator(
         FilterKind::Pdr => needs(file.sensors.pdr.is_some(), "step events: add [sensors.pdr]")?,
         _ => {}
     }
-    let kalman = e.filter == FilterKind::Ekf11 || e.filter.family().is_some();
+    // The particle filters only the paper models run take the family's options too.
+    let paper_pf = matches!(e.filter, FilterKind::Sir | FilterKind::Rbpf);
+    let kalman = e.filter == FilterKind::Ekf11 || e.filter.family().is_some() || paper_pf;
     if !kalman {
         let extra = [
             ("options", e.options.is_some()),
@@ -795,7 +798,7 @@ fn check_estimator(
             ));
         }
     }
-    if e.options.is_some() && e.filter.family().is_none() {
+    if e.options.is_some() && e.filter.family().is_none() && !paper_pf {
         return Err(ctx.err(
             &at("options"),
             "[estimator.options] tunes the filters ekf, ukf, ckf, stf, rekf and pf",
@@ -831,9 +834,15 @@ fn check_estimator(
         cfg.validate()
             .map_err(|m| ctx.err(&at("ekf"), m.to_string()))?;
     }
+    // An option's own complaint ("options.particles: …") points at that option.
     e.build(build_ctx)
         .map(|_| ())
-        .map_err(|m| ctx.err(&at("filter"), m))
+        .map_err(|m| match m.split_once(": ") {
+            Some((k, rest)) if k.starts_with("options.") && !k.contains(' ') => {
+                ctx.err(&at(k), rest)
+            }
+            _ => ctx.err(&at("filter"), m),
+        })
 }
 
 impl World {

@@ -52,7 +52,7 @@ rate_position_jacobian = false"#,
         about: "seed 001: SIR particle filter (20 particles, resampling whenever N_eff < N) on the 2-D Singer model [x, ẋ, y, ẏ, ÿ] with known clocks, GPS + DTMB pseudoranges",
         toml: r#"name = "PF"
 sources = ["gps", "dtmb"]
-filter = "pf"
+filter = "sir"
 [options]
 particles = 20
 resampling = "systematic"
@@ -93,7 +93,7 @@ model = "plane_turning""#,
         about: "seed 003 'PF': the same model, measurements and scheme, SIR particle filter (500 particles, resampling whenever N_eff < N)",
         toml: r#"name = "PF"
 sources = ["gps", "bds", "dtmb"]
-filter = "pf"
+filter = "sir"
 selection = "seamless"
 [options]
 particles = 500
@@ -249,7 +249,7 @@ neff_threshold = 0.3"#
             .unwrap();
         let t = expand(user).unwrap();
         assert_eq!(t["name"].as_str(), Some("PF 100"));
-        assert_eq!(t["filter"].as_str(), Some("pf"));
+        assert_eq!(t["filter"].as_str(), Some("sir"));
         assert_eq!(t["options"]["particles"].as_integer(), Some(500));
         assert_eq!(t["options"]["neff_threshold"].as_float(), Some(0.3));
         assert!(!t.contains_key("preset"));

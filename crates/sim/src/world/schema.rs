@@ -235,8 +235,13 @@ pub enum FilterKind {
     Stf,
     /// Seed 004's relative-entropy Kalman filter.
     Rekf,
-    /// The SIR particle filter.
+    /// The particle filter: regularised on the paper models, the family's on seed 000's.
     Pf,
+    /// The plain SIR particle filter (the papers' own, seeds 001 and 003; paper models).
+    Sir,
+    /// The Rao-Blackwellised particle filter, clocks by a Kalman filter per particle
+    /// (paper models).
+    Rbpf,
 }
 
 impl FilterKind {
@@ -249,7 +254,12 @@ impl FilterKind {
             FilterKind::Stf => FamilyKind::Stf,
             FilterKind::Rekf => FamilyKind::Rekf,
             FilterKind::Pf => FamilyKind::Pf,
-            FilterKind::Ekf11 | FilterKind::Wls | FilterKind::Ins | FilterKind::Pdr => return None,
+            FilterKind::Ekf11
+            | FilterKind::Wls
+            | FilterKind::Ins
+            | FilterKind::Pdr
+            | FilterKind::Sir
+            | FilterKind::Rbpf => return None,
         })
     }
 }
@@ -369,17 +379,16 @@ impl EstimatorSpec {
                 aleph_threshold: cfg.rekf_aleph_threshold,
                 residual_gate_c: gate.or(Some(3.0)),
             },
-            FilterKind::Pf => PaperFilter::Pf {
+            FilterKind::Pf | FilterKind::Sir | FilterKind::Rbpf => PaperFilter::Pf {
                 particles: cfg.particles,
-                resampling: match cfg.resampling {
-                    crate::fusion::family::ResamplingKind::Systematic => {
-                        crate::fusion::particle::Resampling::Systematic
-                    }
-                    crate::fusion::family::ResamplingKind::Stratified => {
-                        crate::fusion::particle::Resampling::Stratified
-                    }
-                },
+                resampling: cfg.resampling.scheme(),
                 neff_threshold: cfg.neff_threshold,
+                variant: match self.filter {
+                    FilterKind::Sir => crate::fusion::particle::PfVariant::Sir,
+                    FilterKind::Rbpf => crate::fusion::particle::PfVariant::RaoBlackwellised,
+                    _ => crate::fusion::particle::PfVariant::Regularised,
+                },
+                linearised: cfg.pf_proposal == crate::fusion::family::ProposalKind::Linearised,
             },
             other @ (FilterKind::Ekf11 | FilterKind::Wls | FilterKind::Ins | FilterKind::Pdr) => {
                 return Err(format!(
@@ -458,6 +467,12 @@ impl EstimatorSpec {
                 )?,
             ),
             FilterKind::Wls => Box::new(WlsEstimator::new(&self.name, &self.sources)),
+            FilterKind::Sir | FilterKind::Rbpf => {
+                return Err(format!(
+                    "filter \"{}\" runs on a paper process model ([estimator.process] model = \"singer_2d\" or \"plane_turning\"); on seed 000's model use filter = \"pf\"",
+                    format!("{:?}", self.filter).to_lowercase()
+                ))
+            }
             FilterKind::Ins => {
                 let imu = ctx
                     .imu

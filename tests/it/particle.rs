@@ -1,0 +1,301 @@
+//! The particle-filter family against independent truths: the Kalman filter (the exact
+//! posterior and the PCRLB of a linear-Gaussian model) as the particle count grows, no
+//! allocation per epoch (a counting allocator), and bad world input refused with
+//! file:line:column and the allowed range.
+
+use crate::common::repo;
+use hybridnav::core::{StreamRng, System, TrialRng};
+use hybridnav::fusion::kalman::Ekf;
+use hybridnav::fusion::models::{
+    ConstantVelocity, MeasurementModel, PositionFixModel, Pseudoranges, RangeRow, StateLayout,
+};
+use hybridnav::fusion::particle::{
+    ParticleBuffer, ParticleFilter, PseudorangeLikelihood, Resampling,
+};
+use hybridnav::fusion::pcrlb::bound_sequence;
+use nalgebra::{DMatrix, SMatrix, SVector, Vector3};
+use rand::Rng;
+use rand_distr::StandardNormal;
+use std::alloc::{GlobalAlloc, Layout, System as SystemAlloc};
+use std::cell::Cell;
+use std::process::Command;
+
+/// Counts the allocations of the current thread (tests run on their own threads).
+struct Counting;
+
+thread_local! {
+    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+}
+
+// SAFETY: every call is forwarded to the system allocator unchanged; the counter is a
+// const-initialised thread-local `Cell`, whose access does not allocate.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.with(|c| c.set(c.get() + 1));
+        // SAFETY: forwarded with the caller's layout.
+        unsafe { SystemAlloc.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: forwarded with the caller's pointer and layout.
+        unsafe { SystemAlloc.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.with(|c| c.set(c.get() + 1));
+        // SAFETY: forwarded with the caller's arguments.
+        unsafe { SystemAlloc.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn allocations() -> u64 {
+    ALLOCATIONS.with(Cell::get)
+}
+
+type V4 = SVector<f64, 4>;
+type M4 = SMatrix<f64, 4, 4>;
+
+fn normal4(rng: &mut StreamRng) -> V4 {
+    V4::from_fn(|_, _| rng.sample(StandardNormal))
+}
+
+/// The three members of the family on the same buffers.
+fn family(n: usize) -> [ParticleFilter<4>; 3] {
+    let make =
+        |scheme| ParticleFilter::new(ParticleBuffer::<4>::new(n).unwrap(), scheme, 0.5).unwrap();
+    [
+        make(Resampling::Systematic),
+        make(Resampling::Stratified).regularised(),
+        make(Resampling::Residual)
+            .rao_blackwellised(std::array::from_fn(|s| {
+                (s == System::Dtmb.index()).then_some(3)
+            }))
+            .unwrap(),
+    ]
+}
+
+/// No member of the family allocates in an epoch (predict, weight by ranges, resample
+/// with or without the kernel, moments) once built.
+#[test]
+fn no_particle_filter_allocates_per_epoch() {
+    let layout = StateLayout {
+        pos: [Some(0), Some(1), Some(2)],
+        vel: [None; 3],
+        clock: std::array::from_fn(|s| (s == System::Dtmb.index()).then_some(3)),
+        isb: [None; System::COUNT],
+        drift: None,
+    };
+    let rows: Vec<RangeRow> = [
+        (3000.0, 0.0),
+        (0.0, 4000.0),
+        (-2500.0, -2500.0),
+        (800.0, -3900.0),
+    ]
+    .iter()
+    .map(|&(x, y)| RangeRow {
+        emitter_pos_m: Vector3::new(x, y, 300.0),
+        emitter_vel_mps: Vector3::zeros(),
+        system: System::Dtmb,
+        sigma_m: 5.0,
+        sigma_rate_mps: 1.0,
+    })
+    .collect();
+    let model = ConstantVelocity::<4>::new(0.5).unwrap();
+    let truth = Vector3::new(10.0, 20.0, 0.0);
+    for mut pf in family(2000) {
+        let mut rng = TrialRng::new(3, 0).stream("test/alloc");
+        pf.init_gaussian(
+            &V4::new(0.0, 0.0, 0.0, 50.0),
+            &M4::from_diagonal(&V4::new(400.0, 400.0, 1.0, 100.0)),
+            &mut rng,
+        )
+        .unwrap();
+        let mut lik = PseudorangeLikelihood::with_capacity(rows.len());
+        // A warm-up epoch, then the counted ones.
+        let mut epoch = |pf: &mut ParticleFilter<4>, rng: &mut StreamRng| {
+            pf.predict(&model, 1.0, rng).unwrap();
+            lik.clear(layout.pos);
+            for r in &rows {
+                let n: f64 = rng.sample(StandardNormal);
+                lik.push(
+                    &layout,
+                    r,
+                    (r.emitter_pos_m - truth).norm() + 50.0 + 5.0 * n,
+                );
+            }
+            pf.update_ranges(&lik, rng);
+            pf.resample(rng);
+            pf.resample_regularised(rng);
+            std::hint::black_box((pf.mean(), pf.covariance(), pf.n_eff()));
+        };
+        epoch(&mut pf, &mut rng);
+        let before = allocations();
+        for _ in 0..20 {
+            epoch(&mut pf, &mut rng);
+        }
+        assert_eq!(allocations() - before, 0, "{:?} allocated", pf.variant());
+    }
+}
+
+/// On a linear-Gaussian model (constant velocity, 2-D position fixes) the KF is the exact
+/// posterior mean and its covariance is the PCRLB, so each filter's mean-square error is
+/// the bound plus its distance to the KF. That excess must fall as the particle count
+/// grows, roughly as 1/N: the log–log slope over N = 250 … 4000 is at most −0.5 for the
+/// regularised PF and for SIR (the kernel's bias also vanishes, as h_opt → 0).
+#[test]
+fn particle_filters_approach_the_bound_as_n_grows() {
+    let cv = ConstantVelocity::<4>::new(0.2).unwrap();
+    let fix =
+        PositionFixModel::<4, 2>::new([0, 2], SMatrix::<f64, 2, 2>::identity() * 4.0).unwrap();
+    let x0 = V4::new(0.0, 1.0, 0.0, 0.5);
+    let p0 = M4::from_diagonal(&V4::new(9.0, 1.0, 9.0, 1.0));
+    let (runs, steps) = (8, 20);
+    // The bound of the position (trace of its block), checked against the KF below.
+    let f = DMatrix::from_fn(4, 4, |i, j| nalgebra::Matrix4::from(cv_f())[(i, j)]);
+    let q = {
+        let q = hybridnav::fusion::models::ProcessModel::q(&cv, &x0, 1.0);
+        DMatrix::from_fn(4, 4, |i, j| q[(i, j)])
+    };
+    let h = DMatrix::from_row_slice(2, 4, &[1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
+    let info = h.transpose() * h / 4.0;
+    let p0d = DMatrix::from_fn(4, 4, |i, j| p0[(i, j)]);
+    let bounds = bound_sequence(&p0d, &f, &q, &vec![info; steps]).unwrap();
+    let counts = [250usize, 1000, 4000];
+    for variant in ["sir", "regularised"] {
+        let mut excess = Vec::new();
+        for &n in &counts {
+            let (mut sq_diff, mut count) = (0.0, 0.0);
+            for run in 0..runs {
+                let trial = TrialRng::new(29, run);
+                let mut rng = trial.stream("test/pf_bound/truth");
+                let mut x = x0 + p0.cholesky().unwrap().l() * normal4(&mut rng);
+                let mut kf = Ekf::new(x0, p0).unwrap();
+                let mut prng = trial.stream("test/pf_bound/particles");
+                let pf = ParticleFilter::new(
+                    ParticleBuffer::<4>::new(n).unwrap(),
+                    Resampling::Systematic,
+                    0.5,
+                )
+                .unwrap();
+                let mut pf = if variant == "sir" {
+                    pf
+                } else {
+                    pf.regularised()
+                };
+                pf.init_gaussian(&x0, &p0, &mut prng).unwrap();
+                let gq = hybridnav::fusion::models::ProcessModel::q(&cv, &x0, 1.0)
+                    .cholesky()
+                    .unwrap()
+                    .l();
+                for (k, bound) in bounds.iter().enumerate() {
+                    x = cv_f() * x + gq * normal4(&mut rng);
+                    let z = SVector::<f64, 2>::new(
+                        x[0] + 2.0 * rng.sample::<f64, _>(StandardNormal),
+                        x[2] + 2.0 * rng.sample::<f64, _>(StandardNormal),
+                    );
+                    kf.predict(&cv, 1.0).unwrap();
+                    kf.update(&fix, &z);
+                    // The KF's covariance is the bound.
+                    let p = kf.covariance();
+                    assert!(
+                        (p[(0, 0)] - bound[(0, 0)]).abs() < 1e-9 * bound[(0, 0)],
+                        "epoch {k}"
+                    );
+                    pf.predict(&cv, 1.0, &mut prng).unwrap();
+                    assert!(!pf.update(&fix, &z, &mut prng).degenerate);
+                    let m = pf.mean();
+                    sq_diff += (m[0] - kf.state()[0]).powi(2) + (m[2] - kf.state()[2]).powi(2);
+                    count += 1.0;
+                }
+            }
+            excess.push(sq_diff / count);
+        }
+        let lx: Vec<f64> = counts.iter().map(|n| (*n as f64).ln()).collect();
+        let ly: Vec<f64> = excess.iter().map(|e| e.ln()).collect();
+        let (mx, my) = (lx.iter().sum::<f64>() / 3.0, ly.iter().sum::<f64>() / 3.0);
+        let slope = lx
+            .iter()
+            .zip(&ly)
+            .map(|(x, y)| (x - mx) * (y - my))
+            .sum::<f64>()
+            / lx.iter().map(|x| (x - mx).powi(2)).sum::<f64>();
+        let bound_mse = bounds.iter().map(|b| b[(0, 0)] + b[(2, 2)]).sum::<f64>() / steps as f64;
+        eprintln!("{variant}: bound MSE {bound_mse:.3} m², excess {excess:?}, slope {slope:.2}");
+        assert!(
+            slope <= -0.5,
+            "{variant}: excess over the bound falls with slope {slope}"
+        );
+        // At 4000 particles the filter is within 5 % of the bound's MSE.
+        assert!(
+            excess[2] < 0.05 * bound_mse,
+            "{variant}: {excess:?} vs {bound_mse}"
+        );
+    }
+    let _ = Pseudoranges::<4, 1>::new;
+    let _ = <PositionFixModel<4, 2> as MeasurementModel<4, 2>>::r;
+}
+
+fn cv_f() -> M4 {
+    hybridnav::fusion::models::ProcessModel::jacobian(
+        &ConstantVelocity::<4>::new(0.2).unwrap(),
+        &V4::zeros(),
+        1.0,
+    )
+}
+
+/// A world whose particle filter has zero particles, an N_eff threshold outside [0, 1], or
+/// a filter its model cannot run is refused with exit code 2, file:line:column and the
+/// allowed range.
+#[test]
+fn bad_particle_filter_input_is_refused_with_its_place_and_range() {
+    let world = std::fs::read_to_string(repo().join("worlds/seed003-seamless.toml")).unwrap();
+    let dir = std::env::temp_dir().join(format!("hybridnav-it-particle-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cases = [
+        (
+            "options = { particles = 100 }",
+            "options = { particles = 0 }",
+            ":92:25:",
+            "expected 2 to 1 000 000",
+        ),
+        (
+            "options = { particles = 100 }",
+            "options = { particles = 100, neff_threshold = 1.5 }",
+            ":92:47:",
+            "expected a fraction in [0, 1]",
+        ),
+        (
+            "options = { particles = 100 }",
+            "options = { particles = 100, neff_threshold = -0.1 }",
+            ":92:47:",
+            "expected a fraction in [0, 1]",
+        ),
+        (
+            "filter = \"rbpf\"\noptions = { particles = 500",
+            "filter = \"rbpf\"\nprocess = { model = \"pva_clock\" }\noptions = { particles = 500",
+            "filter",
+            "runs on a paper process model",
+        ),
+    ];
+    for (i, (find, replace, place, expect)) in cases.iter().enumerate() {
+        assert!(world.contains(find), "case {i}: {find:?} not in the world");
+        let path = dir.join(format!("bad{i}.toml"));
+        std::fs::write(&path, world.replacen(find, replace, 1)).unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_hybridnav"))
+            .args(["check"])
+            .arg(&path)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "case {i}: {err}");
+        assert!(err.contains(&format!("bad{i}.toml")), "case {i}: {err}");
+        assert!(err.contains(place), "case {i}: expected {place} in {err}");
+        assert!(
+            err.contains(expect),
+            "case {i}: expected {expect:?} in {err}"
+        );
+        assert!(!err.contains("panicked"), "case {i}: {err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
