@@ -6,7 +6,8 @@
 //!
 //! Symbols are produced in FEC groups: the codewords that fill one signal frame (4QAM: 1,
 //! 16QAM: 2, 64QAM: 3) or two (32QAM: 5 codewords; 4QAM-NR: 1), with the scrambler
-//! restarted at each group's first bit. The interleaver's delay lines start filled with
+//! restarted at each signal frame's share of the group's transport-stream bytes (for
+//! 32QAM in the middle of the third codeword), as the receiver dtmb-sdr descrambles. The interleaver's delay lines start filled with
 //! constellation points of a fixed hash sequence (what a tower sent before the recording),
 //! so the receiver's de-interleaver output is data from its `52·51·M`-th symbol on: the
 //! first TS packet of the payload leaves a receiver after `51·M/72` frames (170 for
@@ -258,14 +259,22 @@ impl DataLayer {
 
     /// Encodes the next FEC group into `self.group`.
     fn fill_group(&mut self) -> Result<(), DtmbError> {
-        self.scrambler.reset();
         let per_cw = self.profile.rate.ts_bytes_per_codeword();
+        // The scrambler restarts with every signal frame's share of the group's bytes
+        // (for 32QAM 0.8, ten packets: in the middle of the third codeword).
+        let per_frame =
+            self.profile.codewords_per_group() * per_cw / self.profile.frames_per_group();
         let mut bch_msg = [0u8; BCH_K];
         for cw in 0..self.profile.codewords_per_group() {
             for p in self.ts.chunks_exact_mut(PACKET_LEN) {
                 self.packets.next_packet(p)?;
             }
-            self.scrambler.apply(&mut self.ts);
+            for (i, b) in self.ts.iter_mut().enumerate() {
+                if (cw * per_cw + i) % per_frame == 0 {
+                    self.scrambler.reset();
+                }
+                *b ^= self.scrambler.next_byte();
+            }
             for (blk, bytes) in self.ts.chunks_exact(BCH_K / 8).enumerate() {
                 for (i, &b) in bytes.iter().enumerate() {
                     for t in 0..8 {
@@ -334,7 +343,12 @@ impl DataLayer {
                 }
             }
             CarrierMode::Single => {
-                out[..SI_LEN].copy_from_slice(&si);
+                // C = 1 sends the system information at the start of the body with the
+                // opposite chip polarity (0 → −(1+j)), as dtmb-sdr's C = 1 receiver
+                // references it; the prefix 0000 thus looks like C = 3780's 1111.
+                for (o, x) in out[..SI_LEN].iter_mut().zip(&si) {
+                    *o = -x;
+                }
                 out[SI_LEN..].copy_from_slice(&self.data);
             }
         }
