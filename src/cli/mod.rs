@@ -613,7 +613,9 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
     let data = a.profile.data_layer()?;
     if let Some(path) = &a.world {
         if data.is_some() {
-            bail!("--payload/--qam/--fec/--interleaver/--carriers are not supported with --world yet");
+            bail!(
+                "--payload/--qam/--fec/--interleaver/--carriers are not supported with --world yet"
+            );
         }
         if a.snr_db.is_some() {
             bail!("--snr-db cannot be given with --world: the world's link budget sets the SNR");

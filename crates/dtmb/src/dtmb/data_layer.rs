@@ -368,11 +368,26 @@ mod tests {
         assert_eq!(p(Constellation::Qam4, CodeRate::R04, 240).si_index(), 5);
         assert_eq!(p(Constellation::Qam16, CodeRate::R08, 720).si_index(), 16);
         assert_eq!(p(Constellation::Qam32, CodeRate::R08, 240).si_index(), 17);
-        assert_eq!(p(Constellation::Qam64, CodeRate::R06, 240).codewords_per_group(), 3);
-        assert_eq!(p(Constellation::Qam32, CodeRate::R08, 240).codewords_per_group(), 5);
-        assert_eq!(p(Constellation::Qam16, CodeRate::R04, 240).codewords_per_group(), 2);
-        assert_eq!(p(Constellation::Qam64, CodeRate::R06, 240).interleaver_delay_frames(), 170);
-        assert_eq!(p(Constellation::Qam64, CodeRate::R06, 720).interleaver_delay_frames(), 510);
+        assert_eq!(
+            p(Constellation::Qam64, CodeRate::R06, 240).codewords_per_group(),
+            3
+        );
+        assert_eq!(
+            p(Constellation::Qam32, CodeRate::R08, 240).codewords_per_group(),
+            5
+        );
+        assert_eq!(
+            p(Constellation::Qam16, CodeRate::R04, 240).codewords_per_group(),
+            2
+        );
+        assert_eq!(
+            p(Constellation::Qam64, CodeRate::R06, 240).interleaver_delay_frames(),
+            170
+        );
+        assert_eq!(
+            p(Constellation::Qam64, CodeRate::R06, 720).interleaver_delay_frames(),
+            510
+        );
         assert!(Profile::new(
             Constellation::Qam32,
             CodeRate::R06,

@@ -59,7 +59,11 @@ impl TimeInterleaver {
             if n != 0 {
                 let i = self.offset[b] + self.pos[b];
                 std::mem::swap(x, &mut self.line[i]);
-                self.pos[b] = if self.pos[b] + 1 == n { 0 } else { self.pos[b] + 1 };
+                self.pos[b] = if self.pos[b] + 1 == n {
+                    0
+                } else {
+                    self.pos[b] + 1
+                };
             }
             self.branch = if b + 1 == BRANCHES { 0 } else { b + 1 };
         }

@@ -188,7 +188,10 @@ impl LdpcCode {
             }
             let (before, rest) = a.split_at_mut(col * words);
             let (prow, after) = rest.split_at_mut(words);
-            for r in before.chunks_exact_mut(words).chain(after.chunks_exact_mut(words)) {
+            for r in before
+                .chunks_exact_mut(words)
+                .chain(after.chunks_exact_mut(words))
+            {
                 if r[w0] & bit != 0 {
                     for w in w0..words {
                         r[w] ^= prow[w];

@@ -50,9 +50,9 @@ const ODD_VECTORS: [&str; 32] = [
 
 /// Logical positions of the 36 system-information symbols in a C = 3780 block.
 pub const C3780_POSITIONS: [usize; 36] = [
-    0, 140, 279, 419, 420, 560, 699, 839, 840, 980, 1119, 1259, 1260, 1400, 1539, 1679, 1680,
-    1820, 1959, 2099, 2100, 2240, 2379, 2519, 2520, 2660, 2799, 2939, 2940, 3080, 3219, 3359,
-    3360, 3500, 3639, 3779,
+    0, 140, 279, 419, 420, 560, 699, 839, 840, 980, 1119, 1259, 1260, 1400, 1539, 1679, 1680, 1820,
+    1959, 2099, 2100, 2240, 2379, 2519, 2520, 2660, 2799, 2939, 2940, 3080, 3219, 3359, 3360, 3500,
+    3639, 3779,
 ];
 
 /// The 32-bit vector of system-information index `index` (1..=64), first bit sent in the
@@ -61,9 +61,14 @@ pub const C3780_POSITIONS: [usize; 36] = [
 /// # Panics
 /// For an index outside 1..=64 (callers pass profile indices 3..=24 or the markers 1, 2).
 pub fn vector(index: u8) -> u32 {
-    assert!((1..=64).contains(&index), "system-information index {index}");
+    assert!(
+        (1..=64).contains(&index),
+        "system-information index {index}"
+    );
     let odd = ODD_VECTORS[usize::from(index - 1) / 2];
-    let v = odd.bytes().fold(0u32, |a, c| (a << 1) | u32::from(c == b'1'));
+    let v = odd
+        .bytes()
+        .fold(0u32, |a, c| (a << 1) | u32::from(c == b'1'));
     if index % 2 == 0 {
         !v
     } else {

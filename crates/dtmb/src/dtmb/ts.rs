@@ -207,7 +207,10 @@ mod tests {
         b[376] = SYNC;
         b.truncate(500);
         let e = check_packets(&b, "x").unwrap_err().to_string();
-        assert!(e.contains("byte offset 376") && e.contains("124 bytes"), "{e}");
+        assert!(
+            e.contains("byte offset 376") && e.contains("124 bytes"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -229,7 +232,10 @@ mod tests {
         assert_eq!((s.payload_packets(), s.null_packets()), (2, 1));
         std::fs::write(&p, &pkt[..100]).unwrap();
         let e = PacketSource::from_file(&p).unwrap_err().to_string();
-        assert!(e.contains("byte offset 0") && e.contains("100 bytes"), "{e}");
+        assert!(
+            e.contains("byte offset 0") && e.contains("100 bytes"),
+            "{e}"
+        );
         let _ = std::fs::remove_dir_all(&d);
     }
 }
