@@ -12,11 +12,11 @@ pub struct ProfileArgs {
     /// Without it but with a profile option, null packets only.
     #[arg(long, value_name = "FILE.ts")]
     pub payload: Option<PathBuf>,
-    /// Data constellation: 4qam, 16qam, 32qam or 64qam (default 64qam when any
+    /// Data constellation: 4qam-nr, 4qam, 16qam, 32qam or 64qam (default 64qam when any
     /// data-layer option is given; without all of them the bodies are random 64QAM).
     #[arg(long)]
     pub qam: Option<String>,
-    /// LDPC code rate: 0.4, 0.6 or 0.8 (default 0.6; 32QAM takes 0.8 only).
+    /// LDPC code rate: 0.4, 0.6 or 0.8 (default 0.6; 32QAM and 4QAM-NR take 0.8 only).
     #[arg(long)]
     pub fec: Option<String>,
     /// Time-interleaver depth M: 240 or 720 (default 720).

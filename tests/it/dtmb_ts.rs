@@ -6,8 +6,8 @@
 //! the frames after the interleaver delay `51·M/72` frames and before the last frame (the
 //! receiver needs the next header to equalise a frame; facts.md §8). The receiver's
 //! system-information detection (`dtmb_core_c3780_extract --system-info-index auto`) must
-//! name the transmitted profile. Every profile 5–24 (4QAM, 16QAM, 32QAM, 64QAM; both
-//! interleaver depths) in PN420, PN595 and PN945 with C = 3780, and PN595 4QAM with C = 1.
+//! name the transmitted profile. Every profile 3–24 (4QAM-NR, 4QAM, 16QAM, 32QAM, 64QAM;
+//! both interleaver depths) in PN420, PN595 and PN945 with C = 3780, and PN595 4QAM with C = 1.
 
 use crate::common::{hybridnav, skip, tmp_dir};
 use hybridnav::dtmb::data_layer::Profile;
@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 /// Frames decodable after the de-interleaver in every recording.
-const DECODED_FRAMES: usize = 14;
+const DECODED_FRAMES: usize = 15;
 
 /// The directory of dtmb-sdr's compiled tools, or `None` (skipped) when it is missing.
 fn dtmb_sdr_bin() -> Option<PathBuf> {
@@ -163,7 +163,7 @@ fn check(
         .map_err(|e| e.to_string())?;
     let got = std::fs::read(&out_ts).unwrap_or_default();
     let n = got.len() / 188;
-    // Whole FEC groups of the decodable frames (32QAM groups span two frames).
+    // Whole FEC groups of the decodable frames (32QAM and 4QAM-NR groups span two).
     let groups = DECODED_FRAMES / p.frames_per_group();
     let expected = (groups as f64 * p.frames_per_group() as f64 * p.packets_per_frame()) as usize;
     if got.len() % 188 != 0 || got.len() > payload.len() || got[..] != payload[..got.len()] {
@@ -236,17 +236,18 @@ fn tail(b: &[u8]) -> String {
     lines[lines.len().saturating_sub(3)..].join(" | ")
 }
 
-/// The C = 3780 profiles 5–24 (4QAM-NR, 3 and 4, is not built yet).
+/// The C = 3780 profiles 3–24.
 fn c3780_profiles() -> Vec<Profile> {
     let mut v = Vec::new();
     for c in [
+        Constellation::Qam4Nr,
         Constellation::Qam4,
         Constellation::Qam16,
         Constellation::Qam32,
         Constellation::Qam64,
     ] {
         for rate in CodeRate::ALL {
-            if c == Constellation::Qam32 && rate != CodeRate::R08 {
+            if matches!(c, Constellation::Qam32 | Constellation::Qam4Nr) && rate != CodeRate::R08 {
                 continue;
             }
             for m in [240, 720] {

@@ -17,7 +17,7 @@ use super::bch::{self, BCH_K, BCH_N};
 use super::frame::{CarrierMode, SI_LEN};
 use super::interleaver::TimeInterleaver;
 use super::ldpc::{self, CodeRate, LdpcCode, CODEWORD_BITS};
-use super::mapping::{map_bits, Constellation};
+use super::mapping::{map_bits, nr_encode, Constellation};
 use super::pn::BODY_LEN;
 use super::scrambler::Scrambler;
 use super::system_info;
@@ -68,12 +68,6 @@ impl Profile {
                     constellation.name(),
                     rate.name()
                 ),
-            });
-        }
-        if constellation == Constellation::Qam4Nr {
-            return Err(DtmbError::InvalidParameter {
-                name: "qam",
-                reason: "4qam-nr is not implemented yet (4qam, 16qam, 32qam, 64qam are)".into(),
             });
         }
         Ok(Self {
@@ -198,7 +192,10 @@ pub struct DataLayer {
     code: &'static LdpcCode,
     points: Vec<Complex32>,
     packets: PacketSource,
-    interleaver: TimeInterleaver,
+    /// The symbol interleaver, or for 4QAM-NR the bit interleaver (the NR code follows it).
+    interleaver: Option<TimeInterleaver>,
+    bit_interleaver: Option<TimeInterleaver<u8>>,
+    frame_bits: Vec<u8>,
     scrambler: Scrambler,
     /// The current group's symbols and the next unread one.
     group: Vec<Complex32>,
@@ -225,8 +222,16 @@ impl DataLayer {
         let points = profile.constellation.points();
         let np = points.len() as u64;
         let fill_points = points.clone();
-        let interleaver = TimeInterleaver::new(profile.interleaver_m, false, move |i| {
-            fill_points[(mix64(i as u64 ^ 0x5eed) % np) as usize]
+        let nr = profile.constellation == Constellation::Qam4Nr;
+        let interleaver = (!nr).then(|| {
+            TimeInterleaver::new(profile.interleaver_m, false, move |i| {
+                fill_points[(mix64(i as u64 ^ 0x5eed) % np) as usize]
+            })
+        });
+        let bit_interleaver = nr.then(|| {
+            TimeInterleaver::new(profile.interleaver_m, false, |i| {
+                (mix64(i as u64 ^ 0x5eed) & 1) as u8
+            })
         });
         let group_symbols = profile.frames_per_group() * DATA_SYMBOLS;
         let code = ldpc::code(profile.rate);
@@ -236,6 +241,8 @@ impl DataLayer {
             points,
             packets,
             interleaver,
+            bit_interleaver,
+            frame_bits: vec![0; if nr { DATA_SYMBOLS } else { 0 }],
             scrambler: Scrambler::new(),
             group: vec![Complex32::default(); group_symbols],
             group_pos: group_symbols,
@@ -289,8 +296,10 @@ impl DataLayer {
                 &mut self.bits[cw * CODEWORD_BITS..(cw + 1) * CODEWORD_BITS],
             );
         }
-        let bps = self.profile.constellation.bits_per_symbol();
-        map_bits(&self.points, bps, &self.bits, &mut self.group);
+        if self.bit_interleaver.is_none() {
+            let bps = self.profile.constellation.bits_per_symbol();
+            map_bits(&self.points, bps, &self.bits, &mut self.group);
+        }
         self.group_pos = 0;
         Ok(())
     }
@@ -309,18 +318,52 @@ impl DataLayer {
                 got: out.len(),
             });
         }
-        let mut filled = 0;
-        while filled < DATA_SYMBOLS {
-            if self.group_pos == self.group.len() {
-                self.fill_group()?;
+        if self.bit_interleaver.is_some() {
+            // 4QAM-NR: 3744 LDPC bits a frame through the bit interleaver, then each byte
+            // (first bit most significant) as its 16-bit NR codeword on eight 4QAM symbols.
+            let mut filled = 0;
+            while filled < DATA_SYMBOLS {
+                if self.group_pos == self.bits.len() {
+                    self.fill_group()?;
+                }
+                let take = (DATA_SYMBOLS - filled).min(self.bits.len() - self.group_pos);
+                self.frame_bits[filled..filled + take]
+                    .copy_from_slice(&self.bits[self.group_pos..self.group_pos + take]);
+                self.group_pos += take;
+                filled += take;
             }
-            let take = (DATA_SYMBOLS - filled).min(self.group.len() - self.group_pos);
-            self.data[filled..filled + take]
-                .copy_from_slice(&self.group[self.group_pos..self.group_pos + take]);
-            self.group_pos += take;
-            filled += take;
+            if let Some(bil) = &mut self.bit_interleaver {
+                bil.process(&mut self.frame_bits);
+            }
+            for (byte_bits, syms) in self
+                .frame_bits
+                .chunks_exact(8)
+                .zip(self.data.chunks_exact_mut(8))
+            {
+                let byte = byte_bits.iter().fold(0u8, |a, &b| (a << 1) | (b & 1));
+                let w = nr_encode(byte);
+                for (t, s) in syms.iter_mut().enumerate() {
+                    let b0 = (w >> (15 - 2 * t)) & 1;
+                    let b1 = (w >> (14 - 2 * t)) & 1;
+                    *s = self.points[usize::from(b0 | (b1 << 1))];
+                }
+            }
+        } else {
+            let mut filled = 0;
+            while filled < DATA_SYMBOLS {
+                if self.group_pos == self.group.len() {
+                    self.fill_group()?;
+                }
+                let take = (DATA_SYMBOLS - filled).min(self.group.len() - self.group_pos);
+                self.data[filled..filled + take]
+                    .copy_from_slice(&self.group[self.group_pos..self.group_pos + take]);
+                self.group_pos += take;
+                filled += take;
+            }
+            if let Some(il) = &mut self.interleaver {
+                il.process(&mut self.data);
+            }
         }
-        self.interleaver.process(&mut self.data);
         let mut si = [Complex32::default(); SI_LEN];
         super::frame::system_info_symbols(
             self.profile.carrier,

@@ -10,11 +10,12 @@ use num_complex::Complex32;
 /// Number of branches.
 pub const BRANCHES: usize = 52;
 
-/// The time interleaver (or, with `deinterleave`, its inverse).
+/// The time interleaver (or, with `deinterleave`, its inverse), of symbols or (4QAM-NR,
+/// whose interleaver runs on the LDPC bits before the NR code) of bits.
 #[derive(Clone, Debug)]
-pub struct TimeInterleaver {
+pub struct TimeInterleaver<T = Complex32> {
     /// All branches' delay lines, branch after branch.
-    line: Vec<Complex32>,
+    line: Vec<T>,
     /// Start of each branch's line in `line`, and its length.
     offset: [usize; BRANCHES],
     len: [usize; BRANCHES],
@@ -24,10 +25,17 @@ pub struct TimeInterleaver {
     branch: usize,
 }
 
-impl TimeInterleaver {
+impl TimeInterleaver<Complex32> {
+    /// The end-to-end delay of interleaver and de-interleaver in symbols: `52·51·M`.
+    pub fn latency_symbols(m: usize) -> usize {
+        BRANCHES * (BRANCHES - 1) * m
+    }
+}
+
+impl<T: Copy> TimeInterleaver<T> {
     /// An interleaver of depth `m` (240 or 720) with delay lines filled by `fill(i)`:
     /// the symbols "sent before" the stream starts.
-    pub fn new(m: usize, deinterleave: bool, mut fill: impl FnMut(usize) -> Complex32) -> Self {
+    pub fn new(m: usize, deinterleave: bool, mut fill: impl FnMut(usize) -> T) -> Self {
         let mut offset = [0usize; BRANCHES];
         let mut len = [0usize; BRANCHES];
         let mut total = 0;
@@ -46,13 +54,8 @@ impl TimeInterleaver {
         }
     }
 
-    /// The end-to-end delay of interleaver and de-interleaver in symbols: `52·51·M`.
-    pub fn latency_symbols(m: usize) -> usize {
-        BRANCHES * (BRANCHES - 1) * m
-    }
-
     /// Passes `data` through in place.
-    pub fn process(&mut self, data: &mut [Complex32]) {
+    pub fn process(&mut self, data: &mut [T]) {
         for x in data {
             let b = self.branch;
             let n = self.len[b];

@@ -167,9 +167,52 @@ pub fn map_bits(points: &[Complex32], bits_per_symbol: usize, bits: &[u8], out: 
     }
 }
 
+/// The Nordstrom–Robinson (16, 8) codeword of `byte` (GB 20600-2006 §4.5.1): the byte
+/// (first bit most significant) followed by 7 parity bits and an overall parity bit,
+///
+/// ```text
+/// y_i = x₇ ⊕ x_{i+6} ⊕ x_i ⊕ x_{i+1} ⊕ x_{i+3} ⊕ (x_i ⊕ x_{i+4})(x_{i+1} ⊕ x_{i+2} ⊕ x_{i+3} ⊕ x_{i+5})
+///       ⊕ (x_{i+1} ⊕ x_{i+2})(x_{i+3} ⊕ x_{i+5}),   indices mod 7, i = 0 … 6,
+/// ```
+///
+/// with `x₀` the byte's first bit; the 16 bits are sent first bit (most significant)
+/// first. This is the generator form the receiver dtmb-sdr decodes with.
+pub fn nr_encode(byte: u8) -> u16 {
+    let x: [u8; 8] = std::array::from_fn(|i| (byte >> (7 - i)) & 1);
+    let mut parity = 0u16;
+    let mut last = (byte.count_ones() & 1) as u8;
+    for i in 0..7 {
+        let at = |j: usize| x[(i + j) % 7];
+        let y = x[7]
+            ^ at(6)
+            ^ at(0)
+            ^ at(1)
+            ^ at(3)
+            ^ ((at(0) ^ at(4)) & (at(1) ^ at(2) ^ at(3) ^ at(5)))
+            ^ ((at(1) ^ at(2)) & (at(3) ^ at(5)));
+        parity |= u16::from(y) << (7 - i);
+        last ^= y;
+    }
+    (u16::from(byte) << 8) | parity | u16::from(last)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The Nordstrom–Robinson code is nonlinear with 256 codewords at minimum Hamming
+    /// distance 6 (its defining property).
+    #[test]
+    fn nordstrom_robinson_has_distance_6() {
+        let words: Vec<u16> = (0..=255u8).map(nr_encode).collect();
+        let mut dmin = 16;
+        for i in 0..256 {
+            for j in 0..i {
+                dmin = dmin.min((words[i] ^ words[j]).count_ones());
+            }
+        }
+        assert_eq!(dmin, 6);
+    }
 
     #[test]
     fn constellations_have_unit_power_and_distinct_points() {
