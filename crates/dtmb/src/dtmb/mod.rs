@@ -26,6 +26,7 @@
 pub mod bch;
 pub mod channel;
 pub mod data_layer;
+pub mod data_receiver;
 mod fd_channel;
 pub mod frame;
 pub mod interleaver;
