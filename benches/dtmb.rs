@@ -281,8 +281,13 @@ fn bench_data_layer(c: &mut Criterion) {
     use hybridnav::dtmb::ldpc::{self, CodeRate, CODEWORD_BITS, FULL_BITS};
     use hybridnav::dtmb::mapping::Constellation;
     use hybridnav::dtmb::ts::PacketSource;
-    let profile =
-        Profile::new(Constellation::Qam64, CodeRate::R06, 720, CarrierMode::Multi3780).unwrap();
+    let profile = Profile::new(
+        Constellation::Qam64,
+        CodeRate::R06,
+        720,
+        CarrierMode::Multi3780,
+    )
+    .unwrap();
     let cfg = TxConfig {
         schedule: FrameSchedule {
             mode: MODE,

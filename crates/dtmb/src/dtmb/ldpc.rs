@@ -11,8 +11,11 @@
 //! rotation,
 //!
 //! ```text
-//! p_j = Σ_b Σ_{s ∈ u_b} rot(g_{b,j}, s),      u_b = message block b,
+//! p_j = Σ_b Σ_{s ∈ u_b} rot(g_{b,j}, s) = Σ_s rot(Σ_{b: s ∈ u_b} g_{b,j}, s),
 //! ```
+//!
+//! (`u_b` message block b; the second form, one rotation per shift and parity block, is
+//! the one computed)
 //!
 //! which is the standard's own quasi-cyclic generator form (`G_qc`, §4.3.2) — no dense
 //! generator matrix is built. The transmitted order is the one the receiver dtmb-sdr
@@ -231,19 +234,27 @@ impl LdpcCode {
         let cb = self.rate.parity_blocks();
         assert_eq!(message.len(), kb * Z);
         assert_eq!(out.len(), CODEWORD_BITS);
+        // p_j = Σ_s rot(Σ_{b: u_b[s] = 1} g_{b,j}, s): for each shift, add up the first
+        // rows of the blocks whose bit s is set (plain XORs, which vectorise), then rotate
+        // that sum once per parity block.
         let mut acc = [0u128; 35];
         let acc = &mut acc[..cb];
-        for (b, block) in message.chunks_exact(Z).enumerate() {
-            let mut u = 0u128;
-            for (s, &bit) in block.iter().enumerate() {
-                u |= u128::from(bit & 1) << s;
+        let mut sum = [0u128; 35];
+        let sum = &mut sum[..cb];
+        for s in 0..Z {
+            sum.fill(0);
+            let mut any = false;
+            for b in 0..kb {
+                if message[b * Z + s] & 1 != 0 {
+                    any = true;
+                    for (t, &gj) in sum.iter_mut().zip(&self.g[b * cb..(b + 1) * cb]) {
+                        *t ^= gj;
+                    }
+                }
             }
-            let g = &self.g[b * cb..(b + 1) * cb];
-            while u != 0 {
-                let s = u.trailing_zeros();
-                u &= u - 1;
-                for (a, &gj) in acc.iter_mut().zip(g) {
-                    *a ^= rot(gj, s);
+            if any {
+                for (a, &t) in acc.iter_mut().zip(sum.iter()) {
+                    *a ^= rot(t, s as u32);
                 }
             }
         }
