@@ -178,6 +178,7 @@ pub struct Transmitter {
 struct DataBodies {
     layer: Box<DataLayer>,
     next_frame: i64,
+    first: bool,
     logical: Vec<Complex32>,
     error: Option<DtmbError>,
 }
@@ -219,11 +220,12 @@ impl Transmitter {
         }
     }
 
-    /// A transmitter whose frames `0, 1, …` carry the bodies of `layer` (a transport
-    /// stream through the GB 20600 data layer) instead of random payloads. The data layer
-    /// is sequential: frames must be asked for in increasing order, apart from the few
-    /// frames the cache keeps; a frame before 0 (a channel's look-back) or one asked for
-    /// again after it left the cache gets a random body. The carrier mode is the layer's.
+    /// A transmitter whose frames `k₀, k₀ + 1, …` carry the bodies of `layer` (a transport
+    /// stream through the GB 20600 data layer) instead of random payloads, `k₀` the first
+    /// frame asked for. The data layer is sequential: frames must be asked for in
+    /// increasing order, apart from the few frames the cache keeps; a frame before `k₀`
+    /// or one asked for again after it left the cache gets a random body. The carrier
+    /// mode is the layer's.
     pub fn with_data_layer<R: Rng + ?Sized>(cfg: TxConfig, layer: DataLayer, rng: &mut R) -> Self {
         let mut cfg = cfg;
         cfg.carrier = layer.profile().carrier;
@@ -231,6 +233,7 @@ impl Transmitter {
         t.data = Some(DataBodies {
             layer: Box::new(layer),
             next_frame: 0,
+            first: true,
             logical: vec![Complex32::default(); BODY_LEN],
             error: None,
         });
@@ -280,7 +283,13 @@ impl Transmitter {
         let buf = &mut self.cache[slot].1;
         buf[..h].copy_from_slice(&self.headers[phase]);
         let data_frame = match &mut self.data {
-            Some(d) if frame >= d.next_frame => {
+            Some(d) if frame >= d.next_frame || d.first => {
+                if d.first {
+                    // The layer's first body goes to the first frame asked for (a world
+                    // recording starts anywhere in the tower's schedule).
+                    d.first = false;
+                    d.next_frame = frame;
+                }
                 // Frames skipped over are encoded and dropped, so the stream stays whole.
                 let si_index = d.layer.profile().si_index();
                 while d.next_frame <= frame {
