@@ -220,20 +220,31 @@ impl Transmitter {
         }
     }
 
-    /// A transmitter whose frames `k₀, k₀ + 1, …` carry the bodies of `layer` (a transport
-    /// stream through the GB 20600 data layer) instead of random payloads, `k₀` the first
-    /// frame asked for. The data layer is sequential: frames must be asked for in
-    /// increasing order, apart from the few frames the cache keeps; a frame before `k₀`
-    /// or one asked for again after it left the cache gets a random body. The carrier
-    /// mode is the layer's.
+    /// A transmitter whose frames `0, 1, …` carry the bodies of `layer` (a transport
+    /// stream through the GB 20600 data layer) instead of random payloads. The data layer
+    /// is sequential: frames must be asked for in increasing order, apart from the few
+    /// frames the cache keeps; a frame before the first data frame (a channel's
+    /// look-back) or one asked for again after it left the cache gets a random body. The
+    /// carrier mode is the layer's.
     pub fn with_data_layer<R: Rng + ?Sized>(cfg: TxConfig, layer: DataLayer, rng: &mut R) -> Self {
+        Self::with_data_layer_from(cfg, layer, Some(0), rng)
+    }
+
+    /// [`Transmitter::with_data_layer`] whose first data frame is `start`, or with `None`
+    /// the first frame asked for (a world recording starts anywhere in the schedule).
+    pub fn with_data_layer_from<R: Rng + ?Sized>(
+        cfg: TxConfig,
+        layer: DataLayer,
+        start: Option<i64>,
+        rng: &mut R,
+    ) -> Self {
         let mut cfg = cfg;
         cfg.carrier = layer.profile().carrier;
         let mut t = Self::new(cfg, rng);
         t.data = Some(DataBodies {
             layer: Box::new(layer),
-            next_frame: 0,
-            first: true,
+            next_frame: start.unwrap_or(0),
+            first: start.is_none(),
             logical: vec![Complex32::default(); BODY_LEN],
             error: None,
         });

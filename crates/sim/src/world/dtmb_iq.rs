@@ -737,7 +737,7 @@ fn owner_transmitter(
     )
     .map_err(|e| bad("transmitter data layer", format!("transmitter {id}: {e}")))?;
     Ok(match layer {
-        Some(l) => Transmitter::with_data_layer(tx_cfg, l, &mut stream),
+        Some(l) => Transmitter::with_data_layer_from(tx_cfg, l, None, &mut stream),
         None => Transmitter::new(tx_cfg, &mut stream),
     })
 }
