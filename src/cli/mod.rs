@@ -1,5 +1,7 @@
 //! The command line: clap definitions turned into validated actions in one place.
 
+mod dtmb;
+
 use crate::core::{EmitterId, GpsTime};
 use crate::io::atomic::write_atomic;
 use crate::layout::metrics::ClockModel;
@@ -186,6 +188,10 @@ pub enum DtmbCommand {
         /// Output base path (without the .sigmf-data / .sigmf-meta suffix).
         #[arg(long)]
         out: PathBuf,
+        /// The data layer (GB 20600 transmitter: scrambler, BCH, LDPC, mapping, time
+        /// interleaver, system information): see `hybridnav_dtmb::dtmb::data_layer`.
+        #[command(flatten)]
+        profile: dtmb::ProfileArgs,
     },
 }
 
@@ -327,6 +333,7 @@ pub fn run(cli: Cli) -> Result<()> {
             channel,
             seed,
             out,
+            profile,
         }) => cmd_dtmb_iq(DtmbIqArgs {
             mode,
             frames,
@@ -340,6 +347,7 @@ pub fn run(cli: Cli) -> Result<()> {
             channel,
             seed,
             out,
+            profile,
         }),
         Command::Ephemeris(EphemerisCommand::Synth { start, hours, out }) => {
             cmd_synth(&start, hours, &out)
@@ -736,11 +744,12 @@ struct DtmbIqArgs {
     channel: u32,
     seed: Option<u64>,
     out: PathBuf,
+    profile: dtmb::ProfileArgs,
 }
 
 fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
     use crate::dtmb::pn::{PnMode, SAMPLE_RATE_HZ};
-    use crate::dtmb::sigmf::{generate_iq, write_sigmf, write_sigmf_with, SampleFormat};
+    use crate::dtmb::sigmf::{write_sigmf, write_sigmf_with, SampleFormat};
     let format = match a.format.to_ascii_lowercase().as_str() {
         "cf32" | "cf32_le" => SampleFormat::Cf32,
         "ci8" => SampleFormat::Ci8,
@@ -754,7 +763,13 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
         }
         Ok(())
     };
+    let data = a.profile.data_layer()?;
     if let Some(path) = &a.world {
+        if data.is_some() {
+            bail!(
+                "--payload/--qam/--fec/--interleaver/--carriers are not supported with --world yet"
+            );
+        }
         if a.snr_db.is_some() {
             bail!("--snr-db cannot be given with --world: the world's link budget sets the SNR");
         }
@@ -830,8 +845,14 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
         bail!("--snr-db must be a finite number of dB, got {snr_db}");
     }
     let center_hz = crate::dtmb::uhf_channel_center_hz(a.channel)?;
-    let (samples, annotations) =
-        generate_iq(mode, a.frames, snr_db, a.oversampling, a.seed.unwrap_or(1))?;
+    let (samples, annotations) = crate::dtmb::sigmf::generate_iq_with(
+        mode,
+        a.frames,
+        snr_db,
+        a.oversampling,
+        a.seed.unwrap_or(1),
+        data,
+    )?;
     mkdir()?;
     let rate_hz = SAMPLE_RATE_HZ * a.oversampling as f64;
     write_sigmf(out, &samples, format, rate_hz, center_hz, &annotations)?;

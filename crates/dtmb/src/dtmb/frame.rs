@@ -319,6 +319,45 @@ impl BodyModulator {
         Ok(())
     }
 
+    /// Writes one body built from given logical symbols (3780: system information and data
+    /// in their positions, from [`super::data_layer::DataLayer`]): for C = 3780 logical
+    /// symbol `l` goes to subcarrier `interleave_index(l)` and the body is the unitary
+    /// inverse DFT; for C = 1 the symbols are the body.
+    ///
+    /// # Errors
+    /// [`DtmbError::BufferLength`] when `logical` or `out` is not 3780 samples long.
+    pub fn modulate_logical(
+        &mut self,
+        carrier: CarrierMode,
+        logical: &[Complex32],
+        out: &mut [Complex32],
+    ) -> Result<(), DtmbError> {
+        if out.len() != BODY_LEN || logical.len() != BODY_LEN {
+            return Err(DtmbError::BufferLength {
+                what: "frame body",
+                expected: BODY_LEN,
+                got: out.len().min(logical.len()),
+            });
+        }
+        self.logical.copy_from_slice(logical);
+        self.logical_current = true;
+        match carrier {
+            CarrierMode::Single => out.copy_from_slice(logical),
+            CarrierMode::Multi3780 => {
+                let scale = idft_scale();
+                for (&x, &p) in logical.iter().zip(&self.table) {
+                    self.physical[p as usize] = x * scale;
+                }
+                self.ifft.process_outofplace_with_scratch(
+                    &mut self.physical,
+                    out,
+                    &mut self.scratch,
+                );
+            }
+        }
+        Ok(())
+    }
+
     /// The logical symbols (system information then data) of the last body.
     pub fn symbols(&mut self) -> &[Complex32] {
         if !self.logical_current {

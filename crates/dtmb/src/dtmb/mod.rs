@@ -23,19 +23,29 @@
 //! source (`source`) also uses `engine`, `fusion::measurement`, `gnss::receiver_clock` and
 //! `propagation`, as the GNSS source does.
 
+pub mod bch;
 pub mod channel;
+pub mod data_layer;
+pub mod data_receiver;
 mod fd_channel;
 pub mod frame;
+pub mod interleaver;
 pub mod kernel;
+pub mod ldpc;
+mod ldpc_tables;
+pub mod mapping;
 pub mod measurement;
 pub mod multipath;
 pub mod noise;
 pub mod pn;
 pub mod receiver;
+pub mod scrambler;
 pub mod sigmf;
 pub mod source;
+pub mod system_info;
 pub mod tps;
 pub mod transmitter;
+pub mod ts;
 
 pub use channel::Channel;
 pub use frame::{BodyModulator, CarrierMode, Qam};
@@ -92,6 +102,14 @@ pub enum DtmbError {
         path: String,
         /// The I/O error.
         source: std::io::Error,
+    },
+    /// A transport stream that is not 188-byte packets with sync bytes.
+    #[error("{path}: {reason}")]
+    Ts {
+        /// The file.
+        path: String,
+        /// What is wrong, with the byte offset.
+        reason: String,
     },
     /// A SigMF file that does not follow the subset this module reads.
     #[error("{path}: {reason}")]

@@ -326,6 +326,23 @@ pub fn generate_iq(
     oversampling: usize,
     seed: u64,
 ) -> Result<(Vec<Complex32>, Vec<Annotation>), DtmbError> {
+    generate_iq_with(mode, frames, snr_db, oversampling, seed, None)
+}
+
+/// [`generate_iq`] with the frame bodies of a GB 20600 data layer (a transport stream
+/// through the whole transmitter) when `data` is given: frame `k` of the recording carries
+/// the layer's `k`-th body, and every annotation names the profile.
+///
+/// # Errors
+/// As [`generate_iq`], and the data layer's errors (a payload that fails to read).
+pub fn generate_iq_with(
+    mode: PnMode,
+    frames: usize,
+    snr_db: f64,
+    oversampling: usize,
+    seed: u64,
+    data: Option<super::data_layer::DataLayer>,
+) -> Result<(Vec<Complex32>, Vec<Annotation>), DtmbError> {
     if frames == 0 || frames > 20_000 {
         return Err(DtmbError::InvalidParameter {
             name: "frames",
@@ -355,7 +372,13 @@ pub fn generate_iq(
         qam: Qam::Qam64,
         si_vector: 0,
     };
-    let mut tx = Transmitter::new(cfg, &mut streams.stream("dtmb/payload"));
+    let profile = data.as_ref().map(|d| *d.profile());
+    let mut tx = match data {
+        Some(layer) => {
+            Transmitter::with_data_layer(cfg, layer, &mut streams.stream("dtmb/payload"))
+        }
+        None => Transmitter::new(cfg, &mut streams.stream("dtmb/payload")),
+    };
     let n = mode.frame_len();
     let total = frames * n;
     let block = n;
@@ -370,6 +393,9 @@ pub fn generate_iq(
     let mut base = vec![Complex32::default(); total];
     for (k, chunk) in base.chunks_mut(block).enumerate() {
         ch.process(&mut tx, (k * block) as i64, chunk, &mut noise)?;
+        if let Some(e) = tx.take_error() {
+            return Err(e);
+        }
     }
     let samples = if oversampling == 1 {
         base
@@ -388,7 +414,15 @@ pub fn generate_iq(
         .map(|k| Annotation {
             sample_start: (k * n * oversampling) as u64,
             sample_count: (n * oversampling) as u64,
-            label: format!("frame {k} {} phase {}", mode.name(), mode.phase_of_frame(k)),
+            label: match &profile {
+                Some(p) => format!(
+                    "frame {k} {} phase {} {}",
+                    mode.name(),
+                    mode.phase_of_frame(k),
+                    p.name()
+                ),
+                None => format!("frame {k} {} phase {}", mode.name(), mode.phase_of_frame(k)),
+            },
         })
         .collect();
     Ok((samples, annotations))

@@ -15,6 +15,7 @@
 //! starts at `t0 + k·T_frame + δ_tower`; its index in the superframe is `k mod F` and its
 //! header phase follows the schedule of [`PnMode::phase_of_frame`].
 
+use super::data_layer::DataLayer;
 use super::frame::{BodyModulator, CarrierMode, Qam};
 use super::pn::{PnMode, BODY_LEN, SAMPLE_RATE_HZ, SAMPLE_RATE_HZ_INT};
 use super::DtmbError;
@@ -168,6 +169,18 @@ pub struct Transmitter {
     headers: Vec<Vec<Complex32>>,
     cache: Vec<(i64, Vec<Complex32>)>,
     next_slot: usize,
+    /// The GB 20600 data layer when the bodies carry a transport stream, the next frame
+    /// it encodes, its logical-symbol buffer and the first error it met.
+    data: Option<DataBodies>,
+}
+
+/// Frame bodies from a [`DataLayer`]: frame `k ≥ 0` carries the layer's `k`-th body.
+struct DataBodies {
+    layer: Box<DataLayer>,
+    next_frame: i64,
+    first: bool,
+    logical: Vec<Complex32>,
+    error: Option<DtmbError>,
 }
 
 impl std::fmt::Debug for Transmitter {
@@ -203,7 +216,49 @@ impl Transmitter {
                 .map(|_| (i64::MIN, vec![Complex32::default(); mode.frame_len()]))
                 .collect(),
             next_slot: 0,
+            data: None,
         }
+    }
+
+    /// A transmitter whose frames `0, 1, …` carry the bodies of `layer` (a transport
+    /// stream through the GB 20600 data layer) instead of random payloads. The data layer
+    /// is sequential: frames must be asked for in increasing order, apart from the few
+    /// frames the cache keeps; a frame before the first data frame (a channel's
+    /// look-back) or one asked for again after it left the cache gets a random body. The
+    /// carrier mode is the layer's.
+    pub fn with_data_layer<R: Rng + ?Sized>(cfg: TxConfig, layer: DataLayer, rng: &mut R) -> Self {
+        Self::with_data_layer_from(cfg, layer, Some(0), rng)
+    }
+
+    /// [`Transmitter::with_data_layer`] whose first data frame is `start`, or with `None`
+    /// the first frame asked for (a world recording starts anywhere in the schedule).
+    pub fn with_data_layer_from<R: Rng + ?Sized>(
+        cfg: TxConfig,
+        layer: DataLayer,
+        start: Option<i64>,
+        rng: &mut R,
+    ) -> Self {
+        let mut cfg = cfg;
+        cfg.carrier = layer.profile().carrier;
+        let mut t = Self::new(cfg, rng);
+        t.data = Some(DataBodies {
+            layer: Box::new(layer),
+            next_frame: start.unwrap_or(0),
+            first: start.is_none(),
+            logical: vec![Complex32::default(); BODY_LEN],
+            error: None,
+        });
+        t
+    }
+
+    /// The data layer, when the transmitter has one.
+    pub fn data_layer(&self) -> Option<&DataLayer> {
+        self.data.as_ref().map(|d| &*d.layer)
+    }
+
+    /// The first error of the data layer (a payload that failed to read), taken.
+    pub fn take_error(&mut self) -> Option<DtmbError> {
+        self.data.as_mut().and_then(|d| d.error.take())
     }
 
     /// The configuration.
@@ -236,17 +291,56 @@ impl Transmitter {
         } else {
             self.cfg.si_vector
         };
-        let mut rng = PayloadRng::for_frame(self.payload_key, frame);
         let buf = &mut self.cache[slot].1;
         buf[..h].copy_from_slice(&self.headers[phase]);
-        // The body length is fixed by construction, so modulate cannot fail here.
-        let _ = self.body.modulate(
-            self.cfg.carrier,
-            self.cfg.qam,
-            si,
-            &mut rng,
-            &mut buf[h..h + BODY_LEN],
-        );
+        let data_frame = match &mut self.data {
+            Some(d) if frame >= d.next_frame || d.first => {
+                if d.first {
+                    // The layer's first body goes to the first frame asked for (a world
+                    // recording starts anywhere in the tower's schedule).
+                    d.first = false;
+                    d.next_frame = frame;
+                }
+                // Frames skipped over are encoded and dropped, so the stream stays whole.
+                let si_index = d.layer.profile().si_index();
+                while d.next_frame <= frame {
+                    let k = d.next_frame;
+                    let si = if k.rem_euclid(f) == 0 {
+                        if k.div_euclid(f).rem_euclid(2) == 1 {
+                            1
+                        } else {
+                            2
+                        }
+                    } else {
+                        si_index
+                    };
+                    if let Err(e) = d.layer.next_frame(si, &mut d.logical) {
+                        d.error.get_or_insert(e);
+                        d.logical.fill(Complex32::default());
+                    }
+                    d.next_frame += 1;
+                }
+                // The body length is fixed by construction, so this cannot fail.
+                let _ = self.body.modulate_logical(
+                    self.cfg.carrier,
+                    &d.logical,
+                    &mut buf[h..h + BODY_LEN],
+                );
+                true
+            }
+            _ => false,
+        };
+        if !data_frame {
+            let mut rng = PayloadRng::for_frame(self.payload_key, frame);
+            // The body length is fixed by construction, so modulate cannot fail here.
+            let _ = self.body.modulate(
+                self.cfg.carrier,
+                self.cfg.qam,
+                si,
+                &mut rng,
+                &mut buf[h..h + BODY_LEN],
+            );
+        }
         self.cache[slot].0 = frame;
         slot
     }

@@ -195,7 +195,7 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
         if !signals.iter().any(|sg| sg.owner == o) {
             signals.push(Signal {
                 owner: o,
-                tx: Transmitter::new(tx_cfg, &mut rng.stream(&format!("dtmb/{}/tx", specs[o].id))),
+                tx: owner_transmitter(world, &specs[o], tx_cfg, &rng)?,
                 channel: None,
                 offset: None,
                 paths: Vec::new(),
@@ -701,4 +701,43 @@ fn frame_annotation(
     let p = truth.enu.pos_enu_m;
     m.insert("hybridnav:platform_enu_m".into(), json!([p.x, p.y, p.z]));
     (ann, m)
+}
+
+/// The transmitter of the tower `id`: with a data layer when its `[[transmitter]]` names a
+/// profile or payload (`qam`, `fec`, `interleaver`, `carriers`, `payload`; the payload path
+/// relative to the world file), else random bodies.
+fn owner_transmitter(
+    world: &World,
+    tower: &TowerSpec,
+    tx_cfg: TxConfig,
+    rng: &TrialRng,
+) -> Result<Transmitter, DtmbError> {
+    let mut stream = rng.stream(&format!("dtmb/{}/tx", tower.id));
+    let Some(t) = world
+        .transmitters
+        .iter()
+        .find(|t| t.kind == TransmitterKind::Dtmb && t.tower_spec(System::Dtmb).id == tower.id)
+    else {
+        return Ok(Transmitter::new(tx_cfg, &mut stream));
+    };
+    let (id, spec) = (&t.id, &t.spec);
+    let payload = spec.payload.as_ref().map(|p| {
+        world
+            .path
+            .parent()
+            .map(|d| d.join(p))
+            .unwrap_or_else(|| std::path::PathBuf::from(p))
+    });
+    let layer = crate::dtmb::data_layer::data_layer_from_options(
+        payload.as_deref(),
+        spec.qam.as_deref(),
+        spec.fec.as_deref(),
+        spec.interleaver,
+        spec.carriers,
+    )
+    .map_err(|e| bad("transmitter data layer", format!("transmitter {id}: {e}")))?;
+    Ok(match layer {
+        Some(l) => Transmitter::with_data_layer_from(tx_cfg, l, None, &mut stream),
+        None => Transmitter::new(tx_cfg, &mut stream),
+    })
 }

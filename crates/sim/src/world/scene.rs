@@ -354,6 +354,25 @@ pub struct TransmitterSpec {
     /// independent. Default: none.
     #[serde(default)]
     pub sfn: Option<String>,
+    /// DTMB data layer (GB 20600 transmitter, issue 25): the constellation (`"4qam-nr"`,
+    /// `"4qam"`, `"16qam"`, `"32qam"`, `"64qam"`), LDPC rate (`"0.4"`, `"0.6"`, `"0.8"`),
+    /// time-interleaver depth (240, 720), carriers (3780, 1) and the transport stream it
+    /// carries (a path relative to the world file; null packets after it, or only null
+    /// packets without it). With none of these keys the tower's bodies are random 64QAM.
+    #[serde(default)]
+    pub qam: Option<String>,
+    /// See `qam`.
+    #[serde(default)]
+    pub fec: Option<String>,
+    /// See `qam`.
+    #[serde(default)]
+    pub interleaver: Option<usize>,
+    /// See `qam`.
+    #[serde(default)]
+    pub carriers: Option<usize>,
+    /// See `qam`.
+    #[serde(default)]
+    pub payload: Option<String>,
 }
 
 /// A transmitter with its position resolved.

@@ -1,0 +1,515 @@
+//! The whole GB 20600 transmitter against an independent receiver: hybridnav records a
+//! random transport stream (`dtmb iq --payload`), and dtmb-sdr's complete receiver
+//! (`dtmb-decode`, PyPI `dtmb-sdr`, MIT; its wheel ships the compiled C++ receiver) must
+//! give it back bit-exact: its output is a prefix of the payload (no packet wrong) holding
+//! at least 90 % of the packets that can have left its de-interleaver, which are those of
+//! the frames after the interleaver delay `51·M/72` frames and before the last frame (the
+//! receiver needs the next header to equalise a frame; facts.md §8). The receiver's
+//! system-information detection (`dtmb_core_c3780_extract --system-info-index auto`) must
+//! name the transmitted profile. Every profile 3–24 (4QAM-NR, 4QAM, 16QAM, 32QAM, 64QAM;
+//! both interleaver depths) in PN420, PN595 and PN945 with C = 3780, and PN595 4QAM with C = 1.
+
+use crate::common::{hybridnav, skip, tmp_dir};
+use hybridnav::dtmb::data_layer::Profile;
+use hybridnav::dtmb::frame::CarrierMode;
+use hybridnav::dtmb::ldpc::CodeRate;
+use hybridnav::dtmb::mapping::Constellation;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// Frames decodable after the de-interleaver in every recording.
+const DECODED_FRAMES: usize = 15;
+
+/// The directory of dtmb-sdr's compiled tools, or `None` (skipped) when it is missing.
+fn dtmb_sdr_bin() -> Option<PathBuf> {
+    let ok = Command::new("dtmb-decode")
+        .arg("--help")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    let dir = Command::new("python3")
+        .args([
+            "-c",
+            "import dtmb, os; print(os.path.join(os.path.dirname(dtmb.__file__), 'bin'))",
+        ])
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| PathBuf::from(String::from_utf8_lossy(&o.stdout).trim()));
+    match dir {
+        Some(d) if ok && d.join("dtmb_core_c3780_extract").exists() => Some(d),
+        _ => {
+            skip("dtmb-sdr (pip install dtmb-sdr) is not installed: dtmb-decode not found");
+            None
+        }
+    }
+}
+
+/// A random transport stream of `packets` packets on PID 0x100 with a continuous
+/// continuity counter (the receiver marks a skipping counter as a discontinuity).
+fn random_ts(packets: usize, seed: u64) -> Vec<u8> {
+    let mut s = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
+    let mut out = Vec::with_capacity(packets * 188);
+    for k in 0..packets {
+        out.extend_from_slice(&[0x47, 0x01, 0x00, 0x10 | (k as u8 & 15)]);
+        for _ in 0..184 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            out.push((s >> 24) as u8);
+        }
+    }
+    out
+}
+
+struct Case {
+    pn: &'static str,
+    profile: Profile,
+}
+
+fn qam_name(c: Constellation) -> &'static str {
+    c.name()
+}
+
+/// Records `case`, decodes it with dtmb-decode and checks the result; `Err` says why not.
+fn check(
+    bin: &Path,
+    dir: &Path,
+    case: &Case,
+    payload: &[u8],
+    payload_path: &Path,
+) -> Result<String, String> {
+    let p = &case.profile;
+    let delay = p.interleaver_delay_frames();
+    let frames = delay + 1 + DECODED_FRAMES;
+    let base = dir.join(format!(
+        "{}-{}-{}-{}-{}",
+        case.pn,
+        qam_name(p.constellation),
+        p.rate.name(),
+        p.interleaver_m,
+        if p.carrier == CarrierMode::Single {
+            1
+        } else {
+            3780
+        }
+    ));
+    let b = base.to_str().unwrap();
+    let o = hybridnav(&[
+        "dtmb",
+        "iq",
+        "--mode",
+        case.pn,
+        "--frames",
+        &frames.to_string(),
+        "--snr-db",
+        "35",
+        "--payload",
+        payload_path.to_str().unwrap(),
+        "--qam",
+        qam_name(p.constellation),
+        "--fec",
+        p.rate.name(),
+        "--interleaver",
+        &p.interleaver_m.to_string(),
+        "--carriers",
+        if p.carrier == CarrierMode::Single {
+            "1"
+        } else {
+            "3780"
+        },
+        "--out",
+        b,
+    ]);
+    if !o.status.success() {
+        return Err(format!(
+            "dtmb iq failed: {}",
+            String::from_utf8_lossy(&o.stderr)
+        ));
+    }
+    let data = format!("{b}.sigmf-data");
+    // The annotations name the profile.
+    let meta = std::fs::read_to_string(format!("{b}.sigmf-meta")).unwrap();
+    if !meta.contains(&format!("(SI {})", p.si_index())) {
+        return Err("the SigMF annotations do not name the profile".into());
+    }
+    let out_ts = format!("{b}.ts");
+    let body_mode = if p.carrier == CarrierMode::Single {
+        "c1"
+    } else {
+        "c3780"
+    };
+    let o = Command::new("dtmb-decode")
+        .args([
+            "--input",
+            &data,
+            "--input-format",
+            "cf32",
+            "--input-rate",
+            "7560000",
+            "--pn-mode",
+            case.pn,
+            "--system-info-index",
+            &p.si_index().to_string(),
+            "--frame-body-mode",
+            body_mode,
+            "--output",
+            &out_ts,
+            "--error-policy",
+            "continue",
+            "--workers",
+            "2",
+        ])
+        .output()
+        .map_err(|e| e.to_string())?;
+    let got = std::fs::read(&out_ts).unwrap_or_default();
+    let n = got.len() / 188;
+    // Whole FEC groups of the decodable frames (32QAM and 4QAM-NR groups span two).
+    let groups = DECODED_FRAMES / p.frames_per_group();
+    let expected = (groups as f64 * p.frames_per_group() as f64 * p.packets_per_frame()) as usize;
+    if got.len() % 188 != 0 || got.len() > payload.len() || got[..] != payload[..got.len()] {
+        let first_bad = (0..n)
+            .find(|&k| got[k * 188..(k + 1) * 188] != payload[k * 188..(k + 1) * 188])
+            .unwrap_or(n);
+        return Err(format!(
+            "output is not a prefix of the payload: {n} packets, first wrong packet {first_bad} \
+             (stderr tail: {})",
+            tail(&o.stderr)
+        ));
+    }
+    if (n as f64) < 0.9 * expected as f64 {
+        return Err(format!(
+            "{n} packets decoded of {expected} that can have left the de-interleaver (stderr \
+             tail: {})",
+            tail(&o.stderr)
+        ));
+    }
+    // The receiver's system-information detection names the profile.
+    let mut extract = Command::new(bin.join("dtmb_core_c3780_extract"));
+    extract.args([
+        "--auto-sync",
+        "--sync-frames",
+        "40",
+        "--acquisition-frames",
+        "16",
+        "--max-frames",
+        "48",
+        "--pn-mode",
+        case.pn,
+        "--qam",
+        qam_name(p.constellation),
+        "--normalization",
+        "qam",
+        "--equalizer",
+        "pn",
+        "--input-format",
+        "cf32",
+        "--system-info-index",
+        "auto",
+    ]);
+    if p.carrier == CarrierMode::Single {
+        extract.args(["--frame-body-mode", "c1"]);
+    }
+    let o = extract
+        .args([data.as_str(), "/dev/null"])
+        .output()
+        .map_err(|e| e.to_string())?;
+    let log = String::from_utf8_lossy(&o.stderr).to_string() + &String::from_utf8_lossy(&o.stdout);
+    let detected = log
+        .lines()
+        .find_map(|l| l.strip_prefix("system_info_index="))
+        .map(str::trim)
+        .unwrap_or("none");
+    if detected != p.si_index().to_string() {
+        return Err(format!(
+            "SI detection named {detected}, sent {} ({})",
+            p.si_index(),
+            tail(&o.stderr)
+        ));
+    }
+    let _ = std::fs::remove_file(&data);
+    Ok(format!("{n}/{expected} packets"))
+}
+
+fn tail(b: &[u8]) -> String {
+    let s = String::from_utf8_lossy(b);
+    let lines: Vec<&str> = s.lines().collect();
+    lines[lines.len().saturating_sub(3)..].join(" | ")
+}
+
+/// The C = 3780 profiles 3–24.
+fn c3780_profiles() -> Vec<Profile> {
+    let mut v = Vec::new();
+    for c in [
+        Constellation::Qam4Nr,
+        Constellation::Qam4,
+        Constellation::Qam16,
+        Constellation::Qam32,
+        Constellation::Qam64,
+    ] {
+        for rate in CodeRate::ALL {
+            if matches!(c, Constellation::Qam32 | Constellation::Qam4Nr) && rate != CodeRate::R08 {
+                continue;
+            }
+            for m in [240, 720] {
+                v.push(Profile::new(c, rate, m, CarrierMode::Multi3780).unwrap());
+            }
+        }
+    }
+    v
+}
+
+fn run_matrix(name: &str, cases: Vec<Case>) {
+    let Some(bin) = dtmb_sdr_bin() else {
+        return;
+    };
+    let dir = tmp_dir(name);
+    let payload = random_ts(400, 25);
+    let payload_path = dir.join("payload.ts");
+    std::fs::write(&payload_path, &payload).unwrap();
+    let mut failures = Vec::new();
+    for case in &cases {
+        match check(&bin, &dir, case, &payload, &payload_path) {
+            Ok(s) => eprintln!("{} {}: {s}", case.pn, case.profile.name()),
+            Err(e) => failures.push(format!("{} {}: {e}", case.pn, case.profile.name())),
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+#[test]
+fn dtmb_ts_pn420_every_profile_decodes_bit_exact_in_dtmb_sdr() {
+    let cases = c3780_profiles()
+        .into_iter()
+        .map(|profile| Case {
+            pn: "pn420",
+            profile,
+        })
+        .collect();
+    run_matrix("ts-pn420", cases);
+}
+
+#[test]
+fn dtmb_ts_pn595_every_profile_decodes_bit_exact_in_dtmb_sdr() {
+    let mut cases: Vec<Case> = c3780_profiles()
+        .into_iter()
+        .map(|profile| Case {
+            pn: "pn595",
+            profile,
+        })
+        .collect();
+    for rate in CodeRate::ALL {
+        cases.push(Case {
+            pn: "pn595",
+            profile: Profile::new(Constellation::Qam4, rate, 240, CarrierMode::Single).unwrap(),
+        });
+    }
+    run_matrix("ts-pn595", cases);
+}
+
+#[test]
+fn dtmb_ts_pn945_every_profile_decodes_bit_exact_in_dtmb_sdr() {
+    let cases = c3780_profiles()
+        .into_iter()
+        .map(|profile| Case {
+            pn: "pn945",
+            profile,
+        })
+        .collect();
+    run_matrix("ts-pn945", cases);
+}
+
+/// A payload shorter than the recording is followed by null packets (PID 0x1FFF), never
+/// repeated: the receiver gives back the payload, then only null packets.
+#[test]
+fn dtmb_ts_a_short_payload_is_followed_by_null_packets() {
+    if dtmb_sdr_bin().is_none() {
+        return;
+    }
+    let dir = tmp_dir("ts-short");
+    let payload = random_ts(40, 7);
+    let path = dir.join("short.ts");
+    std::fs::write(&path, &payload).unwrap();
+    let base = dir.join("rec");
+    let o = hybridnav(&[
+        "dtmb",
+        "iq",
+        "--mode",
+        "pn945",
+        "--frames",
+        "190",
+        "--snr-db",
+        "35",
+        "--payload",
+        path.to_str().unwrap(),
+        "--qam",
+        "16qam",
+        "--fec",
+        "0.8",
+        "--interleaver",
+        "240",
+        "--out",
+        base.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out_ts = dir.join("out.ts");
+    let o = Command::new("dtmb-decode")
+        .args([
+            "--input",
+            &format!("{}.sigmf-data", base.display()),
+            "--input-format",
+            "cf32",
+            "--input-rate",
+            "7560000",
+            "--pn-mode",
+            "pn945",
+            "--system-info-index",
+            "15",
+            "--output",
+            out_ts.to_str().unwrap(),
+            "--error-policy",
+            "continue",
+            "--workers",
+            "2",
+        ])
+        .output()
+        .unwrap();
+    let got = std::fs::read(&out_ts).unwrap_or_default();
+    assert!(
+        got.len() > payload.len() + 10 * 188,
+        "{} bytes: {}",
+        got.len(),
+        tail(&o.stderr)
+    );
+    assert_eq!(&got[..payload.len()], &payload[..]);
+    for p in got[payload.len()..].chunks(188) {
+        assert_eq!(&p[..4], &[0x47, 0x1f, 0xff, 0x10]);
+        assert!(p[4..].iter().all(|&b| b == 0xff));
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A payload that is not 188-byte packets is refused with the byte offset, exit code 2.
+#[test]
+fn dtmb_ts_a_bad_payload_is_refused_with_its_byte_offset() {
+    let dir = tmp_dir("ts-bad");
+    let mut payload = random_ts(3, 1);
+    payload[188] = 0x48;
+    let path = dir.join("bad.ts");
+    std::fs::write(&path, &payload).unwrap();
+    let out = dir.join("rec");
+    let o = hybridnav(&[
+        "dtmb",
+        "iq",
+        "--frames",
+        "2",
+        "--snr-db",
+        "20",
+        "--payload",
+        path.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("byte offset 188") && err.contains("0x48"),
+        "{err}"
+    );
+    payload[188] = 0x47;
+    std::fs::write(&path, &payload[..300]).unwrap();
+    let o = hybridnav(&[
+        "dtmb",
+        "iq",
+        "--frames",
+        "2",
+        "--snr-db",
+        "20",
+        "--payload",
+        path.to_str().unwrap(),
+        "--qam",
+        "64qam",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("300 bytes") && err.contains("byte offset 188"),
+        "{err}"
+    );
+    assert!(!out.with_extension("sigmf-data").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A world's tower carrying a programme: the Kehui Road world's D01 with `qam = "16qam"`,
+/// `fec = "0.6"`, `interleaver = 240` and `payload = "pay.ts"` in its `[[transmitter]]`,
+/// recorded by `dtmb iq --world` from 5 s through the scene's paths at the link budget's
+/// SNR; dtmb-sdr decodes a contiguous run of the payload's packets (the recording starts
+/// inside the tower's first data frame, so the run may start a frame in), none wrong.
+#[test]
+fn dtmb_ts_a_world_tower_carries_its_payload_through_the_scene() {
+    if dtmb_sdr_bin().is_none() {
+        return;
+    }
+    let dir = tmp_dir("ts-world");
+    let payload = random_ts(400, 11);
+    std::fs::write(dir.join("pay.ts"), &payload).unwrap();
+    let text =
+        std::fs::read_to_string(crate::common::repo().join("worlds/seed000-kehui.toml")).unwrap();
+    let text = text.replace(
+        "pn_mode = \"pn945\"\n",
+        "pn_mode = \"pn945\"\nqam = \"16qam\"\nfec = \"0.6\"\ninterleaver = 240\npayload = \"pay.ts\"\n",
+    );
+    assert!(text.contains("payload = \"pay.ts\""));
+    let world = dir.join("kehui.toml");
+    std::fs::write(&world, text).unwrap();
+    let base = dir.join("rec");
+    let o = hybridnav(&[
+        "dtmb",
+        "iq",
+        "--world",
+        world.to_str().unwrap(),
+        "--from-s",
+        "5",
+        "--frames",
+        "190",
+        "--out",
+        base.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out_ts = dir.join("out.ts");
+    let o = Command::new("dtmb-decode")
+        .args([
+            "--input",
+            &format!("{}.sigmf-data", base.display()),
+            "--input-format",
+            "cf32",
+            "--input-rate",
+            "7560000",
+            "--pn-mode",
+            "pn945",
+            "--system-info-index",
+            "13",
+            "--output",
+            out_ts.to_str().unwrap(),
+            "--error-policy",
+            "continue",
+            "--workers",
+            "2",
+        ])
+        .output()
+        .unwrap();
+    let got = std::fs::read(&out_ts).unwrap_or_default();
+    let n = got.len() / 188;
+    // 190 frames less the delay (170) and the last: 19 frames of 6 packets, the first of
+    // which may precede the recording.
+    assert!(n >= 18 * 6, "{n} packets: {}", tail(&o.stderr));
+    let start = payload
+        .chunks(188)
+        .position(|p| p == &got[..188])
+        .expect("the first decoded packet is one of the payload's");
+    assert!(start <= 2 * 6, "starts at packet {start}");
+    assert_eq!(&got[..], &payload[start * 188..start * 188 + got.len()]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
