@@ -1,5 +1,7 @@
 //! The command line: clap definitions turned into validated actions in one place.
 
+mod gnss_iq;
+
 use crate::core::{EmitterId, GpsTime};
 use crate::io::atomic::write_atomic;
 use crate::layout::metrics::ClockModel;
@@ -57,6 +59,9 @@ pub enum Command {
     /// DTMB signal tools.
     #[command(subcommand)]
     Dtmb(DtmbCommand),
+    /// GNSS signal tools.
+    #[command(subcommand)]
+    Gnss(gnss_iq::GnssCommand),
     /// List the estimator presets (the papers' systems) an `[[estimator]]` can name, with
     /// the keys each one sets.
     Presets,
@@ -300,6 +305,7 @@ pub fn run(cli: Cli) -> Result<()> {
         }
         Command::Fm(FmCommand::Survey { world, out, seed }) => cmd_fm_survey(&world, &out, seed),
         Command::Export(a) => cmd_export(&a),
+        Command::Gnss(c) => gnss_iq::run(c),
         Command::Layout(a) => Ok(crate::layout::run(&a.request())?),
         Command::Presets => {
             for p in crate::world::presets::PRESETS {

@@ -1,0 +1,24 @@
+//! GNSS at signal level: the satellites of a world as baseband IQ a software receiver can
+//! acquire, track, decode and position from (`hybridnav gnss iq`).
+//!
+//! - [`ca_code`]: GPS L1 C/A Gold codes (IS-GPS-200 §3.3.2.3).
+//! - [`lnav`]: the GPS LNAV message (subframes 1–5, TLM/HOW, parity; IS-GPS-200 §20.3).
+//! - [`baseband`]: replicas, noise, AGC and quantisation; the sample formats.
+//! - [`scenario`]: a world's geometry per epoch (the measurement level's orbits, clocks,
+//!   atmosphere, Sagnac and the scene's paths) turned into replicas and streamed.
+
+pub mod baseband;
+pub mod ca_code;
+pub mod lnav;
+pub mod scenario;
+
+/// Why a recording cannot be made.
+#[derive(Debug, thiserror::Error)]
+pub enum SignalError {
+    /// A request the world cannot satisfy, named by the option at fault.
+    #[error("{what}: {reason}")]
+    InvalidRequest { what: &'static str, reason: String },
+    /// Writing an output failed.
+    #[error("{0}")]
+    Io(#[from] std::io::Error),
+}
