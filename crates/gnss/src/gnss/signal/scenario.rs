@@ -181,14 +181,31 @@ fn bad(what: &'static str, reason: String) -> SignalError {
     SignalError::InvalidRequest { what, reason }
 }
 
+/// The grid (s) on which `World::receiver_clock` records the clock's states.
+const RX_CLOCK_GRID_S: f64 = 0.1;
+
+/// The receiver clock's offset (s) for `sys` at true time `t_s`, interpolated linearly
+/// between the recorded states. [`ClockTrack::bias_s`] extrapolates each state with its
+/// own drift, so its bias steps by the random walk's increment at every grid point
+/// (≈ 10⁻¹⁰ s for a TCXO, a fifth of an L1 cycle): a measurement source never notices,
+/// but a carrier loop would see a phase jump every 0.1 s. Joining the recorded states
+/// keeps the same values on the grid and a continuous phase between them.
+fn rx_offset_s(clock: &ClockTrack, sys: System, t_s: f64) -> f64 {
+    let k = (t_s / RX_CLOCK_GRID_S).floor();
+    let t0 = k * RX_CLOCK_GRID_S;
+    // Evaluate just inside each state's interval so the floor inside the track picks it.
+    let b0 = clock.bias_s(t0 + 1e-9) + clock.isb_s(sys, t0 + 1e-9);
+    let b1 =
+        clock.bias_s(t0 + RX_CLOCK_GRID_S + 1e-9) + clock.isb_s(sys, t0 + RX_CLOCK_GRID_S + 1e-9);
+    b0 + (b1 - b0) * ((t_s - t0) / RX_CLOCK_GRID_S)
+}
+
 /// The true simulation time (ns) when the receiver clock of `sys` reads `t_rx_s`.
 fn true_time_ns(clock: &ClockTrack, sys: System, t_rx_s: f64) -> i64 {
     // One fixed-point step is exact to far below a nanosecond: the bias changes by
     // drift·bias ≈ 10⁻¹² s between the two evaluations.
-    let b = clock.bias_s(t_rx_s) + clock.isb_s(sys, t_rx_s);
-    let t = t_rx_s - b;
-    let b = clock.bias_s(t) + clock.isb_s(sys, t);
-    ((t_rx_s - b) * 1e9).round() as i64
+    let t = t_rx_s - rx_offset_s(clock, sys, t_rx_s);
+    ((t_rx_s - rx_offset_s(clock, sys, t)) * 1e9).round() as i64
 }
 
 /// The per-trial draws of the measurement model: (tropo factor, per-satellite (URE,
@@ -499,7 +516,7 @@ pub fn record(
         let sim = SimTime(t0_ns + e * SEGMENT_NS);
         let truth = truth_at(w.frame, w.start, w.trajectory, sim);
         let t_s = sim.seconds();
-        let rx_clock_s = t_s + w.clock.bias_s(t_s) + w.clock.isb_s(sys, t_s);
+        let rx_clock_s = t_s + rx_offset_s(w.clock, sys, t_s);
         for ch in channels.iter_mut() {
             let s = sat_epoch(
                 w,
