@@ -60,7 +60,7 @@ use crate::gnss::rinex_nav::NavData;
 use crate::gnss::signal::baseband::{
     add_noise, add_replica, CarrierTable, NavSymbols, Quantiser, Replica, SampleFormat,
 };
-use crate::gnss::signal::{ca_code, lnav, SignalError};
+use crate::gnss::signal::{b1i, ca_code, d1d2, lnav, SignalError};
 use crate::measurement::Truth;
 use crate::motion::Trajectory;
 use crate::propagation::{Emitter, LinkParams, LinkPaths, PathKind, Polarisation, Scene};
@@ -166,7 +166,7 @@ struct Channel {
 pub fn ranging_code(signal: Signal, prn: u16) -> Option<Vec<u8>> {
     match signal {
         Signal::GpsL1Ca => ca_code::ca_code_bits(prn).map(|c| c.to_vec()),
-        Signal::BdsB1i => None,
+        Signal::BdsB1i => b1i::b1i_code_bits(prn),
     }
 }
 
@@ -290,6 +290,8 @@ pub fn validate(w: &IqWorld<'_>, req: &IqRequest) -> Result<Vec<EmitterId>, Sign
         .satellites()
         .into_iter()
         .filter(|s| s.system == sys && ranging_code(req.signal, s.number).is_some())
+        // The GEO satellites' D2 message is not generated (see `d1d2`).
+        .filter(|s| !s.is_bds_geo())
         .collect();
     let t_start = w.start.add_seconds(req.from_s);
     let t_end = w.start.add_seconds(req.from_s + req.duration_s);
@@ -478,7 +480,7 @@ pub fn record(
                     sat,
                     w.leap_seconds,
                 )),
-                Signal::BdsB1i => return None,
+                Signal::BdsB1i => Box::new(d1d2::BdsNavStream::new(Arc::clone(&w.nav), sat)?),
             };
             Some(Channel {
                 sat,
