@@ -27,6 +27,8 @@ use crate::gnss::signal::baseband::NavSymbols;
 use std::sync::Arc;
 
 /// π of the BDS ICD.
+// The ICD's rounded value on purpose: receivers convert with it, so must the encoder.
+#[allow(clippy::approx_constant)]
 const BDS_PI: f64 = 3.141_592_653_589_8;
 /// The preamble.
 const PREAMBLE: u64 = 0b111_0001_0010;

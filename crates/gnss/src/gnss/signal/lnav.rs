@@ -31,6 +31,8 @@ use crate::gnss::atmosphere::Klobuchar;
 use crate::gnss::ephemeris::Ephemeris;
 
 /// π as IS-GPS-200 defines it for converting semicircles (§20.3.3.4.3).
+// The ICD's rounded value on purpose: receivers convert with it, so must the encoder.
+#[allow(clippy::approx_constant)]
 pub const GPS_PI: f64 = 3.141_592_653_589_8;
 /// Bits per subframe.
 pub const SUBFRAME_BITS: usize = 300;
@@ -244,6 +246,57 @@ fn subframe_words(c: &LnavContent<'_>, frame_start: GpsTime, id: u32, start_tow:
     w
 }
 
+/// A satellite's LNAV symbols over time: the frame in force is rebuilt from the navigation
+/// data whenever a code period falls in a new 30 s frame. One bit spans 20 code periods;
+/// L1 C/A has no overlay code.
+pub struct LnavStream {
+    nav: std::sync::Arc<crate::gnss::rinex_nav::NavData>,
+    sat: crate::core::EmitterId,
+    utc: UtcParams,
+    frame: i64,
+    bits: [u8; FRAME_BITS],
+}
+
+impl LnavStream {
+    /// The stream of `sat` from `nav` (its Klobuchar and leap seconds go in subframe 4).
+    pub fn new(
+        nav: std::sync::Arc<crate::gnss::rinex_nav::NavData>,
+        sat: crate::core::EmitterId,
+        leap_seconds: i32,
+    ) -> Self {
+        Self {
+            nav,
+            sat,
+            utc: UtcParams { leap_seconds },
+            frame: i64::MIN,
+            bits: [0; FRAME_BITS],
+        }
+    }
+}
+
+impl crate::gnss::signal::baseband::NavSymbols for LnavStream {
+    fn symbol(&mut self, ms: i64) -> u8 {
+        let bit = ms.div_euclid(20);
+        let frame = bit.div_euclid(FRAME_BITS as i64);
+        if frame != self.frame {
+            self.frame = frame;
+            let start = GpsTime::from_ns(frame * 30_000_000_000);
+            match self.nav.select(self.sat, start) {
+                Some(eph) => {
+                    let content = LnavContent {
+                        eph,
+                        klobuchar: self.nav.klobuchar,
+                        utc: self.utc,
+                    };
+                    frame_bits(&content, start, &mut self.bits);
+                }
+                None => self.bits = [0; FRAME_BITS],
+            }
+        }
+        self.bits[bit.rem_euclid(FRAME_BITS as i64) as usize]
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -337,56 +390,5 @@ mod tests {
         assert_eq!(ura_index(2.0), 0);
         assert_eq!(ura_index(2.8), 1);
         assert_eq!(ura_index(10000.0), 15);
-    }
-}
-
-/// A satellite's LNAV symbols over time: the frame in force is rebuilt from the navigation
-/// data whenever a code period falls in a new 30 s frame. One bit spans 20 code periods;
-/// L1 C/A has no overlay code.
-pub struct LnavStream {
-    nav: std::sync::Arc<crate::gnss::rinex_nav::NavData>,
-    sat: crate::core::EmitterId,
-    utc: UtcParams,
-    frame: i64,
-    bits: [u8; FRAME_BITS],
-}
-
-impl LnavStream {
-    /// The stream of `sat` from `nav` (its Klobuchar and leap seconds go in subframe 4).
-    pub fn new(
-        nav: std::sync::Arc<crate::gnss::rinex_nav::NavData>,
-        sat: crate::core::EmitterId,
-        leap_seconds: i32,
-    ) -> Self {
-        Self {
-            nav,
-            sat,
-            utc: UtcParams { leap_seconds },
-            frame: i64::MIN,
-            bits: [0; FRAME_BITS],
-        }
-    }
-}
-
-impl crate::gnss::signal::baseband::NavSymbols for LnavStream {
-    fn symbol(&mut self, ms: i64) -> u8 {
-        let bit = ms.div_euclid(20);
-        let frame = bit.div_euclid(FRAME_BITS as i64);
-        if frame != self.frame {
-            self.frame = frame;
-            let start = GpsTime::from_ns(frame * 30_000_000_000);
-            match self.nav.select(self.sat, start) {
-                Some(eph) => {
-                    let content = LnavContent {
-                        eph,
-                        klobuchar: self.nav.klobuchar,
-                        utc: self.utc,
-                    };
-                    frame_bits(&content, start, &mut self.bits);
-                }
-                None => self.bits = [0; FRAME_BITS],
-            }
-        }
-        self.bits[bit.rem_euclid(FRAME_BITS as i64) as usize]
     }
 }
