@@ -297,4 +297,46 @@ mod tests {
         assert!((rms - 32.0).abs() < 1.0, "{rms}");
         assert_eq!(bytes.len(), 2 * x.len());
     }
+
+    #[test]
+    fn a_delayed_replica_correlates_at_its_delay_with_its_amplitude() {
+        // A direct path and a reflection 0.5 chip later at a third of the amplitude, as
+        // `scenario` adds them: the correlation with the prompt code peaks at lag 0 and
+        // at the reflection's delay with the ratio of their amplitudes.
+        let code = crate::gnss::signal::ca_code::ca_code_bits(7)
+            .expect("PRN 7")
+            .to_vec();
+        let fs = 4.092e6; // 4 samples per chip
+        let rate = 1.023e6 / fs;
+        let mut out = vec![Complex32::default(); 4092 * 4];
+        let table = CarrierTable::default();
+        for (delay_chips, amp) in [(0.0, 0.3f32), (0.5, 0.1f32)] {
+            let r = Replica {
+                amplitude: amp,
+                ms: 0,
+                chip: (1023.0 - delay_chips) % 1023.0,
+                chips_per_sample: rate,
+                phase_cycles: 0.0,
+                cycles_per_sample: 0.0,
+            };
+            add_replica(&mut out, &r, &code, &mut Ones, &table);
+        }
+        // Correlate with the prompt replica at lags of whole samples (¼ chip).
+        let corr = |lag: usize| -> f64 {
+            out.iter()
+                .enumerate()
+                .map(|(n, s)| {
+                    let chip = ((n + 4092 * 4 - lag) as f64 * rate) as usize % 1023;
+                    f64::from(s.re) * (1.0 - 2.0 * f64::from(code[chip]))
+                })
+                .sum::<f64>()
+                / out.len() as f64
+        };
+        // At lag 0 the direct path plus half of the reflection's triangle (0.5 chip off).
+        assert!((corr(0) - (0.3 + 0.1 * 0.5)).abs() < 0.01, "{}", corr(0));
+        // At the reflection's delay (2 samples) the reflection plus half the direct path's.
+        assert!((corr(2) - (0.1 + 0.3 * 0.5)).abs() < 0.01, "{}", corr(2));
+        // Beyond 1.5 chips both have gone.
+        assert!(corr(8).abs() < 0.01, "{}", corr(8));
+    }
 }
