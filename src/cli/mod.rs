@@ -1,6 +1,7 @@
 //! The command line: clap definitions turned into validated actions in one place.
 
 mod dtmb;
+mod gnss_iq;
 
 use crate::core::{EmitterId, GpsTime};
 use crate::io::atomic::write_atomic;
@@ -65,6 +66,9 @@ pub enum Command {
     /// DTMB signal tools.
     #[command(subcommand)]
     Dtmb(DtmbCommand),
+    /// GNSS signal tools.
+    #[command(subcommand)]
+    Gnss(gnss_iq::GnssCommand),
     /// List the estimator presets (the papers' systems) an `[[estimator]]` can name, with
     /// the keys each one sets.
     Presets,
@@ -354,6 +358,7 @@ pub fn run(cli: Cli) -> Result<()> {
         }
         Command::Fm(FmCommand::Survey { world, out, seed }) => cmd_fm_survey(&world, &out, seed),
         Command::Export(a) => cmd_export(&a),
+        Command::Gnss(c) => gnss_iq::run(c),
         Command::Layout(a) => Ok(crate::layout::run(&a.request())?),
         Command::Reproduce(a) => cmd_reproduce(&a),
         Command::Presets => {

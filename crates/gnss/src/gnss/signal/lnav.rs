@@ -1,0 +1,394 @@
+//! The GPS legacy navigation message (LNAV) on L1 C/A, IS-GPS-200 §20.3.
+//!
+//! A frame is 1500 bits at 50 bit/s (30 s): five 300-bit subframes of ten 30-bit words.
+//! Every word carries 24 data bits and 6 parity bits (IS-GPS-200 Table 20-XIV):
+//!
+//! ```text
+//! D_i = d_i ⊕ D30*                       (i = 1..24; * marks the previous word's bits)
+//! D25 = D29* ⊕ d1⊕d2⊕d3⊕d5⊕d6⊕d10⊕d11⊕d12⊕d13⊕d14⊕d17⊕d18⊕d20⊕d23
+//! D26 = D30* ⊕ d2⊕d3⊕d4⊕d6⊕d7⊕d11⊕d12⊕d13⊕d14⊕d15⊕d18⊕d19⊕d21⊕d24
+//! D27 = D29* ⊕ d1⊕d3⊕d4⊕d5⊕d7⊕d8⊕d12⊕d13⊕d14⊕d15⊕d16⊕d19⊕d20⊕d22
+//! D28 = D30* ⊕ d2⊕d4⊕d5⊕d6⊕d8⊕d9⊕d13⊕d14⊕d15⊕d16⊕d17⊕d20⊕d21⊕d23
+//! D29 = D30* ⊕ d1⊕d3⊕d5⊕d6⊕d7⊕d9⊕d10⊕d14⊕d15⊕d16⊕d17⊕d18⊕d21⊕d22⊕d24
+//! D30 = D29* ⊕ d3⊕d5⊕d6⊕d8⊕d9⊕d10⊕d11⊕d13⊕d15⊕d19⊕d22⊕d23⊕d24
+//! ```
+//!
+//! Words 2 (HOW) and 10 end with two non-information bits chosen so that D29 = D30 = 0
+//! (§20.3.5.2), so every subframe starts with D29* = D30* = 0 and its TLM preamble is sent
+//! upright. Word 1 (TLM) holds the preamble 10001011; word 2 (HOW) the 17-bit truncated
+//! TOW count of the *next* subframe's start, the alert and anti-spoof flags and the
+//! subframe ID. A frame starts at a GPS time of week that is a multiple of 30 s, so
+//! subframe ID = (TOW/6 mod 5) + 1.
+//!
+//! Subframes 1–3 carry the clock and ephemeris (Figure 20-1, Table 20-III), with the
+//! scale factors below; angles go out in semicircles (π = 3.1415926535898, the ICD's
+//! value). Subframe 4 always carries page 18 (SV ID 56: Klobuchar α/β and the UTC
+//! parameters), and subframe 5 a dummy page (data ID 01, SV ID 0): hybridnav broadcasts no
+//! almanac, which a receiver needs only for a cold start's search, not for a fix.
+
+use crate::core::GpsTime;
+use crate::gnss::atmosphere::Klobuchar;
+use crate::gnss::ephemeris::Ephemeris;
+
+/// π as IS-GPS-200 defines it for converting semicircles (§20.3.3.4.3).
+// The ICD's rounded value on purpose: receivers convert with it, so must the encoder.
+#[allow(clippy::approx_constant)]
+pub const GPS_PI: f64 = 3.141_592_653_589_8;
+/// Bits per subframe.
+pub const SUBFRAME_BITS: usize = 300;
+/// Bits per frame (5 subframes, 30 s).
+pub const FRAME_BITS: usize = 1500;
+/// The TLM preamble.
+const PREAMBLE: u32 = 0b1000_1011;
+
+/// The UTC parameters of subframe 4 page 18 (IS-GPS-200 §20.3.3.5.1.6).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UtcParams {
+    /// GPST − UTC leap seconds ΔtLS (and ΔtLSF: no leap second is announced).
+    pub leap_seconds: i32,
+}
+
+/// Everything one satellite's frame carries besides the time.
+#[derive(Clone, Debug)]
+pub struct LnavContent<'a> {
+    pub eph: &'a Ephemeris,
+    pub klobuchar: Option<Klobuchar>,
+    pub utc: UtcParams,
+}
+
+/// A subframe being filled: ten words of 24 data bits (bit 1 is the word's MSB).
+struct Words([u32; 10]);
+
+impl Words {
+    fn new() -> Self {
+        Self([0; 10])
+    }
+
+    /// Puts the `width` low bits of `value` at subframe bit `first` (1-based, IS-GPS-200
+    /// numbering, parity bits included); a field may span two words.
+    fn put(&mut self, first: usize, width: usize, value: u64) {
+        for k in 0..width {
+            let bit = (value >> (width - 1 - k)) & 1;
+            let pos = first + k - 1; // 0-based subframe bit
+            let (w, b) = (pos / 30, pos % 30);
+            debug_assert!(b < 24, "field over parity bits at {first}+{k}");
+            if bit == 1 {
+                self.0[w] |= 1 << (23 - b);
+            }
+        }
+    }
+
+    /// Puts a two's-complement field: `x / scale` rounded.
+    fn put_signed(&mut self, first: usize, width: usize, x: f64, scale: f64) {
+        let v = (x / scale).round() as i64;
+        self.put(first, width, (v as u64) & ((1u64 << width) - 1));
+    }
+
+    /// Puts an unsigned field: `x / scale` rounded.
+    fn put_unsigned(&mut self, first: usize, width: usize, x: f64, scale: f64) {
+        let v = (x / scale).round().max(0.0) as u64;
+        self.put(first, width, v & ((1u64 << width) - 1));
+    }
+
+    /// A 32-bit field split as 8 MSBs ending word `w` and 24 LSBs filling word `w + 1`.
+    fn put_split32(&mut self, msb_first: usize, x: f64, scale: f64, signed: bool) {
+        let v = (x / scale).round();
+        let raw = if signed {
+            (v as i64 as u64) & 0xffff_ffff
+        } else {
+            (v.max(0.0) as u64) & 0xffff_ffff
+        };
+        self.put(msb_first, 8, raw >> 24);
+        self.put(msb_first + 30 - 16, 24, raw & 0x00ff_ffff);
+    }
+}
+
+/// Parity bits D25..D30 of 24 data bits `d` (d1 the MSB) after the previous word's D29*,
+/// D30* (IS-GPS-200 Table 20-XIV).
+pub fn parity(d: u32, d29s: u32, d30s: u32) -> u32 {
+    let bit = |i: u32| (d >> (24 - i)) & 1;
+    let x = |idx: &[u32]| idx.iter().fold(0, |a, &i| a ^ bit(i));
+    let p25 = d29s ^ x(&[1, 2, 3, 5, 6, 10, 11, 12, 13, 14, 17, 18, 20, 23]);
+    let p26 = d30s ^ x(&[2, 3, 4, 6, 7, 11, 12, 13, 14, 15, 18, 19, 21, 24]);
+    let p27 = d29s ^ x(&[1, 3, 4, 5, 7, 8, 12, 13, 14, 15, 16, 19, 20, 22]);
+    let p28 = d30s ^ x(&[2, 4, 5, 6, 8, 9, 13, 14, 15, 16, 17, 20, 21, 23]);
+    let p29 = d30s ^ x(&[1, 3, 5, 6, 7, 9, 10, 14, 15, 16, 17, 18, 21, 22, 24]);
+    let p30 = d29s ^ x(&[3, 5, 6, 8, 9, 10, 11, 13, 15, 19, 22, 23, 24]);
+    (p25 << 5) | (p26 << 4) | (p27 << 3) | (p28 << 2) | (p29 << 1) | p30
+}
+
+/// Encodes ten data words into 300 transmitted bits (0/1), solving the last two data bits
+/// of words 2 and 10 so that their D29 = D30 = 0.
+fn encode(words: &Words, out: &mut [u8]) {
+    let (mut d29s, mut d30s) = (0u32, 0u32);
+    for (w, &data) in words.0.iter().enumerate() {
+        let mut d = data;
+        if w == 1 || w == 9 {
+            // Try the four values of d23 d24 for the one that zeroes D29 and D30.
+            d &= !0b11;
+            if let Some(t) = (0..4u32).find(|&t| parity(d | t, d29s, d30s) & 0b11 == 0) {
+                d |= t;
+            }
+        }
+        let p = parity(d, d29s, d30s);
+        let sent = if d30s == 1 { !d & 0x00ff_ffff } else { d };
+        let word = (sent << 6) | p;
+        for k in 0..30 {
+            out[w * 30 + k] = ((word >> (29 - k)) & 1) as u8;
+        }
+        d29s = (p >> 1) & 1;
+        d30s = p & 1;
+    }
+}
+
+/// The URA index (0–15) of a user range accuracy in metres (IS-GPS-200 §20.3.3.3.1.3).
+pub fn ura_index(ura_m: f64) -> u64 {
+    const BOUNDS: [f64; 15] = [
+        2.4, 3.4, 4.85, 6.85, 9.65, 13.65, 24.0, 48.0, 96.0, 192.0, 384.0, 768.0, 1536.0, 3072.0,
+        6144.0,
+    ];
+    BOUNDS.iter().position(|&b| ura_m <= b).unwrap_or(15) as u64
+}
+
+/// The 1500 bits (0/1) of the frame that starts at `frame_start` (a GPS time of week that
+/// is a multiple of 30 s).
+pub fn frame_bits(content: &LnavContent<'_>, frame_start: GpsTime, out: &mut [u8; FRAME_BITS]) {
+    let tow0 = frame_start.tow_s().round() as i64;
+    for sf in 0..5 {
+        let start_tow = tow0 + 6 * sf as i64;
+        let words = subframe_words(content, frame_start, sf as u32 + 1, start_tow);
+        encode(
+            &words,
+            &mut out[sf * SUBFRAME_BITS..(sf + 1) * SUBFRAME_BITS],
+        );
+    }
+}
+
+fn subframe_words(c: &LnavContent<'_>, frame_start: GpsTime, id: u32, start_tow: i64) -> Words {
+    let e = c.eph;
+    let mut w = Words::new();
+    w.put(1, 8, u64::from(PREAMBLE));
+    // HOW: TOW count of the next subframe (wrapping at the end of the week).
+    let next = ((start_tow + 6) / 6).rem_euclid(100_800);
+    w.put(31, 17, next as u64);
+    w.put(50, 3, u64::from(id));
+    let sc = GPS_PI;
+    match id {
+        1 => {
+            w.put(61, 10, (frame_start.week().rem_euclid(1024)) as u64);
+            // Code on L2: 01 = P code on; URA; health; IODC (10 bits).
+            w.put(71, 2, 1);
+            w.put(73, 4, ura_index(e.ura_m));
+            w.put(77, 6, u64::from(e.health) & 0x3f);
+            let iodc = u64::from(e.iodc) & 0x3ff;
+            w.put(83, 2, iodc >> 8);
+            w.put_signed(197, 8, e.tgd_s, 2f64.powi(-31));
+            w.put(211, 8, iodc & 0xff);
+            w.put_unsigned(219, 16, e.toc.tow_s(), 16.0);
+            w.put_signed(241, 8, e.af2, 2f64.powi(-55));
+            w.put_signed(249, 16, e.af1, 2f64.powi(-43));
+            w.put_signed(271, 22, e.af0, 2f64.powi(-31));
+        }
+        2 => {
+            w.put(61, 8, u64::from(e.iode) & 0xff);
+            w.put_signed(69, 16, e.crs, 2f64.powi(-5));
+            w.put_signed(91, 16, e.delta_n / sc, 2f64.powi(-43));
+            w.put_split32(107, e.m0 / sc, 2f64.powi(-31), true);
+            w.put_signed(151, 16, e.cuc, 2f64.powi(-29));
+            w.put_split32(167, e.e, 2f64.powi(-33), false);
+            w.put_signed(211, 16, e.cus, 2f64.powi(-29));
+            w.put_split32(227, e.sqrt_a, 2f64.powi(-19), false);
+            w.put_unsigned(271, 16, e.toe.tow_s(), 16.0);
+            // Fit interval flag: 0 (4 hours); AODO 0.
+        }
+        3 => {
+            w.put_signed(61, 16, e.cic, 2f64.powi(-29));
+            w.put_split32(77, e.omega0 / sc, 2f64.powi(-31), true);
+            w.put_signed(121, 16, e.cis, 2f64.powi(-29));
+            w.put_split32(137, e.i0 / sc, 2f64.powi(-31), true);
+            w.put_signed(181, 16, e.crc, 2f64.powi(-5));
+            w.put_split32(197, e.omega / sc, 2f64.powi(-31), true);
+            w.put_signed(241, 24, e.omega_dot / sc, 2f64.powi(-43));
+            w.put(271, 8, u64::from(e.iode) & 0xff);
+            w.put_signed(279, 14, e.idot / sc, 2f64.powi(-43));
+        }
+        4 => {
+            // Page 18: data ID 01, SV ID 56.
+            w.put(61, 2, 1);
+            w.put(63, 6, 56);
+            let k = c.klobuchar.unwrap_or(Klobuchar {
+                alpha: [0.0; 4],
+                beta: [0.0; 4],
+            });
+            w.put_signed(69, 8, k.alpha[0], 2f64.powi(-30));
+            w.put_signed(77, 8, k.alpha[1], 2f64.powi(-27));
+            w.put_signed(91, 8, k.alpha[2], 2f64.powi(-24));
+            w.put_signed(99, 8, k.alpha[3], 2f64.powi(-24));
+            w.put_signed(107, 8, k.beta[0], 2f64.powi(11));
+            w.put_signed(121, 8, k.beta[1], 2f64.powi(14));
+            w.put_signed(129, 8, k.beta[2], 2f64.powi(16));
+            w.put_signed(137, 8, k.beta[3], 2f64.powi(16));
+            // A1 = A0 = 0 (GPS time steered to UTC exactly), tot and WNt at the frame's
+            // week, ΔtLS = ΔtLSF, WNLSF and DN at the frame's week (no leap announced).
+            let wn8 = (frame_start.week().rem_euclid(256)) as u64;
+            w.put(219, 8, 0);
+            w.put(227, 8, wn8);
+            w.put(241, 8, (c.utc.leap_seconds as i64 as u64) & 0xff);
+            w.put(249, 8, wn8);
+            w.put(257, 8, 7);
+            w.put(271, 8, (c.utc.leap_seconds as i64 as u64) & 0xff);
+        }
+        _ => {
+            // Dummy page: data ID 01, SV ID 0.
+            w.put(61, 2, 1);
+        }
+    }
+    w
+}
+
+/// A satellite's LNAV symbols over time: the frame in force is rebuilt from the navigation
+/// data whenever a code period falls in a new 30 s frame. One bit spans 20 code periods;
+/// L1 C/A has no overlay code.
+pub struct LnavStream {
+    nav: std::sync::Arc<crate::gnss::rinex_nav::NavData>,
+    sat: crate::core::EmitterId,
+    utc: UtcParams,
+    frame: i64,
+    bits: [u8; FRAME_BITS],
+}
+
+impl LnavStream {
+    /// The stream of `sat` from `nav` (its Klobuchar and leap seconds go in subframe 4).
+    pub fn new(
+        nav: std::sync::Arc<crate::gnss::rinex_nav::NavData>,
+        sat: crate::core::EmitterId,
+        leap_seconds: i32,
+    ) -> Self {
+        Self {
+            nav,
+            sat,
+            utc: UtcParams { leap_seconds },
+            frame: i64::MIN,
+            bits: [0; FRAME_BITS],
+        }
+    }
+}
+
+impl crate::gnss::signal::baseband::NavSymbols for LnavStream {
+    fn symbol(&mut self, ms: i64) -> u8 {
+        let bit = ms.div_euclid(20);
+        let frame = bit.div_euclid(FRAME_BITS as i64);
+        if frame != self.frame {
+            self.frame = frame;
+            let start = GpsTime::from_ns(frame * 30_000_000_000);
+            match self.nav.select(self.sat, start) {
+                Some(eph) => {
+                    let content = LnavContent {
+                        eph,
+                        klobuchar: self.nav.klobuchar,
+                        utc: self.utc,
+                    };
+                    frame_bits(&content, start, &mut self.bits);
+                }
+                None => self.bits = [0; FRAME_BITS],
+            }
+        }
+        self.bits[bit.rem_euclid(FRAME_BITS as i64) as usize]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gnss::ephemeris::tests::g02_2010;
+
+    /// Reads `width` bits at subframe bit `first` (1-based) from decoded data bits.
+    fn field(sf: &[u8], first: usize, width: usize) -> u64 {
+        (0..width).fold(0, |a, k| (a << 1) | u64::from(sf[first - 1 + k]))
+    }
+
+    /// Undoes the D30* inversion and checks every word's parity like a receiver.
+    fn decode_subframe(bits: &[u8]) -> Vec<u8> {
+        let mut out = bits.to_vec();
+        let (mut d29s, mut d30s) = (0u32, 0u32);
+        for w in 0..10 {
+            let word: u32 = bits[w * 30..w * 30 + 30]
+                .iter()
+                .fold(0, |a, &b| (a << 1) | u32::from(b));
+            let mut d = word >> 6;
+            if d30s == 1 {
+                d = !d & 0x00ff_ffff;
+            }
+            assert_eq!(
+                parity(d, d29s, d30s),
+                word & 0x3f,
+                "parity of word {}",
+                w + 1
+            );
+            for k in 0..24 {
+                out[w * 30 + k] = ((d >> (23 - k)) & 1) as u8;
+            }
+            d29s = (word >> 1) & 1;
+            d30s = word & 1;
+        }
+        out
+    }
+
+    #[test]
+    fn frame_decodes_back_to_the_ephemeris() {
+        let eph = g02_2010();
+        let content = LnavContent {
+            eph: &eph,
+            klobuchar: Some(Klobuchar {
+                alpha: [0.1118e-07, -0.7451e-08, -0.5961e-07, 0.1192e-06],
+                beta: [0.1167e+06, -0.2294e+06, -0.1311e+06, 0.1049e+07],
+            }),
+            utc: UtcParams { leap_seconds: 15 },
+        };
+        let start = GpsTime::from_week_tow(1590, 345_600.0);
+        let mut bits = [0u8; FRAME_BITS];
+        frame_bits(&content, start, &mut bits);
+        let sfs: Vec<Vec<u8>> = bits.chunks(SUBFRAME_BITS).map(decode_subframe).collect();
+        for (i, sf) in sfs.iter().enumerate() {
+            assert_eq!(field(sf, 1, 8), 0x8b);
+            // TOW count of the next subframe; subframe IDs 1..5.
+            assert_eq!(field(sf, 31, 17), (345_600 + 6 * (i as u64 + 1)) / 6);
+            assert_eq!(field(sf, 50, 3), i as u64 + 1);
+            // D29 = D30 = 0 at the end of words 2 and 10.
+            assert_eq!(bits[i * 300 + 58..i * 300 + 60], [0, 0]);
+            assert_eq!(bits[i * 300 + 298..i * 300 + 300], [0, 0]);
+        }
+        let signed = |v: u64, w: usize| -> f64 {
+            let s = (v << (64 - w)) as i64 >> (64 - w);
+            s as f64
+        };
+        assert_eq!(field(&sfs[0], 61, 10), 1590 % 1024);
+        let af0 = signed(field(&sfs[0], 271, 22), 22) * 2f64.powi(-31);
+        assert!((af0 - eph.af0).abs() <= 2f64.powi(-32));
+        let toc = field(&sfs[0], 219, 16) as f64 * 16.0;
+        assert_eq!(toc, 345_600.0);
+        let m0 = (field(&sfs[1], 107, 8) << 24 | field(&sfs[1], 121, 24)) as u32 as i32;
+        assert!((f64::from(m0) * 2f64.powi(-31) * GPS_PI - eph.m0).abs() < 1e-9);
+        let sqrt_a =
+            (field(&sfs[1], 227, 8) << 24 | field(&sfs[1], 241, 24)) as f64 * 2f64.powi(-19);
+        assert!((sqrt_a - eph.sqrt_a).abs() < 2f64.powi(-19));
+        let ecc = (field(&sfs[1], 167, 8) << 24 | field(&sfs[1], 181, 24)) as f64 * 2f64.powi(-33);
+        assert!((ecc - eph.e).abs() < 2f64.powi(-33));
+        let omega = (field(&sfs[2], 197, 8) << 24 | field(&sfs[2], 211, 24)) as u32 as i32;
+        assert!((f64::from(omega) * 2f64.powi(-31) * GPS_PI - eph.omega).abs() < 1e-9);
+        let odot = signed(field(&sfs[2], 241, 24), 24) * 2f64.powi(-43) * GPS_PI;
+        assert!((odot - eph.omega_dot).abs() < 1e-12 * GPS_PI);
+        assert_eq!(field(&sfs[1], 61, 8), u64::from(eph.iode));
+        assert_eq!(field(&sfs[2], 271, 8), u64::from(eph.iode));
+        assert_eq!(field(&sfs[0], 211, 8), u64::from(eph.iodc & 0xff));
+        assert_eq!(field(&sfs[3], 63, 6), 56);
+        assert_eq!(field(&sfs[3], 241, 8), 15);
+    }
+
+    #[test]
+    fn ura_table() {
+        assert_eq!(ura_index(2.0), 0);
+        assert_eq!(ura_index(2.8), 1);
+        assert_eq!(ura_index(10000.0), 15);
+    }
+}

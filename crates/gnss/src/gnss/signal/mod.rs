@@ -1,0 +1,28 @@
+//! GNSS at signal level: the satellites of a world as baseband IQ a software receiver can
+//! acquire, track, decode and position from (`hybridnav gnss iq`).
+//!
+//! - [`ca_code`]: GPS L1 C/A Gold codes (IS-GPS-200 §3.3.2.3).
+//! - [`lnav`]: the GPS LNAV message (subframes 1–5, TLM/HOW, parity; IS-GPS-200 §20.3).
+//! - [`b1i`]: BeiDou B1I ranging codes; [`d1d2`]: the D1 message with its NH code, BCH(15,11)
+//!   and interleaving (MEO/IGSO; GEO satellites, whose D2 is not generated, are left out).
+//! - [`baseband`]: replicas, noise, AGC and quantisation; the sample formats.
+//! - [`scenario`]: a world's geometry per epoch (the measurement level's orbits, clocks,
+//!   atmosphere, Sagnac and the scene's paths) turned into replicas and streamed.
+
+pub mod b1i;
+pub mod baseband;
+pub mod ca_code;
+pub mod d1d2;
+pub mod lnav;
+pub mod scenario;
+
+/// Why a recording cannot be made.
+#[derive(Debug, thiserror::Error)]
+pub enum SignalError {
+    /// A request the world cannot satisfy, named by the option at fault.
+    #[error("{what}: {reason}")]
+    InvalidRequest { what: &'static str, reason: String },
+    /// Writing an output failed.
+    #[error("{0}")]
+    Io(#[from] std::io::Error),
+}
