@@ -78,6 +78,9 @@ pub struct World {
     pub nav: Arc<NavData>,
     /// Where the navigation data came from.
     pub nav_source: String,
+    /// Things a user should know that do not stop the world from running (dropped
+    /// navigation records, implausible values); `check` and `run` print them.
+    pub warnings: Vec<String>,
     /// Scenario length.
     pub duration_s: f64,
     /// Shielding windows with their satellites parsed.
@@ -354,6 +357,7 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
         hash: fnv_hex(text.as_bytes()),
         start,
         frame,
+        warnings: nav.dropped.iter().map(ToString::to_string).collect(),
         nav: Arc::new(nav),
         nav_source,
         duration_s,
@@ -455,39 +459,54 @@ fn check_transmitters(
     Ok(out)
 }
 
+/// The embedded navigation files, by the name worlds and commands use for them.
+pub const BUILTIN_NAV: &[(&str, &str)] = &[(BUILTIN_EPHEMERIS_NAME, BUILTIN_EPHEMERIS)];
+
+/// Reads a navigation source as worlds and commands name it: `builtin:NAME` for an
+/// embedded file ([`BUILTIN_NAV`]), otherwise a RINEX navigation file path, relative to
+/// `base_dir`. Returns the data and how to name its source in messages.
+///
+/// # Errors
+/// An unknown `builtin:` name (the message lists the known ones), a missing file, or the
+/// reader's [`crate::gnss::rinex_nav::RinexError`] text, each said once.
+pub fn read_nav_source(spec: &str, base_dir: &Path) -> Result<(NavData, String), String> {
+    if let Some(name) = spec.strip_prefix("builtin:") {
+        let Some((full, text)) = BUILTIN_NAV
+            .iter()
+            .find(|(n, _)| n.strip_prefix("builtin:") == Some(name))
+        else {
+            let known: Vec<&str> = BUILTIN_NAV.iter().map(|(n, _)| *n).collect();
+            return Err(format!(
+                "unknown embedded navigation data \"{spec}\": expected one of {}",
+                known.join(", ")
+            ));
+        };
+        let nav = parse_nav(text, full)
+            .map_err(|e| format!("the embedded ephemeris does not parse: {e}"))?;
+        return Ok((nav, (*full).to_string()));
+    }
+    let p = base_dir.join(spec);
+    if !p.exists() {
+        return Err(format!(
+            "navigation file {} does not exist (a relative path is read from {}; use \
+             \"{BUILTIN_EPHEMERIS_NAME}\" for the embedded one)",
+            p.display(),
+            if base_dir.as_os_str().is_empty() {
+                "the current directory".to_string()
+            } else {
+                base_dir.display().to_string()
+            }
+        ));
+    }
+    let nav = read_nav_file(&p).map_err(|e| e.to_string())?;
+    Ok((nav, p.display().to_string()))
+}
+
 /// Navigation data: a file relative to the world file, or the embedded default.
 fn load_nav(ctx: &Ctx<'_>, ephemeris: Option<&str>) -> Result<(NavData, String), WorldError> {
-    match ephemeris {
-        None | Some(BUILTIN_EPHEMERIS_NAME) => {
-            let nav = parse_nav(BUILTIN_EPHEMERIS, BUILTIN_EPHEMERIS_NAME).map_err(|e| {
-                ctx.err(
-                    "world.ephemeris",
-                    format!("the embedded ephemeris does not parse: {e}"),
-                )
-            })?;
-            Ok((nav, BUILTIN_EPHEMERIS_NAME.to_string()))
-        }
-        Some(rel) => {
-            let p = ctx.path.parent().unwrap_or(Path::new(".")).join(rel);
-            if !p.exists() {
-                return Err(ctx.err(
-                    "world.ephemeris",
-                    format!(
-                        "navigation file {} does not exist (paths are relative to the world \
-                         file; use \"{BUILTIN_EPHEMERIS_NAME}\" for the embedded one)",
-                        p.display()
-                    ),
-                ));
-            }
-            let nav = read_nav_file(&p).map_err(|e| {
-                ctx.err(
-                    "world.ephemeris",
-                    format!("cannot use navigation file: {e}"),
-                )
-            })?;
-            Ok((nav, p.display().to_string()))
-        }
-    }
+    let base = ctx.path.parent().unwrap_or(Path::new("."));
+    read_nav_source(ephemeris.unwrap_or(BUILTIN_EPHEMERIS_NAME), base)
+        .map_err(|m| ctx.err("world.ephemeris", m))
 }
 
 fn check_gnss(
