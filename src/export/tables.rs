@@ -289,6 +289,12 @@ fn imu_table(_world: &World, rec: &Recording) -> Option<Table> {
     None
 }
 
+/// A time in seconds rounded to whole nanoseconds, the resolution of simulation time, so
+/// that a sum such as 15.000000000000002 prints as 15.0.
+fn whole_ns(t_s: f64) -> f64 {
+    (t_s * 1e9).round() / 1e9
+}
+
 /// Magnetometer samples, each with the true position at its own time.
 fn magnetometer_table(_world: &World, rec: &Recording) -> Option<Table> {
     let mut cols: [Vec<f64>; 8] = Default::default();
@@ -297,7 +303,10 @@ fn magnetometer_table(_world: &World, rec: &Recording) -> Option<Table> {
             let [bx, by, bz] = m.b_body_ut;
             let [e, n, u] = m.true_pos_enu_m;
             let norm = (bx * bx + by * by + bz * bz).sqrt();
-            for (k, v) in [m.t_s, bx, by, bz, norm, e, n, u].into_iter().enumerate() {
+            for (k, v) in [whole_ns(m.t_s), bx, by, bz, norm, e, n, u]
+                .into_iter()
+                .enumerate()
+            {
                 cols[k].push(v);
             }
         }

@@ -81,12 +81,16 @@ fn every_format_is_written_and_read_by_the_tools_users_pair_it_with() {
         assert_eq!(format!("{x:02X}"), cs, "{line}");
         *kinds.entry(&body[..5]).or_insert(0) += 1;
     }
-    // One GGA, RMC and two GSA per epoch; GSV per system.
+    // One GGA, RMC and one GSA per system and epoch (each with its system's talker);
+    // GSV per system; no sentence over the 82 characters NMEA 0183 allows.
     let epochs = kinds["GNGGA"];
     assert!(epochs > 100, "{kinds:?}");
     assert_eq!(kinds["GNRMC"], epochs);
-    assert_eq!(kinds["GNGSA"], 2 * epochs);
+    assert_eq!((kinds["GPGSA"], kinds["GBGSA"]), (epochs, epochs));
+    assert!(!kinds.contains_key("GNGSA"), "{kinds:?}");
     assert!(kinds["GPGSV"] >= epochs && kinds["GBGSV"] >= epochs);
+    let longest = nmea.split("\r\n").map(|l| l.len() + 2).max().unwrap();
+    assert!(longest <= 82, "a sentence of {longest} characters");
 
     // The SigMF recording is 50 PN945 signal frames (945-symbol header + 3780-symbol body,
     // GB 20600-2006) as cf32, 8 bytes a sample.
@@ -317,5 +321,150 @@ fn bad_formats_are_refused_before_anything_runs() {
             out.join("w").to_str().unwrap(),
         ],
         &["rinex export: the trial has no GNSS observations"],
+    );
+}
+
+/// The value of `"key":` in one line of gpsd JSON (numbers and booleans only).
+fn json_field<'a>(obj: &'a str, key: &str) -> Option<&'a str> {
+    let at = obj.find(&format!("\"{key}\":"))? + key.len() + 3;
+    let rest = &obj[at..];
+    let end = rest.find([',', '}', ']']).unwrap_or(rest.len());
+    Some(&rest[..end])
+}
+
+/// gpsd, the daemon most Linux navigation stacks read NMEA through, decodes the exported
+/// sentences (`gpsdecode -j`): every GGA's position matches the file's, GPS satellites
+/// are GPS, BeiDou satellites from the `GB` sentences are BeiDou (gnssid 3), and the
+/// satellites each per-system GSA lists are marked used. BeiDou numbers above 32 are
+/// checked only with gpsd ≥ 3.23: gpsd 3.22 (Debian 12) maps every number 33–64 to SBAS
+/// whatever the talker, contrary to NMEA 4.10 (docs/datasets.md).
+#[test]
+fn gpsd_reads_the_nmea_export() {
+    let ok = std::process::Command::new("gpsdecode")
+        .arg("-V")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ok {
+        crate::common::skip("gpsdecode (Debian gpsd-clients) not installed");
+        return;
+    }
+    let version = String::from_utf8_lossy(
+        &std::process::Command::new("gpsdecode")
+            .arg("-V")
+            .output()
+            .unwrap()
+            .stdout,
+    )
+    .to_string();
+    let (maj, min) = version
+        .split_whitespace()
+        .find_map(|w| {
+            let mut it = w.split('.');
+            Some((
+                it.next()?.parse::<u32>().ok()?,
+                it.next()?.parse::<u32>().ok()?,
+            ))
+        })
+        .unwrap_or((0, 0));
+    let modern = (maj, min) >= (3, 23);
+    let out = tmp_dir("export-gpsd");
+    let o = hybridnav(&[
+        "export",
+        "worlds/default.toml",
+        "--format",
+        "nmea",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let nmea = std::fs::read(out.join("truth.nmea")).unwrap();
+    let mut child = std::process::Command::new("gpsdecode")
+        .arg("-j")
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("gpsdecode runs");
+    {
+        use std::io::Write;
+        child.stdin.take().unwrap().write_all(&nmea).unwrap();
+    }
+    let decoded = child.wait_with_output().unwrap();
+    let json = String::from_utf8_lossy(&decoded.stdout);
+    let text = String::from_utf8_lossy(&nmea);
+    // Positions: each TPV against the GGA it came from, parsed here.
+    let ggas: Vec<(f64, f64)> = text
+        .lines()
+        .filter(|l| l.starts_with("$GNGGA"))
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            let dm = |s: &str, deg_digits: usize| {
+                s[..deg_digits].parse::<f64>().unwrap()
+                    + s[deg_digits..].parse::<f64>().unwrap() / 60.0
+            };
+            (dm(f[2], 2), dm(f[4], 3))
+        })
+        .collect();
+    let tpvs: Vec<&str> = json
+        .lines()
+        .filter(|l| l.contains("\"class\":\"TPV\""))
+        .collect();
+    assert!(
+        tpvs.len() + 1 >= ggas.len() && tpvs.len() > 100,
+        "{} TPV for {} GGA",
+        tpvs.len(),
+        ggas.len()
+    );
+    for tpv in &tpvs {
+        let lat: f64 = json_field(tpv, "lat").unwrap().parse().unwrap();
+        let lon: f64 = json_field(tpv, "lon").unwrap().parse().unwrap();
+        assert!(
+            ggas.iter()
+                .any(|(a, b)| (a - lat).abs() < 1e-8 && (b - lon).abs() < 1e-8),
+            "TPV {lat} {lon} matches no GGA"
+        );
+    }
+    // Satellites: the last complete sky of the file, against the last epoch's GSA/GSV.
+    let sky = json
+        .lines()
+        .rev()
+        .find(|l| l.contains("\"class\":\"SKY\"") && l.contains("\"gnssid\":3"))
+        .expect("a SKY report with BeiDou satellites");
+    let last_epoch = &text[text.rfind("$GNGGA").unwrap()..];
+    let used = |talker: &str| -> Vec<u32> {
+        let l = last_epoch
+            .lines()
+            .find(|l| l.starts_with(&format!("${talker}GSA")))
+            .unwrap();
+        l.split(',')
+            .skip(3)
+            .take(12)
+            .filter_map(|p| p.parse().ok())
+            .collect()
+    };
+    let (gps_used, bds_used) = (used("GP"), used("GB"));
+    let mut checked_bds = 0;
+    for sat in sky.split("{\"PRN\"").skip(1) {
+        let gnssid: u32 = json_field(sat, "gnssid").unwrap().parse().unwrap();
+        let svid: u32 = json_field(sat, "svid").unwrap().parse().unwrap();
+        let is_used = json_field(sat, "used") == Some("true");
+        let prn: u32 = sat[1..].split(',').next().unwrap().parse().unwrap();
+        if gnssid == 0 {
+            assert!(prn <= 32 && gps_used.contains(&svid) == is_used, "{sat}");
+        } else if gnssid == 3 {
+            assert_eq!(prn, 400 + svid, "{sat}");
+            assert_eq!(bds_used.contains(&svid), is_used, "{sat}");
+            checked_bds += 1;
+        } else {
+            // Only the gpsd 3.22 SBAS reading of BeiDou 33–64 may land here.
+            assert!(!modern && gnssid == 1 && (33..=64).contains(&prn), "{sat}");
+            assert!(
+                bds_used.contains(&prn) || last_epoch.contains(&format!(",{prn},")),
+                "{sat}"
+            );
+        }
+    }
+    assert!(
+        checked_bds >= 4,
+        "{checked_bds} BeiDou satellites read as BeiDou: {sky}"
     );
 }

@@ -518,6 +518,9 @@ fn extrapolation_beyond_the_fit_interval_is_measured() {
     }
 }
 
+/// 3-D RMS (m), max (m), samples and the CSV row of the max, of one system.
+type ErrorStats = (f64, f64, usize, String);
+
 /// Satellite positions as `hybridnav ephemeris positions` prints them with default
 /// settings, compared with an SP3 file read here independently of the crate's SP3 reader
 /// (columns of the `P` records, km). Returns (3-D RMS, max, samples, stderr) per system
@@ -528,7 +531,7 @@ fn cli_vs_sp3(
     start: &str,
     end: &str,
     extra: &[&str],
-) -> (BTreeMap<char, (f64, f64, usize, String)>, String) {
+) -> (BTreeMap<char, ErrorStats>, String) {
     let mut args = vec![
         "ephemeris",
         "positions",
@@ -574,7 +577,7 @@ fn cli_vs_sp3(
             }
         }
     }
-    let mut acc: BTreeMap<char, (f64, f64, usize, String)> = BTreeMap::new();
+    let mut acc: BTreeMap<char, ErrorStats> = BTreeMap::new();
     for row in String::from_utf8_lossy(&o.stdout).lines().skip(1) {
         let f: Vec<&str> = row.split(',').collect();
         let key = (f[0].to_string(), format!("{},{}", f[1], f[2]));
