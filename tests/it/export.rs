@@ -468,3 +468,62 @@ fn gpsd_reads_the_nmea_export() {
         "{checked_bds} BeiDou satellites read as BeiDou: {sky}"
     );
 }
+
+/// Wrong-peak TC-OFDM acquisitions are flagged: in seed 004's world some ranges are tens
+/// of km off. Recomputed here from the CSV's own columns: every range whose
+/// pseudorange − true range differs from its epoch's median (same system, ≥ 3 ranges) by
+/// more than 6 km has `wrong_peak = 1`, every other has 0, and the flagged and unflagged
+/// populations are far apart (nothing between 1 km and 6 km), so the threshold separates
+/// them rather than cutting through a continuum.
+#[test]
+fn wrong_peak_ranges_are_flagged() {
+    let out = tmp_dir("export-wrong-peak");
+    let o = hybridnav(&[
+        "export",
+        "worlds/seed004-bupt.toml",
+        "--format",
+        "csv",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let rows = csv_rows(&out.join("ranges.csv"));
+    let mut by_epoch: BTreeMap<(String, String), Vec<f64>> = BTreeMap::new();
+    for r in &rows {
+        by_epoch
+            .entry((r["t_s"].clone(), r["system"].clone()))
+            .or_default()
+            .push(num(r, "pseudorange_m") - num(r, "true_range_m"));
+    }
+    let (mut flagged, mut tc, mut gap) = (0, 0, 0);
+    for r in &rows {
+        let v = &by_epoch[&(r["t_s"].clone(), r["system"].clone())];
+        let flag = r["wrong_peak"].as_str();
+        if v.len() < 3 {
+            assert_eq!(flag, "0");
+            assert_eq!(r["excess_range_m"], "");
+            continue;
+        }
+        let mut s = v.clone();
+        s.sort_by(f64::total_cmp);
+        let n = s.len();
+        let med = if n % 2 == 1 {
+            s[n / 2]
+        } else {
+            0.5 * (s[n / 2 - 1] + s[n / 2])
+        };
+        let excess = num(r, "pseudorange_m") - num(r, "true_range_m") - med;
+        assert!((excess - num(r, "excess_range_m")).abs() < 1e-6, "{r:?}");
+        assert_eq!(flag, if excess.abs() > 6000.0 { "1" } else { "0" }, "{r:?}");
+        if r["system"] == "tcofdm" {
+            tc += 1;
+            flagged += usize::from(flag == "1");
+        }
+        if (1000.0..=6000.0).contains(&excess.abs()) {
+            gap += 1;
+        }
+    }
+    println!("{flagged} of {tc} TC-OFDM ranges flagged as wrong peaks");
+    assert!(flagged >= 5 && flagged * 20 < tc, "{flagged} of {tc}");
+    assert_eq!(gap, 0, "ranges between 1 and 6 km off");
+}

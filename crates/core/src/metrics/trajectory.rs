@@ -309,9 +309,7 @@ pub fn write_tum(path: &Path, t_s: &[f64], pos: &[Vector3<f64>]) -> io::Result<(
             ));
         }
         // Writing to a String cannot fail.
-        // Times are whole nanoseconds of simulation time: nine fixed decimals print them
-        // exactly (15.000000000, not the float sum 15.000000000000002).
-        let _ = writeln!(text, "{t:.9} {} {} {} 0 0 0 1", p.x, p.y, p.z);
+        let _ = writeln!(text, "{t} {} {} {} 0 0 0 1", p.x, p.y, p.z);
     }
     crate::io::atomic::write_atomic(path, text.as_bytes())
 }
