@@ -7,7 +7,7 @@ use crate::gnss::link::Signal;
 use crate::gnss::signal::baseband::SampleFormat;
 use crate::gnss::signal::scenario::{record, validate, IqRequest, IqSinks, IqSummary, IqWorld};
 use crate::io::atomic::{write_atomic, AtomicFile};
-use crate::world::load_world;
+use super::load_world;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use serde_json::json;

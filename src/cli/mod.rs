@@ -1,16 +1,16 @@
 //! The command line: clap definitions turned into validated actions in one place.
 
 mod dtmb;
+mod ephemeris;
 mod gnss_iq;
 
-use crate::core::{EmitterId, GpsTime};
+use crate::core::GpsTime;
 use crate::io::atomic::write_atomic;
 use crate::layout::metrics::ClockModel;
 use crate::layout::place::Objective;
 use crate::layout::LayoutRequest;
 use crate::montecarlo::store::{MergePlan, RunDir, Shard, Takeover};
 use crate::montecarlo::{merge_into, run_into_with, OutputSet, RunOptions};
-use crate::world::load_world;
 use anyhow::{bail, Context, Result};
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::{Args, Parser, Subcommand};
@@ -245,9 +245,9 @@ pub struct RunArgs {
 pub enum EphemerisCommand {
     /// Print satellite positions and clocks as CSV (ECEF metres, clock in seconds).
     Positions {
-        /// RINEX 2 or 3 navigation file.
+        /// RINEX 2 or 3 navigation file, or embedded data such as `builtin:nominal-gps-bds`.
         #[arg(long)]
-        nav: PathBuf,
+        nav: String,
         /// First epoch (ISO-8601; GPST unless it ends in Z or UTC).
         #[arg(long)]
         start: String,
@@ -260,6 +260,11 @@ pub enum EphemerisCommand {
         /// Satellites, e.g. G05,C01 (default: all GPS and BeiDou satellites in the file).
         #[arg(long, value_delimiter = ',')]
         sats: Vec<String>,
+        /// Largest |t − toe| in seconds at which a record is used: one value for every
+        /// system, or per system as gps=7200,bds=3600 [default: gps=7200,bds=3600, as
+        /// RTKLIB].
+        #[arg(long, value_name = "SECONDS")]
+        max_age: Option<String>,
     },
     /// Write a RINEX 3 navigation file for the nominal GPS and BeiDou constellations.
     Synth {
@@ -273,6 +278,16 @@ pub enum EphemerisCommand {
         #[arg(long)]
         out: PathBuf,
     },
+}
+
+/// Loads a world and prints its warnings (dropped navigation records, implausible
+/// values) on stderr, so that every command that reads a world shows them.
+pub(crate) fn load_world(path: &Path) -> Result<crate::world::World, crate::world::WorldError> {
+    let w = crate::world::load_world(path)?;
+    for m in &w.warnings {
+        eprintln!("warning: {m}");
+    }
+    Ok(w)
 }
 
 /// The default world: `worlds/default.toml` in the current directory, else the one next
@@ -323,7 +338,8 @@ pub fn run(cli: Cli) -> Result<()> {
             end,
             step,
             sats,
-        }) => cmd_positions(&nav, &start, &end, step, &sats),
+            max_age,
+        }) => ephemeris::positions(&nav, &start, &end, step, &sats, max_age.as_deref()),
         Command::Dtmb(DtmbCommand::Iq {
             mode,
             frames,
@@ -617,69 +633,6 @@ fn cmd_merge(dirs: &[PathBuf], out: &Path, quiet: bool, force: bool, outputs: &s
     let dir = take_out(out, how)?;
     let written = merge_into(&world, &plan, &dir, outputs).map_err(anyhow::Error::msg)?;
     report_written(&written, quiet);
-    Ok(())
-}
-
-fn cmd_positions(nav: &Path, start: &str, end: &str, step: f64, sats: &[String]) -> Result<()> {
-    use std::io::Write;
-    let data = crate::gnss::rinex_nav::read_nav_file(nav)?;
-    let t0 = GpsTime::parse_iso(start)
-        .map_err(anyhow::Error::msg)
-        .context("--start")?;
-    let t1 = GpsTime::parse_iso(end)
-        .map_err(anyhow::Error::msg)
-        .context("--end")?;
-    if !(step.is_finite() && step > 0.0) {
-        bail!("--step must be a positive number of seconds, got {step}");
-    }
-    if t1 < t0 {
-        bail!("--end ({t1}) is before --start ({t0})");
-    }
-    let n_steps = (t1.seconds_since(t0) / step).floor() as u64 + 1;
-    if n_steps > 10_000_000 {
-        bail!("{n_steps} epochs requested; at most 10 000 000 (use a larger --step)");
-    }
-    let ids: Vec<EmitterId> = if sats.is_empty() {
-        data.satellites()
-    } else {
-        sats.iter()
-            .map(|s| s.parse::<EmitterId>().map_err(anyhow::Error::msg))
-            .collect::<Result<_>>()?
-    };
-    let stdout = std::io::stdout();
-    let mut w = std::io::BufWriter::new(stdout.lock());
-    writeln!(w, "sat,gpst_week,gpst_tow_s,x_m,y_m,z_m,clock_s")?;
-    let mut missing = Vec::new();
-    for k in 0..n_steps {
-        let t = t0.add_seconds(k as f64 * step);
-        for id in &ids {
-            match data.select(*id, t) {
-                Some(eph) => {
-                    let s = eph.state(t);
-                    writeln!(
-                        w,
-                        "{id},{},{:.3},{:.3},{:.3},{:.3},{:.12e}",
-                        t.week(),
-                        t.tow_s(),
-                        s.pos_ecef_m.x,
-                        s.pos_ecef_m.y,
-                        s.pos_ecef_m.z,
-                        s.clock_s
-                    )?;
-                }
-                None => missing.push((*id, t)),
-            }
-        }
-    }
-    w.flush()?;
-    if !missing.is_empty() {
-        eprintln!(
-            "note: {} satellite-epochs had no healthy ephemeris within its fit interval (first: {} at {})",
-            missing.len(),
-            missing[0].0,
-            missing[0].1
-        );
-    }
     Ok(())
 }
 

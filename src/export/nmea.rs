@@ -2,11 +2,18 @@
 //! multi-constellation receiver logs them, for the truth and for each estimator.
 //!
 //! Conventions (NMEA 0183 v4.10):
-//! - Position and fix sentences use the combined talker `GN`; satellites in view use `GP`
-//!   (GPS) and `GB` (BeiDou), with signal id 1 (GPS L1 C/A, BeiDou B1I).
-//! - GSA lists the satellites of one system (up to 12) and ends with the system id
-//!   (1 GPS, 4 BeiDou); the DOPs are those of the whole GPS + BeiDou geometry with one
-//!   clock per system.
+//! - Position and fix sentences use the combined talker `GN`; the satellite sentences use
+//!   the talker of their system, `GP` (GPS) and `GB` (BeiDou), so that a reader never has
+//!   to guess the system from the satellite number (BeiDou C33 read from a `GN` sentence
+//!   is SBAS PRN 120 in the NMEA 2.x numbering many readers still apply).
+//! - GSA lists the satellites of one system (up to 12) and ends with the NMEA 4.10 system
+//!   id (1 GPS, 4 BeiDou); the DOPs are those of the whole GPS + BeiDou geometry with one
+//!   clock per system. Each epoch gives GGA, RMC, every GSA, then every GSV, the order
+//!   of multi-constellation receivers.
+//! - GSV carries the signal id 1 (GPS L1 C/A, BeiDou B1I).
+//! - No sentence exceeds the 82 characters NMEA 0183 allows (`$` to CR LF): latitude and
+//!   longitude carry 6 decimals of a minute (1.9 mm), and the altitude and speed lose
+//!   decimals only when a diverged estimate would not fit otherwise.
 //! - Times are UTC (GPST minus the leap seconds of the epoch).
 //! - The GGA altitude is the WGS-84 ellipsoidal height with a geoid separation of 0, so
 //!   altitude + separation is exactly the ellipsoidal height a reader reconstructs.
@@ -24,25 +31,38 @@ use std::path::{Path, PathBuf};
 /// Metres per second in a knot.
 const MPS_PER_KNOT: f64 = 1852.0 / 3600.0;
 
+/// Longest sentence NMEA 0183 allows, `$` to CR LF included (NMEA 0183 v4.10 §5.3).
+pub const MAX_SENTENCE_LEN: usize = 82;
+
+/// `x` with `decimals` decimals, or fewer (down to none) when the text would be longer
+/// than `width` characters.
+fn fit(x: f64, decimals: usize, width: usize) -> String {
+    (0..=decimals)
+        .rev()
+        .map(|d| format!("{x:.d$}"))
+        .find(|t| t.len() <= width)
+        .unwrap_or_else(|| format!("{x:.0}"))
+}
+
 /// Appends `$body*hh\r\n`.
 fn sentence(out: &mut String, body: &str) {
     let cs = body.bytes().fold(0u8, |a, b| a ^ b);
     let _ = write!(out, "${body}*{cs:02X}\r\n");
 }
 
-/// `ddmm.mmmmmmm,N` or `dddmm.mmmmmmm,E` (7 decimals of a minute: 0.2 mm).
+/// `ddmm.mmmmmm,N` or `dddmm.mmmmmm,E` (6 decimals of a minute: 1.9 mm).
 fn lat_lon(g: &Geodetic) -> String {
     let f = |deg: f64, width: usize, pos: char, neg: char| {
         let a = deg.abs();
         let mut d = a.trunc();
         let mut m = (a - d) * 60.0;
-        // Rounding to 7 decimals can carry a minute to 60.
-        if (m * 1e7).round() >= 60.0 * 1e7 {
+        // Rounding to 6 decimals can carry a minute to 60.
+        if (m * 1e6).round() >= 60.0 * 1e6 {
             d += 1.0;
             m = 0.0;
         }
         format!(
-            "{:0width$}{:010.7},{}",
+            "{:0width$}{:09.6},{}",
             d as u32,
             m,
             if deg < 0.0 { neg } else { pos }
@@ -146,18 +166,19 @@ fn epoch(out: &mut String, f: &Fix<'_>) {
             sentence(
                 out,
                 &format!(
-                    "GNGGA,{hms},{},1,{:02},{},{:.3},M,0.000,M,,",
+                    "GNGGA,{hms},{},1,{:02},{},{},M,0.0,M,,",
                     lat_lon(&g),
                     sats.len().min(99),
                     fmt_dop(dop.map(|d| d.1)),
-                    g.h_m
+                    // −999.999 … 99999.999 m keep millimetres.
+                    fit(g.h_m, 3, 9)
                 ),
             );
             let (speed, course) = match f.vel_enu_mps {
                 Some(v) => {
                     let s = (v.x * v.x + v.y * v.y).sqrt();
                     let c = v.x.atan2(v.y).to_degrees().rem_euclid(360.0);
-                    (format!("{:.3}", s / MPS_PER_KNOT), format!("{c:.2}"))
+                    (fit(s / MPS_PER_KNOT, 3, 7), format!("{c:.2}"))
                 }
                 None => (String::new(), String::new()),
             };
@@ -174,10 +195,11 @@ fn epoch(out: &mut String, f: &Fix<'_>) {
             sentence(out, &format!("GNRMC,{hms},V,,,,,,,{date},,,N,V"));
         }
     }
-    for (system, talker, sys_id) in [(System::Gps, "GP", 1), (System::Bds, "GB", 4)] {
+    const SYSTEMS: [(System, &str, u8); 2] = [(System::Gps, "GP", 1), (System::Bds, "GB", 4)];
+    for (system, talker, sys_id) in SYSTEMS {
         let mine: Vec<&SatInView> = sats.iter().filter(|s| s.system == system).collect();
         let mut gsa = format!(
-            "GNGSA,A,{}",
+            "{talker}GSA,A,{}",
             if f.pos_ecef_m.is_some() && dop.is_some() {
                 3
             } else {
@@ -198,6 +220,9 @@ fn epoch(out: &mut String, f: &Fix<'_>) {
             fmt_dop(dop.map(|d| d.2))
         );
         sentence(out, &gsa);
+    }
+    for (system, talker, _) in SYSTEMS {
+        let mine: Vec<&SatInView> = sats.iter().filter(|s| s.system == system).collect();
         // GSV: four satellites per sentence; a system with none still says so.
         let n_msgs = mine.len().div_ceil(4).max(1);
         for m in 0..n_msgs {
@@ -318,10 +343,45 @@ mod tests {
     #[test]
     fn coordinates_in_degrees_and_minutes() {
         let g = Geodetic::from_deg(48.1173, -11.516_666_666_666_667, 0.0);
-        assert_eq!(lat_lon(&g), "4807.0380000,N,01131.0000000,W");
+        assert_eq!(lat_lon(&g), "4807.038000,N,01131.000000,W");
         // A minute that rounds up to 60 carries into the degrees.
         let g = Geodetic::from_deg(-(40.0 - 1e-12), 116.0, 0.0);
-        assert_eq!(lat_lon(&g), "4000.0000000,S,11600.0000000,E");
+        assert_eq!(lat_lon(&g), "4000.000000,S,11600.000000,E");
+    }
+
+    /// The longest fields a fix can produce — a southern, western position, a 99.99 HDOP
+    /// field, a 5-digit altitude, and a diverged estimate far above the Earth moving at
+    /// 1e6 m/s — still fit in 82 characters.
+    #[test]
+    fn sentences_fit_in_82_characters() {
+        let t = GpsTime::from_gpst_calendar(2018, 12, 31, 23, 59, 59, 990_000_000);
+        for (lat, lon, h, v) in [
+            (-89.999_999, -179.999_999, -999.999_4, 1e3),
+            (-45.5, -120.25, 99_999.999, 340.0),
+            (-45.5, -120.25, 1.234e7, 1e6),
+            (-45.5, -120.25, -6.3e6, -1e6),
+        ] {
+            let g = Geodetic::from_deg(lat, lon, h);
+            let mut out = String::new();
+            epoch(
+                &mut out,
+                &Fix {
+                    t,
+                    pos_ecef_m: Some(g.to_ecef()),
+                    vel_enu_mps: Some(Vector3::new(v, -v, 0.0)),
+                    gnss: None,
+                },
+            );
+            for line in out.split_inclusive("\r\n") {
+                assert!(
+                    line.len() <= MAX_SENTENCE_LEN,
+                    "{} chars: {line}",
+                    line.len()
+                );
+            }
+        }
+        assert_eq!(fit(-999.9994, 3, 9), "-999.999");
+        assert_eq!(fit(1.234e7, 3, 9), "12340000");
     }
 
     #[test]

@@ -100,12 +100,27 @@ pub fn observation_text(world: &World, rec: &Recording) -> Result<String, String
                 .into(),
         );
     };
+    // The receiver's systems: the header declares observables for those only, and the
+    // file type is the system's letter when there is one (RINEX 3.04 §5.1, Table A1).
+    let systems: Vec<System> = world
+        .file
+        .sensors
+        .gnss
+        .as_ref()
+        .map(|g| g.systems.clone())
+        .unwrap_or_default();
+    let has = |s: System| systems.contains(&s);
+    let file_system = match (has(System::Gps), has(System::Bds)) {
+        (true, false) => "G",
+        (false, true) => "C",
+        _ => "M",
+    };
     let mut h = String::new();
     header(
         &mut h,
         &format!(
             "{:>9}{:11}{:<20}{:<20}",
-            "3.04", "", "OBSERVATION DATA", "M"
+            "3.04", "", "OBSERVATION DATA", file_system
         ),
         "RINEX VERSION / TYPE",
     );
@@ -177,8 +192,12 @@ pub fn observation_text(world: &World, rec: &Recording) -> Result<String, String
         &format!("{:14.4}{:14.4}{:14.4}", 0.0, 0.0, 0.0),
         "ANTENNA: DELTA H/E/N",
     );
-    header(&mut h, "G    4 C1C L1C D1C S1C", "SYS / # / OBS TYPES");
-    header(&mut h, "C    4 C2I L2I D2I S2I", "SYS / # / OBS TYPES");
+    if has(System::Gps) {
+        header(&mut h, "G    4 C1C L1C D1C S1C", "SYS / # / OBS TYPES");
+    }
+    if has(System::Bds) {
+        header(&mut h, "C    4 C2I L2I D2I S2I", "SYS / # / OBS TYPES");
+    }
     header(&mut h, "DBHZ", "SIGNAL STRENGTH UNIT");
     if epochs.len() >= 2 {
         let dt = epochs[1].tag.seconds_since(epochs[0].tag);
@@ -197,8 +216,12 @@ pub fn observation_text(world: &World, rec: &Recording) -> Result<String, String
         );
     }
     header(&mut h, &format!("{:6}", 0), "RCV CLOCK OFFS APPL");
-    header(&mut h, "G L1C  0.00000", "SYS / PHASE SHIFT");
-    header(&mut h, "C L2I  0.00000", "SYS / PHASE SHIFT");
+    if has(System::Gps) {
+        header(&mut h, "G L1C  0.00000", "SYS / PHASE SHIFT");
+    }
+    if has(System::Bds) {
+        header(&mut h, "C L2I  0.00000", "SYS / PHASE SHIFT");
+    }
     header(
         &mut h,
         &format!("{:6}", first.tag.gpst_minus_utc_s()),

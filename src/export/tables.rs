@@ -109,10 +109,12 @@ fn ranges_table(_world: &World, rec: &Recording) -> Option<Table> {
     let mut cols: [Vec<f64>; 7] = Default::default();
     let mut rate: Vec<Option<f64>> = Vec::new();
     let mut em: [Vec<f64>; 3] = Default::default();
-    for b in &rec.batches {
+    let mut batch_of: Vec<usize> = Vec::new();
+    for (k_batch, b) in rec.batches.iter().enumerate() {
         for m in &b.items {
             if let Measurement::Range(r) = m {
                 tr.push(&b.truth);
+                batch_of.push(k_batch);
                 src.push(b.source.name().to_string());
                 emitter.push(r.emitter.to_string());
                 system.push(format!("{:?}", r.emitter.system).to_lowercase());
@@ -143,6 +145,7 @@ fn ranges_table(_world: &World, rec: &Recording) -> Option<Table> {
     if !src.is_empty() {
         let mut t = Table::default();
         t.push("source", Values::Str(src));
+        let (excess, wrong) = excess_ranges(&batch_of, &system, &cols[0], &cols[5]);
         t.push("system", Values::Str(system));
         t.push("emitter", Values::Str(emitter));
         let [pr, sig, sig_rate, cn0, el, geo, true_rate] = cols;
@@ -158,11 +161,66 @@ fn ranges_table(_world: &World, rec: &Recording) -> Option<Table> {
         t.push("emitter_z_ecef_m", Values::F64(ez));
         t.push("true_range_m", Values::F64(geo));
         t.push("true_range_rate_mps", Values::F64(true_rate));
+        t.push("excess_range_m", Values::OptF64(excess));
+        t.push("wrong_peak", Values::I64(wrong));
         tr.prepend_time(&mut t);
         tr.append(&mut t, "truth_");
         return Some(t);
     }
     None
+}
+
+/// Excess range beyond which a range is flagged as a wrong-peak acquisition (m): the
+/// longest echo of the COST 207 channel profiles (hilly terrain, 20 µs) is 6 km, so a
+/// range that much longer or shorter than its epoch's others did not come from the
+/// direct path or a physical echo; it locked onto a sidelobe or noise peak (TC-OFDM
+/// ranges off by 9–94 km were seen).
+const WRONG_PEAK_EXCESS_M: f64 = 6_000.0;
+
+/// For each range row: its excess range, (pseudorange − true range) minus the median of
+/// that over the same epoch's ranges of the same system (which removes the receiver's
+/// clock of that system), and whether it exceeds [`WRONG_PEAK_EXCESS_M`]. `None` (and
+/// not flagged) when the epoch has fewer than 3 ranges of the system, too few for a
+/// median to say which one is off.
+fn excess_ranges(
+    batch_of: &[usize],
+    system: &[String],
+    pr_m: &[f64],
+    true_m: &[f64],
+) -> (Vec<Option<f64>>, Vec<i64>) {
+    let mut excess = vec![None; pr_m.len()];
+    let mut i = 0;
+    while i < pr_m.len() {
+        let end = (i..pr_m.len())
+            .find(|&j| batch_of[j] != batch_of[i])
+            .unwrap_or(pr_m.len());
+        let mut systems: Vec<&String> = system[i..end].iter().collect();
+        systems.sort();
+        systems.dedup();
+        for sys in systems {
+            let rows: Vec<usize> = (i..end).filter(|&j| &system[j] == sys).collect();
+            if rows.len() < 3 {
+                continue;
+            }
+            let mut res: Vec<f64> = rows.iter().map(|&j| pr_m[j] - true_m[j]).collect();
+            res.sort_by(f64::total_cmp);
+            let n = res.len();
+            let median = if n % 2 == 1 {
+                res[n / 2]
+            } else {
+                0.5 * (res[n / 2 - 1] + res[n / 2])
+            };
+            for &j in &rows {
+                excess[j] = Some(pr_m[j] - true_m[j] - median);
+            }
+        }
+        i = end;
+    }
+    let wrong = excess
+        .iter()
+        .map(|e| i64::from(e.is_some_and(|x| x.abs() > WRONG_PEAK_EXCESS_M)))
+        .collect();
+    (excess, wrong)
 }
 
 /// Position fixes (FM fingerprinting, magnetic landmarks).
@@ -289,6 +347,12 @@ fn imu_table(_world: &World, rec: &Recording) -> Option<Table> {
     None
 }
 
+/// A time in seconds rounded to whole nanoseconds, the resolution of simulation time, so
+/// that a sum such as 15.000000000000002 prints as 15.0.
+fn whole_ns(t_s: f64) -> f64 {
+    (t_s * 1e9).round() / 1e9
+}
+
 /// Magnetometer samples, each with the true position at its own time.
 fn magnetometer_table(_world: &World, rec: &Recording) -> Option<Table> {
     let mut cols: [Vec<f64>; 8] = Default::default();
@@ -297,7 +361,10 @@ fn magnetometer_table(_world: &World, rec: &Recording) -> Option<Table> {
             let [bx, by, bz] = m.b_body_ut;
             let [e, n, u] = m.true_pos_enu_m;
             let norm = (bx * bx + by * by + bz * bz).sqrt();
-            for (k, v) in [m.t_s, bx, by, bz, norm, e, n, u].into_iter().enumerate() {
+            for (k, v) in [whole_ns(m.t_s), bx, by, bz, norm, e, n, u]
+                .into_iter()
+                .enumerate()
+            {
                 cols[k].push(v);
             }
         }
@@ -439,7 +506,7 @@ pub fn write_tum(world: &World, rec: &Recording, dir: &Path) -> Result<Vec<PathB
     let frame = &world.frame;
     let mut files = Vec::new();
     let track = rec.truth_track();
-    let t: Vec<f64> = track.iter().map(|t| t.sim.seconds()).collect();
+    let t: Vec<f64> = track.iter().map(|t| whole_ns(t.sim.seconds())).collect();
     let p: Vec<Vector3<f64>> = track.iter().map(|t| t.enu.pos_enu_m).collect();
     let path = dir.join("truth.tum");
     tum(&path, &t, &p).map_err(|e| e.to_string())?;
@@ -450,7 +517,7 @@ pub fn write_tum(world: &World, rec: &Recording, dir: &Path) -> Result<Vec<PathB
             .iter()
             .filter_map(|e| {
                 e.est_ecef_m
-                    .map(|x| (e.t_s, frame.enu_of_ecef(&Vector3::from(x))))
+                    .map(|x| (whole_ns(e.t_s), frame.enu_of_ecef(&Vector3::from(x))))
             })
             .unzip();
         let path = dir.join(format!("{stem}.tum"));

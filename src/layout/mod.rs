@@ -133,6 +133,11 @@ pub fn run(args: &LayoutRequest) -> Result<(), LayoutError> {
         }
     };
     let world = crate::world::load_world(&args.world)?;
+    // Every command that reads a world shows its warnings (the CLI's own loader does the
+    // same); layout sits below the CLI and so prints them itself.
+    for m in &world.warnings {
+        eprintln!("warning: {m}");
+    }
     let times = epochs(&world, &args.times)?;
     let region = match &args.region {
         Some(r) => Region::parse(r).map_err(LayoutError::Invalid)?,

@@ -81,12 +81,16 @@ fn every_format_is_written_and_read_by_the_tools_users_pair_it_with() {
         assert_eq!(format!("{x:02X}"), cs, "{line}");
         *kinds.entry(&body[..5]).or_insert(0) += 1;
     }
-    // One GGA, RMC and two GSA per epoch; GSV per system.
+    // One GGA, RMC and one GSA per system and epoch (each with its system's talker);
+    // GSV per system; no sentence over the 82 characters NMEA 0183 allows.
     let epochs = kinds["GNGGA"];
     assert!(epochs > 100, "{kinds:?}");
     assert_eq!(kinds["GNRMC"], epochs);
-    assert_eq!(kinds["GNGSA"], 2 * epochs);
+    assert_eq!((kinds["GPGSA"], kinds["GBGSA"]), (epochs, epochs));
+    assert!(!kinds.contains_key("GNGSA"), "{kinds:?}");
     assert!(kinds["GPGSV"] >= epochs && kinds["GBGSV"] >= epochs);
+    let longest = nmea.split("\r\n").map(|l| l.len() + 2).max().unwrap();
+    assert!(longest <= 82, "a sentence of {longest} characters");
 
     // The SigMF recording is 50 PN945 signal frames (945-symbol header + 3780-symbol body,
     // GB 20600-2006) as cf32, 8 bytes a sample.
@@ -318,4 +322,208 @@ fn bad_formats_are_refused_before_anything_runs() {
         ],
         &["rinex export: the trial has no GNSS observations"],
     );
+}
+
+/// The value of `"key":` in one line of gpsd JSON (numbers and booleans only).
+fn json_field<'a>(obj: &'a str, key: &str) -> Option<&'a str> {
+    let at = obj.find(&format!("\"{key}\":"))? + key.len() + 3;
+    let rest = &obj[at..];
+    let end = rest.find([',', '}', ']']).unwrap_or(rest.len());
+    Some(&rest[..end])
+}
+
+/// gpsd, the daemon most Linux navigation stacks read NMEA through, decodes the exported
+/// sentences (`gpsdecode -j`): every GGA's position matches the file's, GPS satellites
+/// are GPS, BeiDou satellites from the `GB` sentences are BeiDou (gnssid 3), and the
+/// satellites each per-system GSA lists are marked used. BeiDou numbers above 32 are
+/// checked only with gpsd ≥ 3.23: gpsd 3.22 (Debian 12) maps every number 33–64 to SBAS
+/// whatever the talker, contrary to NMEA 4.10 (docs/datasets.md).
+#[test]
+fn gpsd_reads_the_nmea_export() {
+    let ok = std::process::Command::new("gpsdecode")
+        .arg("-V")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ok {
+        crate::common::skip("gpsdecode (Debian gpsd-clients) not installed");
+        return;
+    }
+    let version = String::from_utf8_lossy(
+        &std::process::Command::new("gpsdecode")
+            .arg("-V")
+            .output()
+            .unwrap()
+            .stdout,
+    )
+    .to_string();
+    let (maj, min) = version
+        .split_whitespace()
+        .find_map(|w| {
+            let mut it = w.split('.');
+            Some((
+                it.next()?.parse::<u32>().ok()?,
+                it.next()?.parse::<u32>().ok()?,
+            ))
+        })
+        .unwrap_or((0, 0));
+    let modern = (maj, min) >= (3, 23);
+    let out = tmp_dir("export-gpsd");
+    let o = hybridnav(&[
+        "export",
+        "worlds/default.toml",
+        "--format",
+        "nmea",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let nmea = std::fs::read(out.join("truth.nmea")).unwrap();
+    let mut child = std::process::Command::new("gpsdecode")
+        .arg("-j")
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("gpsdecode runs");
+    {
+        use std::io::Write;
+        child.stdin.take().unwrap().write_all(&nmea).unwrap();
+    }
+    let decoded = child.wait_with_output().unwrap();
+    let json = String::from_utf8_lossy(&decoded.stdout);
+    let text = String::from_utf8_lossy(&nmea);
+    // Positions: each TPV against the GGA it came from, parsed here.
+    let ggas: Vec<(f64, f64)> = text
+        .lines()
+        .filter(|l| l.starts_with("$GNGGA"))
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            let dm = |s: &str, deg_digits: usize| {
+                s[..deg_digits].parse::<f64>().unwrap()
+                    + s[deg_digits..].parse::<f64>().unwrap() / 60.0
+            };
+            (dm(f[2], 2), dm(f[4], 3))
+        })
+        .collect();
+    let tpvs: Vec<&str> = json
+        .lines()
+        .filter(|l| l.contains("\"class\":\"TPV\""))
+        .collect();
+    assert!(
+        tpvs.len() + 1 >= ggas.len() && tpvs.len() > 100,
+        "{} TPV for {} GGA",
+        tpvs.len(),
+        ggas.len()
+    );
+    for tpv in &tpvs {
+        let lat: f64 = json_field(tpv, "lat").unwrap().parse().unwrap();
+        let lon: f64 = json_field(tpv, "lon").unwrap().parse().unwrap();
+        assert!(
+            ggas.iter()
+                .any(|(a, b)| (a - lat).abs() < 1e-8 && (b - lon).abs() < 1e-8),
+            "TPV {lat} {lon} matches no GGA"
+        );
+    }
+    // Satellites: the last complete sky of the file, against the last epoch's GSA/GSV.
+    let sky = json
+        .lines()
+        .rev()
+        .find(|l| l.contains("\"class\":\"SKY\"") && l.contains("\"gnssid\":3"))
+        .expect("a SKY report with BeiDou satellites");
+    let last_epoch = &text[text.rfind("$GNGGA").unwrap()..];
+    let used = |talker: &str| -> Vec<u32> {
+        let l = last_epoch
+            .lines()
+            .find(|l| l.starts_with(&format!("${talker}GSA")))
+            .unwrap();
+        l.split(',')
+            .skip(3)
+            .take(12)
+            .filter_map(|p| p.parse().ok())
+            .collect()
+    };
+    let (gps_used, bds_used) = (used("GP"), used("GB"));
+    let mut checked_bds = 0;
+    for sat in sky.split("{\"PRN\"").skip(1) {
+        let gnssid: u32 = json_field(sat, "gnssid").unwrap().parse().unwrap();
+        let svid: u32 = json_field(sat, "svid").unwrap().parse().unwrap();
+        let is_used = json_field(sat, "used") == Some("true");
+        let prn: u32 = sat[1..].split(',').next().unwrap().parse().unwrap();
+        if gnssid == 0 {
+            assert!(prn <= 32 && gps_used.contains(&svid) == is_used, "{sat}");
+        } else if gnssid == 3 {
+            assert_eq!(prn, 400 + svid, "{sat}");
+            assert_eq!(bds_used.contains(&svid), is_used, "{sat}");
+            checked_bds += 1;
+        } else {
+            // Only the gpsd 3.22 SBAS reading of BeiDou 33–64 may land here.
+            assert!(!modern && gnssid == 1 && (33..=64).contains(&prn), "{sat}");
+            assert!(
+                bds_used.contains(&prn) || last_epoch.contains(&format!(",{prn},")),
+                "{sat}"
+            );
+        }
+    }
+    assert!(
+        checked_bds >= 4,
+        "{checked_bds} BeiDou satellites read as BeiDou: {sky}"
+    );
+}
+
+/// Wrong-peak TC-OFDM acquisitions are flagged: in seed 004's world some ranges are tens
+/// of km off. Recomputed here from the CSV's own columns: every range whose
+/// pseudorange − true range differs from its epoch's median (same system, ≥ 3 ranges) by
+/// more than 6 km has `wrong_peak = 1`, every other has 0, and the flagged and unflagged
+/// populations are far apart (nothing between 1 km and 6 km), so the threshold separates
+/// them rather than cutting through a continuum.
+#[test]
+fn wrong_peak_ranges_are_flagged() {
+    let out = tmp_dir("export-wrong-peak");
+    let o = hybridnav(&[
+        "export",
+        "worlds/seed004-bupt.toml",
+        "--format",
+        "csv",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let rows = csv_rows(&out.join("ranges.csv"));
+    let mut by_epoch: BTreeMap<(String, String), Vec<f64>> = BTreeMap::new();
+    for r in &rows {
+        by_epoch
+            .entry((r["t_s"].clone(), r["system"].clone()))
+            .or_default()
+            .push(num(r, "pseudorange_m") - num(r, "true_range_m"));
+    }
+    let (mut flagged, mut tc, mut gap) = (0, 0, 0);
+    for r in &rows {
+        let v = &by_epoch[&(r["t_s"].clone(), r["system"].clone())];
+        let flag = r["wrong_peak"].as_str();
+        if v.len() < 3 {
+            assert_eq!(flag, "0");
+            assert_eq!(r["excess_range_m"], "");
+            continue;
+        }
+        let mut s = v.clone();
+        s.sort_by(f64::total_cmp);
+        let n = s.len();
+        let med = if n % 2 == 1 {
+            s[n / 2]
+        } else {
+            0.5 * (s[n / 2 - 1] + s[n / 2])
+        };
+        let excess = num(r, "pseudorange_m") - num(r, "true_range_m") - med;
+        assert!((excess - num(r, "excess_range_m")).abs() < 1e-6, "{r:?}");
+        assert_eq!(flag, if excess.abs() > 6000.0 { "1" } else { "0" }, "{r:?}");
+        if r["system"] == "tcofdm" {
+            tc += 1;
+            flagged += usize::from(flag == "1");
+        }
+        if (1000.0..=6000.0).contains(&excess.abs()) {
+            gap += 1;
+        }
+    }
+    println!("{flagged} of {tc} TC-OFDM ranges flagged as wrong peaks");
+    assert!(flagged >= 5 && flagged * 20 < tc, "{flagged} of {tc}");
+    assert_eq!(gap, 0, "ranges between 1 and 6 km off");
 }

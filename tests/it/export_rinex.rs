@@ -258,3 +258,60 @@ fn on_a_real_broadcast_file_too() {
     let nav = gnss.join("ESBC00DNK_R_20201770000_01D_MN.rnx");
     run_tools(&open_sky_world(&dir, Some(&nav)), &dir.join("out"));
 }
+
+/// A GPS-only receiver's file declares GPS observables only (file type `G`, no BeiDou
+/// `SYS / # / OBS TYPES` or phase-shift line), and georinex reads it as GPS data.
+#[test]
+fn a_gps_only_file_declares_no_beidou_observables() {
+    let dir = tmp_dir("rinex-gps-only");
+    let world = open_sky_world(&dir, None);
+    let text = std::fs::read_to_string(&world).unwrap();
+    assert!(text.contains("systems = [\"gps\", \"bds\"]"));
+    let gps_only = text
+        .replace("systems = [\"gps\", \"bds\"]", "systems = [\"gps\"]")
+        .replace("sources = [\"gps\", \"bds\"]", "sources = [\"gps\"]");
+    let world = crate::common::write(&dir, "gps-only.toml", &gps_only);
+    let out = dir.join("out");
+    export(&world, &out);
+    let obs = std::fs::read_to_string(out.join("hybridnav.obs")).unwrap();
+    let header: Vec<&str> = obs
+        .lines()
+        .take_while(|l| !l.contains("END OF HEADER"))
+        .collect();
+    let first = header[0];
+    assert_eq!(&first[40..41], "G", "{first}");
+    assert!(
+        header.iter().any(|l| l.starts_with("G    4 C1C")),
+        "{header:?}"
+    );
+    assert!(
+        !header
+            .iter()
+            .any(|l| l.starts_with('C') && l.contains("SYS /")),
+        "{header:?}"
+    );
+    // The body holds GPS satellites only.
+    assert!(obs
+        .lines()
+        .skip(header.len() + 1)
+        .filter(|l| !l.starts_with('>'))
+        .all(|l| l.starts_with('G')));
+    if python_has(&["georinex"]) {
+        let py = std::process::Command::new("python3")
+            .args(["-W", "ignore", "-c"])
+            .arg(
+                "import sys, georinex as gr\n\
+                 o = gr.load(sys.argv[1])\n\
+                 svs = sorted(str(s) for s in o.sv.values)\n\
+                 assert svs and all(s.startswith('G') for s in svs), svs\n\
+                 assert sorted(o.data_vars) == ['C1C', 'D1C', 'L1C', 'S1C'], list(o.data_vars)\n\
+                 print(len(svs), 'GPS satellites,', list(o.data_vars))",
+            )
+            .arg(out.join("hybridnav.obs"))
+            .output()
+            .expect("python3");
+        let text = String::from_utf8_lossy(&py.stdout);
+        println!("{text}");
+        assert!(py.status.success(), "{text}{}", stderr(&py));
+    }
+}

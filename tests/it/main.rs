@@ -33,3 +33,4 @@ mod reproductions;
 mod reproductions_abstract;
 mod skeleton;
 mod tcofdm;
+mod world_mistakes;

@@ -205,7 +205,13 @@ impl GpsTime {
             return Err(err());
         }
         let s_whole = sec.floor() as u8;
-        let ns = ((sec - sec.floor()) * 1e9).round() as u32;
+        // Rounding 59.9999999997 s would give 1e9 ns: keep it within the second.
+        let ns = (((sec - sec.floor()) * 1e9).round() as u32).min(999_999_999);
+        // A day the month does not have (June 31) or a leap second where there is none
+        // is an error here, not a panic in the calendar conversion.
+        if Epoch::maybe_from_gregorian(y, mo, d, h, mi, s_whole, ns, scale).is_err() {
+            return Err(err());
+        }
         Ok(match scale {
             TimeScale::UTC => Self::from_utc(y, mo, d, h, mi, s_whole, ns),
             TimeScale::BDT => Self::from_bdt_calendar(y, mo, d, h, mi, s_whole, ns),
@@ -310,6 +316,17 @@ mod tests {
         let e = GpsTime::parse_iso("2020-13-01T00:00:00").unwrap_err();
         assert!(e.contains("expected YYYY-MM-DD"), "{e}");
         assert!(GpsTime::parse_iso("yesterday").is_err());
+        // Days a month does not have, and a leap second in a scale without them, are
+        // errors rather than panics in the calendar conversion.
+        for bad in [
+            "2018-06-31T04:00:00 GPST",
+            "2019-02-29T00:00:00",
+            "2018-06-30T23:59:60 GPST",
+        ] {
+            let e = GpsTime::parse_iso(bad).unwrap_err();
+            assert!(e.contains("expected YYYY-MM-DD"), "{e}");
+        }
+        assert!(GpsTime::parse_iso("2020-02-29T00:00:59.9999999999").is_ok());
     }
 
     #[test]

@@ -150,6 +150,64 @@ pub struct Ephemeris {
     pub fit_interval_h: f64,
 }
 
+/// Bounds of the broadcast elements a real navigation message can carry, from the field
+/// widths and scale factors of the message (a value outside them cannot have been
+/// broadcast) and, where the interface specification narrows it, its valid range.
+///
+/// GPS, IS-GPS-200 Table 20-III (LNAV subframes 2 and 3):
+///
+/// ```text
+/// Crs, Crc   16 bits × 2⁻⁵ m           → |C| ≤ 2¹⁵·2⁻⁵  = 1024 m
+/// Cuc, Cus, Cic, Cis 16 bits × 2⁻²⁹ rad → |C| ≤ 2¹⁵·2⁻²⁹ = 6.1035e-5 rad
+/// e          32 bits unsigned × 2⁻³³, valid range 0 … 0.03
+/// √A         32 bits unsigned × 2⁻¹⁹ √m → ≤ 8192 √m; valid range from 2530 √m
+/// Δn         16 bits × 2⁻⁴³ semicircles/s → |Δn| ≤ 2⁻²⁸ π rad/s = 1.17e-8 rad/s
+/// ```
+///
+/// BeiDou, BDS-SIS-ICD-B1I-3.0 §5.2.4 (the D1/D2 ephemeris parameter table):
+///
+/// ```text
+/// Crs, Crc   18 bits × 2⁻⁶ m           → |C| ≤ 2¹⁷·2⁻⁶  = 2048 m
+/// Cuc, Cus, Cic, Cis 18 bits × 2⁻³¹ rad → |C| ≤ 2¹⁷·2⁻³¹ = 6.1035e-5 rad
+/// e          32 bits unsigned × 2⁻³³   → 0 … 0.5
+/// √A         32 bits unsigned × 2⁻¹⁹ √m → ≤ 8192 √m
+/// Δn         16 bits × 2⁻⁴³ semicircles/s → |Δn| ≤ 1.17e-8 rad/s
+/// ```
+///
+/// The lower bound on √A (2530 √m, A = 6401 km) is the Earth's radius plus a few tens of
+/// kilometres: no orbit lies lower. The same physical reason bounds the perigee
+/// A (1 − e) from below. Rounding in RINEX (12 significant digits) is far inside the
+/// 1e-9 relative slack allowed.
+#[derive(Clone, Copy, Debug)]
+struct ElementBounds {
+    radius_correction_m: f64,
+    angle_correction_rad: f64,
+    eccentricity_max: f64,
+    delta_n_rad_per_s: f64,
+}
+
+const GPS_BOUNDS: ElementBounds = ElementBounds {
+    radius_correction_m: 1024.0,
+    angle_correction_rad: 6.103_515_625e-5,
+    eccentricity_max: 0.03,
+    delta_n_rad_per_s: 3.725_290_298_461_914e-9 * PI,
+};
+
+const BDS_BOUNDS: ElementBounds = ElementBounds {
+    radius_correction_m: 2048.0,
+    angle_correction_rad: 6.103_515_625e-5,
+    eccentricity_max: 0.5,
+    delta_n_rad_per_s: 3.725_290_298_461_914e-9 * PI,
+};
+
+/// Smallest √A (√m) of a broadcast orbit: IS-GPS-200's valid range starts here, and
+/// A = 6401 km is just above the Earth's surface.
+pub const SQRT_A_MIN: f64 = 2530.0;
+/// Largest √A (√m) a broadcast message can carry (32 unsigned bits × 2⁻¹⁹).
+pub const SQRT_A_MAX: f64 = 8192.0;
+/// Mean equatorial radius of the Earth (m), WGS-84: a perigee below it is impossible.
+const EARTH_RADIUS_M: f64 = 6_378_137.0;
+
 /// A satellite's position, velocity and clock at one instant.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SatState {
@@ -227,6 +285,93 @@ impl Ephemeris {
     /// True when the broadcast health word says the satellite may be used (health = 0).
     pub fn is_healthy(&self) -> bool {
         self.health == 0
+    }
+
+    /// Why this record cannot describe a real orbit, or `None` when every element lies in
+    /// the range the broadcast message can carry ([`ElementBounds`]): a non-finite
+    /// number, an eccentricity or semi-major axis out of range, a perigee inside the
+    /// Earth, or a harmonic correction larger than its field allows. Such records come
+    /// from corrupted files; evaluated, they put satellites anywhere (Crs = 1e30 m gives a
+    /// satellite 4.6e29 m away), so readers drop them.
+    pub fn implausibility(&self) -> Option<String> {
+        let fields = [
+            ("af0", self.af0),
+            ("af1", self.af1),
+            ("af2", self.af2),
+            ("sqrt(A)", self.sqrt_a),
+            ("e", self.e),
+            ("i0", self.i0),
+            ("OMEGA0", self.omega0),
+            ("omega", self.omega),
+            ("M0", self.m0),
+            ("Delta n", self.delta_n),
+            ("IDOT", self.idot),
+            ("OMEGA DOT", self.omega_dot),
+            ("Cuc", self.cuc),
+            ("Cus", self.cus),
+            ("Crc", self.crc),
+            ("Crs", self.crs),
+            ("Cic", self.cic),
+            ("Cis", self.cis),
+            ("TGD", self.tgd_s),
+            ("TGD2", self.tgd2_s),
+        ];
+        if let Some((name, v)) = fields.iter().find(|(_, v)| !v.is_finite()) {
+            return Some(format!("{name} = {v} is not a finite number"));
+        }
+        let b = match self.sat.system {
+            System::Bds => BDS_BOUNDS,
+            _ => GPS_BOUNDS,
+        };
+        let slack = 1.0 + 1e-9;
+        if !(0.0..=b.eccentricity_max * slack).contains(&self.e) {
+            return Some(format!(
+                "eccentricity {} is outside 0 … {} (the broadcast range)",
+                self.e, b.eccentricity_max
+            ));
+        }
+        if !(SQRT_A_MIN..=SQRT_A_MAX * slack).contains(&self.sqrt_a) {
+            return Some(format!(
+                "sqrt(A) {} sqrt(m) (semi-major axis {:.0} km) is outside {SQRT_A_MIN} … {SQRT_A_MAX} sqrt(m)",
+                self.sqrt_a,
+                self.semi_major_axis_m() / 1e3
+            ));
+        }
+        let perigee_m = self.semi_major_axis_m() * (1.0 - self.e);
+        if perigee_m < EARTH_RADIUS_M {
+            return Some(format!(
+                "the perigee ({:.0} km from the geocentre) is inside the Earth",
+                perigee_m / 1e3
+            ));
+        }
+        for (name, v) in [("Crs", self.crs), ("Crc", self.crc)] {
+            if v.abs() > b.radius_correction_m * slack {
+                return Some(format!(
+                    "{name} = {v} m exceeds the ±{} m the message can carry",
+                    b.radius_correction_m
+                ));
+            }
+        }
+        for (name, v) in [
+            ("Cuc", self.cuc),
+            ("Cus", self.cus),
+            ("Cic", self.cic),
+            ("Cis", self.cis),
+        ] {
+            if v.abs() > b.angle_correction_rad * slack {
+                return Some(format!(
+                    "{name} = {v} rad exceeds the ±{:.4e} rad the message can carry",
+                    b.angle_correction_rad
+                ));
+            }
+        }
+        if self.delta_n.abs() > b.delta_n_rad_per_s * slack {
+            return Some(format!(
+                "Delta n = {} rad/s exceeds the ±{:.3e} rad/s the message can carry",
+                self.delta_n, b.delta_n_rad_per_s
+            ));
+        }
+        None
     }
 
     /// True when the BeiDou GEO algorithm applies (BDS PRN 1–5 and ≥ 59).

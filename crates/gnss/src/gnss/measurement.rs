@@ -66,6 +66,24 @@ pub const F_B1I_HZ: f64 = 1_561.098e6;
 fn default_systems() -> Vec<System> {
     vec![System::Gps]
 }
+/// Reads `systems`, offering only the satellite systems: the terrestrial ones (DTMB,
+/// TC-OFDM) are `System` values too, but have sensors of their own.
+fn gnss_systems<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<System>, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(rename_all = "lowercase")]
+    enum Satellite {
+        Gps,
+        Bds,
+    }
+    Ok(Vec::<Satellite>::deserialize(d)?
+        .into_iter()
+        .map(|s| match s {
+            Satellite::Gps => System::Gps,
+            Satellite::Bds => System::Bds,
+        })
+        .collect())
+}
+
 fn default_rate_hz() -> f64 {
     1.0
 }
@@ -116,7 +134,7 @@ impl Default for GnssErrorConfig {
 #[serde(deny_unknown_fields)]
 pub struct GnssConfig {
     /// Systems tracked: `"gps"`, `"bds"`.
-    #[serde(default = "default_systems")]
+    #[serde(default = "default_systems", deserialize_with = "gnss_systems")]
     pub systems: Vec<System>,
     /// Measurement rate (Hz).
     #[serde(default = "default_rate_hz")]

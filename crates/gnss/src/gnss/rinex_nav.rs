@@ -30,27 +30,138 @@ use crate::gnss::ephemeris::Ephemeris;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-/// Largest |t − toe| (s) at which a GPS ephemeris is still selected. The 4 h curve fit is
-/// centred on toe (±2 h); the further 2 h bridge gaps in single-station files, at a cost:
-/// beyond ±2 h the orbit is an extrapolation, measured at 5.9 m RMS for 2–3 h and 23 m RMS
-/// (67 m max) for 3–4 h against precise orbits (docs/validation.md). Use
-/// [`NavData::select_with_max_age`] with 7200 s where accuracy matters more than
-/// availability.
-pub const GPS_MAX_AGE_S: f64 = 4.0 * 3600.0;
-/// Largest |t − toe| (s) at which a BeiDou ephemeris is still selected: BeiDou updates
-/// hourly, plus 1 h of margin.
-pub const BDS_MAX_AGE_S: f64 = 2.0 * 3600.0;
+/// Default largest |t − toe| (s) at which a GPS ephemeris is selected: half of the 4 h
+/// curve-fit interval centred on toe (IS-GPS-200 §20.3.4.4), RTKLIB's `MAXDTOE`. Beyond it
+/// the orbit is an extrapolation, measured at 5.9 m RMS for 2–3 h and 23 m RMS (67 m max)
+/// for 3–4 h against precise orbits (docs/validation.md).
+pub const GPS_MAX_AGE_S: f64 = 2.0 * 3600.0;
+/// Default largest |t − toe| (s) at which a BeiDou ephemeris is selected: BeiDou uploads
+/// a new ephemeris every hour (BDS-SIS-ICD-B1I-3.0 §5.2.4.11, AODE), so a receiver
+/// tracking the satellite never holds one more than 1 h from toe.
+pub const BDS_MAX_AGE_S: f64 = 3600.0;
+/// Gap (s) within which records of one satellite are compared with each other when
+/// screening duplicates: two GPS fit intervals.
+const NEIGHBOUR_SPAN_S: f64 = 4.0 * 3600.0;
+/// Two records of different satellites whose orbits stay within this distance (m) of each
+/// other over ±1 h are copies of one orbit: distinct GNSS satellites never fly in
+/// formation (the closest slots of one plane are thousands of km apart), while two
+/// issues of one satellite's ephemeris agree to metres.
+const SAME_ORBIT_M: f64 = 1_000.0;
+/// A record further than this (m) from its own satellite's neighbouring record, at its
+/// toe, does not describe that satellite: consecutive issues agree within tens of metres
+/// even 4 h from toe (23 m RMS, 67 m max measured, docs/validation.md), and a manoeuvre
+/// moves a GPS satellite by far less in a few hours.
+const OWN_ORBIT_M: f64 = 10_000.0;
+
+/// The age limits of ephemeris selection: the largest |t − toe| (s) at which a record is
+/// used, per system.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MaxAge {
+    /// GPS limit (s).
+    pub gps_s: f64,
+    /// BeiDou limit (s).
+    pub bds_s: f64,
+}
+
+impl Default for MaxAge {
+    /// RTKLIB's 2 h for GPS ([`GPS_MAX_AGE_S`]) and 1 h for BeiDou ([`BDS_MAX_AGE_S`]).
+    fn default() -> Self {
+        Self {
+            gps_s: GPS_MAX_AGE_S,
+            bds_s: BDS_MAX_AGE_S,
+        }
+    }
+}
+
+impl MaxAge {
+    /// The limit for one system, `None` for a system without broadcast ephemerides.
+    pub fn of(&self, system: System) -> Option<f64> {
+        match system {
+            System::Gps => Some(self.gps_s),
+            System::Bds => Some(self.bds_s),
+            _ => None,
+        }
+    }
+
+    /// Parses a command-line value: seconds for every system (`7200`), or per system
+    /// (`gps=7200,bds=3600`; a system left out keeps its default). Each limit must be a
+    /// positive number of seconds of at most a week.
+    ///
+    /// # Errors
+    /// A message saying which part is wrong and what was expected.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let seconds = |v: &str| -> Result<f64, String> {
+            let x: f64 = v.trim().parse().map_err(|_| {
+                format!("expected seconds such as 7200 or gps=7200,bds=3600, found '{v}'")
+            })?;
+            if x.is_finite() && x > 0.0 && x <= SECONDS_PER_WEEK as f64 {
+                Ok(x)
+            } else {
+                Err(format!(
+                    "expected a positive number of seconds up to a week (604800), found {x}"
+                ))
+            }
+        };
+        if !text.contains('=') {
+            let s = seconds(text)?;
+            return Ok(Self { gps_s: s, bds_s: s });
+        }
+        let mut out = Self::default();
+        for part in text.split(',') {
+            let (k, v) = part
+                .split_once('=')
+                .ok_or_else(|| format!("expected SYSTEM=SECONDS, found '{part}'"))?;
+            match k.trim().to_ascii_lowercase().as_str() {
+                "gps" | "g" => out.gps_s = seconds(v)?,
+                "bds" | "c" => out.bds_s = seconds(v)?,
+                other => return Err(format!("unknown system '{other}': expected gps or bds")),
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// A record the reader read but does not use, and why: its elements are out of the
+/// range a broadcast message can carry, or its orbit is another satellite's.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DroppedRecord {
+    /// The file the record came from.
+    pub file: String,
+    /// The 1-based line of the record's first line, when known.
+    pub line: Option<usize>,
+    /// The satellite the record claims to be.
+    pub sat: EmitterId,
+    /// The record's toe.
+    pub toe: GpsTime,
+    /// Why it was dropped.
+    pub reason: String,
+}
+
+impl std::fmt::Display for DroppedRecord {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.line {
+            Some(l) => write!(f, "{}, line {l}: ", self.file)?,
+            None => write!(f, "{}: ", self.file)?,
+        }
+        write!(
+            f,
+            "{} record with toe {} dropped: {}",
+            self.sat, self.toe, self.reason
+        )
+    }
+}
 
 /// A failure to read a navigation file. Every variant names the file and, where the
 /// problem is in the text, the 1-based line number and what was expected there.
 #[derive(Debug, thiserror::Error)]
 pub enum RinexError {
     /// The file could not be read at all.
-    #[error("{file}: cannot read the file: {source}")]
+    #[error("{file}: cannot read the file: {io}")]
     Io {
         file: String,
-        #[source]
-        source: std::io::Error,
+        /// Carried in the message rather than as the error's source, so that a chain
+        /// printer (`{:#}`) shows the OS error once.
+        io: std::io::Error,
     },
     /// A line or field does not hold what the format requires.
     #[error("{file}, line {line}: expected {expected}, found {found}")]
@@ -128,6 +239,11 @@ pub struct NavData {
     pub leap_seconds: Option<i32>,
     /// Number of records skipped per system letter (systems other than G and C).
     pub skipped: BTreeMap<char, usize>,
+    /// GPS and BeiDou records read but not used (implausible elements, an orbit that is
+    /// another satellite's); callers show them as warnings.
+    pub dropped: Vec<DroppedRecord>,
+    /// The age limits [`NavData::select`] applies.
+    pub max_age: MaxAge,
 }
 
 /// Reads a navigation file from disk; see [`parse_nav`].
@@ -137,13 +253,12 @@ pub struct NavData {
 /// [`parse_nav`].
 pub fn read_nav_file(path: &Path) -> Result<NavData, RinexError> {
     let file = path.display().to_string();
-    let bytes =
-        crate::io::read::read_bytes(path, crate::io::read::RINEX_NAV).map_err(|source| {
-            RinexError::Io {
-                file: file.clone(),
-                source,
-            }
-        })?;
+    let bytes = crate::io::read::read_bytes(path, crate::io::read::RINEX_NAV).map_err(|io| {
+        RinexError::Io {
+            file: file.clone(),
+            io,
+        }
+    })?;
     // RINEX is ASCII; bytes beyond it are replaced rather than rejected so that a stray
     // byte in a comment does not make a whole file unreadable. A replaced byte inside a
     // data field still fails that field's parse with a line number.
@@ -356,7 +471,15 @@ pub fn parse_nav(text: &str, file_name: &str) -> Result<NavData, RinexError> {
     } else {
         &RINEX_3
     };
-    parse_body(&ctx, &lines, &header, &mut nav, dialect)?;
+    let mut record_lines = Vec::new();
+    parse_body(&ctx, &lines, &header, &mut nav, &mut record_lines, dialect)?;
+    let records = std::mem::take(&mut nav.ephemerides)
+        .into_iter()
+        .zip(record_lines.into_iter().map(Some))
+        .collect();
+    let (kept, dropped) = screen(records, file_name);
+    nav.ephemerides = kept;
+    nav.dropped = dropped;
     nav.sort();
     Ok(nav)
 }
@@ -729,6 +852,7 @@ fn parse_body(
     lines: &[&str],
     header: &Header,
     nav: &mut NavData,
+    record_lines: &mut Vec<usize>,
     dialect: &Dialect,
 ) -> Result<(), RinexError> {
     let mut idx = header.body_start;
@@ -766,6 +890,7 @@ fn parse_body(
         };
         nav.ephemerides
             .push(build_ephemeris(ctx, &raw, toc, dialect.v3)?);
+        record_lines.push(idx + 1);
         idx += 8;
         if let Some(next) = lines.get(idx) {
             if !is_blank(next) && !(dialect.is_record_start)(next) {
@@ -1033,23 +1158,120 @@ fn build_ephemeris(
         iodc: if bds { counter(6, 1)? } else { counter(5, 3)? },
         fit_interval_h: if bds { 0.0 } else { get(6, 1)? },
     };
-    if !(0.0..1.0).contains(&eph.e) {
-        return Err(ctx.syntax(
-            raw.orbit_line[1],
-            format!("eccentricity of {sat} in [0, 1)"),
-            format!("{}", eph.e),
-        ));
-    }
-    // Orbits between 1 000 km and 100 000 km from the geocentre: anything else is a
-    // corrupted record, and would give meaningless (or non-finite) positions.
-    if !(1.0e3..=1.0e4).contains(&eph.sqrt_a) {
-        return Err(ctx.syntax(
-            raw.orbit_line[1],
-            format!("sqrt(A) of {sat} between 1000 and 10000 sqrt(m)"),
-            format!("{}", eph.sqrt_a),
-        ));
-    }
+    // Elements out of their physical range are not a syntax error: the record is read,
+    // then dropped with a warning by `screen`, so one corrupt record does not make a
+    // whole day of navigation data unusable.
     Ok(eph)
+}
+
+/// Splits parsed records into the usable ones and the dropped ones (with the reason):
+///
+/// 1. A record whose elements a broadcast message cannot carry
+///    ([`Ephemeris::implausibility`]) is dropped.
+/// 2. A record whose orbit is another satellite's (the two stay within [`SAME_ORBIT_M`]
+///    at toe − 1 h, toe and toe + 1 h) belongs to the satellite whose own nearest other
+///    record (within [`NEIGHBOUR_SPAN_S`]) agrees with it. A record that is more than
+///    [`OWN_ORBIT_M`] from its own satellite's nearest other record, or that has no
+///    such record to vouch for it, is a copy under the wrong PRN and is dropped: RINEX
+///    merging of station files has produced such copies (G01 of 2010-07-01 06:00 in
+///    IGS brdc1820.10n is G23's record under G01's PRN).
+///
+/// Health plays no part here: an unhealthy record still describes its satellite's orbit.
+fn screen(
+    records: Vec<(Ephemeris, Option<usize>)>,
+    file: &str,
+) -> (Vec<Ephemeris>, Vec<DroppedRecord>) {
+    let mut dropped = Vec::new();
+    let drop = |e: &Ephemeris, line: Option<usize>, reason: String| DroppedRecord {
+        file: file.to_string(),
+        line,
+        sat: e.sat,
+        toe: e.toe,
+        reason,
+    };
+    let mut plausible = Vec::with_capacity(records.len());
+    for (e, line) in records {
+        match e.implausibility() {
+            Some(why) => dropped.push(drop(&e, line, why)),
+            None => plausible.push((e, line)),
+        }
+    }
+    // Positions at toe − 1 h, toe and toe + 1 h of record i, and the same instants from
+    // record j: the largest distance between them.
+    // The instant toe comes first so that the usual case (thousands of km apart) costs
+    // one evaluation per pair.
+    let spread = |a: &Ephemeris, b: &Ephemeris| -> f64 {
+        let mut worst = 0.0f64;
+        for dt in [0.0, -3600.0, 3600.0] {
+            let t = a.toe.add_seconds(dt);
+            worst = worst.max((a.state(t).pos_ecef_m - b.state(t).pos_ecef_m).norm());
+            if worst >= SAME_ORBIT_M {
+                break;
+            }
+        }
+        worst
+    };
+    let near = |a: &Ephemeris, b: &Ephemeris| a.toe.seconds_since(b.toe).abs() <= NEIGHBOUR_SPAN_S;
+    // Records sharing their orbit with a record of another satellite of the same system.
+    let shared: Vec<Option<EmitterId>> = plausible
+        .iter()
+        .map(|(a, _)| {
+            plausible
+                .iter()
+                .find(|(b, _)| {
+                    b.sat != a.sat
+                        && b.sat.system == a.sat.system
+                        && near(a, b)
+                        && spread(a, b) < SAME_ORBIT_M
+                })
+                .map(|(b, _)| b.sat)
+        })
+        .collect();
+    let mut kept = Vec::with_capacity(plausible.len());
+    for (i, (a, line)) in plausible.iter().enumerate() {
+        let Some(other) = shared[i] else {
+            continue;
+        };
+        // The satellite's own other record with toe nearest to this one's.
+        let own = plausible
+            .iter()
+            .enumerate()
+            .filter(|(j, (b, _))| *j != i && b.sat == a.sat && near(a, b))
+            .map(|(_, (b, _))| b)
+            .min_by_key(|b| (b.toe.ns() - a.toe.ns()).unsigned_abs());
+        let verdict = match own {
+            Some(b) => {
+                let d = (a.state(a.toe).pos_ecef_m - b.state(a.toe).pos_ecef_m).norm();
+                (d > OWN_ORBIT_M).then(|| {
+                    format!(
+                        "its orbit is {other}'s (within {SAME_ORBIT_M} m over ±1 h) and \
+                         {:.0} km from {}'s own record with toe {}",
+                        d / 1e3,
+                        a.sat,
+                        b.toe
+                    )
+                })
+            }
+            None => Some(format!(
+                "its orbit is {other}'s (within {SAME_ORBIT_M} m over ±1 h) and no other \
+                 record of {} within {} h confirms it",
+                a.sat,
+                NEIGHBOUR_SPAN_S / 3600.0
+            )),
+        };
+        if let Some(why) = verdict {
+            dropped.push(drop(a, *line, why));
+        }
+    }
+    let doubtful: BTreeSet<(EmitterId, GpsTime, Option<usize>)> =
+        dropped.iter().map(|d| (d.sat, d.toe, d.line)).collect();
+    for (e, line) in plausible {
+        if !doubtful.contains(&(e.sat, e.toe, line)) {
+            kept.push(e);
+        }
+    }
+    dropped.sort_by_key(|d| (d.line, d.sat, d.toe));
+    (kept, dropped)
 }
 
 impl NavData {
@@ -1065,6 +1287,8 @@ impl NavData {
             klobuchar,
             leap_seconds,
             skipped: BTreeMap::new(),
+            dropped: Vec::new(),
+            max_age: MaxAge::default(),
         }
     }
 
@@ -1073,16 +1297,17 @@ impl NavData {
         self.ephemerides.sort_by(eph_order);
     }
 
-    /// The ephemeris to use for `sat` at time `t`: among the healthy ephemerides with
-    /// |t − toe| within [`GPS_MAX_AGE_S`] (GPS) or [`BDS_MAX_AGE_S`] (BeiDou), the one
-    /// with toe nearest to `t`; among equally near ones, the latest transmitted (then the
-    /// later toe). `None` when there is none, or for a non-GNSS emitter.
+    /// The ephemeris to use for `sat` at time `t`, chosen as RTKLIB does (`seleph` in
+    /// `ephemeris.c`, with the satellite then excluded when its health word is non-zero):
+    /// among *all* records with |t − toe| within [`NavData::max_age`] for the system, the
+    /// one with toe nearest to `t` (among equally near ones the latest transmitted, then
+    /// the later toe). If that record is unhealthy the satellite is unusable at `t` and
+    /// the answer is `None`: a healthy neighbour further away is never substituted, since
+    /// the control segment flags a satellite unhealthy precisely when its older or newer
+    /// orbit must not be used. `None` also when no record is near enough, or for a
+    /// non-GNSS emitter.
     pub fn select(&self, sat: EmitterId, t: GpsTime) -> Option<&Ephemeris> {
-        let max_age_s = match sat.system {
-            System::Gps => GPS_MAX_AGE_S,
-            System::Bds => BDS_MAX_AGE_S,
-            _ => return None,
-        };
+        let max_age_s = self.max_age.of(sat.system)?;
         self.select_with_max_age(sat, t, max_age_s)
     }
 
@@ -1093,6 +1318,12 @@ impl NavData {
         t: GpsTime,
         max_age_s: f64,
     ) -> Option<&Ephemeris> {
+        self.nearest(sat, t, max_age_s).filter(|e| e.is_healthy())
+    }
+
+    /// The record of `sat` with toe nearest to `t` within `max_age_s`, healthy or not
+    /// (ties as in [`NavData::select`]).
+    pub fn nearest(&self, sat: EmitterId, t: GpsTime, max_age_s: f64) -> Option<&Ephemeris> {
         debug_assert!(self
             .ephemerides
             .windows(2)
@@ -1106,9 +1337,6 @@ impl NavData {
             .iter()
             .take_while(|e| e.sat == sat && e.toe.ns() <= t.ns().saturating_add(max_age_ns))
         {
-            if !e.is_healthy() {
-                continue;
-            }
             best = match best {
                 None => Some(e),
                 Some(b) => {
@@ -1324,13 +1552,18 @@ G01 2020 06 25 04 00 00 1.604342833161e-05 7.048583938740e-12 0.000000000000e+00
             msg.contains("sqrt(A) of G02") && msg.contains("line 8"),
             "{msg}"
         );
-        // An impossible eccentricity.
+        // An impossible eccentricity: the record is read and dropped with its line.
         let text = format!(
             "{V2_HEADER}{}",
             V2_G02.replace("0.960697804112D-02", "0.160697804112D+01")
         );
-        let msg = parse_nav(&text, "bad.10n").unwrap_err().to_string();
-        assert!(msg.contains("eccentricity"), "{msg}");
+        let nav = parse_nav(&text, "bad.10n").unwrap();
+        assert!(nav.ephemerides.is_empty());
+        let msg = nav.dropped[0].to_string();
+        assert!(
+            msg.contains("eccentricity") && msg.contains("bad.10n, line 6"),
+            "{msg}"
+        );
         // A bad date.
         let text = format!(
             "{V2_HEADER}{}",
@@ -1434,16 +1667,30 @@ G01 2020 06 25 04 00 00 1.604342833161e-05 7.048583938740e-12 0.000000000000e+00
             nav.select(base.sat, t.add_seconds(5400.0)).unwrap().toe,
             base.toe.add_seconds(7200.0)
         );
-        // At 4 h the unhealthy 4 h one is skipped; the 2 h one is 2 h away.
+        // At 4 h the nearest record is the unhealthy one: the satellite is unusable, and
+        // the healthy 2 h record (2 h away, within the limit) is not substituted.
+        assert!(nav.select(base.sat, t.add_seconds(14_400.0)).is_none());
         assert_eq!(
-            nav.select(base.sat, t.add_seconds(14_400.0)).unwrap().toe,
+            nav.nearest(base.sat, t.add_seconds(14_400.0), GPS_MAX_AGE_S)
+                .unwrap()
+                .health,
+            1
+        );
+        // At 2.9 h the healthy 2 h record is still the nearest.
+        assert_eq!(
+            nav.select(base.sat, t.add_seconds(2.9 * 3600.0))
+                .unwrap()
+                .toe,
             base.toe.add_seconds(7200.0)
         );
-        // Beyond 4 h of the last healthy one: nothing.
+        // More than 2 h from every toe: nothing, unless the limit is raised.
+        assert!(nav.select(base.sat, t.add_seconds(-7201.0)).is_none());
         assert!(nav
-            .select(base.sat, t.add_seconds(7200.0 + 14_401.0))
-            .is_none());
-        assert!(nav.select(base.sat, t.add_seconds(-14_401.0)).is_none());
+            .select_with_max_age(base.sat, t.add_seconds(-7201.0), 4.0 * 3600.0)
+            .is_some());
+        let mut wide = nav.clone();
+        wide.max_age = MaxAge::parse("gps=7300").unwrap();
+        assert!(wide.select(base.sat, t.add_seconds(-7201.0)).is_some());
         assert!(nav.select(EmitterId::new(System::Gps, 3), t).is_none());
         assert!(nav.select(EmitterId::new(System::Dtmb, 2), t).is_none());
         // Exactly halfway between two healthy ones: the later issue.
@@ -1465,5 +1712,88 @@ G01 2020 06 25 04 00 00 1.604342833161e-05 7.048583938740e-12 0.000000000000e+00
             nav.ephemerides[0].toe,
             GpsTime::from_week_tow(1590, 345_600.0)
         );
+    }
+
+    #[test]
+    fn max_age_parses() {
+        assert_eq!(
+            MaxAge::parse("7200").unwrap(),
+            MaxAge {
+                gps_s: 7200.0,
+                bds_s: 7200.0
+            }
+        );
+        assert_eq!(
+            MaxAge::parse("bds=1800").unwrap(),
+            MaxAge {
+                gps_s: GPS_MAX_AGE_S,
+                bds_s: 1800.0
+            }
+        );
+        assert_eq!(MaxAge::parse("G=100, C=200").unwrap().bds_s, 200.0);
+        for bad in ["", "-1", "0", "inf", "1e9", "gal=100", "gps", "gps=x"] {
+            assert!(MaxAge::parse(bad).is_err(), "{bad}");
+        }
+    }
+
+    /// Each harmonic amplitude and orbit size out of its broadcast range drops the record
+    /// (with its line), while the same record with in-range values is kept.
+    #[test]
+    fn implausible_elements_drop_the_record() {
+        let ok = parse_nav(&format!("{V2_HEADER}{V2_G02}"), "ok.10n").unwrap();
+        assert_eq!(ok.ephemerides.len(), 1);
+        assert!(ok.dropped.is_empty());
+        for (field, bad, needle) in [
+            ("0.414375000000D+02", "0.100000000000D+31", "Crs"), // Crs = 1e30 m
+            ("0.249937500000D+03", "-0.20000000000D+04", "Crc"),
+            ("0.232271850109D-05", "0.100000000000D-02", "Cuc"),
+            ("0.617466866970D-05", "0.100000000000D+01", "Cus"),
+            ("-0.558793544769D-08", "-0.100000000000D-03", "Cic"),
+            ("0.167638063431D-06", "0.700000000000D-04", "Cis"),
+            ("0.960697804112D-02", "0.500000000000D-01", "eccentricity"),
+            ("0.515359739113D+04", "0.900000000000D+04", "sqrt(A)"),
+            ("0.515359739113D+04", "0.200000000000D+04", "sqrt(A)"),
+            ("0.525557597442D-08", "0.525557597442D-06", "Delta n"),
+        ] {
+            let text = format!("{V2_HEADER}{}", V2_G02.replace(field, bad));
+            let nav = parse_nav(&text, "bad.10n").unwrap();
+            assert!(nav.ephemerides.is_empty(), "{needle}");
+            let msg = nav.dropped[0].to_string();
+            assert!(
+                msg.contains(needle) && msg.contains("line 6") && msg.contains("G02"),
+                "{msg}"
+            );
+        }
+    }
+
+    /// A copy of G02's record under PRN 7 is dropped and G02's own kept, since G02's
+    /// other record vouches for G02; without that second record neither can be told
+    /// apart and both are dropped.
+    #[test]
+    fn a_record_under_the_wrong_prn_is_dropped() {
+        let next = V2_G02
+            .replace(" 2 10  7  1  0  0  0.0", " 2 10  7  1  2  0  0.0")
+            .replace("0.345600000000D+06", "0.352800000000D+06")
+            // Two hours later the mean anomaly has moved on by n·7200 s (n = √(μ/A³) + Δn
+            // = 1.458657e-4 rad/s): 1.65772167412 + 1.050233 = 2.707954530837 rad.
+            .replace("0.165772167412D+01", "0.270795453084D+01");
+        let copy = V2_G02.replace(" 2 10  7  1", " 7 10  7  1");
+        let nav = parse_nav(&format!("{V2_HEADER}{V2_G02}{next}{copy}"), "dup.10n").unwrap();
+        let g07 = EmitterId::new(System::Gps, 7);
+        assert!(
+            nav.ephemerides.iter().all(|e| e.sat != g07),
+            "{:?}",
+            nav.dropped
+        );
+        assert_eq!(nav.ephemerides.len(), 2);
+        assert_eq!(nav.dropped.len(), 1);
+        let msg = nav.dropped[0].to_string();
+        assert!(
+            msg.contains("G07") && msg.contains("G02's") && msg.contains("line 22"),
+            "{msg}"
+        );
+        let alone = parse_nav(&format!("{V2_HEADER}{V2_G02}{copy}"), "dup.10n").unwrap();
+        assert!(alone.ephemerides.is_empty(), "{:?}", alone.ephemerides);
+        assert_eq!(alone.dropped.len(), 2);
     }
 }

@@ -79,6 +79,9 @@ pub struct World {
     pub nav: Arc<NavData>,
     /// Where the navigation data came from.
     pub nav_source: String,
+    /// Things a user should know that do not stop the world from running (dropped
+    /// navigation records, implausible values); `check` and `run` print them.
+    pub warnings: Vec<String>,
     /// Scenario length.
     pub duration_s: f64,
     /// Shielding windows with their satellites parsed.
@@ -154,6 +157,32 @@ fn parse_path(at: &str) -> Vec<PathSeg> {
     segs
 }
 
+/// Deserialises a world file, returning on error the key path of the error (the table of
+/// a missing key, the key of a wrong value; empty for syntax errors), the parser's byte
+/// span when it has one, and the message without the path.
+fn deserialize_world(
+    text: &str,
+) -> Result<WorldFile, (String, Option<std::ops::Range<usize>>, String)> {
+    serde_path_to_error::deserialize(toml::Deserializer::new(text)).map_err(|e| {
+        let tracked = e.path().to_string();
+        let inner = e.into_inner();
+        let span = inner.span();
+        let message = inner.message().trim().to_string();
+        // Errors inside `[[estimator]]` tables carry their own path (they are read table
+        // by table after presets are expanded): `estimator[1].filter: unknown variant …`.
+        if let Some((key, rest)) = schema::split_estimator_error(&message) {
+            return (key.to_string(), span, rest.to_string());
+        }
+        // A path of only `?` segments (or nothing) means the error is about the syntax.
+        let key = if tracked.split('.').all(|s| s == "?" || s.is_empty()) {
+            String::new()
+        } else {
+            tracked
+        };
+        (key, span, message)
+    })
+}
+
 fn fnv_hex(bytes: &[u8]) -> String {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for &b in bytes {
@@ -193,14 +222,23 @@ pub fn load_world(path: &Path) -> Result<World, WorldError> {
 /// As [`load_world`].
 pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
     let ctx = Ctx { path, text };
-    let file: WorldFile = toml::from_str(text).map_err(|e| {
-        let (line, column) = e.span().map_or((1, 1), |s| locate::line_col(text, s.start));
+    let file: WorldFile = deserialize_world(text).map_err(|(key, span, message)| {
+        let segs = parse_path(&key);
+        // The parser's span is exact for syntax errors and values; the key path is what
+        // locates errors inside tables the parser only saw as a whole (`[[estimator]]`,
+        // read through presets) and missing keys (at their table's header).
+        let (line, column) = match span {
+            Some(s) if !key.starts_with("estimator") => locate::line_col(text, s.start),
+            _ if !segs.is_empty() => locate(text, &segs),
+            Some(s) => locate::line_col(text, s.start),
+            None => (1, 1),
+        };
         WorldError {
             file: path.to_path_buf(),
             line,
             column,
-            key: String::new(),
-            message: e.message().trim().to_string(),
+            key: path_to_string(&segs),
+            message,
         }
     })?;
 
@@ -376,11 +414,20 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
         }
     }
 
+    let mut warnings: Vec<String> = nav.dropped.iter().map(ToString::to_string).collect();
+    warnings.extend(plausibility_warnings(
+        &ctx,
+        &file,
+        probe.as_ref(),
+        &transmitters,
+    ));
+
     Ok(World {
         path: path.to_path_buf(),
         hash: fnv_hex(text.as_bytes()),
         start,
         frame,
+        warnings,
         nav: Arc::new(nav),
         nav_source,
         duration_s,
@@ -391,6 +438,157 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
         epoch_cache: Default::default(),
         file,
     })
+}
+
+/// Fastest plausible pedestrian (m/s): running pace. Preferred walking speed is about
+/// 1.4 m/s (Bohannon 1997, Age and Ageing 26:15–19) and recreational running stays below
+/// 6 m/s; faster usually means a speed in km/h.
+const PEDESTRIAN_MAX_MPS: f64 = 6.0;
+/// Fastest plausible road vehicle (m/s), 250 km/h; faster usually means km/h.
+const CAR_MAX_MPS: f64 = 70.0;
+/// Highest ERP (kW) of a UHF television transmitter: 1000 kW is the FCC's cap for UHF DTV
+/// (47 CFR 73.622(f)(8)); more usually means a value in W.
+const TV_MAX_ERP_KW: f64 = 1000.0;
+/// Highest ERP (kW) of an FM broadcast station: 100 kW, the FCC's class C maximum
+/// (47 CFR 73.211(b)).
+const FM_MAX_ERP_KW: f64 = 100.0;
+/// Lowest plausible antenna height (m above the world origin) of a broadcast or base
+/// station transmitter: antennas sit on masts or roofs; less usually means km or a
+/// height above the wrong datum.
+const TRANSMITTER_MIN_HEIGHT_M: f64 = 3.0;
+
+/// Values that are valid but probably not what the author meant, each with the unit slip
+/// it suggests. They do not stop the world; `check` and `run` print them.
+fn plausibility_warnings(
+    ctx: &Ctx<'_>,
+    file: &WorldFile,
+    probe: &dyn Trajectory,
+    transmitters: &[Transmitter],
+) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut warn = |at: &str, m: String| out.push(ctx.err(at, m).to_string());
+    // Speed: the fastest moment of the trajectory, sampled every 0.5 s.
+    let traj_s = probe.duration_s();
+    let n = (traj_s / 0.5).ceil().min(2.0e6) as usize;
+    let top_mps = (0..=n)
+        .map(|k| probe.state_at(k as f64 * 0.5).vel_enu_mps.norm())
+        .fold(0.0, f64::max);
+    let limit = match file.platform.kind {
+        PlatformKind::Pedestrian => Some(("a pedestrian", PEDESTRIAN_MAX_MPS)),
+        PlatformKind::Car => Some(("a car", CAR_MAX_MPS)),
+        PlatformKind::Target => None,
+    };
+    if let Some((what, max)) = limit {
+        if top_mps > max {
+            warn(
+                "platform.trajectory",
+                format!(
+                    "the trajectory reaches {top_mps:.1} m/s ({:.0} km/h), fast for {what} \
+                     (at most {max} m/s expected); was a speed in km/h given as m/s?",
+                    top_mps * 3.6
+                ),
+            );
+        }
+    }
+    if let Some(d) = file.world.duration_s {
+        if d < traj_s - 1e-6 {
+            warn(
+                "world.duration_s",
+                format!(
+                    "duration_s = {d} s stops the scenario before the trajectory ends \
+                     ({traj_s:.1} s); leave it out to run the whole trajectory"
+                ),
+            );
+        }
+    }
+    if let Some(g) = &file.sensors.gnss {
+        let m = g.elevation_mask_deg;
+        if m > 0.0 && m < std::f64::consts::FRAC_PI_2 && m.fract() != 0.0 {
+            warn(
+                "sensors.gnss.elevation_mask_deg",
+                format!(
+                    "an elevation mask of {m}° is unusually low; if it is in radians, write \
+                     {:.1} (degrees)",
+                    m.to_degrees()
+                ),
+            );
+        }
+    }
+    for (i, t) in transmitters.iter().enumerate() {
+        let max_kw = if t.kind == TransmitterKind::Fm {
+            FM_MAX_ERP_KW
+        } else {
+            TV_MAX_ERP_KW
+        };
+        if t.spec.erp_kw > max_kw {
+            warn(
+                &format!("transmitter[{i}].erp_kw"),
+                format!(
+                    "{} radiates {} kW ERP, more than the {max_kw} kW of the largest \
+                     {} transmitters; was it given in W ({} kW)?",
+                    t.id,
+                    t.spec.erp_kw,
+                    if t.kind == TransmitterKind::Fm {
+                        "FM"
+                    } else {
+                        "UHF TV"
+                    },
+                    t.spec.erp_kw / 1e3
+                ),
+            );
+        }
+        if t.pos_enu_m.z < TRANSMITTER_MIN_HEIGHT_M {
+            let key = if t.spec.position.is_some() {
+                "position.h_m"
+            } else {
+                "position_enu_m"
+            };
+            warn(
+                &format!("transmitter[{i}].{key}"),
+                format!(
+                    "{}'s antenna is {:.2} m above the world origin; masts and roofs put \
+                     antennas at least {TRANSMITTER_MIN_HEIGHT_M} m up (a height in km? an \
+                     ellipsoidal height h_m is above the ellipsoid, like the origin's)",
+                    t.id, t.pos_enu_m.z
+                ),
+            );
+        }
+    }
+    // Co-channel DTMB towers at signal level: their signals add at the receiver, and
+    // unless they form a declared single-frequency network (same payload and schedule)
+    // the receiver's acquisition locks onto either and ranging resets.
+    let signal_level = file
+        .sensors
+        .dtmb
+        .as_ref()
+        .is_some_and(|d| d.level == crate::dtmb::source::DtmbLevel::Signal);
+    if signal_level {
+        for (i, t) in transmitters.iter().enumerate() {
+            if t.kind != TransmitterKind::Dtmb {
+                continue;
+            }
+            let twin = transmitters[..i].iter().find(|o| {
+                o.kind == TransmitterKind::Dtmb
+                    && o.freq_hz == t.freq_hz
+                    && (o.spec.sfn.is_none() || o.spec.sfn != t.spec.sfn)
+            });
+            if let Some(o) = twin {
+                warn(
+                    &format!("transmitter[{i}].channel"),
+                    format!(
+                        "DTMB towers {} and {} share the carrier {} MHz at level = \"signal\" \
+                         without a common sfn: their independent signals interfere and the \
+                         receiver's ranging loses lock; put them on different channels or \
+                         in one single-frequency network (sfn = \"…\")",
+                        o.id,
+                        t.id,
+                        t.freq_hz * 1e-6
+                    ),
+                );
+            }
+        }
+    }
+    out
 }
 
 /// A car or a target cannot drive through a building; a pedestrian may walk into one (an
@@ -482,39 +680,54 @@ fn check_transmitters(
     Ok(out)
 }
 
+/// The embedded navigation files, by the name worlds and commands use for them.
+pub const BUILTIN_NAV: &[(&str, &str)] = &[(BUILTIN_EPHEMERIS_NAME, BUILTIN_EPHEMERIS)];
+
+/// Reads a navigation source as worlds and commands name it: `builtin:NAME` for an
+/// embedded file ([`BUILTIN_NAV`]), otherwise a RINEX navigation file path, relative to
+/// `base_dir`. Returns the data and how to name its source in messages.
+///
+/// # Errors
+/// An unknown `builtin:` name (the message lists the known ones), a missing file, or the
+/// reader's [`crate::gnss::rinex_nav::RinexError`] text, each said once.
+pub fn read_nav_source(spec: &str, base_dir: &Path) -> Result<(NavData, String), String> {
+    if let Some(name) = spec.strip_prefix("builtin:") {
+        let Some((full, text)) = BUILTIN_NAV
+            .iter()
+            .find(|(n, _)| n.strip_prefix("builtin:") == Some(name))
+        else {
+            let known: Vec<&str> = BUILTIN_NAV.iter().map(|(n, _)| *n).collect();
+            return Err(format!(
+                "unknown embedded navigation data \"{spec}\": expected one of {}",
+                known.join(", ")
+            ));
+        };
+        let nav = parse_nav(text, full)
+            .map_err(|e| format!("the embedded ephemeris does not parse: {e}"))?;
+        return Ok((nav, (*full).to_string()));
+    }
+    let p = base_dir.join(spec);
+    if !p.exists() {
+        return Err(format!(
+            "navigation file {} does not exist (a relative path is read from {}; use \
+             \"{BUILTIN_EPHEMERIS_NAME}\" for the embedded one)",
+            p.display(),
+            if base_dir.as_os_str().is_empty() {
+                "the current directory".to_string()
+            } else {
+                base_dir.display().to_string()
+            }
+        ));
+    }
+    let nav = read_nav_file(&p).map_err(|e| e.to_string())?;
+    Ok((nav, p.display().to_string()))
+}
+
 /// Navigation data: a file relative to the world file, or the embedded default.
 fn load_nav(ctx: &Ctx<'_>, ephemeris: Option<&str>) -> Result<(NavData, String), WorldError> {
-    match ephemeris {
-        None | Some(BUILTIN_EPHEMERIS_NAME) => {
-            let nav = parse_nav(BUILTIN_EPHEMERIS, BUILTIN_EPHEMERIS_NAME).map_err(|e| {
-                ctx.err(
-                    "world.ephemeris",
-                    format!("the embedded ephemeris does not parse: {e}"),
-                )
-            })?;
-            Ok((nav, BUILTIN_EPHEMERIS_NAME.to_string()))
-        }
-        Some(rel) => {
-            let p = ctx.path.parent().unwrap_or(Path::new(".")).join(rel);
-            if !p.exists() {
-                return Err(ctx.err(
-                    "world.ephemeris",
-                    format!(
-                        "navigation file {} does not exist (paths are relative to the world \
-                         file; use \"{BUILTIN_EPHEMERIS_NAME}\" for the embedded one)",
-                        p.display()
-                    ),
-                ));
-            }
-            let nav = read_nav_file(&p).map_err(|e| {
-                ctx.err(
-                    "world.ephemeris",
-                    format!("cannot use navigation file: {e}"),
-                )
-            })?;
-            Ok((nav, p.display().to_string()))
-        }
-    }
+    let base = ctx.path.parent().unwrap_or(Path::new("."));
+    read_nav_source(ephemeris.unwrap_or(BUILTIN_EPHEMERIS_NAME), base)
+        .map_err(|m| ctx.err("world.ephemeris", m))
 }
 
 fn check_gnss(

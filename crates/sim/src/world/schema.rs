@@ -207,10 +207,27 @@ where
         .map(|(i, t)| {
             let t = crate::world::presets::expand(t)
                 .map_err(|m| D::Error::custom(format!("estimator[{i}].{m}")))?;
-            EstimatorSpec::deserialize(toml::Value::Table(t))
-                .map_err(|e| D::Error::custom(format!("estimator[{i}]: {}", e.message())))
+            serde_path_to_error::deserialize(toml::Value::Table(t)).map_err(|e| {
+                let inner = e.path().to_string();
+                let at = if inner.is_empty() || inner == "." || inner == "?" {
+                    format!("estimator[{i}]")
+                } else {
+                    format!("estimator[{i}].{inner}")
+                };
+                D::Error::custom(format!("{at}: {}", e.into_inner().message()))
+            })
         })
         .collect()
+}
+
+/// Splits an error of [`estimators_with_presets`] into its key path and message:
+/// `estimator[1].filter: unknown variant` → (`estimator[1].filter`, `unknown variant`).
+pub(crate) fn split_estimator_error(message: &str) -> Option<(&str, &str)> {
+    let rest = message.strip_prefix("estimator[")?;
+    let close = rest.find(']')?;
+    rest[..close].parse::<usize>().ok()?;
+    let (key, msg) = message.split_once(": ")?;
+    (!key.contains(' ')).then_some((key, msg))
 }
 
 /// The filter an estimator runs.
