@@ -299,3 +299,53 @@ fn bad_particle_filter_input_is_refused_with_its_place_and_range() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The bound a run reports is the bound of the world: `summary.json`'s
+/// `pcrlb_pos_rmse_m` for seed 003's estimators equals `World::pcrlb_pos_rmse_m` computed
+/// from the library for the same seed and trials, `efficiency` is the summary's RMSE over
+/// it, and the report's table shows both.
+#[test]
+fn a_run_reports_the_worlds_bound_in_its_summary_and_report() {
+    let world_path = crate::common::repo().join("worlds/seed003-seamless.toml");
+    let out = crate::common::tmp_dir("pcrlb-report");
+    let _ = std::fs::remove_dir_all(&out);
+    let o = crate::common::hybridnav(&[
+        "run",
+        world_path.to_str().expect("utf-8 path"),
+        "--trials",
+        "2",
+        "--seed",
+        "3",
+        "--quiet",
+        "--out",
+        out.to_str().expect("utf-8 path"),
+    ]);
+    assert!(o.status.success(), "{}", crate::common::stderr(&o));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let world = hybridnav::world::load_world(&world_path).unwrap();
+    let bounds = world.pcrlb_pos_rmse_m(3, 2);
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    let ests = summary["estimators"].as_array().unwrap();
+    assert_eq!(ests.len(), bounds.len());
+    let mut bounded = 0;
+    for (e, b) in ests.iter().zip(&bounds) {
+        let Some(b) = b else {
+            assert!(e["pcrlb_pos_rmse_m"].is_null(), "{e}");
+            continue;
+        };
+        bounded += 1;
+        let reported = e["pcrlb_pos_rmse_m"].as_f64().unwrap();
+        assert!((reported - b).abs() <= 1e-9 * b, "{reported} vs {b}");
+        let rmse = e["error_3d_m"]["rmse"].as_f64().unwrap();
+        let eff = e["efficiency"].as_f64().unwrap();
+        assert!((eff - rmse / b).abs() <= 1e-9 * eff, "{eff} vs {rmse}/{b}");
+        assert!(
+            html.contains(&format!("<td>{b:.2}</td><td>{eff:.2}</td>")),
+            "report lacks the bound of {}",
+            e["name"]
+        );
+    }
+    assert!(bounded >= 3, "seed 003's EKF and PFs share one model");
+    let _ = std::fs::remove_dir_all(&out);
+}

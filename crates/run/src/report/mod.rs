@@ -86,7 +86,7 @@ fn opt(v: Option<f64>, digits: usize) -> String {
 /// The papers' table: σ-levels of the 3-D and horizontal error, their spread, and the
 /// other statistics of `summary.json`.
 fn table(h: &mut String, s: &Summary) {
-    h.push_str("<h2>Position error</h2>\n<div class=\"wide\"><table><tr><th>estimator</th><th>1σ</th><th>2σ</th><th>3σ</th><th>mean</th><th>RMSE</th><th>max</th><th>mean ATE</th><th>RMSE ATE</th><th>mean RPE</th><th>RMSE RPE</th><th>RMSE ATE aligned</th><th>horiz. 1σ / 2σ / 3σ</th><th>mean NEES [95 % band]</th><th>mean NIS / dof</th><th>availability</th><th>coasting</th><th>modes</th></tr>\n");
+    h.push_str("<h2>Position error</h2>\n<div class=\"wide\"><table><tr><th>estimator</th><th>1σ</th><th>2σ</th><th>3σ</th><th>mean</th><th>RMSE</th><th>max</th><th>mean ATE</th><th>RMSE ATE</th><th>mean RPE</th><th>RMSE RPE</th><th>RMSE ATE aligned</th><th>horiz. 1σ / 2σ / 3σ</th><th>mean NEES [95 % band]</th><th>mean NIS / dof</th><th>PCRLB on RMSE</th><th>RMSE / PCRLB</th><th>availability</th><th>coasting</th><th>modes</th></tr>\n");
     for e in &s.estimators {
         let a = e.error_3d_m.as_ref();
         let b = e.error_h_m.as_ref();
@@ -105,7 +105,7 @@ fn table(h: &mut String, s: &Summary) {
             .collect();
         let _ = writeln!(
             h,
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{} / {} / {}</td><td>{}</td><td>{}</td><td>{:.1} %</td><td>{:.1} %</td><td>{}</td></tr>",
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{} / {} / {}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{:.1} %</td><td>{:.1} %</td><td>{}</td></tr>",
             escape(&e.name),
             opt(a.map(|x| x.sigma1), 2),
             opt(a.map(|x| x.sigma2), 2),
@@ -123,12 +123,14 @@ fn table(h: &mut String, s: &Summary) {
             opt(b.map(|x| x.sigma3), 2),
             nees,
             nis,
+            opt(e.pcrlb_pos_rmse_m, 2),
+            opt(e.efficiency, 2),
             100.0 * e.availability,
             100.0 * e.coasting_epochs as f64 / e.epochs.max(1) as f64,
             modes.join(", ")
         );
     }
-    h.push_str("</table></div>\n<p class=\"meta\">Metres. σ-levels are the 68.27/95.45/99.73 % percentiles of the 3-D error over every epoch of every trial (seed 000's convention). ATE and RPE follow the TUM benchmark in ECEF without alignment, RPE over Δ = 1 s, as seed 000 computes them; the aligned ATE first fits each trial's trajectory to the truth by a rigid (Horn) transform. NEES is of the position (3 degrees of freedom, 3 for a consistent filter) with the two-sided 95 % χ² band of its mean; NIS is summed over each epoch's updates, against the summed dimensions (its expectation for a consistent filter; particle filters have none). Every estimator is scored at the same instants (the world's scoring epochs: the GNSS epochs unless <code>[scoring]</code> says otherwise), with the estimate after every batch of the instant. Availability counts the epochs whose estimate used a measurement within the coast limit; coasting, those among them at which the estimator used none.</p>\n");
+    h.push_str("</table></div>\n<p class=\"meta\">Metres. σ-levels are the 68.27/95.45/99.73 % percentiles of the 3-D error over every epoch of every trial (seed 000's convention). ATE and RPE follow the TUM benchmark in ECEF without alignment, RPE over Δ = 1 s, as seed 000 computes them; the aligned ATE first fits each trial's trajectory to the truth by a rigid (Horn) transform. NEES is of the position (3 degrees of freedom, 3 for a consistent filter) with the two-sided 95 % χ² band of its mean; NIS is summed over each epoch's updates, against the summed dimensions (its expectation for a consistent filter; particle filters have none). The PCRLB is the posterior Cramér–Rao bound on the position RMSE (Tichavský, Muravchik &amp; Nehorai 1998) for the estimators whose process model it covers: no unbiased estimator of that model does better, so RMSE / PCRLB is 1 for an efficient one. Every estimator is scored at the same instants (the world's scoring epochs: the GNSS epochs unless <code>[scoring]</code> says otherwise), with the estimate after every batch of the instant. Availability counts the epochs whose estimate used a measurement within the coast limit; coasting, those among them at which the estimator used none.</p>\n");
     across(h, s);
 }
 
