@@ -11,6 +11,20 @@ fn line_of(needle: &str) -> usize {
         + 1
 }
 
+/// The default world's text with its `ephemeris = "…"` line naming `nav` instead.
+fn with_ephemeris(text: &str, nav: &str) -> String {
+    text.lines()
+        .map(|l| {
+            if l.starts_with("ephemeris = ") {
+                format!("ephemeris = \"{nav}\"")
+            } else {
+                l.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
 #[test]
 fn summary_is_identical_for_one_and_two_threads() {
     let d = tmp_dir("threads");
@@ -81,7 +95,11 @@ fn summary_has_the_documented_keys() {
     }
     assert_eq!(v["trials"], 2);
     let est = v["estimators"].as_array().unwrap();
-    assert_eq!(est.len(), 3);
+    // One summary entry per [[estimator]] table of the world.
+    assert_eq!(
+        est.len(),
+        default_world_text().matches("[[estimator]]").count()
+    );
     for e in est {
         for k in ["sigma1", "sigma2", "sigma3", "mean", "std", "rmse", "max"] {
             let x = e["error_3d_m"][k]
@@ -105,7 +123,9 @@ fn check_prints_a_summary() {
     assert!(o.status.success(), "{}", stderr(&o));
     let s = String::from_utf8_lossy(&o.stdout);
     assert!(s.contains("estimator  GPS+BDS"), "{s}");
-    assert!(s.contains("GPS week 2003"), "{s}");
+    // The world starts on 2020-06-25 04:00 GPST: 14 781 days after the GPS epoch
+    // (1980-01-06), week 2111 (day 4 of it).
+    assert!(s.contains("GPS week 2111"), "{s}");
 }
 
 /// Runs `check` on the default world edited by `edit` and returns stderr.
@@ -171,10 +191,13 @@ fn world_with_an_impossible_value_names_the_key() {
         t.replace("systems = [\"gps\", \"bds\"]", "systems = [\"gps\"]")
     });
     assert!(
-        e.contains("estimator[2].sources[1]") && e.contains("does not simulate"),
+        // The first estimator using BeiDou is the second, "GPS+BDS".
+        e.contains("estimator[1].sources[1]") && e.contains("does not simulate"),
         "{e}"
     );
-    let e = check_edited("dup", |t| t.replace("name = \"GPS+BDS\"", "name = \"GPS\""));
+    let e = check_edited("dup", |t| {
+        t.replace("name = \"GPS+BDS\"", "name = \"GPS WLS\"")
+    });
     assert!(e.contains("used twice"), "{e}");
 }
 
@@ -187,9 +210,7 @@ fn missing_world_and_missing_ephemeris_are_clear() {
         "{}",
         stderr(&o)
     );
-    let e = check_edited("eph", |t| {
-        t.replace("builtin:nominal-gps-bds", "nowhere.rnx")
-    });
+    let e = check_edited("eph", |t| with_ephemeris(t, "nowhere.rnx"));
     assert!(
         e.contains("world.ephemeris") && e.contains("does not exist"),
         "{e}"
@@ -208,11 +229,15 @@ fn malformed_toml_gives_line_and_column() {
 #[test]
 fn empty_sky_is_a_clear_error() {
     let Some(g) = shared_gnss() else { return };
-    // brdc1820.10n holds 2010 orbits; the world starts in 2018, so no satellite is usable.
+    // brdc1820.10n holds 2010 orbits; the world starts in 2020, so no satellite is usable.
     let nav = g.join("brdc1820.10n");
     let e = check_edited("empty", |t| {
-        t.replace("builtin:nominal-gps-bds", nav.to_str().unwrap())
+        with_ephemeris(t, nav.to_str().unwrap())
             .replace("systems = [\"gps\", \"bds\"]", "systems = [\"gps\"]")
+            .replace(
+                "sources = [\"gps\", \"bds\", \"dtmb\"]",
+                "sources = [\"gps\", \"dtmb\"]",
+            )
             .replace("sources = [\"gps\", \"bds\"]", "sources = [\"gps\"]")
     });
     assert!(e.contains("empty sky"), "{e}");

@@ -91,9 +91,16 @@ pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     p
 }
 
-/// The default world's text.
+/// The default world's text, with its ephemeris path (relative to `worlds/`) made absolute
+/// so that a test can write the text, edited or not, into any directory.
 pub fn default_world_text() -> String {
-    std::fs::read_to_string(repo().join("worlds/default.toml")).expect("read default world")
+    let text =
+        std::fs::read_to_string(repo().join("worlds/default.toml")).expect("read default world");
+    let eph = repo().join("ephemeris");
+    text.replace(
+        "\"../ephemeris/",
+        &format!("\"{}/", eph.display().to_string().replace('\\', "/")),
+    )
 }
 
 /// Whether `python3` can import every one of `modules`; prints why not (the test then

@@ -13,41 +13,71 @@ use std::path::{Path, PathBuf};
 
 const C_MPS: f64 = 299_792_458.0;
 
-/// The default world without its buildings and shielding, its receiver clock started
-/// just under 0.5 ms; with `nav`, on a real broadcast file at its place and day.
+/// The default world without its buildings, shielding, DTMB tower and the estimators that
+/// use the tower or the IMU, its receiver clock started just under 0.5 ms; on the
+/// synthetic `builtin:nominal-gps-bds` constellation (2018-06-01 04:00 GPST), or with
+/// `nav`, on a real broadcast file at its place and day.
 fn open_sky_world(dir: &Path, nav: Option<&Path>) -> PathBuf {
     let text = crate::common::default_world_text();
-    let mut out = Vec::new();
-    let mut skip = false;
+    // Split into tables (a header line and the lines up to the next header).
+    let mut tables: Vec<Vec<&str>> = vec![Vec::new()];
     for line in text.lines() {
         if line.starts_with('[') {
-            skip = line.starts_with("[[shielding]]")
-                || line.starts_with("[scene")
-                || line.starts_with("[[scene")
-                || line.starts_with("[[transmitter]]");
+            tables.push(Vec::new());
         }
+        tables.last_mut().unwrap().push(line);
+    }
+    let mut out = Vec::new();
+    let mut in_dropped_estimator = false;
+    for t in &tables {
+        let header = t[0];
+        let body = t.join("\n");
+        if header.starts_with("[[estimator]]") {
+            in_dropped_estimator = body.contains("\"dtmb\"") || body.contains("filter = \"ins\"");
+        } else if !header.starts_with("[estimator.") {
+            in_dropped_estimator = false;
+        }
+        let skip = header.starts_with("[[shielding]]")
+            || header.starts_with("[scene")
+            || header.starts_with("[[scene")
+            || header.starts_with("[[transmitter]]")
+            || header.starts_with("[sensors.dtmb]")
+            || in_dropped_estimator;
         if !skip {
-            out.push(line.to_string());
+            out.extend(t.iter().map(|l| l.to_string()));
         }
     }
-    let mut w = out.join("\n");
+    let (ephemeris, start) = match nav {
+        Some(nav) => (nav.display().to_string(), "2020-06-25T10:00:00 GPST"),
+        None => (
+            "builtin:nominal-gps-bds".to_string(),
+            "2018-06-01T04:00:00 GPST",
+        ),
+    };
+    let mut w = out
+        .iter()
+        .map(|l| {
+            if l.starts_with("ephemeris = ") {
+                format!("ephemeris = {ephemeris:?}")
+            } else if l.starts_with("start = ") {
+                format!("start = {start:?}")
+            } else {
+                l.clone()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
     w = w
         .replace("initial_bias_s = 1.0e-4", "initial_bias_s = 4.999e-4")
         .replace(
             "initial_bias_sigma_s = 1.0e-5",
             "initial_bias_sigma_s = 0.0",
         );
-    if let Some(nav) = nav {
-        w = w
-            .replace(
-                "ephemeris = \"builtin:nominal-gps-bds\"",
-                &format!("ephemeris = {:?}", nav.display().to_string()),
-            )
-            .replace("2018-06-01T04:00:00 GPST", "2020-06-25T10:00:00 GPST")
-            .replace(
-                "origin = { lat_deg = 40.00470, lon_deg = 116.39690, h_m = 45.0 }",
-                "origin = { lat_deg = 55.40, lon_deg = 8.45, h_m = 20.0 }",
-            );
+    if nav.is_some() {
+        w = w.replace(
+            "origin = { lat_deg = 40.00470, lon_deg = 116.39690, h_m = 45.0 }",
+            "origin = { lat_deg = 55.40, lon_deg = 8.45, h_m = 20.0 }",
+        );
     }
     crate::common::write(dir, "open-sky.toml", &w)
 }

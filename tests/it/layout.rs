@@ -144,8 +144,29 @@ fn layout_writes_every_output_of_the_default_world() {
     }
 }
 
+/// The default world's street (buildings, trees, tower) under the synthetic nominal sky of
+/// 2018-06-01 04:00 GPST, the sky it had before it took the real 2020 broadcast file: the
+/// seeded scene of the placement test below.
+fn synthetic_sky_street(dir: &Path) -> std::path::PathBuf {
+    let text: String = default_world_text()
+        .lines()
+        .map(|l| {
+            if l.starts_with("ephemeris = ") {
+                "ephemeris = \"builtin:nominal-gps-bds\"".to_string()
+            } else if l.starts_with("start = ") {
+                "start = \"2018-06-01T04:00:00 GPST\"".to_string()
+            } else {
+                l.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    write(dir, "synthetic-sky.toml", &text)
+}
+
 /// The greedy-then-swap search on a seeded scene: the default world's street canyons
-/// with twenty seeded candidate sites (tests/data/layout/canyon-candidates.csv), K = 2.
+/// under the synthetic sky (`synthetic_sky_street`) with twenty seeded candidate sites
+/// (tests/data/layout/canyon-candidates.csv), K = 2.
 /// There greedy is myopic — its first site is the best single site but not part of the
 /// best pair — and the swaps find a strictly better pair that no random placement of the
 /// baseline reaches; an exhaustive search over all 190 pairs confirms it is the optimum.
@@ -153,9 +174,10 @@ fn layout_writes_every_output_of_the_default_world() {
 fn placement_beats_greedy_alone_and_random_placement_on_a_seeded_scene() {
     let d = tmp_dir("layout-place");
     let cand = "tests/data/layout/canyon-candidates.csv";
+    let world_file = synthetic_sky_street(&tmp_dir("layout-place-world"));
     let out = run_ok(&[
         "layout",
-        "worlds/default.toml",
+        world_file.to_str().unwrap(),
         "--grid",
         "10",
         "--out",
@@ -212,7 +234,7 @@ fn placement_beats_greedy_alone_and_random_placement_on_a_seeded_scene() {
     assert!(steps.iter().any(|s| s["phase"] == "swap"));
 
     // Exhaustively, through the library, on the same grid.
-    let world = hybridnav::world::load_world(&repo().join("worlds/default.toml")).unwrap();
+    let world = hybridnav::world::load_world(&world_file).unwrap();
     let region = Region::of_world(&world).unwrap();
     let cands = place::parse_candidates(&repo().join(cand), &region).unwrap();
     let grid = Grid::new(region, 10.0, 1, cands.len()).unwrap();

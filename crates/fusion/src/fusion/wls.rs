@@ -3,7 +3,9 @@
 //! The unknowns are the receiver position and one clock offset per positioning system
 //! present (GPS, BDS, DTMB, TC-OFDM: up to 3 + 4 = 7), or a single clock shared by all
 //! systems when [`WlsOptions::shared_clock`] is set (seed 000's assumption for GPS and
-//! DTMB, §5.1). With `u_i` the unit line of sight from the receiver to emitter `i` and
+//! DTMB, §5.1), or with DTMB ranges on the GPS clock and every other system on its own
+//! when [`WlsOptions::dtmb_on_gps_clock`] is set (seed 000's shared clock for GPS and DTMB
+//! next to a BeiDou clock that absorbs BeiDou's inter-system bias). With `u_i` the unit line of sight from the receiver to emitter `i` and
 //! `b_{s(i)}` the clock of its system, the model and its Jacobian row are (seed 000 eqs.
 //! 9–13, here solved as a snapshot rather than inside the filter):
 //!
@@ -46,6 +48,11 @@ const MIN_PIVOT_RATIO: f64 = 1e-12;
 pub struct WlsOptions {
     /// One clock for every system instead of one per system.
     pub shared_clock: bool,
+    /// DTMB ranges take the GPS clock when GPS ranges are present (a tower locked to GPS
+    /// time, as a single-frequency network's transmitters are); the other systems keep
+    /// one clock each. Without GPS ranges DTMB has its own clock. Ignored when
+    /// `shared_clock` is set.
+    pub dtmb_on_gps_clock: bool,
     /// Starting position; by default the point of the WGS-84 ellipsoid below the mean of
     /// the emitter positions, which lies near the receiver for satellites spread across
     /// the sky and for towers around it alike.
@@ -60,6 +67,7 @@ impl Default for WlsOptions {
     fn default() -> Self {
         Self {
             shared_clock: false,
+            dtmb_on_gps_clock: false,
             initial_pos_ecef_m: None,
             max_iterations: 20,
             tolerance_m: 1e-6,
@@ -158,8 +166,18 @@ where
     // Columns: 0..3 position, then one clock per present system (or one shared clock).
     let mut clock_col = [None; System::COUNT];
     let mut n_clocks = 0;
+    let gps = System::Gps.index();
     for (s, &here) in present.iter().enumerate() {
         if here {
+            if opts.dtmb_on_gps_clock
+                && !opts.shared_clock
+                && s == System::Dtmb.index()
+                && clock_col[gps].is_some()
+            {
+                // GPS comes first in System::ALL, so its column already exists.
+                clock_col[s] = clock_col[gps];
+                continue;
+            }
             clock_col[s] = Some(3 + if opts.shared_clock { 0 } else { n_clocks });
             if !opts.shared_clock || n_clocks == 0 {
                 n_clocks += 1;
@@ -646,5 +664,59 @@ mod tests {
             solve(&bad, &WlsOptions::default()),
             Err(WlsError::InvalidMeasurement { index: 1 })
         );
+    }
+
+    /// A DTMB tower on the GPS clock: with noiseless ranges the fix is exact and DTMB
+    /// reports the GPS clock; the tower's range adds information (smaller position
+    /// covariance), while on a clock of its own it adds none (the covariance equals the
+    /// fix without it, since a free clock absorbs the one range that observes it).
+    #[test]
+    fn dtmb_on_the_gps_clock_adds_information() {
+        let frame = EnuFrame::new(Geodetic::from_deg(40.0, 116.4, 45.0));
+        let rx = frame.ecef_of_enu(&Vector3::new(12.0, -7.0, 1.5));
+        let (b_gps, b_bds) = (30.0, 45.0);
+        let gps = sky(
+            &frame,
+            &[(20.0, 60.0), (140.0, 35.0), (260.0, 40.0), (330.0, 15.0)],
+        );
+        let bds = sky(&frame, &[(90.0, 50.0), (200.0, 25.0)]);
+        let tower = frame.ecef_of_enu(&Vector3::new(-8250.0, -9345.0, 273.0));
+        let mut ms: Vec<RangeMeasurement> = gps
+            .iter()
+            .map(|e| meas(System::Gps, *e, (e - rx).norm() + b_gps))
+            .chain(
+                bds.iter()
+                    .map(|e| meas(System::Bds, *e, (e - rx).norm() + b_bds)),
+            )
+            .collect();
+        let without = solve(&ms, &WlsOptions::default()).unwrap();
+        ms.push(meas(System::Dtmb, tower, (tower - rx).norm() + b_gps));
+        let own = solve(&ms, &WlsOptions::default()).unwrap();
+        let on_gps = WlsOptions {
+            dtmb_on_gps_clock: true,
+            ..WlsOptions::default()
+        };
+        let joint = solve(&ms, &on_gps).unwrap();
+        assert!((joint.pos_ecef_m - rx).norm() < 1e-4);
+        assert_eq!(joint.n_clocks, 2);
+        assert_relative_eq!(joint.clock_m(System::Dtmb).unwrap(), b_gps, epsilon = 1e-4);
+        assert_relative_eq!(joint.clock_m(System::Bds).unwrap(), b_bds, epsilon = 1e-4);
+        assert_eq!(own.n_clocks, 3);
+        assert_relative_eq!(
+            own.cov_pos_ecef_m2,
+            without.cov_pos_ecef_m2,
+            max_relative = 1e-9
+        );
+        assert!(joint.cov_pos_ecef_m2.trace() < 0.99 * without.cov_pos_ecef_m2.trace());
+        // Without GPS ranges the tower keeps a clock of its own.
+        let no_gps: Vec<RangeMeasurement> = ms
+            .iter()
+            .filter(|m| m.system() != System::Gps)
+            .copied()
+            .collect();
+        assert!(matches!(
+            solve(&no_gps, &on_gps),
+            Err(WlsError::TooFewMeasurements { .. })
+        ));
     }
 }

@@ -154,8 +154,9 @@ pub struct InsFilterConfig {
     #[serde(default = "d_noise_scale")]
     pub stf_weakening: f64,
     /// Pool the pseudoranges of every fix source at one epoch (e.g. `"gnss"` and
-    /// `"tcofdm"`) into one least-squares fix, seed 004's joint TC-OFDM/GNSS solution
-    /// (eqs. 10–13); default false (one fix per GNSS batch, TC-OFDM ranges unused).
+    /// `"tcofdm"` or `"dtmb"`) into one least-squares fix, seed 004's joint TC-OFDM/GNSS
+    /// solution (eqs. 10–13; DTMB ranges on the GPS clock); default false (one fix per
+    /// GNSS batch, TC-OFDM and DTMB ranges unused).
     #[serde(default)]
     pub joint_fix: bool,
     /// σ of what a fix velocity does not describe of the IMU's motion, `[horizontal,
@@ -382,10 +383,13 @@ fn triad(
 ///
 /// # Fixes
 ///
-/// With `joint_fix`, the pseudoranges of every fix source at one epoch (GNSS and TC-OFDM)
-/// are pooled into one weighted least-squares fix with one clock per system (seed 004
-/// eqs. 10–13 write one clock; the simulated receiver has inter-system biases), solved
-/// when every fix source has reported at that time or when a later batch arrives.
+/// With `joint_fix`, the pseudoranges of every fix source at one epoch (GNSS, DTMB and
+/// TC-OFDM) are pooled into one weighted least-squares fix with one clock per system
+/// (seed 004 eqs. 10–13 write one clock; the simulated receiver has inter-system biases)
+/// except DTMB, whose towers are taken to be on GPS time and share the GPS clock (seed
+/// 000's single clock for GPS and DTMB, §5.1; a tower with its own clock would only
+/// determine that clock), solved when every fix source has reported at that time or when
+/// a later batch arrives.
 ///
 /// A fix at time t_f is compared with the INS at its last sample time t_i, moved by the
 /// INS velocity: r_fix + v̂ (t_i − t_f) (|t_i − t_f| ≤ `max_fix_lag_s`, else rejected).
@@ -794,8 +798,11 @@ impl InsEstimator {
         if self.pending.is_empty() {
             return;
         }
+        // DTMB ranges share the GPS clock, as in seed 000's filter: a tower on a clock of
+        // its own would have its one range absorbed by that clock and add nothing.
         let opts = WlsOptions {
             initial_pos_ecef_m: self.latest.map(|e| e.pos_ecef_m),
+            dtmb_on_gps_clock: true,
             ..WlsOptions::default()
         };
         let fix = match wls::solve(self.pending.iter(), &opts) {
