@@ -4,7 +4,7 @@
 //! positions from it; its fixes are compared with the recording's truth.csv. Bad requests
 //! are refused before any file is written.
 
-use crate::common::{hybridnav, refused, shared_gnss, skip, stderr, tmp_dir};
+use crate::common::{hybridnav, refused, skip, stderr, tmp_dir};
 use hybridnav::core::Geodetic;
 use std::process::Command;
 
@@ -80,9 +80,6 @@ fn fixes(log: &str) -> Vec<Geodetic> {
 
 #[test]
 fn gnss_iq_gps_l1ca_is_positioned_by_gnss_sdr_in_open_sky() {
-    if shared_gnss().is_none() {
-        return;
-    }
     if Command::new("gnss-sdr").arg("--version").output().is_err() {
         skip("gnss-sdr not installed (Debian package gnss-sdr; .ci/install-gnss-sdr)");
         return;
@@ -195,9 +192,6 @@ fn gnss_iq_gps_l1ca_is_positioned_by_gnss_sdr_in_open_sky() {
 
 #[test]
 fn gnss_iq_refuses_bad_requests_before_writing() {
-    if shared_gnss().is_none() {
-        return;
-    }
     let d = tmp_dir("gnss-iq-bad");
     let base = d.join("bad");
     let b = base.to_str().expect("utf-8");
@@ -321,9 +315,6 @@ PVT.dump=false
 /// the fix, from the four or more whose D1 ephemerides GNSS-SDR decodes.
 #[test]
 fn gnss_iq_bds_b1i_is_positioned_by_gnss_sdr_in_open_sky() {
-    if shared_gnss().is_none() {
-        return;
-    }
     if Command::new("gnss-sdr").arg("--version").output().is_err() {
         skip("gnss-sdr not installed (Debian package gnss-sdr; .ci/install-gnss-sdr)");
         return;
