@@ -197,7 +197,19 @@ fn a_resolved_world_loads_as_the_same_world_for_every_shipped_world() {
             .unwrap_or_else(|e| panic!("{}: resolved text does not load: {e}", w.display()));
         let resolved_again = reference::resolved_toml(&again.file).unwrap();
         assert_eq!(resolved, resolved_again, "{}", w.display());
-        assert_eq!(world.summary(), again.summary(), "{}", w.display());
+        // The summary names the text's hash, which differs; every other line must agree.
+        let summary = |s: String| -> Vec<String> {
+            s.lines()
+                .filter(|l| !l.starts_with("file "))
+                .map(String::from)
+                .collect()
+        };
+        assert_eq!(
+            summary(world.summary()),
+            summary(again.summary()),
+            "{}",
+            w.display()
+        );
         assert_eq!(world.warnings, again.warnings, "{}", w.display());
         // Presets are expanded: the resolved text names none.
         assert!(!resolved.contains("preset ="), "{}", w.display());
