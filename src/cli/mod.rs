@@ -337,8 +337,8 @@ pub fn run(cli: Cli) -> Result<()> {
         } => {
             let w = load_world(&world)?;
             if resolved {
-                let text = crate::world::reference::resolved_toml(&w.file)
-                    .map_err(anyhow::Error::msg)?;
+                let text =
+                    crate::world::reference::resolved_toml(&w.file).map_err(anyhow::Error::msg)?;
                 print!("{text}");
                 return Ok(());
             }

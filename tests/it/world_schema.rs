@@ -54,8 +54,16 @@ fn the_reference_carries_types_units_defaults_and_ranges() {
     ] {
         assert!(md.contains(row), "missing row {row}");
     }
-    for section in ["`[world]`", "`[platform]`", "`[[estimator]]`", "`[[transmitter]]`"] {
-        assert!(md.contains(&format!("## {section}")), "no section {section}");
+    for section in [
+        "`[world]`",
+        "`[platform]`",
+        "`[[estimator]]`",
+        "`[[transmitter]]`",
+    ] {
+        assert!(
+            md.contains(&format!("## {section}")),
+            "no section {section}"
+        );
     }
 }
 
@@ -166,10 +174,16 @@ fn jsonschema_refuses_the_deliberate_mistakes_the_loader_refuses_at_the_same_tab
         let beyond = BEYOND_A_SCHEMA.iter().any(|(f, _)| *f == name);
         if kind == "warning" || beyond {
             // A warning is about a valid world; a mistake beyond a schema passes it.
-            assert_eq!(r["ok"], true, "{name}: the schema refuses a valid world: {r}");
+            assert_eq!(
+                r["ok"], true,
+                "{name}: the schema refuses a valid world: {r}"
+            );
             continue;
         }
-        assert_eq!(r["ok"], false, "{name}: the loader refuses it, the schema accepts it");
+        assert_eq!(
+            r["ok"], false,
+            "{name}: the loader refuses it, the schema accepts it"
+        );
         let path = r["path"].as_str().unwrap();
         let message = r["message"].as_str().unwrap();
         // The schema names the table for an unknown key (the loader names the key itself).
@@ -184,7 +198,10 @@ fn jsonschema_refuses_the_deliberate_mistakes_the_loader_refuses_at_the_same_tab
         );
         refused += 1;
     }
-    assert!(refused >= 7, "only {refused} mistakes refused by the schema");
+    assert!(
+        refused >= 7,
+        "only {refused} mistakes refused by the schema"
+    );
 }
 
 #[test]

@@ -51,7 +51,9 @@ use std::collections::BTreeMap;
 use std::f64::consts::PI;
 
 /// The oscillator class of a receiver clock.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Oscillator {
     /// Temperature-compensated crystal: h₀ = 2e-19 s, h₋₂ = 2e-20 /s.

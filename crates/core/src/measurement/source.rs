@@ -10,7 +10,20 @@ use serde::{Deserialize, Serialize};
 /// The kinds of measurement source, the key of the engine's routing: an estimator
 /// subscribes to kinds ([`super::Estimator::consumes`]) and every batch carries the kind
 /// that produced it. World files name them in lowercase (`"gnss"`, `"fm"`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize, schemars::JsonSchema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Hash,
+    PartialOrd,
+    Ord,
+    Serialize,
+    Deserialize,
+    schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum SourceKind {
     /// A GNSS receiver: pseudoranges and rates of GPS and BeiDou satellites (the batch a

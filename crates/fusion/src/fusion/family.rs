@@ -84,7 +84,9 @@ impl FamilyKind {
 }
 
 /// How the particle filter resamples (`[estimator.options] resampling`).
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum ResamplingKind {
     Systematic,
@@ -93,7 +95,9 @@ pub enum ResamplingKind {
 }
 
 /// Where a particle filter draws its particles from (`[estimator.options] pf_proposal`).
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum ProposalKind {
     Prior,

@@ -92,7 +92,9 @@ pub const PLANE_VARIANCE_M2: f64 = 1e-2;
 pub const N_CLOCKS: usize = System::COUNT;
 
 /// Whether the receiver knows its clock offsets.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum ClockMode {
     /// The offsets the world's emitters declare, exactly (seed 001's 5-state reading).

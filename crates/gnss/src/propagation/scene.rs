@@ -29,7 +29,9 @@ pub const MAX_POLYGON_VERTICES: usize = 512;
 pub const MAX_COORDINATE_M: f64 = 1.0e6;
 
 /// The material of a building's outer walls.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum WallMaterial {
     /// Reinforced concrete (the default: most urban façades).
@@ -107,7 +109,9 @@ impl WallMaterial {
 }
 
 /// The building class of ITU-R P.2109 building entry loss.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum BuildingClass {
     /// Traditional construction (the default).
@@ -119,7 +123,9 @@ pub enum BuildingClass {
 
 /// The material of an open ground surface (ITU-R P.2040-1 Table 3 for ground, ITU-R P.527
 /// for water).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum GroundMaterial {
     /// Medium-dry ground (the default): ε' = 15 f^−0.1, σ = 0.035 f^1.63.

@@ -44,7 +44,9 @@ use serde::Deserialize;
 pub const SOURCE_NAME: &str = "emitters";
 
 /// A value per system (`{ gps = …, bds = …, dtmb = …, tcofdm = … }`), every key optional.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(deny_unknown_fields)]
 pub struct PerSystem {
     pub gps: Option<f64>,

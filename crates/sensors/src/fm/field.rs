@@ -162,7 +162,9 @@ pub fn synthesize_stations(declared: &[FmStation], total: usize, seed: u64) -> V
 }
 
 /// The Hata environment class, as written in a configuration.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum FmEnvironment {
     /// Urban, small or medium city (default).

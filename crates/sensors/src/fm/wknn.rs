@@ -49,7 +49,9 @@ use nalgebra::{Matrix3, Vector3};
 use serde::Deserialize;
 
 /// How the K neighbours are weighted.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Weighting {
     /// w = 1/(D + ε) (default).
@@ -60,7 +62,9 @@ pub enum Weighting {
 }
 
 /// What to do when no RP lies inside the constraint circle.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum NoRpPolicy {
     /// Search every RP and flag the fix as unconstrained (default).

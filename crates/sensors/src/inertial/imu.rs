@@ -61,7 +61,9 @@ const HOUR_S: f64 = 3600.0;
 
 /// An IMU performance grade with the values of facts §4 (Aceinna gnss-ins-sim
 /// `imu_model.py`), or `custom` to give all four values explicitly.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum ImuGrade {
     /// Consumer MEMS (a phone): ARW 0.75 °/√h, BI 10 °/h, VRW 0.05 m/s/√h, accel BI 2e-4 m/s².

@@ -83,7 +83,9 @@ fn d_spread() -> usize {
 }
 
 /// How an image becomes spikes (see the module docs).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum SnnEncoding {
     /// One afferent per image row, firing once at a time set by the row's phase and its

@@ -43,7 +43,9 @@ use rand_distr::StandardNormal;
 use serde::Deserialize;
 
 /// Which matcher names the landmark.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default, serde::Serialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Matcher {
     /// Dynamic time warping against the survey's templates (the paper's baseline).

@@ -17,9 +17,15 @@ use std::fmt::Write as _;
 /// world file.
 pub fn json_schema() -> Value {
     let mut settings = SchemaSettings::draft07();
-    settings.transforms.push(Box::new(RecursiveTransform(drop_null)));
-    settings.transforms.push(Box::new(RestrictFormats::default()));
-    let mut schema = settings.into_generator().into_root_schema_for::<WorldFile>();
+    settings
+        .transforms
+        .push(Box::new(RecursiveTransform(drop_null)));
+    settings
+        .transforms
+        .push(Box::new(RestrictFormats::default()));
+    let mut schema = settings
+        .into_generator()
+        .into_root_schema_for::<WorldFile>();
     schema.insert("title".into(), "hybridnav world file".into());
     schema.to_value()
 }
@@ -281,7 +287,10 @@ impl Reference<'_> {
 
     /// The description of a key: its own, else its type's.
     fn description(&self, s: &Value) -> Option<String> {
-        let own = s.get("description").and_then(Value::as_str).map(String::from);
+        let own = s
+            .get("description")
+            .and_then(Value::as_str)
+            .map(String::from);
         own.or_else(|| {
             self.resolve(s)
                 .get("description")
@@ -381,14 +390,11 @@ impl Reference<'_> {
         self.variants(s)
             .iter()
             .filter_map(|v| {
-                v.get("properties")?
-                    .as_object()?
-                    .iter()
-                    .find_map(|(k, p)| {
-                        let vals = self.enum_values(p);
-                        (vals.len() == 1 && p.get("type") == Some(&Value::String("string".into())))
-                            .then(|| format!("{k} = {}", vals[0].0))
-                    })
+                v.get("properties")?.as_object()?.iter().find_map(|(k, p)| {
+                    let vals = self.enum_values(p);
+                    (vals.len() == 1 && p.get("type") == Some(&Value::String("string".into())))
+                        .then(|| format!("{k} = {}", vals[0].0))
+                })
             })
             .collect()
     }
@@ -453,7 +459,10 @@ impl Reference<'_> {
             None if required => "required".into(),
             None => "—".into(),
         };
-        let mut description = self.description(s).map(|d| one_line(&d)).unwrap_or_default();
+        let mut description = self
+            .description(s)
+            .map(|d| one_line(&d))
+            .unwrap_or_default();
         if !when.is_empty() {
             description = format!("*when {when}:* {description}");
         }

@@ -287,7 +287,19 @@ impl ResolvedScene {
 }
 
 /// What a transmitter is.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, schemars::JsonSchema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Deserialize,
+    PartialEq,
+    Eq,
+    Hash,
+    PartialOrd,
+    Ord,
+    serde::Serialize,
+    schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum TransmitterKind {
     /// A DTMB (GB 20600-2006) television transmitter used as a pseudo-satellite.
