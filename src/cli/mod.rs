@@ -59,6 +59,20 @@ pub enum Command {
         /// Interval of the visibility survey along the trajectory (s).
         #[arg(long, default_value_t = 1.0, value_name = "S")]
         step: f64,
+        /// Print only the world as TOML with every default filled in and presets expanded
+        /// (loading that text gives the same world); warnings go to stderr.
+        #[arg(long, conflicts_with = "map")]
+        resolved: bool,
+    },
+    /// Print the JSON Schema of world files (for TOML editors: taplo, Even Better TOML),
+    /// or with `--markdown` the world-file reference (docs/world-file.md).
+    Schema {
+        /// Write to this file (atomically) instead of standard output.
+        #[arg(long, value_name = "FILE")]
+        out: Option<PathBuf>,
+        /// The Markdown reference of every key instead of the JSON Schema.
+        #[arg(long)]
+        markdown: bool,
     },
     /// Broadcast ephemeris tools.
     #[command(subcommand)]
@@ -315,8 +329,19 @@ pub fn run(cli: Cli) -> Result<()> {
             force,
             outputs,
         } => cmd_merge(&dirs, &out, quiet, force, &outputs),
-        Command::Check { world, map, step } => {
+        Command::Check {
+            world,
+            map,
+            step,
+            resolved,
+        } => {
             let w = load_world(&world)?;
+            if resolved {
+                let text =
+                    crate::world::reference::resolved_toml(&w.file).map_err(anyhow::Error::msg)?;
+                print!("{text}");
+                return Ok(());
+            }
             print!("{}", w.summary());
             if !(step.is_finite() && step > 0.0) {
                 anyhow::bail!("--step must be a positive number of seconds, got {step}");
@@ -377,6 +402,21 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Gnss(c) => gnss_iq::run(c),
         Command::Layout(a) => Ok(crate::layout::run(&a.request())?),
         Command::Reproduce(a) => cmd_reproduce(&a),
+        Command::Schema { out, markdown } => {
+            let text = if markdown {
+                crate::world::reference::markdown()
+            } else {
+                let mut s = serde_json::to_string_pretty(&crate::world::reference::json_schema())?;
+                s.push('\n');
+                s
+            };
+            match out {
+                Some(path) => write_atomic(&path, text.as_bytes())
+                    .with_context(|| format!("cannot write {}", path.display()))?,
+                None => print!("{text}"),
+            }
+            Ok(())
+        }
         Command::Presets => {
             for p in crate::world::presets::PRESETS {
                 println!("{}\n  {}", p.name, p.about);

@@ -34,3 +34,4 @@ mod reproductions_abstract;
 mod skeleton;
 mod tcofdm;
 mod world_mistakes;
+mod world_schema;

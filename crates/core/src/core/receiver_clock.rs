@@ -51,7 +51,9 @@ use std::collections::BTreeMap;
 use std::f64::consts::PI;
 
 /// The oscillator class of a receiver clock.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Oscillator {
     /// Temperature-compensated crystal: h₀ = 2e-19 s, h₋₂ = 2e-20 /s.
@@ -76,7 +78,7 @@ impl Oscillator {
 
 /// `[receiver.clock]` in a world file. Every field has a default: a TCXO starting with zero
 /// bias and drift and no inter-system biases.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct ClockConfig {
     /// `"tcxo"` (default), `"ocxo"` or `"custom"`.

@@ -11,7 +11,18 @@ use serde::{Deserialize, Serialize};
 /// subscribes to kinds ([`super::Estimator::consumes`]) and every batch carries the kind
 /// that produced it. World files name them in lowercase (`"gnss"`, `"fm"`).
 #[derive(
-    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize,
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Hash,
+    PartialOrd,
+    Ord,
+    Serialize,
+    Deserialize,
+    schemars::JsonSchema,
 )]
 #[serde(rename_all = "lowercase")]
 pub enum SourceKind {

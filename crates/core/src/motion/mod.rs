@@ -154,7 +154,7 @@ fn default_turning_noise() -> f64 {
 /// `trajectory = { kind = "singer" }` is seed 001's target and
 /// `trajectory = { kind = "plane_turning" }` is seed 003's.
 /// A stop at one waypoint of a [`TrajectoryConfig::Waypoints`] path.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct WaypointStop {
     /// Index of the waypoint in `points_enu_m`.
@@ -163,7 +163,7 @@ pub struct WaypointStop {
     pub dwell_s: f64,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum TrajectoryConfig {
     /// A polyline followed at `speed_mps` (see [`waypoints`] for the exact kinematics).

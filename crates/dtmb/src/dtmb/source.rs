@@ -63,7 +63,9 @@ use std::sync::Arc;
 pub const BANDWIDTH_HZ: f64 = 7.56e6;
 
 /// Which level of the DTMB model a world runs.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum DtmbLevel {
     /// Transmitter → channel → receiver for every measurement.
@@ -74,7 +76,9 @@ pub enum DtmbLevel {
 }
 
 /// The Hata environment class, as written in a world file.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Environment {
     /// Urban, small or medium city (default).
@@ -116,7 +120,7 @@ fn default_rx_height() -> f64 {
 }
 
 /// `[sensors.dtmb]` in a world file.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct DtmbSensorConfig {
     /// `"signal"` or `"measurement"` (default).

@@ -61,7 +61,7 @@ fn default_nav_db() -> f64 {
 }
 
 /// `[sensors.tcofdm]` in a world file. Fields as [`DtmbSensorConfig`] plus the two below.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TcofdmSensorConfig {
     /// `"signal"` or `"measurement"` (default).

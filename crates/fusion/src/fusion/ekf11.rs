@@ -143,7 +143,7 @@ pub fn clock_drift_psd_m2ps3(h_minus_2_per_s: f64) -> f64 {
 }
 
 /// Configuration of the BeiDou inter-system-bias state.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct IsbConfig {
     /// 1-σ of the bias when the filter is initialised (m). Default 30 m (100 ns), the
@@ -165,7 +165,7 @@ impl Default for IsbConfig {
 
 /// Tuning of [`Ekf11`]. Every field has a default, so a world file lists only what it
 /// changes; unknown fields are an error, so a misspelt name does not silently fall back.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct Ekf11Config {
     /// `S_a` of eq. 7 per ECEF axis x, y, z: PSD of the jerk (m²/s⁵). Default 1.0 on each

@@ -84,7 +84,9 @@ impl FamilyKind {
 }
 
 /// How the particle filter resamples (`[estimator.options] resampling`).
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum ResamplingKind {
     Systematic,
@@ -93,7 +95,9 @@ pub enum ResamplingKind {
 }
 
 /// Where a particle filter draws its particles from (`[estimator.options] pf_proposal`).
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum ProposalKind {
     Prior,
@@ -113,7 +117,7 @@ impl ResamplingKind {
 
 /// `[estimator.options]`: the tuning of the family's filters. The process model's tuning
 /// (PSDs, initial sigmas, χ² gates) is `[estimator.ekf]`, shared with `ekf11`.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct FamilyConfig {
     /// UKF: Merwe's α, β, κ. Defaults α = 0.5, β = 2, κ = 0: with twelve states a small α

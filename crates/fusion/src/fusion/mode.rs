@@ -31,8 +31,8 @@ use serde::Deserialize;
 /// A triangular membership function `[a, b, c]`: 0 at a and c, 1 at b, linear between.
 /// `a == b` makes a left shoulder (μ = 1 for every x ≤ b) and `b == c` a right shoulder
 /// (μ = 1 for every x ≥ b), so the outer sets of an input cover its whole range.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
-#[serde(from = "[f64; 3]")]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
+#[serde(from = "[f64; 3]", into = "[f64; 3]")]
 pub struct Triangle {
     pub a: f64,
     pub b: f64,
@@ -46,6 +46,12 @@ impl From<[f64; 3]> for Triangle {
             b: v[1],
             c: v[2],
         }
+    }
+}
+
+impl From<Triangle> for [f64; 3] {
+    fn from(t: Triangle) -> Self {
+        [t.a, t.b, t.c]
     }
 }
 
@@ -83,7 +89,19 @@ impl Triangle {
 }
 
 /// An integration mode of seed 000.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Deserialize,
+    PartialEq,
+    Eq,
+    Hash,
+    PartialOrd,
+    Ord,
+    serde::Serialize,
+    schemars::JsonSchema,
+)]
 pub enum Mode {
     /// GPS only.
     A,
@@ -105,7 +123,9 @@ impl Mode {
 }
 
 /// A linguistic value of an input.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Level {
     Small,
@@ -114,7 +134,9 @@ pub enum Level {
 }
 
 /// The antecedent of a rule: a level per input; an absent input does not constrain.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(deny_unknown_fields)]
 pub struct Antecedent {
     #[serde(default)]
@@ -126,7 +148,9 @@ pub struct Antecedent {
 }
 
 /// One rule: `if` the antecedent `then` the mode.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(deny_unknown_fields)]
 pub struct Rule {
     #[serde(rename = "if")]
@@ -135,7 +159,7 @@ pub struct Rule {
 }
 
 /// The fuzzy system's configuration (`[estimator.fuzzy]` in a world file).
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct FuzzyConfig {
     /// GDOP of GPS: small (assumed left shoulder to 8) and large (rising from 3 to 8).

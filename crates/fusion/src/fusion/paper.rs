@@ -92,7 +92,9 @@ pub const PLANE_VARIANCE_M2: f64 = 1e-2;
 pub const N_CLOCKS: usize = System::COUNT;
 
 /// Whether the receiver knows its clock offsets.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum ClockMode {
     /// The offsets the world's emitters declare, exactly (seed 001's 5-state reading).
@@ -135,7 +137,7 @@ fn d_clock_noise() -> f64 {
 /// `[estimator.process]`: the process model an estimator runs. Absent, or
 /// `model = "pva_clock"`, is seed 000's position–velocity–acceleration + clock model of
 /// the filter family ([`crate::fusion::family`]).
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(tag = "model", rename_all = "snake_case", deny_unknown_fields)]
 pub enum ProcessSpec {
     /// Seed 000's 12-state model (the filter family's default).

@@ -28,7 +28,7 @@ use nalgebra::Vector3;
 use serde::Deserialize;
 
 /// `dtmb_clock_correction = { … }` in an `[[estimator]]` table.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct ClockCorrectionConfig {
     /// Calibrate only while the GPS-only GDOP is at most this. Default 4 (the paper says

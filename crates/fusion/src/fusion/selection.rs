@@ -24,7 +24,9 @@ use nalgebra::Vector3;
 use serde::Deserialize;
 
 /// `selection = "…"` in an `[[estimator]]` table.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum SelectionKind {
     /// Seed 000's fuzzy inference system (tuned by `[estimator.fuzzy]`).

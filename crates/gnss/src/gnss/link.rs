@@ -192,7 +192,7 @@ pub fn fll_sigma_hz(
 }
 
 /// Tracking loops, antenna and link budget of a GNSS receiver (`[sensors.gnss.tracking]`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrackingConfig {
     /// DLL noise bandwidth B_L (Hz); default 1.

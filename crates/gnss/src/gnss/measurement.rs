@@ -66,15 +66,20 @@ pub const F_B1I_HZ: f64 = 1_561.098e6;
 fn default_systems() -> Vec<System> {
     vec![System::Gps]
 }
-/// Reads `systems`, offering only the satellite systems: the terrestrial ones (DTMB,
-/// TC-OFDM) are `System` values too, but have sensors of their own.
+/// A satellite system a GNSS receiver tracks: the values `systems` accepts. The
+/// terrestrial systems (DTMB, TC-OFDM) are `System` values too, but have sensors of their
+/// own, so they are not offered here.
+#[derive(serde::Deserialize, schemars::JsonSchema)]
+#[serde(rename_all = "lowercase")]
+enum Satellite {
+    /// GPS L1 C/A.
+    Gps,
+    /// BeiDou B1I.
+    Bds,
+}
+
+/// Reads `systems`, offering only the satellite systems ([`Satellite`]).
 fn gnss_systems<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<System>, D::Error> {
-    #[derive(Deserialize)]
-    #[serde(rename_all = "lowercase")]
-    enum Satellite {
-        Gps,
-        Bds,
-    }
     Ok(Vec::<Satellite>::deserialize(d)?
         .into_iter()
         .map(|s| match s {
@@ -95,7 +100,7 @@ fn default_true() -> bool {
 }
 
 /// Error budget of the simulated GNSS receiver beyond tracking noise.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct GnssErrorConfig {
     /// 1-σ broadcast orbit + clock error (user range error) for GPS, m.
@@ -130,17 +135,20 @@ impl Default for GnssErrorConfig {
 }
 
 /// `[sensors.gnss]` in a world file.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct GnssConfig {
     /// Systems tracked: `"gps"`, `"bds"`.
     #[serde(default = "default_systems", deserialize_with = "gnss_systems")]
+    #[schemars(with = "Vec<Satellite>", length(min = 1))]
     pub systems: Vec<System>,
     /// Measurement rate (Hz).
     #[serde(default = "default_rate_hz")]
+    #[schemars(range(min = 1e-3, max = 100.0))]
     pub rate_hz: f64,
-    /// Elevation mask (degrees).
+    /// Elevation mask (degrees), at least -5° and below 90°.
     #[serde(default = "default_mask_deg")]
+    #[schemars(range(min = -5.0), extend("exclusiveMaximum" = 90.0))]
     pub elevation_mask_deg: f64,
     /// Whether pseudorange rates are output.
     #[serde(default = "default_true")]

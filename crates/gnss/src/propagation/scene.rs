@@ -29,7 +29,9 @@ pub const MAX_POLYGON_VERTICES: usize = 512;
 pub const MAX_COORDINATE_M: f64 = 1.0e6;
 
 /// The material of a building's outer walls.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum WallMaterial {
     /// Reinforced concrete (the default: most urban façades).
@@ -107,7 +109,9 @@ impl WallMaterial {
 }
 
 /// The building class of ITU-R P.2109 building entry loss.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum BuildingClass {
     /// Traditional construction (the default).
@@ -119,7 +123,9 @@ pub enum BuildingClass {
 
 /// The material of an open ground surface (ITU-R P.2040-1 Table 3 for ground, ITU-R P.527
 /// for water).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum GroundMaterial {
     /// Medium-dry ground (the default): ε' = 15 f^−0.1, σ = 0.035 f^1.63.
@@ -154,7 +160,7 @@ impl GroundMaterial {
 }
 
 /// One building: a vertical prism over its footprint.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct BuildingConfig {
     /// Footprint vertices `[east, north]` (m), at least three, not self-intersecting.
@@ -170,7 +176,7 @@ pub struct BuildingConfig {
 }
 
 /// A forest, park or row of trees: a vertical prism of foliage.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ForestConfig {
     /// Outline vertices `[east, north]` (m).
@@ -193,7 +199,7 @@ fn default_density() -> f64 {
 
 /// An indoor area that is not a modelled building (a station concourse, an underground
 /// mall, a covered market): a receiver inside it is indoor, but it blocks no ray.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct IndoorZoneConfig {
     /// Outline vertices `[east, north]` (m).
@@ -208,7 +214,7 @@ pub struct IndoorZoneConfig {
 }
 
 /// An open ground surface of a particular material (water, wet meadow, paving).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SurfaceConfig {
     /// Outline vertices `[east, north]` (m).
@@ -218,7 +224,7 @@ pub struct SurfaceConfig {
 }
 
 /// The flat ground plane.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct GroundConfig {
     /// ENU up coordinate of the ground (m); default 0.
@@ -247,7 +253,7 @@ impl Default for GroundConfig {
 }
 
 /// How the link computation behaves.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LinkOptions {
     /// Walls farther than this from the receiver (horizontal distance, m) are not tried as
@@ -286,7 +292,7 @@ impl Default for LinkOptions {
 }
 
 /// The whole scene as a world file writes it.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SceneConfig {
     /// Buildings; default none.

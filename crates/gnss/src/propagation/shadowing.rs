@@ -52,7 +52,7 @@ use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 
 /// Shadowing field parameters.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ShadowingConfig {
     /// Standard deviation σ (dB), ≥ 0; default 4 dB.

@@ -44,7 +44,9 @@ use serde::Deserialize;
 pub const SOURCE_NAME: &str = "emitters";
 
 /// A value per system (`{ gps = …, bds = …, dtmb = …, tcofdm = … }`), every key optional.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(deny_unknown_fields)]
 pub struct PerSystem {
     pub gps: Option<f64>,
@@ -76,7 +78,7 @@ impl PerSystem {
 
 /// One `[[sensors.emitters.emitter]]`: exactly one of `position_enu_m` and the triple
 /// `azimuth_deg`, `elevation_deg`, `range_m` (a satellite seen from the ENU origin).
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct EmitterSpec {
     /// `gps`, `bds`, `dtmb` or `tcofdm`.
@@ -107,7 +109,7 @@ pub struct EmitterSpec {
 }
 
 /// `[sensors.emitters]`.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct EmittersConfig {
     /// Measurement rate (Hz); default 1 (both papers: "interval 1 s").

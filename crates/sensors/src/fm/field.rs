@@ -162,7 +162,9 @@ pub fn synthesize_stations(declared: &[FmStation], total: usize, seed: u64) -> V
 }
 
 /// The Hata environment class, as written in a configuration.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum FmEnvironment {
     /// Urban, small or medium city (default).
@@ -201,7 +203,7 @@ fn default_sens() -> f64 {
 }
 
 /// The receiver and propagation parameters of the RSSI field.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FmFieldConfig {
     /// Hata environment class, default `"urban"`.

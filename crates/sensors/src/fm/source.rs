@@ -42,7 +42,7 @@ fn one() -> f64 {
 }
 
 /// `[sensors.fm]` in a world file.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FmSensorConfig {
     /// Fix rate (Hz), default 1.
@@ -75,7 +75,7 @@ pub struct FmSensorConfig {
 /// to 16 640 RPs on a 3 m grid; the defaults reproduce that density: surveyed RPs every
 /// 24 m and the kriged grid every 3 m over the trajectory's bounding box widened by
 /// `margin_m`.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct FmSurveySpec {
     pub rp_spacing_m: f64,

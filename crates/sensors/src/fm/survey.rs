@@ -24,7 +24,7 @@ fn default_noise() -> f64 {
 }
 
 /// How the surveyor measures.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SurveyConfig {
     /// Scans averaged per RP (1–1000), default 10.

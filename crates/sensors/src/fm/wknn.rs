@@ -49,7 +49,9 @@ use nalgebra::{Matrix3, Vector3};
 use serde::Deserialize;
 
 /// How the K neighbours are weighted.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Weighting {
     /// w = 1/(D + ε) (default).
@@ -60,7 +62,9 @@ pub enum Weighting {
 }
 
 /// What to do when no RP lies inside the constraint circle.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum NoRpPolicy {
     /// Search every RP and flag the fix as unconstrained (default).
@@ -87,7 +91,7 @@ fn default_up() -> f64 {
 }
 
 /// WKNN parameters.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct WknnConfig {
     /// Number of neighbours K (1–64), default 4.
@@ -186,7 +190,7 @@ fn yes() -> bool {
 }
 
 /// Seed 000's constraint circle.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ConstraintConfig {
     /// Use the circle (default true); false searches every RP.

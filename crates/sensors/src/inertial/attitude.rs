@@ -51,7 +51,9 @@ use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
 /// How the IMU is carried.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Platform {
     /// A car: heading along the path, pitch on slopes.
@@ -95,7 +97,7 @@ fn d_phone_sway() -> f64 {
 }
 
 /// The walker's gait (ignored for a car). Every field has a default.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct GaitConfig {
     /// Mean step frequency f_step (Hz); default 1.8.
@@ -148,7 +150,7 @@ impl Default for GaitConfig {
 }
 
 /// The platform: how the IMU is carried, and the gait of a walker.
-#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PlatformConfig {
     /// `car`, `pedestrian` or `handheld`; default `car`.

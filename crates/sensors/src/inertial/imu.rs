@@ -61,7 +61,9 @@ const HOUR_S: f64 = 3600.0;
 
 /// An IMU performance grade with the values of facts §4 (Aceinna gnss-ins-sim
 /// `imu_model.py`), or `custom` to give all four values explicitly.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum ImuGrade {
     /// Consumer MEMS (a phone): ARW 0.75 °/√h, BI 10 °/h, VRW 0.05 m/s/√h, accel BI 2e-4 m/s².
@@ -104,7 +106,7 @@ const STANDARD_GRAVITY: f64 = crate::inertial::STANDARD_GRAVITY_MPS2;
 
 /// An IMU as a world file writes it (`[imu]`). Every field but `grade` has a default; the
 /// four noise values default to the grade's and override it when given.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ImuConfig {
     /// Sample rate (Hz), in (0, 1000]; default 100.

@@ -100,7 +100,7 @@ fn quadratic_fit(
 }
 
 /// `[estimator.ins]`: how the loosely coupled INS takes its fixes and initialises.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct InsFilterConfig {
     /// Sources whose batches give fixes; default `["gnss"]`. A `"gnss"` batch gives one

@@ -63,7 +63,7 @@ pub type State15 = SVector<f64, 15>;
 pub type Cov6 = SMatrix<f64, 6, 6>;
 
 /// Which member of the Kalman family runs the INS error state.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum InsKalmanKind {
     /// The hand-written closed-loop EKF of [`super::ins_ekf::InsEkf`] (the default).

@@ -34,7 +34,7 @@ fn d_noise() -> f64 {
 }
 
 /// The local field and the sensor (defaults: Beijing-like field, 0.5 µT noise).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MagnetometerConfig {
     /// Total intensity F (µT); default 54.

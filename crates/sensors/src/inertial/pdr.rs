@@ -62,7 +62,7 @@ fn d_ki() -> f64 {
 }
 
 /// Step detection, step length and AHRS settings.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PdrConfig {
     /// Low-pass cut-off on |f| (Hz); default 5.

@@ -40,7 +40,7 @@ fn d_rd_multipath() -> f64 {
 }
 
 /// `[estimator.pdr]`: where dead reckoning starts and which fixes (if any) reset it.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PdrFilterConfig {
     /// Start position (ENU m, up optional as 0); default the world's known start point (the

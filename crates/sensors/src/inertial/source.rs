@@ -299,7 +299,7 @@ fn d_sigma_heading() -> f64 {
 
 /// `[sensors.pdr]`: the PDR unit (a phone): its IMU, magnetometer, detector settings and
 /// the σ its step events declare.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PdrSensorConfig {
     /// The unit's IMU; default a `low` (consumer MEMS) grade at 100 Hz.

@@ -33,7 +33,7 @@ fn d_min_distance() -> f64 {
 }
 
 /// One anomaly as a world file would write it (e.g. a `[[scene.magnetic_anomaly]]` table).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MagneticAnomalyConfig {
     /// A name for reports (e.g. `"lift"`); optional.

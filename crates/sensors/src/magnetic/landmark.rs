@@ -69,7 +69,7 @@ fn d_full_scale() -> f64 {
 }
 
 /// How landmark windows are found and imaged.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LandmarkDetectorConfig {
     /// Half-width of the centred moving average (s); default 0.3 (about one step).

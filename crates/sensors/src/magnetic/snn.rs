@@ -83,7 +83,9 @@ fn d_spread() -> usize {
 }
 
 /// How an image becomes spikes (see the module docs).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum SnnEncoding {
     /// One afferent per image row, firing once at a time set by the row's phase and its
@@ -96,7 +98,7 @@ pub enum SnnEncoding {
 }
 
 /// The Tempotron's constants and training settings.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SnnConfig {
     /// Membrane time constant τ (ms); default 10.

@@ -43,7 +43,9 @@ use rand_distr::StandardNormal;
 use serde::Deserialize;
 
 /// Which matcher names the landmark.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default)]
+#[derive(
+    Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Matcher {
     /// Dynamic time warping against the survey's templates (the paper's baseline).
@@ -54,7 +56,7 @@ pub enum Matcher {
 }
 
 /// `dtmb_check = { enabled, sigma_m, delta_r_m }`.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct DtmbCheck {
     /// Apply the check; default true (`dtmb_check = { enabled = false }` takes the best
@@ -77,7 +79,7 @@ impl Default for DtmbCheck {
 }
 
 /// `[sensors.magnetic]`.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct MagneticSensorConfig {
     /// Magnetometer rate (Hz); default 50.

@@ -10,6 +10,7 @@ pub mod dtmb_iq;
 pub mod fm;
 pub mod locate;
 pub mod presets;
+pub mod reference;
 pub mod scene;
 pub mod schema;
 pub mod trial;

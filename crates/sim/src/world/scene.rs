@@ -46,7 +46,7 @@ fn outline(
 }
 
 /// `[[scene.buildings]]`.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct BuildingSpec {
     #[serde(default)]
@@ -64,7 +64,7 @@ pub struct BuildingSpec {
 }
 
 /// `[[scene.forests]]`: a park, wood or hedge.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ForestSpec {
     #[serde(default)]
@@ -80,7 +80,7 @@ pub struct ForestSpec {
 
 /// `[[scene.tree_rows]]`: street trees along a polyline, expanded into one foliage prism
 /// per segment, `width_m` wide (the crown diameter).
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TreeRowSpec {
     #[serde(default)]
@@ -99,7 +99,7 @@ pub struct TreeRowSpec {
 }
 
 /// `[[scene.indoor_zones]]`.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct IndoorZoneSpec {
     #[serde(default)]
@@ -113,7 +113,7 @@ pub struct IndoorZoneSpec {
 }
 
 /// `[[scene.surfaces]]`: water, wet meadow, paving.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SurfaceSpec {
     #[serde(default)]
@@ -134,7 +134,7 @@ fn trunk() -> f64 {
 }
 
 /// `[scene]`.
-#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SceneSection {
     #[serde(default)]
@@ -287,7 +287,19 @@ impl ResolvedScene {
 }
 
 /// What a transmitter is.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Deserialize,
+    PartialEq,
+    Eq,
+    Hash,
+    PartialOrd,
+    Ord,
+    serde::Serialize,
+    schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum TransmitterKind {
     /// A DTMB (GB 20600-2006) television transmitter used as a pseudo-satellite.
@@ -309,7 +321,7 @@ impl TransmitterKind {
 }
 
 /// A geodetic antenna position (WGS-84 ellipsoidal height).
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct GeodeticSpec {
     pub lat_deg: f64,
@@ -318,7 +330,7 @@ pub struct GeodeticSpec {
 }
 
 /// One `[[transmitter]]`: exactly one of `position` (geodetic) or `position_enu_m`.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TransmitterSpec {
     /// Identifier: `"D01"` for DTMB, `"T01"` for TC-OFDM, any label for FM.

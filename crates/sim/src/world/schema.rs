@@ -21,7 +21,8 @@ use crate::measurement::{Estimator, SourceKind};
 use crate::motion::TrajectoryConfig;
 use crate::tcofdm::TcofdmSensorConfig;
 use crate::world::scene::{SceneSection, TransmitterSpec};
-use serde::Deserialize;
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 
 /// The most trials one run takes (world file or `--trials`). Memory does not grow with
 /// the count, as the outputs are streamed (a merge's plan keeps 4 bytes per trial); the
@@ -29,7 +30,7 @@ use serde::Deserialize;
 pub const MAX_TRIALS: u64 = 100_000_000;
 
 /// A whole world file.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct WorldFile {
     pub world: WorldSection,
@@ -49,6 +50,7 @@ pub struct WorldFile {
         rename = "estimator",
         deserialize_with = "estimators_with_presets"
     )]
+    #[schemars(with = "Vec<EstimatorTable>")]
     pub estimators: Vec<EstimatorSpec>,
     #[serde(default)]
     pub montecarlo: MonteCarloSection,
@@ -58,12 +60,13 @@ pub struct WorldFile {
 
 /// `[scoring]`: when every estimator of the world is scored (one record per estimator per
 /// instant, the same instants for all; see `engine::trial::Scoring`).
-#[derive(Clone, Debug, Default, Deserialize)]
+#[derive(Clone, Debug, Default, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ScoringSection {
     /// A fixed scoring rate (Hz) from the start of the trial. Without it, the instants are
     /// the epochs of the `sources` below.
     #[serde(default)]
+    #[schemars(range(min = 1e-3, max = 1e3))]
     pub rate_hz: Option<f64>,
     /// The sources whose epochs are the scoring instants; by default the GNSS receiver's
     /// (or seeds 001/003's emitters'), and every source's when the world has neither.
@@ -72,11 +75,12 @@ pub struct ScoringSection {
     /// Seconds an estimate stays *available* after its estimator last used a measurement
     /// (default 10 s); older estimates are scored as coasting.
     #[serde(default)]
+    #[schemars(range(min = 0.0, max = 86_400.0))]
     pub coast_limit_s: Option<f64>,
 }
 
 /// `[world]`: name, place, time and navigation data.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct WorldSection {
     pub name: String,
@@ -88,6 +92,7 @@ pub struct WorldSection {
     pub start: String,
     /// Scenario length (s); defaults to the trajectory's length.
     #[serde(default)]
+    #[schemars(range(min = 1e-3, max = 864_000.0))]
     pub duration_s: Option<f64>,
     /// RINEX navigation file relative to this world file, or `"builtin:nominal-gps-bds"`.
     #[serde(default)]
@@ -95,17 +100,23 @@ pub struct WorldSection {
 }
 
 /// A geodetic point in degrees and metres (WGS-84 ellipsoidal height).
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Origin {
+    /// Geodetic latitude (degrees, north positive).
+    #[schemars(range(min = -90.0, max = 90.0))]
     pub lat_deg: f64,
+    /// Geodetic longitude (degrees, east positive; 180 to 360 accepted as west).
+    #[schemars(range(min = -180.0, max = 360.0))]
     pub lon_deg: f64,
+    /// Height above the WGS-84 ellipsoid (m).
     #[serde(default)]
+    #[schemars(range(min = -500.0, max = 10_000.0))]
     pub h_m: f64,
 }
 
 /// What carries the receiver.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Serialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum PlatformKind {
     Car,
@@ -115,7 +126,7 @@ pub enum PlatformKind {
 }
 
 /// `[platform]`.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PlatformSection {
     pub kind: PlatformKind,
@@ -140,7 +151,7 @@ impl PlatformSection {
 }
 
 /// `[receiver]`.
-#[derive(Clone, Debug, Deserialize, Default)]
+#[derive(Clone, Debug, Deserialize, Default, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ReceiverSection {
     #[serde(default)]
@@ -148,7 +159,7 @@ pub struct ReceiverSection {
 }
 
 /// `[sensors]`.
-#[derive(Clone, Debug, Deserialize, Default)]
+#[derive(Clone, Debug, Deserialize, Default, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SensorsSection {
     #[serde(default)]
@@ -178,7 +189,7 @@ pub struct SensorsSection {
 }
 
 /// One `[[shielding]]` window: exactly one of `keep_highest`, `keep`, `block`.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ShieldingSpec {
     /// Start of the window, seconds after the world start.
@@ -220,6 +231,47 @@ where
         .collect()
 }
 
+/// One `[[estimator]]` table as written, for the JSON Schema: the keys of
+/// [`EstimatorSpec`] plus `preset`, which names a preset whose keys are laid under the
+/// table's own. With a preset, `name`, `sources` and `filter` may come from it; without
+/// one, the table must give them.
+struct EstimatorTable;
+
+impl JsonSchema for EstimatorTable {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "EstimatorTable".into()
+    }
+
+    fn json_schema(generator: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        let mut schema = EstimatorSpec::json_schema(generator);
+        let required = schema.remove("required");
+        let names: Vec<&str> = crate::world::presets::PRESETS
+            .iter()
+            .map(|p| p.name)
+            .collect();
+        if let Some(props) = schema
+            .get_mut("properties")
+            .and_then(serde_json::Value::as_object_mut)
+        {
+            props.insert(
+                "preset".into(),
+                serde_json::json!({
+                    "description": "A named estimator preset (the papers' systems; `hybridnav presets` lists them) whose keys are laid under this table's own, key by key.",
+                    "type": "string",
+                    "enum": names,
+                }),
+            );
+        }
+        if let Some(required) = required {
+            schema.insert(
+                "anyOf".into(),
+                serde_json::json!([{ "required": ["preset"] }, { "required": required }]),
+            );
+        }
+        schema
+    }
+}
+
 /// Splits an error of [`estimators_with_presets`] into its key path and message:
 /// `estimator[1].filter: unknown variant` → (`estimator[1].filter`, `unknown variant`).
 pub(crate) fn split_estimator_error(message: &str) -> Option<(&str, &str)> {
@@ -231,7 +283,7 @@ pub(crate) fn split_estimator_error(message: &str) -> Option<(&str, &str)> {
 }
 
 /// The filter an estimator runs.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Serialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum FilterKind {
     /// Seed 000's 11-state EKF (position, velocity, acceleration, clock, drift).
@@ -282,7 +334,7 @@ impl FilterKind {
 }
 
 /// One `[[estimator]]`.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct EstimatorSpec {
     /// Row name in the tables (the paper's own names, e.g. `"GPS"`, `"GPS+DTMB"`).
@@ -345,11 +397,14 @@ fn one() -> u64 {
 }
 
 /// `[montecarlo]`.
-#[derive(Clone, Copy, Debug, Deserialize)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MonteCarloSection {
+    /// Number of independent trials (`run --trials` overrides it).
     #[serde(default = "one")]
+    #[schemars(range(min = 1, max = MAX_TRIALS))]
     pub trials: u64,
+    /// Master seed: every trial's random streams derive from it and the trial index.
     #[serde(default = "one")]
     pub seed: u64,
 }
