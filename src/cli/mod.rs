@@ -707,7 +707,7 @@ struct DtmbIqArgs {
 
 fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
     use crate::dtmb::pn::{PnMode, SAMPLE_RATE_HZ};
-    use crate::dtmb::sigmf::{write_sigmf, write_sigmf_with, SampleFormat};
+    use crate::dtmb::sigmf::SampleFormat;
     let format = match a.format.to_ascii_lowercase().as_str() {
         "cf32" | "cf32_le" => SampleFormat::Cf32,
         "ci8" => SampleFormat::Ci8,
@@ -745,29 +745,21 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
             seed: a.seed.unwrap_or(w.file.montecarlo.seed),
             trial: a.trial,
         };
-        let rec = crate::world::dtmb_iq::world_iq(&w, &req)?;
+        // The mode is known before the recording: check it first.
         if let Some(m) = &a.mode {
             let m: PnMode = m.parse()?;
-            if m != rec.mode {
+            let (tower, mode) = crate::world::dtmb_iq::requested_tower(&w, &req)?;
+            if m != mode {
                 bail!(
                     "--mode {} contradicts tower {}'s {} (with --world the tower sets the mode)",
                     m.name(),
-                    rec.tower,
-                    rec.mode.name()
+                    tower,
+                    mode.name()
                 );
             }
         }
         mkdir()?;
-        write_sigmf_with(
-            out,
-            &rec.samples,
-            format,
-            SAMPLE_RATE_HZ,
-            rec.center_freq_hz,
-            &rec.annotations,
-            &rec.global_extra,
-            &rec.annotation_extra,
-        )?;
+        let rec = crate::world::dtmb_iq::write_world_sigmf(&w, &req, out, format)?;
         let others: Vec<&str> = rec
             .towers
             .iter()
@@ -777,7 +769,7 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
         eprintln!(
             "wrote {} samples ({} frames of tower {}{} {}, SNR {:.1} dB at the start, {:.0} MHz) \
              to {}.sigmf-data and .sigmf-meta",
-            rec.samples.len(),
+            rec.samples,
             a.frames,
             rec.tower,
             if others.is_empty() {
@@ -803,20 +795,33 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
         bail!("--snr-db must be a finite number of dB, got {snr_db}");
     }
     let center_hz = crate::dtmb::uhf_channel_center_hz(a.channel)?;
-    let (samples, annotations) = crate::dtmb::sigmf::generate_iq_with(
+    // Refuse bad data-layer options before creating anything.
+    drop(data);
+    mkdir()?;
+    let rate_hz = SAMPLE_RATE_HZ * a.oversampling as f64;
+    let profile = &a.profile;
+    let samples = crate::dtmb::sigmf::write_iq_sigmf(
+        out,
+        format,
+        center_hz,
         mode,
         a.frames,
         snr_db,
         a.oversampling,
         a.seed.unwrap_or(1),
-        data,
+        &|| {
+            crate::dtmb::data_layer::data_layer_from_options(
+                profile.payload.as_deref(),
+                profile.qam.as_deref(),
+                profile.fec.as_deref(),
+                profile.interleaver,
+                profile.carriers,
+            )
+        },
     )?;
-    mkdir()?;
-    let rate_hz = SAMPLE_RATE_HZ * a.oversampling as f64;
-    write_sigmf(out, &samples, format, rate_hz, center_hz, &annotations)?;
     eprintln!(
         "wrote {} samples ({} frames at {:.2} Msps, {:.0} MHz) to {}.sigmf-data and .sigmf-meta",
-        samples.len(),
+        samples,
         a.frames,
         rate_hz * 1e-6,
         center_hz * 1e-6,
