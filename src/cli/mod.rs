@@ -152,6 +152,38 @@ pub enum DtmbCommand {
     /// (BASE.sigmf-data and BASE.sigmf-meta, with an annotation per frame); with --world,
     /// one tower of a world as the platform's receiver hears it along its trajectory
     /// (scene multipath, link budget, Doppler, receiver and tower clocks).
+    /// Bit and packet error rates of the GB 20600 data layer in white Gaussian noise
+    /// against SNR (hybridnav's own data receiver, ideal synchronisation): a table on
+    /// standard output and, with --out, a CSV file.
+    Ber {
+        /// Data constellation: 4qam-nr, 4qam, 16qam, 32qam or 64qam.
+        #[arg(long, default_value = "64qam")]
+        qam: String,
+        /// LDPC code rate: 0.4, 0.6 or 0.8.
+        #[arg(long, default_value = "0.6")]
+        fec: String,
+        /// Time-interleaver depth M: 240 or 720 (no effect in white noise but its delay).
+        #[arg(long, default_value_t = 240)]
+        interleaver: usize,
+        /// Carriers: 3780 or 1.
+        #[arg(long, default_value_t = 3780)]
+        carriers: usize,
+        /// Frame header (sets the frame power the SNR is defined on): pn420, pn595, pn945.
+        #[arg(long, default_value = "pn945")]
+        mode: String,
+        /// SNR grid over the 7.56 MHz band, FROM:TO:STEP in dB (or one value).
+        #[arg(long, allow_hyphen_values = true, value_name = "FROM:TO:STEP")]
+        snr_db: String,
+        /// Frames measured per SNR point (after the interleaver's delay).
+        #[arg(long, default_value_t = 100)]
+        frames: usize,
+        /// Seed of the payload and noise streams.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// CSV output (written atomically).
+        #[arg(long, value_name = "FILE.csv")]
+        out: Option<PathBuf>,
+    },
     Iq {
         /// Frame header: pn420, pn595 or pn945 (with --world: the tower's).
         #[arg(long)]
@@ -340,6 +372,27 @@ pub fn run(cli: Cli) -> Result<()> {
             sats,
             max_age,
         }) => ephemeris::positions(&nav, &start, &end, step, &sats, max_age.as_deref()),
+        Command::Dtmb(DtmbCommand::Ber {
+            qam,
+            fec,
+            interleaver,
+            carriers,
+            mode,
+            snr_db,
+            frames,
+            seed,
+            out,
+        }) => dtmb::ber(&dtmb::BerArgs {
+            qam,
+            fec,
+            interleaver,
+            carriers,
+            mode,
+            snr_db,
+            frames,
+            seed,
+            out,
+        }),
         Command::Dtmb(DtmbCommand::Iq {
             mode,
             frames,
