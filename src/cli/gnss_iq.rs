@@ -2,12 +2,12 @@
 //! receiver hears them, written as a SigMF recording with its truth
 //! (`crate::gnss::signal::scenario` does the work).
 
+use super::load_world;
 use crate::core::TrialRng;
 use crate::gnss::link::Signal;
 use crate::gnss::signal::baseband::SampleFormat;
 use crate::gnss::signal::scenario::{record, validate, IqRequest, IqSinks, IqSummary, IqWorld};
 use crate::io::atomic::{write_atomic, AtomicFile};
-use super::load_world;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use serde_json::json;

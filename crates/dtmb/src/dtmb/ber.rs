@@ -223,7 +223,13 @@ mod tests {
     use crate::dtmb::mapping::Constellation;
 
     fn p64() -> Profile {
-        Profile::new(Constellation::Qam64, CodeRate::R06, 240, CarrierMode::Multi3780).unwrap()
+        Profile::new(
+            Constellation::Qam64,
+            CodeRate::R06,
+            240,
+            CarrierMode::Multi3780,
+        )
+        .unwrap()
     }
 
     /// At 30 dB every packet comes back, in order: the receiver's output is aligned
@@ -248,7 +254,10 @@ mod tests {
 
     #[test]
     fn snr_ranges_parse_and_crossings_interpolate() {
-        assert_eq!(parse_snr_range("12:13:0.5").unwrap(), vec![12.0, 12.5, 13.0]);
+        assert_eq!(
+            parse_snr_range("12:13:0.5").unwrap(),
+            vec![12.0, 12.5, 13.0]
+        );
         assert_eq!(parse_snr_range("7").unwrap(), vec![7.0]);
         assert!(parse_snr_range("1:0:1").is_err());
         assert!(parse_snr_range("1:2").is_err());

@@ -14,9 +14,9 @@ use super::DtmbError;
 use crate::core::{GpsTime, TrialRng};
 use crate::dtmb::multipath::{ChannelConfig, Path as ChannelPath};
 use crate::io::atomic::AtomicFile;
-use std::io::Write;
 use num_complex::Complex32;
 use serde_json::{json, Map, Value};
+use std::io::Write;
 use std::path::Path;
 
 /// Sample format of the data file.
@@ -299,10 +299,8 @@ impl SigmfWriter {
                 v
             }))),
         };
-        let mut ser = serde_json::Serializer::with_formatter(
-            &mut f,
-            serde_json::ser::PrettyFormatter::new(),
-        );
+        let mut ser =
+            serde_json::Serializer::with_formatter(&mut f, serde_json::ser::PrettyFormatter::new());
         serde::Serialize::serialize(&doc, &mut ser).map_err(|e| DtmbError::Sigmf {
             path: self.base.display().to_string(),
             reason: e.to_string(),
@@ -677,10 +675,18 @@ pub fn write_iq_sigmf(
         SampleFormat::Cf32 => 0.0,
         SampleFormat::Ci8 => {
             let mut peak = 0.0f32;
-            stream_iq(mode, frames, snr_db, oversampling, seed, data()?, &mut |b| {
-                peak = peak.max(peak_component(b));
-                Ok(())
-            })?;
+            stream_iq(
+                mode,
+                frames,
+                snr_db,
+                oversampling,
+                seed,
+                data()?,
+                &mut |b| {
+                    peak = peak.max(peak_component(b));
+                    Ok(())
+                },
+            )?;
             peak
         }
     };
