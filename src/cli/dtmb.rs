@@ -1,6 +1,6 @@
 //! The DTMB data-layer options of `hybridnav dtmb iq` (the GB 20600 transmitter profile).
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::Args;
 use std::path::PathBuf;
 
@@ -38,4 +38,105 @@ impl ProfileArgs {
             self.carriers,
         )?)
     }
+}
+
+/// The options of `dtmb ber`.
+pub struct BerArgs {
+    pub qam: String,
+    pub fec: String,
+    pub interleaver: usize,
+    pub carriers: usize,
+    pub mode: String,
+    pub snr_db: String,
+    pub frames: usize,
+    pub seed: u64,
+    pub out: Option<PathBuf>,
+}
+
+/// `hybridnav dtmb ber`: one measured point per SNR, printed as a table and written as
+/// CSV; then the SNRs where the curves cross BER 10⁻⁴ and PER 10⁻² when the grid holds
+/// the crossing.
+pub fn ber(a: &BerArgs) -> Result<()> {
+    use crate::dtmb::ber::{crossing_snr_db, measure_point, parse_snr_range};
+    use crate::dtmb::data_layer::Profile;
+    use crate::dtmb::frame::CarrierMode;
+    use crate::dtmb::ldpc::CodeRate;
+    use crate::dtmb::mapping::Constellation;
+    use crate::dtmb::pn::PnMode;
+    let c: Constellation = a
+        .qam
+        .parse()
+        .map_err(|e: String| anyhow::anyhow!("--qam: {e}"))?;
+    let rate: CodeRate = a
+        .fec
+        .parse()
+        .map_err(|e: String| anyhow::anyhow!("--fec: {e}"))?;
+    let carrier = match a.carriers {
+        3780 => CarrierMode::Multi3780,
+        1 => CarrierMode::Single,
+        n => anyhow::bail!("--carriers must be 3780 or 1, got {n}"),
+    };
+    let profile = Profile::new(c, rate, a.interleaver, carrier)?;
+    let mode: PnMode = a.mode.parse()?;
+    let grid = parse_snr_range(&a.snr_db)?;
+    println!(
+        "# {} {} frames per point after a {}-frame interleaver delay, seed {}",
+        profile.name(),
+        a.frames,
+        profile.interleaver_delay_frames(),
+        a.seed
+    );
+    println!(
+        "{:>8} {:>10} {:>10} {:>12} {:>10} {:>12} {:>10}",
+        "snr_db", "packets", "pkt_err", "per", "bit_err", "ber", "cw_fail"
+    );
+    let mut csv = String::from(
+        "snr_db,frames,packets,packet_errors,per,bits,bit_errors,ber,codewords,ldpc_failures,cwer\n",
+    );
+    let mut points = Vec::with_capacity(grid.len());
+    for &snr in &grid {
+        let p = measure_point(profile, mode, snr, a.frames, a.seed)?;
+        println!(
+            "{:>8.2} {:>10} {:>10} {:>12.3e} {:>10} {:>12.3e} {:>10}",
+            p.snr_db,
+            p.packets,
+            p.packet_errors,
+            p.per(),
+            p.bit_errors,
+            p.ber(),
+            p.ldpc_failures
+        );
+        csv.push_str(&format!(
+            "{},{},{},{},{:e},{},{},{:e},{},{},{:e}\n",
+            p.snr_db,
+            p.frames,
+            p.packets,
+            p.packet_errors,
+            p.per(),
+            p.bits,
+            p.bit_errors,
+            p.ber(),
+            p.codewords,
+            p.ldpc_failures,
+            p.cwer()
+        ));
+        points.push(p);
+    }
+    let ber_pts: Vec<_> = points.iter().map(|p| (p.snr_db, p.ber(), p.bits)).collect();
+    let per_pts: Vec<_> = points
+        .iter()
+        .map(|p| (p.snr_db, p.per(), p.packets))
+        .collect();
+    for (what, pts, target) in [("BER", &ber_pts, 1e-4), ("PER", &per_pts, 1e-2)] {
+        match crossing_snr_db(pts, target) {
+            Some(s) => println!("# {what} crosses {target:e} at {s:.2} dB"),
+            None => println!("# {what} does not cross {target:e} inside the grid"),
+        }
+    }
+    if let Some(out) = &a.out {
+        crate::io::atomic::write_atomic(out, csv.as_bytes())
+            .with_context(|| format!("cannot write {}", out.display()))?;
+        eprintln!("wrote {} points to {}", points.len(), out.display());
+    }
+    Ok(())
 }

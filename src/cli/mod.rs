@@ -166,6 +166,38 @@ pub enum DtmbCommand {
     /// (BASE.sigmf-data and BASE.sigmf-meta, with an annotation per frame); with --world,
     /// one tower of a world as the platform's receiver hears it along its trajectory
     /// (scene multipath, link budget, Doppler, receiver and tower clocks).
+    /// Bit and packet error rates of the GB 20600 data layer in white Gaussian noise
+    /// against SNR (hybridnav's own data receiver, ideal synchronisation): a table on
+    /// standard output and, with --out, a CSV file.
+    Ber {
+        /// Data constellation: 4qam-nr, 4qam, 16qam, 32qam or 64qam.
+        #[arg(long, default_value = "64qam")]
+        qam: String,
+        /// LDPC code rate: 0.4, 0.6 or 0.8.
+        #[arg(long, default_value = "0.6")]
+        fec: String,
+        /// Time-interleaver depth M: 240 or 720 (no effect in white noise but its delay).
+        #[arg(long, default_value_t = 240)]
+        interleaver: usize,
+        /// Carriers: 3780 or 1.
+        #[arg(long, default_value_t = 3780)]
+        carriers: usize,
+        /// Frame header (sets the frame power the SNR is defined on): pn420, pn595, pn945.
+        #[arg(long, default_value = "pn945")]
+        mode: String,
+        /// SNR grid over the 7.56 MHz band, FROM:TO:STEP in dB (or one value).
+        #[arg(long, allow_hyphen_values = true, value_name = "FROM:TO:STEP")]
+        snr_db: String,
+        /// Frames measured per SNR point (after the interleaver's delay).
+        #[arg(long, default_value_t = 100)]
+        frames: usize,
+        /// Seed of the payload and noise streams.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// CSV output (written atomically).
+        #[arg(long, value_name = "FILE.csv")]
+        out: Option<PathBuf>,
+    },
     Iq {
         /// Frame header: pn420, pn595 or pn945 (with --world: the tower's).
         #[arg(long)]
@@ -365,6 +397,27 @@ pub fn run(cli: Cli) -> Result<()> {
             sats,
             max_age,
         }) => ephemeris::positions(&nav, &start, &end, step, &sats, max_age.as_deref()),
+        Command::Dtmb(DtmbCommand::Ber {
+            qam,
+            fec,
+            interleaver,
+            carriers,
+            mode,
+            snr_db,
+            frames,
+            seed,
+            out,
+        }) => dtmb::ber(&dtmb::BerArgs {
+            qam,
+            fec,
+            interleaver,
+            carriers,
+            mode,
+            snr_db,
+            frames,
+            seed,
+            out,
+        }),
         Command::Dtmb(DtmbCommand::Iq {
             mode,
             frames,
@@ -747,7 +800,7 @@ struct DtmbIqArgs {
 
 fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
     use crate::dtmb::pn::{PnMode, SAMPLE_RATE_HZ};
-    use crate::dtmb::sigmf::{write_sigmf, write_sigmf_with, SampleFormat};
+    use crate::dtmb::sigmf::SampleFormat;
     let format = match a.format.to_ascii_lowercase().as_str() {
         "cf32" | "cf32_le" => SampleFormat::Cf32,
         "ci8" => SampleFormat::Ci8,
@@ -785,29 +838,21 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
             seed: a.seed.unwrap_or(w.file.montecarlo.seed),
             trial: a.trial,
         };
-        let rec = crate::world::dtmb_iq::world_iq(&w, &req)?;
+        // The mode is known before the recording: check it first.
         if let Some(m) = &a.mode {
             let m: PnMode = m.parse()?;
-            if m != rec.mode {
+            let (tower, mode) = crate::world::dtmb_iq::requested_tower(&w, &req)?;
+            if m != mode {
                 bail!(
                     "--mode {} contradicts tower {}'s {} (with --world the tower sets the mode)",
                     m.name(),
-                    rec.tower,
-                    rec.mode.name()
+                    tower,
+                    mode.name()
                 );
             }
         }
         mkdir()?;
-        write_sigmf_with(
-            out,
-            &rec.samples,
-            format,
-            SAMPLE_RATE_HZ,
-            rec.center_freq_hz,
-            &rec.annotations,
-            &rec.global_extra,
-            &rec.annotation_extra,
-        )?;
+        let rec = crate::world::dtmb_iq::write_world_sigmf(&w, &req, out, format)?;
         let others: Vec<&str> = rec
             .towers
             .iter()
@@ -817,7 +862,7 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
         eprintln!(
             "wrote {} samples ({} frames of tower {}{} {}, SNR {:.1} dB at the start, {:.0} MHz) \
              to {}.sigmf-data and .sigmf-meta",
-            rec.samples.len(),
+            rec.samples,
             a.frames,
             rec.tower,
             if others.is_empty() {
@@ -843,20 +888,33 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
         bail!("--snr-db must be a finite number of dB, got {snr_db}");
     }
     let center_hz = crate::dtmb::uhf_channel_center_hz(a.channel)?;
-    let (samples, annotations) = crate::dtmb::sigmf::generate_iq_with(
+    // Refuse bad data-layer options before creating anything.
+    drop(data);
+    mkdir()?;
+    let rate_hz = SAMPLE_RATE_HZ * a.oversampling as f64;
+    let profile = &a.profile;
+    let samples = crate::dtmb::sigmf::write_iq_sigmf(
+        out,
+        format,
+        center_hz,
         mode,
         a.frames,
         snr_db,
         a.oversampling,
         a.seed.unwrap_or(1),
-        data,
+        &|| {
+            crate::dtmb::data_layer::data_layer_from_options(
+                profile.payload.as_deref(),
+                profile.qam.as_deref(),
+                profile.fec.as_deref(),
+                profile.interleaver,
+                profile.carriers,
+            )
+        },
     )?;
-    mkdir()?;
-    let rate_hz = SAMPLE_RATE_HZ * a.oversampling as f64;
-    write_sigmf(out, &samples, format, rate_hz, center_hz, &annotations)?;
     eprintln!(
         "wrote {} samples ({} frames at {:.2} Msps, {:.0} MHz) to {}.sigmf-data and .sigmf-meta",
-        samples.len(),
+        samples,
         a.frames,
         rate_hz * 1e-6,
         center_hz * 1e-6,

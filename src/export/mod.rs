@@ -301,8 +301,7 @@ pub const SIGMF_FRAMES: usize = 50;
 /// The SigMF recordings: each DTMB tower as the platform hears it from the trial's start
 /// (`dtmb-<tower>.sigmf-data` and `.sigmf-meta`, cf32 at 7.56 Msps).
 fn write_sigmf(world: &World, rec: &Recording, dir: &Path) -> Result<Vec<PathBuf>, String> {
-    use crate::dtmb::pn::SAMPLE_RATE_HZ;
-    use crate::dtmb::sigmf::{write_sigmf_with, SampleFormat};
+    use crate::dtmb::sigmf::SampleFormat;
     use crate::world::scene::TransmitterKind;
     let mut files = Vec::new();
     for t in world
@@ -317,19 +316,9 @@ fn write_sigmf(world: &World, rec: &Recording, dir: &Path) -> Result<Vec<PathBuf
             seed: rec.seed,
             trial: rec.trial,
         };
-        let iq = crate::world::dtmb_iq::world_iq(world, &req).map_err(|e| e.to_string())?;
         let base = dir.join(format!("dtmb-{}", file_stem(&t.id)));
-        write_sigmf_with(
-            &base,
-            &iq.samples,
-            SampleFormat::Cf32,
-            SAMPLE_RATE_HZ,
-            iq.center_freq_hz,
-            &iq.annotations,
-            &iq.global_extra,
-            &iq.annotation_extra,
-        )
-        .map_err(|e| e.to_string())?;
+        crate::world::dtmb_iq::write_world_sigmf(world, &req, &base, SampleFormat::Cf32)
+            .map_err(|e| e.to_string())?;
         files.push(base.with_extension("sigmf-data"));
         files.push(base.with_extension("sigmf-meta"));
     }

@@ -7,6 +7,7 @@ mod cluster;
 mod common;
 mod covariance_psd;
 mod dtmb_signal;
+mod dtmb_stream;
 mod dtmb_ts;
 mod environment;
 mod export;

@@ -24,6 +24,7 @@
 //! `propagation`, as the GNSS source does.
 
 pub mod bch;
+pub mod ber;
 pub mod channel;
 pub mod data_layer;
 pub mod data_receiver;

@@ -13,6 +13,8 @@ use std::path::{Path, PathBuf};
 pub const PACKET_LEN: usize = 188;
 /// The sync byte.
 pub const SYNC: u8 = 0x47;
+/// Packets per read when a payload file is checked (≈ 1 MiB).
+const CHECK_PACKETS: usize = 5577;
 /// The PID of null packets.
 pub const NULL_PID: u16 = 0x1fff;
 
@@ -25,6 +27,28 @@ pub fn null_packet() -> [u8; PACKET_LEN] {
     p[2] = 0xff;
     p[3] = 0x10;
     p
+}
+
+/// Packet `index` of a pseudo-random transport stream keyed by `key`: sync byte, PID
+/// 0x0100, payload only with the continuity counter `index mod 16`, then 184 bytes of
+/// SplitMix64 (Steele, Lea & Flood, OOPSLA 2014) started from `mix(key ⊕ mix(index))`,
+/// so any packet can be regenerated on its own.
+pub fn pseudo_random_packet(key: u64, index: u64, out: &mut [u8]) {
+    fn mix(mut z: u64) -> u64 {
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+    out[0] = SYNC;
+    out[1] = 0x01;
+    out[2] = 0x00;
+    out[3] = 0x10 | (index % 16) as u8;
+    let mut state = mix(key ^ mix(index));
+    for chunk in out[4..PACKET_LEN].chunks_mut(8) {
+        state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let w = mix(state).to_le_bytes();
+        chunk.copy_from_slice(&w[..chunk.len()]);
+    }
 }
 
 /// The PID of a packet.
@@ -74,6 +98,8 @@ fn check_chunk(bytes: &[u8], base: u64, origin: &str) -> Result<(), DtmbError> {
 /// The packets a transmitter sends: a payload's, then null packets.
 pub struct PacketSource {
     reader: Option<(PathBuf, BufReader<std::fs::File>)>,
+    /// The key of [`pseudo_random_packet`] when the packets are generated, not read.
+    generated: Option<u64>,
     payload_packets: u64,
     null_packets: u64,
 }
@@ -92,12 +118,23 @@ impl PacketSource {
     pub fn null() -> Self {
         Self {
             reader: None,
+            generated: None,
             payload_packets: 0,
             null_packets: 0,
         }
     }
 
-    /// A payload file, checked whole (streamed in 1 MiB reads) before it is used.
+    /// An endless stream of [`pseudo_random_packet`]s of `key` (packet `i` the `i`-th
+    /// sent), for error-rate measurements: a receiver regenerates what was sent.
+    pub fn pseudo_random(key: u64) -> Self {
+        Self {
+            generated: Some(key),
+            ..Self::null()
+        }
+    }
+
+    /// A payload file, checked whole (streamed in reads of 5577 packets, ≈ 1 MiB) before
+    /// it is used.
     ///
     /// # Errors
     /// [`DtmbError::Io`] when it cannot be read, [`DtmbError::Ts`] when it is empty, not a
@@ -109,7 +146,9 @@ impl PacketSource {
             source: e,
         };
         let mut f = BufReader::new(std::fs::File::open(path).map_err(io)?);
-        let mut buf = vec![0u8; 1 << 20];
+        // A whole number of packets, so every chunk starts on a packet boundary (a 1 MiB
+        // buffer, not a multiple of 188, made every payload over 1 MiB look unsynced).
+        let mut buf = vec![0u8; CHECK_PACKETS * PACKET_LEN];
         let mut total = 0u64;
         loop {
             // Fill the buffer fully (short reads happen) so chunks stay packet-aligned.
@@ -145,6 +184,7 @@ impl PacketSource {
         })?;
         Ok(Self {
             reader: Some((path.to_path_buf(), BufReader::with_capacity(1 << 16, f))),
+            generated: None,
             payload_packets: 0,
             null_packets: 0,
         })
@@ -155,6 +195,11 @@ impl PacketSource {
     /// # Errors
     /// [`DtmbError::Io`] when the payload file fails to read.
     pub fn next_packet(&mut self, out: &mut [u8]) -> Result<(), DtmbError> {
+        if let Some(key) = self.generated {
+            pseudo_random_packet(key, self.payload_packets, &mut out[..PACKET_LEN]);
+            self.payload_packets += 1;
+            return Ok(());
+        }
         if let Some((path, r)) = &mut self.reader {
             let mut n = 0;
             while n < PACKET_LEN {
@@ -236,6 +281,38 @@ mod tests {
             e.contains("byte offset 0") && e.contains("100 bytes"),
             "{e}"
         );
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    /// A payload longer than one check read (here 2.5 reads) is accepted and streamed
+    /// whole; a bad sync byte in its second read is reported at its own offset.
+    #[test]
+    fn a_payload_longer_than_one_check_read_is_accepted() {
+        let d = std::env::temp_dir().join(format!("hybridnav-ts-long-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        let p = d.join("long.ts");
+        let n = CHECK_PACKETS * 5 / 2;
+        let mut bytes = Vec::with_capacity(n * PACKET_LEN);
+        for i in 0..n {
+            let mut pkt = null_packet();
+            pkt[1] = 0x01;
+            pkt[4..12].copy_from_slice(&(i as u64).to_le_bytes());
+            bytes.extend_from_slice(&pkt);
+        }
+        std::fs::write(&p, &bytes).unwrap();
+        let mut s = PacketSource::from_file(&p).unwrap();
+        let mut out = [0u8; PACKET_LEN];
+        for i in 0..n {
+            s.next_packet(&mut out).unwrap();
+            assert_eq!(u64::from_le_bytes(out[4..12].try_into().unwrap()), i as u64);
+        }
+        s.next_packet(&mut out).unwrap();
+        assert_eq!(pid(&out), NULL_PID);
+        let bad = (CHECK_PACKETS + 7) * PACKET_LEN;
+        bytes[bad] = 0x00;
+        std::fs::write(&p, &bytes).unwrap();
+        let e = PacketSource::from_file(&p).unwrap_err().to_string();
+        assert!(e.contains(&format!("byte offset {bad}:")), "{e}");
         let _ = std::fs::remove_dir_all(&d);
     }
 }

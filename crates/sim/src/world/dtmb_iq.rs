@@ -48,7 +48,7 @@ use crate::dtmb::channel::Channel;
 use crate::dtmb::frame::{CarrierMode, Qam};
 use crate::dtmb::multipath::{ChannelConfig, Path};
 use crate::dtmb::pn::{PnMode, SAMPLE_RATE_HZ};
-use crate::dtmb::sigmf::Annotation;
+use crate::dtmb::sigmf::{peak_component, Annotation, SampleFormat, SigmfWriter};
 use crate::dtmb::source::{DtmbLevel, DtmbSource, TowerSpec};
 use crate::dtmb::transmitter::{FrameSchedule, SampleSource, Transmitter, TxConfig};
 use crate::dtmb::DtmbError;
@@ -63,8 +63,9 @@ use std::sync::Arc;
 /// stay positive while the platform approaches the tower (256 samples ≈ 10 km).
 const DELAY_MARGIN_SAMPLES: f64 = 256.0;
 
-/// Most frames a recording may hold (as [`crate::dtmb::sigmf::generate_iq`]).
-pub const MAX_FRAMES: usize = 20_000;
+/// Most frames a recording may hold (as [`crate::dtmb::sigmf::stream_iq`]); the
+/// samples are streamed, the annotations (one per tower and frame) held in memory.
+pub const MAX_FRAMES: usize = crate::dtmb::sigmf::MAX_IQ_FRAMES;
 
 /// What to record.
 #[derive(Clone, Debug, PartialEq)]
@@ -86,6 +87,15 @@ pub struct WorldIqRequest {
 pub struct WorldIq {
     /// The samples (7.56 Msps, unit noise variance).
     pub samples: Vec<Complex32>,
+    /// Everything else: annotations, metadata, the towers.
+    pub meta: WorldIqMeta,
+}
+
+/// What a recording of [`world_iq_stream`] holds besides its samples.
+#[derive(Clone, Debug)]
+pub struct WorldIqMeta {
+    /// The number of samples (`frames · frame_len`).
+    pub samples: u64,
     /// One annotation per frame start inside the recording.
     pub annotations: Vec<Annotation>,
     /// Per annotation: `hybridnav:` keys (frame, phase, emission time, true first-path
@@ -141,6 +151,24 @@ impl SampleSource for Shifted<'_> {
 /// unknown tower id, a start outside the world's duration or a recording running past
 /// it, zero or too many frames, a trajectory or link that cannot be built.
 pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbError> {
+    let mut samples = Vec::new();
+    let meta = world_iq_stream(world, req, &mut |b| {
+        samples.extend_from_slice(b);
+        Ok(())
+    })?;
+    Ok(WorldIq { samples, meta })
+}
+
+/// [`world_iq`] with the samples handed to `sink` one frame-long block at a time, in
+/// order, so memory stays flat in the recording's length (the annotations are kept).
+///
+/// # Errors
+/// As [`world_iq`], and the first error of `sink`, which stops the recording.
+pub fn world_iq_stream(
+    world: &World,
+    req: &WorldIqRequest,
+    sink: &mut dyn FnMut(&[Complex32]) -> Result<(), DtmbError>,
+) -> Result<WorldIqMeta, DtmbError> {
     let (t, group) = select_towers(world, req)?;
     let mode = t.pn_mode();
     let n = mode.frame_len();
@@ -204,13 +232,13 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
     }
     let mut noise = rng.stream(&format!("dtmb/iq/{}/noise", specs[me].id));
     let total = req.frames * n;
-    let mut samples = vec![Complex32::default(); total];
+    let mut block = vec![Complex32::default(); n];
     let mut extra = vec![Complex32::default(); n];
     let mut annotations: Vec<(Annotation, Map<String, Value>)> = Vec::new();
     let mut snr_first = f64::NEG_INFINITY;
     // Per tower and block: (taps, first excess delay, x of the first path, SNR, ...).
     let mut links: Vec<TowerBlock> = Vec::with_capacity(specs.len());
-    for (j, block) in samples.chunks_mut(n).enumerate() {
+    for j in 0..req.frames {
         // Receiver-clock time of the block's middle, taken as the trajectory's time (the
         // receiver clock's bias, ≤ ms, moves the platform by millimetres).
         let t_s = req.from_s + (j as f64 + 0.5) * t_frame;
@@ -268,7 +296,7 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
                 *b += e;
             }
         }
-        crate::dtmb::noise::add_awgn(block, 1.0, &mut noise);
+        crate::dtmb::noise::add_awgn(&mut block, 1.0, &mut noise);
         for (l, spec) in links.iter().zip(&specs) {
             annotate_frame_starts(
                 world,
@@ -285,14 +313,15 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
                 &mut annotations,
             );
         }
+        sink(&block)?;
     }
     // SigMF lists annotations by sample; a tower's frames stay in order (stable sort).
     annotations.sort_by_key(|(a, _)| a.sample_start);
     let (annotations, annotation_extra): (Vec<_>, Vec<_>) = annotations.into_iter().unzip();
     let tower_ids: Vec<String> = group.iter().map(|o| o.id.clone()).collect();
     let g = global_extra(world, req, t, mode, &tower_ids);
-    Ok(WorldIq {
-        samples,
+    Ok(WorldIqMeta {
+        samples: total as u64,
         annotations,
         annotation_extra,
         global_extra: g,
@@ -302,6 +331,52 @@ pub fn world_iq(world: &World, req: &WorldIqRequest) -> Result<WorldIq, DtmbErro
         towers: tower_ids,
         snr_db: snr_first,
     })
+}
+
+/// Writes [`world_iq`]'s recording as SigMF (`BASE.sigmf-data`, `.sigmf-meta`) block by
+/// block, the output byte-identical to [`crate::dtmb::sigmf::write_sigmf_with`] of the
+/// in-memory recording; a `ci8` recording is made twice, first for its peak (the scale),
+/// the same samples both times (named random streams).
+///
+/// # Errors
+/// As [`world_iq`] and [`SigmfWriter`].
+pub fn write_world_sigmf(
+    world: &World,
+    req: &WorldIqRequest,
+    base: &std::path::Path,
+    format: SampleFormat,
+) -> Result<WorldIqMeta, DtmbError> {
+    let peak = match format {
+        SampleFormat::Cf32 => 0.0,
+        SampleFormat::Ci8 => {
+            let mut peak = 0.0f32;
+            world_iq_stream(world, req, &mut |b| {
+                peak = peak.max(peak_component(b));
+                Ok(())
+            })?;
+            peak
+        }
+    };
+    // The carrier is known once the towers are chosen; the writer needs it up front.
+    let (t, _) = select_towers(world, req)?;
+    let mut w = SigmfWriter::create(base, format, SAMPLE_RATE_HZ, t.freq_hz, peak)?;
+    let meta = world_iq_stream(world, req, &mut |b| w.write(b))?;
+    w.finish(
+        meta.annotations.iter().cloned(),
+        &meta.annotation_extra,
+        &meta.global_extra,
+    )?;
+    Ok(meta)
+}
+
+/// The id and header mode of the tower a request records, after checking the request as
+/// [`world_iq`] does first (frame count, start and end inside the world's duration).
+///
+/// # Errors
+/// As [`world_iq`]'s checks of the request.
+pub fn requested_tower(world: &World, req: &WorldIqRequest) -> Result<(String, PnMode), DtmbError> {
+    let (t, _) = select_towers(world, req)?;
+    Ok((t.id.clone(), t.pn_mode()))
 }
 
 /// Tower `i`'s link during the block whose middle is at `t_s` (receiver clock): its
