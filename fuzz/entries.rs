@@ -90,3 +90,28 @@ pub fn cli_args(data: &[u8]) {
         let _ = hybridnav::export::Format::parse_list(&a.format);
     }
 }
+
+/// The transport-stream payload reader (`dtmb iq --payload`): the file check, then every
+/// packet read until the stream turns to null packets. The file goes to a directory of
+/// this process under the system's temporary directory.
+pub fn ts_payload(data: &[u8]) {
+    let dir = std::env::temp_dir().join(format!("hybridnav-fuzz-{}", std::process::id()));
+    let _ = std::fs::create_dir_all(&dir);
+    let path = dir.join("payload.ts");
+    std::fs::write(&path, data).expect("temp write");
+    let Ok(mut source) = hybridnav::dtmb::ts::PacketSource::from_file(&path) else {
+        return;
+    };
+    let mut packet = [0u8; 188];
+    // A checked file holds at most data.len() / 188 packets: one more read must give the
+    // first null packet.
+    for _ in 0..=data.len() / 188 {
+        if source.next_packet(&mut packet).is_err() || source.null_packets() > 0 {
+            break;
+        }
+    }
+    assert!(
+        source.payload_packets() as usize <= data.len() / 188,
+        "more packets than the file holds"
+    );
+}

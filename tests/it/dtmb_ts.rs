@@ -438,6 +438,28 @@ fn dtmb_ts_a_bad_payload_is_refused_with_its_byte_offset() {
         err.contains("300 bytes") && err.contains("byte offset 188"),
         "{err}"
     );
+    // Not a regular file: a device that never ends and a directory are refused before a
+    // byte is read from them.
+    for (bad, says) in [
+        ("/dev/zero", "a character device"),
+        (dir.to_str().unwrap(), "a directory"),
+    ] {
+        let o = hybridnav(&[
+            "dtmb",
+            "iq",
+            "--frames",
+            "2",
+            "--snr-db",
+            "20",
+            "--payload",
+            bad,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{bad}: {err}");
+        assert!(err.contains(says) && err.contains(bad), "{bad}: {err}");
+    }
     assert!(!out.with_extension("sigmf-data").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }

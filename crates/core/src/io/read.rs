@@ -80,6 +80,15 @@ pub const SIGMF_DATA: Limit = Limit {
     max_bytes: 4 * GIB,
 };
 
+/// Transport-stream payloads (`dtmb iq --payload`, a world transmitter's `payload`): read
+/// in packets as the recording goes, never whole, so the cap only refuses what no
+/// recording could use: 10⁶ frames (the recording limit) of the densest profile carry
+/// ≈ 40 packets each, 7.5 GB; 64 GiB.
+pub const TS_PAYLOAD: Limit = Limit {
+    what: "transport-stream payload",
+    max_bytes: 64 * GIB,
+};
+
 /// A run directory's manifest (`run.json`, < 1 kB).
 pub const RUN_MANIFEST: Limit = Limit {
     what: "run manifest",

@@ -145,7 +145,9 @@ impl PacketSource {
             path: origin.clone(),
             source: e,
         };
-        let mut f = BufReader::new(std::fs::File::open(path).map_err(io)?);
+        // A regular file of bounded size (a pipe or device would block or never end).
+        let (f, _) = crate::io::read::open(path, crate::io::read::TS_PAYLOAD).map_err(io)?;
+        let mut f = BufReader::new(f);
         // A whole number of packets, so every chunk starts on a packet boundary (a 1 MiB
         // buffer, not a multiple of 188, made every payload over 1 MiB look unsynced).
         let mut buf = vec![0u8; CHECK_PACKETS * PACKET_LEN];
@@ -178,10 +180,7 @@ impl PacketSource {
         if total % PACKET_LEN as u64 != 0 {
             return Err(misaligned(&origin, total));
         }
-        let f = std::fs::File::open(path).map_err(|e| DtmbError::Io {
-            path: origin.clone(),
-            source: e,
-        })?;
+        let (f, _) = crate::io::read::open(path, crate::io::read::TS_PAYLOAD).map_err(io)?;
         Ok(Self {
             reader: Some((path.to_path_buf(), BufReader::with_capacity(1 << 16, f))),
             generated: None,
