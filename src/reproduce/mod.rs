@@ -69,6 +69,20 @@ impl FigureResult {
         }
     }
 
+    /// The row's cells as both tables print them: row, figure, paper, hybridnav, ratio,
+    /// PCRLB and the mark.
+    fn cells(&self) -> [String; 7] {
+        [
+            self.row.to_string(),
+            self.metric.label().to_string(),
+            format!("{:.2}", self.paper_m),
+            fmt_opt(self.simulated_m, 2),
+            fmt_opt(self.ratio(), 2),
+            fmt_opt(self.pcrlb_m, 2),
+            self.mark().to_string(),
+        ]
+    }
+
     /// The mark of the "within" column: ✓, ✓ at the bound, or ✗.
     fn mark(&self) -> &'static str {
         let in_band = self
@@ -274,16 +288,10 @@ pub fn text(results: &[PaperResult]) -> String {
                 "row", "figure", "paper", "hybridnav", "ratio", "PCRLB rmse"
             );
             for f in &r.figures {
+                let [row, fig, paper, sim, ratio, bound, mark] = f.cells();
                 let _ = writeln!(
                     s,
-                    "  {:<20} {:<12} {:>10.2} {:>10} {:>7} {:>12} {}",
-                    f.row,
-                    f.metric.label(),
-                    f.paper_m,
-                    fmt_opt(f.simulated_m, 2),
-                    fmt_opt(f.ratio(), 2),
-                    fmt_opt(f.pcrlb_m, 2),
-                    f.mark()
+                    "  {row:<20} {fig:<12} {paper:>10} {sim:>10} {ratio:>7} {bound:>12} {mark}"
                 );
             }
             let n = r.figures.iter().filter(|f| f.within()).count();
@@ -327,17 +335,7 @@ pub fn markdown(results: &[PaperResult]) -> String {
         if !r.figures.is_empty() {
             s.push_str("| row | figure | paper (m) | hybridnav (m) | ratio | PCRLB on RMSE (m) | within 2× |\n|---|---|---:|---:|---:|---:|:-:|\n");
             for f in &r.figures {
-                let _ = writeln!(
-                    s,
-                    "| {} | {} | {:.2} | {} | {} | {} | {} |",
-                    f.row,
-                    f.metric.label(),
-                    f.paper_m,
-                    fmt_opt(f.simulated_m, 2),
-                    fmt_opt(f.ratio(), 2),
-                    fmt_opt(f.pcrlb_m, 2),
-                    f.mark()
-                );
+                let _ = writeln!(s, "| {} |", f.cells().join(" | "));
             }
             s.push('\n');
         }

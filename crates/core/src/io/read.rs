@@ -67,14 +67,17 @@ pub const CANDIDATES: Limit = Limit {
     max_bytes: 64 * MIB,
 };
 
-/// SigMF metadata (JSON): one annotation per frame of at most 20 000 frames is < 5 MB.
+/// SigMF metadata (JSON): one annotation per frame, about 130 bytes each, so the longest
+/// recording `dtmb iq` writes (10⁶ frames) has ≈ 130 MB; 256 MiB.
 pub const SIGMF_META: Limit = Limit {
     what: "SigMF metadata file",
-    max_bytes: 64 * MIB,
+    max_bytes: 256 * MIB,
 };
 
-/// SigMF sample files (and transport-stream payloads read whole): 20 000 PN945 frames at
-/// 4× oversampling in cf32 are 20 000 × 4 200 × 4 × 8 B ≈ 2.7 GB; 4 GiB.
+/// SigMF sample files, which hybridnav's own reader holds whole: 20 000 PN945 frames at
+/// 4× oversampling in cf32 are 20 000 × 4 200 × 4 × 8 B ≈ 2.7 GB; 4 GiB. `dtmb iq`
+/// streams recordings of up to 10⁶ frames; one larger than this cap is for other
+/// receivers (GNU Radio, dtmb-sdr), not for reading back here.
 pub const SIGMF_DATA: Limit = Limit {
     what: "SigMF data file",
     max_bytes: 4 * GIB,

@@ -472,7 +472,7 @@ pub fn read_sigmf(base: &Path) -> Result<SigmfRecording, DtmbError> {
 /// frame `k` starts at output sample `k · N · L`.
 ///
 /// # Errors
-/// [`DtmbError::InvalidParameter`] for zero frames, more than 20 000 frames, a non-finite
+/// [`DtmbError::InvalidParameter`] for zero frames, more than 10⁶ frames, a non-finite
 /// SNR or an oversampling factor outside 1..=16.
 pub fn generate_iq(
     mode: PnMode,
