@@ -61,6 +61,14 @@ fn d_forgetting() -> f64 {
 fn d_builtin() -> InsKalmanKind {
     InsKalmanKind::Builtin
 }
+/// A fix whose normalised innovation exceeds this cannot come from the motion the INS
+/// has tracked: χ² of 3 or 6 degrees of freedom exceeds 100 with probability below
+/// 10⁻¹⁹, and 10⁵ is a fix more than 316 σ away (1.9 km at a 6 m innovation σ) — a
+/// receiver that teleported or a stream that jumped, not an outlier. The builtin filter
+/// refuses such a fix and restarts from the fixes that follow, reporting the reset
+/// (instead of absorbing kilometres into its velocity and attitude and coasting off).
+const IMPLAUSIBLE_FIX_NIS: f64 = 1.0e5;
+
 /// The longest interval between two fixes whose difference still gives a velocity (s).
 const MAX_DIFFERENCE_INTERVAL_S: f64 = 2.0;
 
@@ -496,7 +504,11 @@ impl InsEstimator {
         ekf_cfg.gyro_bias_sigma_rps *= k;
         ekf_cfg.accel_bias_rw *= k;
         ekf_cfg.gyro_bias_rw *= k;
-        ekf_cfg.nis_gate = cfg.nis_gate;
+        // The user's gate, and never looser than the implausible-jump bound.
+        ekf_cfg.nis_gate = Some(
+            cfg.nis_gate
+                .map_or(IMPLAUSIBLE_FIX_NIS, |g| g.min(IMPLAUSIBLE_FIX_NIS)),
+        );
         Ok(Self {
             name: name.to_string(),
             cfg: cfg.clone(),
@@ -639,6 +651,10 @@ impl InsEstimator {
                         out.used += fix.n;
                         let dof = if fix.vel.is_some() { 6 } else { 3 };
                         tally_unwatched_nis(out, o.nis, dof);
+                    }
+                    Ok(o) if o.nis > IMPLAUSIBLE_FIX_NIS => {
+                        out.rejected += fix.n;
+                        self.reset(out);
                     }
                     _ => out.rejected += fix.n,
                 }
@@ -1017,6 +1033,54 @@ mod tests {
                 })
                 .collect(),
         }
+    }
+
+    #[test]
+    fn a_fix_that_jumps_kilometres_resets_the_ins_and_it_follows_the_new_fixes() {
+        // The glide of the test below, initialised; then every fix moves 5 km north (a
+        // stream that jumped). The first such fix is refused with a reported reset (NIS
+        // far beyond IMPLAUSIBLE_FIX_NIS), and the filter restarts from the moved fixes:
+        // its estimate ends within metres of them, never kilometres off.
+        let f = frame();
+        let start = GpsTime::from_week_tow(2300, 0.0);
+        let cfg = InsFilterConfig {
+            fix_sources: vec![SourceKind::Fm],
+            ..Default::default()
+        };
+        let mut ins =
+            InsEstimator::new("INS", &cfg, &ImuConfig::default(), &[], &f, start).unwrap();
+        let g = local_earth_of(&f).gravity_mps2(0.0);
+        let level = Vector3::new(0.0, 0.0, g);
+        let fix_at = |k: u64, north_m: f64| MeasurementBatch {
+            unscored: false,
+            raw: None,
+            t: start.add_seconds(k as f64 * 0.01),
+            source: SourceKind::Fm,
+            items: vec![Measurement::Position(PositionFix {
+                pos_ecef_m: f.ecef_of_enu(&Vector3::new(0.02 * k as f64, north_m, 0.0)),
+                cov_m2: Matrix3::identity() * 0.01,
+                support: 0,
+            })],
+        };
+        let mut k = 0;
+        for _ in 0..20 {
+            ins.process(&imu_batch(start, k, 100, level));
+            k += 100;
+            ins.process(&fix_at(k - 1, 0.0));
+        }
+        assert!(ins.filter().is_some(), "not initialised");
+        let mut resets = 0;
+        for _ in 0..20 {
+            ins.process(&imu_batch(start, k, 100, level));
+            k += 100;
+            let o = ins.process(&fix_at(k - 1, 5000.0));
+            resets += usize::from(o.numerical_failure);
+        }
+        assert_eq!((resets, ins.resets()), (1, 1));
+        let e = ins.latest().expect("re-initialised from the moved fixes");
+        let want = f.ecef_of_enu(&Vector3::new(0.02 * (k - 1) as f64, 5000.0, 0.0));
+        let off_m = (e.pos_ecef_m - want).norm();
+        assert!(off_m < 5.0, "{off_m} m from the moved fixes");
     }
 
     #[test]
