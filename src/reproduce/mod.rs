@@ -55,9 +55,13 @@ impl FigureResult {
     /// Whether the simulated figure is within a factor [`WITHIN`] of the paper's, or
     /// [`Self::at_bound`].
     pub fn within(&self) -> bool {
+        self.in_band() || self.at_bound()
+    }
+
+    /// Whether simulated / published lies within [1/[`WITHIN`], [`WITHIN`]].
+    fn in_band(&self) -> bool {
         self.ratio()
             .is_some_and(|r| (1.0 / WITHIN..=WITHIN).contains(&r))
-            || self.at_bound()
     }
 
     /// Whether the published figure lies below the bound (no estimator of the model can
@@ -85,10 +89,7 @@ impl FigureResult {
 
     /// The mark of the "within" column: ✓, ✓ at the bound, or ✗.
     fn mark(&self) -> &'static str {
-        let in_band = self
-            .ratio()
-            .is_some_and(|r| (1.0 / WITHIN..=WITHIN).contains(&r));
-        if in_band {
+        if self.in_band() {
             "✓"
         } else if self.at_bound() {
             "✓ (bound)"
