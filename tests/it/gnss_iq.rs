@@ -14,6 +14,14 @@ const WORLD: &str = "worlds/gnss-iq-open-sky.toml";
 /// file source, no filtering, 8 channels, PCPS acquisition, DLL/PLL tracking, the LNAV
 /// decoder and RTKLIB single-point positioning with the broadcast ionosphere (the
 /// package's own example configurations, reduced to what a file needs).
+///
+/// Acquisition sums four 1 ms dwells non-coherently at a false-alarm probability of 10⁻³.
+/// With the package examples' single dwell at 10⁻², a 39.7 dB-Hz satellite has a coherent
+/// SNR of C/N0·1 ms ≈ 9.7 dB, detected with a probability of roughly 0.1–0.2 per search,
+/// while each false alarm holds a channel for ~15 s: on one CI machine G05 (39.7 dB-Hz) was
+/// never acquired in 120 s, and here it took 44 s after two false alarms. Four dwells
+/// acquire every satellite within 5 s of it being in view, with no false alarm, on both
+/// machines (docs/validation.md).
 fn gps_conf(data: &str, rate: f64, out: &str) -> String {
     format!(
         "[GNSS-SDR]
@@ -37,7 +45,8 @@ Channel.signal=1C
 Acquisition_1C.implementation=GPS_L1_CA_PCPS_Acquisition
 Acquisition_1C.item_type=gr_complex
 Acquisition_1C.coherent_integration_time_ms=1
-Acquisition_1C.pfa=0.01
+Acquisition_1C.max_dwells=4
+Acquisition_1C.pfa=0.001
 Acquisition_1C.doppler_max=5000
 Acquisition_1C.doppler_step=250
 Tracking_1C.implementation=GPS_L1_CA_DLL_PLL_Tracking
@@ -89,9 +98,8 @@ fn gnss_iq_gps_l1ca_is_positioned_by_gnss_sdr_in_open_sky() {
     let rate = 2.6e6;
     // 120 s: the first subframe 1 starts 12 s in (after acquisition), so an ephemeris is
     // complete after ~30 s and GNSS-SDR's fixes run at 1 Hz from there. A channel that
-    // loses lock waits for the next subframes 1–3 (30 s more): on some machines GNSS-SDR
-    // 0.0.17 drops several channels in the first seconds (docs/validation.md), so the
-    // recording lasts long enough for every satellite's ephemeris to be decoded.
+    // loses lock waits for the next subframes 1–3 (30 s more), and G17 rises 74 s in, so
+    // the recording lasts long enough for every satellite's ephemeris to be decoded.
     let o = hybridnav(&[
         "gnss",
         "iq",
@@ -257,7 +265,8 @@ fn gnss_iq_refuses_bad_requests_before_writing() {
     );
 }
 
-/// GNSS-SDR's BeiDou B1I configuration: as [`gps_conf`] with the B1 blocks, and one
+/// GNSS-SDR's BeiDou B1I configuration: as [`gps_conf`] with the B1 blocks (and the same
+/// four-dwell acquisition, which also acquires the 38 dB-Hz C07, C11 and C28), and one
 /// channel assigned to each PRN of the recording's annotations (a warm start: GNSS-SDR
 /// otherwise searches all 63 PRNs one channel at a time).
 fn bds_conf(data: &str, rate: f64, out: &str, prns: &[u64]) -> String {
@@ -283,7 +292,8 @@ Channel.signal=B1
 Acquisition_B1.implementation=BEIDOU_B1I_PCPS_Acquisition
 Acquisition_B1.item_type=gr_complex
 Acquisition_B1.coherent_integration_time_ms=1
-Acquisition_B1.pfa=0.01
+Acquisition_B1.max_dwells=4
+Acquisition_B1.pfa=0.001
 Acquisition_B1.doppler_max=5000
 Acquisition_B1.doppler_step=250
 Tracking_B1.implementation=BEIDOU_B1I_DLL_PLL_Tracking
