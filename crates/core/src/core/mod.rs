@@ -4,6 +4,7 @@
 pub mod config;
 pub mod geodesy;
 pub mod ids;
+pub mod noise;
 pub mod receiver_clock;
 pub mod rng;
 pub mod stats;

@@ -24,7 +24,7 @@
 // the portable code.
 #![allow(unsafe_code)]
 
-use super::noise::mix;
+use crate::core::noise::mix;
 use super::pn::BODY_LEN;
 use super::DtmbError;
 use num_complex::Complex32;

@@ -37,7 +37,8 @@ mod ldpc_tables;
 pub mod mapping;
 pub mod measurement;
 pub mod multipath;
-pub mod noise;
+/// The noise generator, shared with the GNSS recordings, lives in the core crate.
+pub use crate::core::noise;
 pub mod pn;
 pub mod receiver;
 pub mod scrambler;

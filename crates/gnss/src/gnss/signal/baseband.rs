@@ -15,8 +15,9 @@
 //! noise's unit power per complex sample (N0·f_s = 1) the path's carrier-to-noise density
 //! is C/N0. The carrier phase is kept as a 32-bit fixed-point fraction of a cycle (2⁻³²
 //! cycle resolution) and turned into cos/sin by a 1024-entry table (phase error ≤ 0.18°,
-//! a correlation loss below 10⁻⁵ dB); the code phase is kept in f64 chips, re-anchored
-//! from the geometry at every segment start so rounding does not accumulate.
+//! a correlation loss below 10⁻⁵ dB); the code phase is kept as a 64-bit fixed-point chip
+//! count (2⁻⁴⁰ chip resolution), re-anchored from the geometry at every segment start so
+//! rounding does not accumulate.
 //!
 //! Noise: complex white Gaussian, N(0, ½) per component. AGC: the gain follows the
 //! measured input power of each block (a first-order loop with a 10-block time constant)
@@ -26,8 +27,6 @@
 
 use crate::core::rng::StreamRng;
 use num_complex::Complex32;
-use rand::Rng;
-use rand_distr::StandardNormal;
 
 /// The sample formats a recording can be written in (SigMF `core:datatype`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -129,7 +128,94 @@ fn fixed_phase(cycles: f64) -> u32 {
     ((cycles - cycles.floor()) * 4_294_967_296.0) as u64 as u32
 }
 
-/// Adds one replica to `out` (code `code` of ±1 as 0/1 chips, `nav` its symbols).
+/// Fraction bits of the fixed-point code phase of a [`ReplicaCursor`]: chip indices below 2²³
+/// fit above them, and a rate rounded to 2⁻⁴⁰ chip per sample drifts by less than 10⁻⁷
+/// chip over a 10 ms segment at 40 Msps.
+const CHIP_FRAC_BITS: u32 = 40;
+
+/// A replica's running state: where its code, symbol and carrier stand at the next sample
+/// it will add. [`ReplicaCursor::add`] can be called on consecutive pieces of a segment,
+/// so a caller can add every replica to one cache-sized piece before moving to the next.
+///
+/// The code phase runs as a 64-bit fixed-point chip count (integer chips above
+/// [`CHIP_FRAC_BITS`] fraction bits): an integer add and compare per sample instead of a
+/// float add and a float-to-index conversion, and the chip's sign picks the signed
+/// amplitude from a two-entry table.
+#[derive(Clone, Copy, Debug)]
+pub struct ReplicaCursor {
+    chip: u64,
+    rate: u64,
+    len: u64,
+    ms: i64,
+    sym: u8,
+    phase: u32,
+    step: u32,
+    signed: [f32; 2],
+}
+
+impl ReplicaCursor {
+    /// The cursor at the first sample of `r`, for a code of `code_len` chips; `nav` gives
+    /// the symbol of the starting period.
+    pub fn new(r: &Replica, code_len: usize, nav: &mut dyn NavSymbols) -> Self {
+        let one = (1u64 << CHIP_FRAC_BITS) as f64;
+        let len = (code_len.max(1) as u64) << CHIP_FRAC_BITS;
+        Self {
+            // The segment's start is in [0, L) by construction; the clamp keeps a rounding
+            // at the top end inside the code.
+            chip: ((r.chip * one) as u64).min(len - 1),
+            rate: (r.chips_per_sample * one).round() as u64,
+            len,
+            ms: r.ms,
+            sym: nav.symbol(r.ms),
+            phase: fixed_phase(r.phase_cycles),
+            step: fixed_phase(r.cycles_per_sample),
+            signed: [r.amplitude, -r.amplitude],
+        }
+    }
+
+    /// Adds the replica to `out` (the next `out.len()` samples) and advances past them.
+    /// `code` is the ranging code as 0/1 chips, `nav` the satellite's symbols.
+    pub fn add(
+        &mut self,
+        out: &mut [Complex32],
+        code: &[u8],
+        nav: &mut dyn NavSymbols,
+        carrier: &CarrierTable,
+    ) {
+        let Self {
+            mut chip,
+            rate,
+            len,
+            mut ms,
+            mut sym,
+            mut phase,
+            step,
+            signed,
+        } = *self;
+        let table = &carrier.table;
+        for o in out.iter_mut() {
+            let c = code[(chip >> CHIP_FRAC_BITS) as usize] ^ sym;
+            let a = signed[usize::from(c & 1)];
+            let (co, si) = table[(phase >> (32 - TABLE_BITS)) as usize];
+            o.re += a * co;
+            o.im += a * si;
+            phase = phase.wrapping_add(step);
+            chip += rate;
+            if chip >= len {
+                chip -= len;
+                ms += 1;
+                sym = nav.symbol(ms);
+            }
+        }
+        self.chip = chip;
+        self.ms = ms;
+        self.sym = sym;
+        self.phase = phase;
+    }
+}
+
+/// Adds one replica to `out` (code `code` of ±1 as 0/1 chips, `nav` its symbols): a
+/// [`ReplicaCursor`] over the whole of `out`.
 pub fn add_replica(
     out: &mut [Complex32],
     r: &Replica,
@@ -137,40 +223,23 @@ pub fn add_replica(
     nav: &mut dyn NavSymbols,
     carrier: &CarrierTable,
 ) {
-    let len = code.len() as f64;
-    let mut chip = r.chip;
-    let mut ms = r.ms;
-    let mut sym = nav.symbol(ms);
-    let mut ph = fixed_phase(r.phase_cycles);
-    let step = fixed_phase(r.cycles_per_sample);
-    let amp = r.amplitude;
-    let rate = r.chips_per_sample;
-    let table = &carrier.table;
-    for o in out.iter_mut() {
-        let c = code[chip as usize] ^ sym;
-        let a = if c == 0 { amp } else { -amp };
-        let (co, si) = table[(ph >> (32 - TABLE_BITS)) as usize];
-        o.re += a * co;
-        o.im += a * si;
-        ph = ph.wrapping_add(step);
-        chip += rate;
-        if chip >= len {
-            chip -= len;
-            ms += 1;
-            sym = nav.symbol(ms);
-        }
-    }
+    ReplicaCursor::new(r, code.len(), nav).add(out, code, nav, carrier);
 }
 
-/// Adds complex white Gaussian noise of unit power (N(0, ½) per component).
+/// Adds complex white Gaussian noise of unit power (N(0, ½) per component), keyed by one
+/// draw from `rng`: the counter-hash Box–Muller generator of [`crate::core::noise`],
+/// vectorised (its tails are cut at 5.77σ per component).
 pub fn add_noise(out: &mut [Complex32], rng: &mut StreamRng) {
-    let s = std::f32::consts::FRAC_1_SQRT_2;
-    for o in out.iter_mut() {
-        let i: f32 = rng.sample(StandardNormal);
-        let q: f32 = rng.sample(StandardNormal);
-        o.re += s * i;
-        o.im += s * q;
-    }
+    crate::core::noise::add_awgn(out, 1.0, rng);
+}
+
+/// `x` saturated to ±`limit` (at most 2²²) and rounded to the nearest integer, ties to
+/// even. Adding and subtracting 1.5·2²³ leaves no fraction bits in an f32 of that size,
+/// so the FPU's own round-to-nearest does the rounding: a baseline x86-64 build would
+/// otherwise call `roundf` for every component.
+fn nearest(x: f32, limit: f32) -> f32 {
+    const SHIFT: f32 = 12_582_912.0;
+    (x.clamp(-limit, limit) + SHIFT) - SHIFT
 }
 
 /// The AGC and quantiser: turns blocks of samples into the output format's bytes.
@@ -202,15 +271,16 @@ impl Quantiser {
         let g = self.gain();
         match self.format {
             SampleFormat::Ci8 => {
+                bytes.reserve(2 * block.len());
                 for s in block {
-                    bytes.push((s.re * g).round().clamp(-127.0, 127.0) as i8 as u8);
-                    bytes.push((s.im * g).round().clamp(-127.0, 127.0) as i8 as u8);
+                    bytes.push(nearest(s.re * g, 127.0) as i8 as u8);
+                    bytes.push(nearest(s.im * g, 127.0) as i8 as u8);
                 }
             }
             SampleFormat::Ci16 => {
                 for s in block {
-                    let i = (s.re * g).round().clamp(-32767.0, 32767.0) as i16;
-                    let q = (s.im * g).round().clamp(-32767.0, 32767.0) as i16;
+                    let i = nearest(s.re * g, 32767.0) as i16;
+                    let q = nearest(s.im * g, 32767.0) as i16;
                     bytes.extend_from_slice(&i.to_le_bytes());
                     bytes.extend_from_slice(&q.to_le_bytes());
                 }
@@ -338,5 +408,81 @@ mod tests {
         assert!((corr(2) - (0.1 + 0.3 * 0.5)).abs() < 0.01, "{}", corr(2));
         // Beyond 1.5 chips both have gone.
         assert!(corr(8).abs() < 0.01, "{}", corr(8));
+    }
+
+    /// Symbols that record which code periods asked for one: period `ms` gets the parity
+    /// of `ms`, so a wrong period count flips the sign of a whole millisecond.
+    struct Parity;
+    impl NavSymbols for Parity {
+        fn symbol(&mut self, ms: i64) -> u8 {
+            (ms & 1) as u8
+        }
+    }
+
+    #[test]
+    fn the_fixed_point_code_phase_follows_the_exact_chip_sequence() {
+        // Over a 10 ms segment at 40 Msps and at 2.6 Msps with a Doppler-shifted chip
+        // rate, every sample's chip and period equal the exact ones, computed in f64 from
+        // the segment's start: χ(n) = χ0 + n·Δχ, chip ⌊χ(n)⌋ mod L, period ⌊χ(n)/L⌋.
+        let code = crate::gnss::signal::ca_code::ca_code_bits(13)
+            .expect("PRN 13")
+            .to_vec();
+        let len = code.len() as f64;
+        for (fs, chip0) in [(40.0e6, 1022.37), (2.6e6, 0.0), (2.6e6, 511.999_999)] {
+            let rate = 1.023e6 * (1.0 + 2.7e-6) / fs;
+            let r = Replica {
+                amplitude: 1.0,
+                ms: 5,
+                chip: chip0,
+                chips_per_sample: rate,
+                phase_cycles: 0.0,
+                cycles_per_sample: 0.0,
+            };
+            let n = (0.01 * fs) as usize;
+            let mut out = vec![Complex32::default(); n];
+            add_replica(&mut out, &r, &code, &mut Parity, &CarrierTable::default());
+            let mut differ = 0usize;
+            for (k, o) in out.iter().enumerate() {
+                let x = chip0 + k as f64 * rate;
+                let period = 5 + (x / len).floor() as i64;
+                let chip = (x % len).floor() as usize;
+                let bit = code[chip] ^ (period & 1) as u8;
+                // The carrier is at phase 0: the table's first entry, cos of half a bin.
+                let expected = if bit == 0 { 1.0 } else { -1.0 };
+                if (f64::from(o.re).signum() - expected).abs() > 0.0 {
+                    differ += 1;
+                }
+            }
+            // A sample may fall within 10⁻⁷ chip of a chip edge, where the two roundings can
+            // disagree; none does in these segments.
+            assert_eq!(differ, 0, "fs {fs}, chip0 {chip0}");
+        }
+    }
+
+    #[test]
+    fn the_quantiser_rounds_to_nearest_and_saturates() {
+        for (x, limit, want) in [
+            (0.49f32, 127.0f32, 0.0f32),
+            (0.51, 127.0, 1.0),
+            (-0.51, 127.0, -1.0),
+            (126.6, 127.0, 127.0),
+            (300.0, 127.0, 127.0),
+            (-1.0e9, 127.0, -127.0),
+            (2.5, 127.0, 2.0),
+            (3.5, 127.0, 4.0),
+            (-32_767.4, 32_767.0, -32_767.0),
+            (40_000.0, 32_767.0, 32_767.0),
+            (1234.49, 32_767.0, 1234.0),
+        ] {
+            assert_eq!(nearest(x, limit), want, "{x}");
+        }
+        // Away from ties, the same integer as f32::round for every value of a fine sweep.
+        let mut x = -140.0f32;
+        while x < 140.0 {
+            if (x.fract().abs() - 0.5).abs() > 1e-4 {
+                assert_eq!(nearest(x, 127.0), x.round().clamp(-127.0, 127.0), "{x}");
+            }
+            x += 0.001_7;
+        }
     }
 }

@@ -58,7 +58,7 @@ use crate::gnss::link::Signal;
 use crate::gnss::measurement::{transmit_geometry, GnssConfig, F_L1_HZ};
 use crate::gnss::rinex_nav::NavData;
 use crate::gnss::signal::baseband::{
-    add_noise, add_replica, CarrierTable, NavSymbols, Quantiser, Replica, SampleFormat,
+    add_noise, CarrierTable, NavSymbols, Quantiser, Replica, ReplicaCursor, SampleFormat,
 };
 use crate::gnss::signal::{b1i, ca_code, d1d2, lnav, SignalError};
 use crate::measurement::Truth;
@@ -74,6 +74,9 @@ use std::sync::Arc;
 pub const SEGMENT_NS: i64 = 10_000_000;
 /// Truth and path rows are written every this many segments (0.1 s).
 const ROW_EVERY: i64 = 10;
+/// Samples of a segment every replica is added to before the next piece: 2048 complex
+/// f32 samples are 16 KiB, half of the smallest first-level data cache in use.
+const PIECE_SAMPLES: usize = 2048;
 /// Most samples per second a recording may use.
 pub const MAX_RATE_SPS: f64 = 100e6;
 
@@ -552,6 +555,7 @@ pub fn record(
             .sum::<f64>();
     let mut quant = Quantiser::new(req.format, power0);
     let mut block: Vec<Complex32> = Vec::new();
+    let mut cursors: Vec<(usize, ReplicaCursor)> = Vec::new();
     let mut bytes: Vec<u8> = Vec::new();
     let mut n_lo: u64 = 0;
     let mut e: i64 = 0;
@@ -576,7 +580,8 @@ pub fn record(
             block.clear();
             block.resize(len, Complex32::default());
             let x = n_lo as f64 - p_now;
-            for ch in channels.iter_mut() {
+            cursors.clear();
+            for (k, ch) in channels.iter_mut().enumerate() {
                 let (Some(a), Some(b)) = (ch.now.as_ref(), ch.next.as_ref()) else {
                     continue;
                 };
@@ -602,7 +607,7 @@ pub fn record(
                             + p.doppler_rel_hz * x / fs,
                         cycles_per_sample: phase_slope + p.doppler_rel_hz / fs,
                     };
-                    add_replica(&mut block, &r, &ch.code, ch.nav.as_mut(), &carrier);
+                    cursors.push((k, ReplicaCursor::new(&r, ch.code.len(), ch.nav.as_mut())));
                 }
                 let ann = ch.ann.get_or_insert_with(|| SatAnnotation {
                     sat: ch.sat,
@@ -622,6 +627,15 @@ pub fn record(
                 ann.sample_count = n_hi - ann.first_sample;
                 ann.max_paths = ann.max_paths.max(a.paths.len());
                 ann.nlos |= a.blocked;
+            }
+            // Every replica is added to one piece of the segment before the next piece, so
+            // the piece stays in the first-level cache instead of streaming the whole
+            // segment through it once per replica.
+            for piece in block.chunks_mut(PIECE_SAMPLES) {
+                for (k, cursor) in cursors.iter_mut() {
+                    let ch = &mut channels[*k];
+                    cursor.add(piece, &ch.code, ch.nav.as_mut(), &carrier);
+                }
             }
             add_noise(&mut block, &mut noise);
             bytes.clear();

@@ -1,6 +1,7 @@
-//! Fast complex white Gaussian noise for the signal chains (DTMB, TC-OFDM).
+//! Fast complex white Gaussian noise for the signal chains (DTMB, TC-OFDM, GNSS IQ).
 //!
-//! A signal-level simulation draws two normal variates per sample, 9450 per DTMB frame;
+//! A signal-level simulation draws two normal variates per sample, 9450 per DTMB frame
+//! and 5.2 million per second of a 2.6 Msps GNSS recording;
 //! with a cryptographic stream generator and a ziggurat that alone costs about as much as
 //! the whole real-time budget. This generator is built to vectorise instead:
 //!
@@ -33,7 +34,7 @@ use rand::Rng;
 
 /// The "triple32" hash: a bijection on 32-bit words with full avalanche.
 #[inline(always)]
-pub(crate) fn mix(mut x: u32) -> u32 {
+pub fn mix(mut x: u32) -> u32 {
     x ^= x >> 17;
     x = x.wrapping_mul(0xed5a_d4bb);
     x ^= x >> 11;
@@ -213,7 +214,13 @@ mod tests {
                 let mut v = vec![Complex32::new(0.25, -0.5); n];
                 // SAFETY: the CPU supports the build's features, checked just above.
                 unsafe { build(&mut v, 0.7, 0x1234_5678, 0x9abc_def0) };
-                assert!(crate::dtmb::same_bits(&v, &portable), "{name}");
+                assert!(
+                    v.len() == portable.len()
+                        && v.iter().zip(&portable).all(|(x, y)| {
+                            x.re.to_bits() == y.re.to_bits() && x.im.to_bits() == y.im.to_bits()
+                        }),
+                    "{name}"
+                );
             }
         }
     }
