@@ -1,14 +1,18 @@
 //! `hybridnav gnss iq` against an independent receiver: GNSS-SDR (Debian `gnss-sdr`)
-//! acquires, tracks and decodes hybridnav's GPS L1 C/A recording of an open-sky world
-//! (the ESBC00DNK station with its own broadcast navigation file of 2020-06-25) and
-//! positions from it; its fixes are compared with the recording's truth.csv. Bad requests
-//! are refused before any file is written.
+//! acquires, tracks and decodes hybridnav's GPS L1 C/A and BeiDou B1I recordings of an
+//! open-sky world (the ESBC00DNK station with its own broadcast navigation file of
+//! 2020-06-25) and of a car on an open road beside it, and positions from them; its fixes
+//! are compared with the recording's truth.csv at the fix's time. Bad requests are
+//! refused before any file is written.
 
 use crate::common::{hybridnav, refused, skip, stderr, tmp_dir};
 use hybridnav::core::Geodetic;
 use std::process::Command;
 
 const WORLD: &str = "worlds/gnss-iq-open-sky.toml";
+const ROAD: &str = "worlds/gnss-iq-open-road.toml";
+/// GPS − UTC on 2020-06-25 (IERS Bulletin C: 18 s since 2017-01-01).
+const LEAP_S: f64 = 18.0;
 
 /// GNSS-SDR's configuration for an interleaved 8-bit recording at `rate` of GPS L1 C/A:
 /// file source, no filtering, 8 channels, PCPS acquisition, DLL/PLL tracking, the LNAV
@@ -69,133 +73,260 @@ PVT.dump=false
     )
 }
 
-/// The fixes GNSS-SDR prints: `Position at … is Lat = X [deg], Long = Y [deg], Height = Z [m]`.
-fn fixes(log: &str) -> Vec<Geodetic> {
+/// Days from 1970-01-01 to the civil date `y-m-d` (proleptic Gregorian), by the
+/// era/day-of-era decomposition of the calendar's 400-year cycle.
+fn days_from_civil(y: i64, m: i64, d: i64) -> i64 {
+    let y = if m <= 2 { y - 1 } else { y };
+    let era = y.div_euclid(400);
+    let yoe = y - era * 400;
+    let mp = (m + 9) % 12;
+    let doy = (153 * mp + 2) / 5 + d - 1;
+    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+    era * 146_097 + doe - 719_468
+}
+
+/// The fixes GNSS-SDR prints, `Position at 2020-Jun-25 02:01:58.000000 UTC using 6
+/// observations is Lat = X [deg], Long = Y [deg], Height = Z [m]`, each with its time in
+/// seconds of GPS time since the GPS epoch (UTC + [`LEAP_S`]).
+fn fixes(log: &str) -> Vec<(f64, Geodetic)> {
     let num = |s: &str, key: &str| -> Option<f64> {
         let i = s.find(key)? + key.len();
         s[i..].split_whitespace().next()?.parse().ok()
     };
+    let time = |s: &str| -> Option<f64> {
+        let i = s.find("Position at ")? + "Position at ".len();
+        let mut it = s[i..].split_whitespace();
+        let (date, hms) = (it.next()?, it.next()?);
+        let mut d = date.split('-');
+        let y: i64 = d.next()?.parse().ok()?;
+        let months = [
+            "Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec",
+        ];
+        let mon = d.next()?;
+        let m = months.iter().position(|&n| n == mon)? as i64 + 1;
+        let day: i64 = d.next()?.parse().ok()?;
+        let mut t = hms.split(':');
+        let (h, mi): (f64, f64) = (t.next()?.parse().ok()?, t.next()?.parse().ok()?);
+        let sec: f64 = t.next()?.parse().ok()?;
+        let days = (days_from_civil(y, m, day) - days_from_civil(1980, 1, 6)) as f64;
+        Some(days * 86_400.0 + h * 3600.0 + mi * 60.0 + sec + LEAP_S)
+    };
     log.lines()
         .filter(|l| l.contains("Position at"))
         .filter_map(|l| {
-            Some(Geodetic::from_deg(
-                num(l, "Lat = ")?,
-                num(l, "Long = ")?,
-                num(l, "Height = ")?,
+            Some((
+                time(l)?,
+                Geodetic::from_deg(num(l, "Lat = ")?, num(l, "Long = ")?, num(l, "Height = ")?),
             ))
         })
         .collect()
 }
 
-#[test]
-fn gnss_iq_gps_l1ca_is_positioned_by_gnss_sdr_in_open_sky() {
+/// A recording's truth.csv: the receiver's ECEF position at each row's GPS time.
+struct Truth(Vec<(f64, nalgebra::Vector3<f64>)>);
+
+impl Truth {
+    fn read(path: &std::path::Path) -> Self {
+        let text = std::fs::read_to_string(path).expect("truth");
+        let mut rows = text.lines();
+        assert_eq!(rows.next(), Some("t_gpst_s,x_m,y_m,z_m"));
+        Self(
+            rows.map(|r| {
+                let v: Vec<f64> = r.split(',').map(|x| x.parse().expect("number")).collect();
+                (v[0], nalgebra::Vector3::new(v[1], v[2], v[3]))
+            })
+            .collect(),
+        )
+    }
+
+    /// The position at `t_gpst_s`, interpolated linearly between the rows around it.
+    fn at(&self, t_gpst_s: f64) -> nalgebra::Vector3<f64> {
+        let rows = &self.0;
+        let k = rows
+            .partition_point(|r| r.0 <= t_gpst_s)
+            .clamp(1, rows.len() - 1);
+        let ((t0, p0), (t1, p1)) = (rows[k - 1], rows[k]);
+        let w = ((t_gpst_s - t0) / (t1 - t0)).clamp(0.0, 1.0);
+        p0 + (p1 - p0) * w
+    }
+}
+
+/// What a recording through GNSS-SDR gave: its console log, the PRNs the recording's
+/// metadata annotates, and the truth.
+struct Positioned {
+    log: String,
+    prns: Vec<u64>,
+    truth: Truth,
+}
+
+/// Records `world` for `duration_s` at `rate` sps ci8 on `signal` (`gps-l1ca` or
+/// `bds-b1i`), writes GNSS-SDR's configuration `conf(data, out, prns)` and runs GNSS-SDR
+/// on it. `None` (after the skip is reported) when GNSS-SDR is not installed.
+fn record_and_position(
+    tag: &str,
+    world: &str,
+    signal: &str,
+    duration_s: u32,
+    rate: f64,
+    conf: impl Fn(&str, &str, &[u64]) -> String,
+) -> Option<Positioned> {
     if Command::new("gnss-sdr").arg("--version").output().is_err() {
         skip("gnss-sdr not installed (Debian package gnss-sdr; .ci/install-gnss-sdr)");
-        return;
+        return None;
     }
-    let d = tmp_dir("gnss-iq-gps");
-    let base = d.join("gps");
-    let rate = 2.6e6;
-    // 120 s: the first subframe 1 starts 12 s in (after acquisition), so an ephemeris is
-    // complete after ~30 s and GNSS-SDR's fixes run at 1 Hz from there. A channel that
-    // loses lock waits for the next subframes 1–3 (30 s more), and G17 rises 74 s in, so
-    // the recording lasts long enough for every satellite's ephemeris to be decoded.
+    let d = tmp_dir(tag);
+    let base = d.join(tag);
+    let (duration, rate_arg) = (duration_s.to_string(), format!("{rate}"));
     let o = hybridnav(&[
         "gnss",
         "iq",
-        WORLD,
+        world,
         "--signal",
-        "gps-l1ca",
+        signal,
         "--duration-s",
-        "120",
+        &duration,
         "--rate-sps",
-        "2.6e6",
+        &rate_arg,
         "--format",
         "ci8",
         "--out",
         base.to_str().expect("utf-8 path"),
     ]);
     assert!(o.status.success(), "gnss iq failed: {}", stderr(&o));
-    let meta = std::fs::read_to_string(d.join("gps.sigmf-meta")).expect("meta");
-    let meta: serde_json::Value = serde_json::from_str(&meta).expect("meta is JSON");
-    assert_eq!(meta["captures"][0]["core:frequency"], 1_575.42e6);
+    let file = |ext: &str| d.join(format!("{tag}.{ext}"));
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(file("sigmf-meta")).expect("meta"))
+            .expect("meta is JSON");
+    let centre_hz = if signal == "gps-l1ca" {
+        1_575.42e6
+    } else {
+        1_561.098e6
+    };
+    assert_eq!(meta["captures"][0]["core:frequency"], centre_hz);
     assert_eq!(meta["global"]["core:datatype"], "ci8");
-    let sats = meta["annotations"].as_array().expect("annotations");
-    assert!(sats.len() >= 5, "{} satellites in view", sats.len());
-    let data_len = std::fs::metadata(d.join("gps.sigmf-data"))
-        .expect("data")
-        .len();
-    assert_eq!(data_len, 2 * 120 * 2_600_000);
-
-    let conf = d.join("gps.conf");
+    let data_len = std::fs::metadata(file("sigmf-data")).expect("data").len();
+    assert_eq!(data_len, 2 * u64::from(duration_s) * rate as u64);
+    let prns: Vec<u64> = meta["annotations"]
+        .as_array()
+        .expect("annotations")
+        .iter()
+        .map(|a| a["hybridnav:prn"].as_u64().expect("prn"))
+        .collect();
+    let conf_path = file("conf");
+    // One GNSS-SDR at a time: each runs a flowgraph of a dozen threads, and on two cores
+    // shared with the other tests several at once starved them (a B1I run lost lock on
+    // three channels and output no fix; the same file alone gave 21 fixes).
+    static ONE_RECEIVER: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _turn = ONE_RECEIVER.lock().unwrap_or_else(|e| e.into_inner());
     std::fs::write(
-        &conf,
-        gps_conf(
-            d.join("gps.sigmf-data").to_str().expect("utf-8"),
-            rate,
+        &conf_path,
+        conf(
+            file("sigmf-data").to_str().expect("utf-8"),
             d.to_str().expect("utf-8"),
+            &prns,
         ),
     )
     .expect("write conf");
     let t0 = std::time::Instant::now();
     let run = Command::new("gnss-sdr")
-        .arg(format!("--config_file={}", conf.display()))
+        .arg(format!("--config_file={}", conf_path.display()))
         .arg(format!("--log_dir={}", d.display()))
         .current_dir(&d)
         .output()
         .expect("run gnss-sdr");
-    let log = String::from_utf8_lossy(&run.stdout);
-    eprintln!("gnss-sdr took {:.1} s", t0.elapsed().as_secs_f64());
+    eprintln!("{tag}: gnss-sdr took {:.1} s", t0.elapsed().as_secs_f64());
+    Some(Positioned {
+        log: String::from_utf8_lossy(&run.stdout).into_owned(),
+        prns,
+        truth: Truth::read(&file("truth.csv")),
+    })
+}
 
-    // Every satellite in the recording is tracked and its message decoded.
-    for s in sats {
-        let prn = s["hybridnav:prn"].as_u64().expect("prn");
+/// The 3-D error of every fix against the truth at its time; asserts at least ten fixes, a
+/// mean within `mean_max_m` over all of them and within `tail_max_m` over the last 30.
+fn assert_fixes_within(tag: &str, r: &Positioned, mean_max_m: f64, tail_max_m: f64) {
+    let log = &r.log;
+    let errors: Vec<f64> = fixes(log)
+        .iter()
+        .map(|(t, g)| (g.to_ecef() - r.truth.at(*t)).norm())
+        .collect();
+    assert!(errors.len() >= 10, "{tag}: {} fixes:\n{log}", errors.len());
+    let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+    let tail = &errors[errors.len().saturating_sub(30)..];
+    let tail_mean = tail.iter().sum::<f64>() / tail.len() as f64;
+    eprintln!(
+        "{tag}: {} fixes, mean 3-D error {mean:.2} m, max {:.2} m, last {} {tail_mean:.2} m",
+        errors.len(),
+        errors.iter().cloned().fold(0.0, f64::max),
+        tail.len()
+    );
+    assert!(
+        mean <= mean_max_m,
+        "{tag}: mean 3-D error {mean:.2} m: {errors:?}"
+    );
+    assert!(
+        tail_mean <= tail_max_m,
+        "{tag}: last {} fixes: mean 3-D error {tail_mean:.2} m: {tail:?}",
+        tail.len()
+    );
+}
+
+/// Every satellite of the recording was acquired and its message decoded.
+fn assert_every_gps_satellite_tracked(tag: &str, r: &Positioned) {
+    for prn in &r.prns {
         assert!(
-            log.contains(&format!("GPS PRN {prn:02} ")),
-            "G{prn:02} was never acquired:\n{log}"
+            r.log.contains(&format!("GPS PRN {prn:02} ")),
+            "{tag}: G{prn:02} was never acquired:\n{}",
+            r.log
         );
     }
     assert!(
-        log.contains("subframe 2") && log.contains("subframe 3"),
-        "no ephemeris subframes decoded:\n{log}"
+        r.log.contains("subframe 2") && r.log.contains("subframe 3"),
+        "{tag}: no ephemeris subframes decoded:\n{}",
+        r.log
     );
+}
 
+// 120 s: the first subframe 1 starts 12 s in (after acquisition), so an ephemeris is
+// complete after ~30 s and GNSS-SDR's fixes run at 1 Hz from there. A channel that loses
+// lock waits for the next subframes 1–3 (30 s more), and G17 rises 74 s in, so the
+// recording lasts long enough for every satellite's ephemeris to be decoded.
+const GPS_DURATION_S: u32 = 120;
+
+/// The goal: within 15 m mean 3-D error over every fix (the anchor, gps-sdr-sim's
+/// static scenario through GNSS-SDR, gave 8.5 m, and 9.0 m measured here beside
+/// hybridnav's 6.6 m: docs/validation.md). Once every ephemeris is decoded, the fixes of
+/// the last 30 s stay within 10 m.
+const MEAN_MAX_M: f64 = 15.0;
+const TAIL_MAX_M: f64 = 10.0;
+
+#[test]
+fn gnss_iq_gps_l1ca_is_positioned_by_gnss_sdr_in_open_sky() {
+    let gps = |data: &str, out: &str, _: &[u64]| gps_conf(data, 2.6e6, out);
+    let Some(r) = record_and_position("gps", WORLD, "gps-l1ca", GPS_DURATION_S, 2.6e6, gps) else {
+        return;
+    };
+    assert!(r.prns.len() >= 5, "{} satellites in view", r.prns.len());
+    assert_every_gps_satellite_tracked("gps", &r);
     // The truth: a static antenna, every row the same point.
-    let truth = std::fs::read_to_string(d.join("gps.truth.csv")).expect("truth");
-    let mut rows = truth.lines();
-    assert_eq!(rows.next(), Some("t_gpst_s,x_m,y_m,z_m"));
-    let first: Vec<f64> = rows
-        .next()
-        .expect("a truth row")
-        .split(',')
-        .map(|v| v.parse().expect("number"))
-        .collect();
-    let truth_ecef = nalgebra::Vector3::new(first[1], first[2], first[3]);
+    assert!(r.truth.0.iter().all(|(_, p)| p == &r.truth.0[0].1));
+    assert_fixes_within("gps", &r, MEAN_MAX_M, TAIL_MAX_M);
+}
 
-    let fixes = fixes(&log);
-    assert!(fixes.len() >= 10, "{} fixes:\n{log}", fixes.len());
-    let errors: Vec<f64> = fixes
-        .iter()
-        .map(|g| (g.to_ecef() - truth_ecef).norm())
-        .collect();
-    let mean = errors.iter().sum::<f64>() / errors.len() as f64;
-    eprintln!(
-        "GNSS-SDR on hybridnav GPS L1 C/A: {} fixes, mean 3-D error {mean:.2} m, max {:.2} m",
-        errors.len(),
-        errors.iter().cloned().fold(0.0, f64::max)
-    );
-    // The goal: within 15 m mean 3-D error over every fix (the anchor, gps-sdr-sim's
-    // static scenario through GNSS-SDR, gave 8.5 m). Once every ephemeris is decoded, the
-    // fixes of the last 30 s stay within 10 m.
-    assert!(mean <= 15.0, "mean 3-D error {mean:.2} m: {errors:?}");
-    let tail = &errors[errors.len().saturating_sub(30)..];
-    let tail_mean = tail.iter().sum::<f64>() / tail.len() as f64;
-    eprintln!("last {} fixes: mean 3-D error {tail_mean:.2} m", tail.len());
-    assert!(
-        tail_mean <= 10.0,
-        "last {} fixes: mean 3-D error {tail_mean:.2} m: {tail:?}",
-        tail.len()
-    );
+/// A car at 10 m/s on an open road, a right-angle turn 70 s in: GNSS-SDR follows it, and
+/// each fix is compared with the truth at the fix's own time (one second off would add
+/// 10 m).
+#[test]
+fn gnss_iq_gps_l1ca_of_a_moving_car_is_positioned_by_gnss_sdr() {
+    let gps = |data: &str, out: &str, _: &[u64]| gps_conf(data, 2.6e6, out);
+    let Some(r) = record_and_position("gps-road", ROAD, "gps-l1ca", GPS_DURATION_S, 2.6e6, gps)
+    else {
+        return;
+    };
+    assert_every_gps_satellite_tracked("gps-road", &r);
+    let (first, last) = (r.truth.0[0].1, r.truth.0[r.truth.0.len() - 1].1);
+    assert!((last - first).norm() > 500.0, "the car moved");
+    assert_fixes_within("gps-road", &r, MEAN_MAX_M, TAIL_MAX_M);
 }
 
 #[test]
@@ -320,96 +451,41 @@ PVT.dump=false
     c
 }
 
+/// BeiDou B1I (D1, MEO/IGSO) through GNSS-SDR's log: how many D1 ephemerides it decoded.
+fn d1_ephemerides(log: &str) -> usize {
+    log.lines()
+        .filter(|l| l.contains("New BEIDOU B1I DNAV message") && l.contains("ephemeris"))
+        .count()
+}
+
+// 120 s: BDT subframe 1 starts 26 s in, the ephemeris is complete ~44 s in; a channel
+// that loses lock (C20 and C22 do, now and then: docs/validation.md) waits for the next
+// 30 s D1 frame, so 120 s leaves room for one loss before the fixes.
+const BDS_DURATION_S: u32 = 120;
+
 /// BeiDou B1I (D1, MEO/IGSO) through GNSS-SDR. Not every satellite is acquired (see
-/// docs/validation.md: C36 and C37 never are, the 38 dB-Hz ones rarely), so this asserts
-/// the fix, from the four or more whose D1 ephemerides GNSS-SDR decodes.
+/// docs/validation.md: C36 and C37 never are), so this asserts the fix, from the four or
+/// more whose D1 ephemerides GNSS-SDR decodes.
 #[test]
 fn gnss_iq_bds_b1i_is_positioned_by_gnss_sdr_in_open_sky() {
-    if Command::new("gnss-sdr").arg("--version").output().is_err() {
-        skip("gnss-sdr not installed (Debian package gnss-sdr; .ci/install-gnss-sdr)");
+    let bds = |data: &str, out: &str, prns: &[u64]| bds_conf(data, 4.2e6, out, prns);
+    let Some(r) = record_and_position("bds", WORLD, "bds-b1i", BDS_DURATION_S, 4.2e6, bds) else {
         return;
-    }
-    let d = tmp_dir("gnss-iq-bds");
-    let base = d.join("bds");
-    // 90 s: BDT subframe 1 starts 26 s in, the ephemeris is complete ~44 s in.
-    let o = hybridnav(&[
-        "gnss",
-        "iq",
-        WORLD,
-        "--signal",
-        "bds-b1i",
-        "--duration-s",
-        "90",
-        "--rate-sps",
-        "4.2e6",
-        "--format",
-        "ci8",
-        "--out",
-        base.to_str().expect("utf-8 path"),
-    ]);
-    assert!(o.status.success(), "gnss iq failed: {}", stderr(&o));
-    let meta: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(d.join("bds.sigmf-meta")).expect("meta"))
-            .expect("meta is JSON");
-    assert_eq!(meta["captures"][0]["core:frequency"], 1_561.098e6);
-    let prns: Vec<u64> = meta["annotations"]
-        .as_array()
-        .expect("annotations")
-        .iter()
-        .map(|a| a["hybridnav:prn"].as_u64().expect("prn"))
-        .collect();
-    let conf = d.join("bds.conf");
-    std::fs::write(
-        &conf,
-        bds_conf(
-            d.join("bds.sigmf-data").to_str().expect("utf-8"),
-            4.2e6,
-            d.to_str().expect("utf-8"),
-            &prns,
-        ),
-    )
-    .expect("write conf");
-    let run = Command::new("gnss-sdr")
-        .arg(format!("--config_file={}", conf.display()))
-        .arg(format!("--log_dir={}", d.display()))
-        .current_dir(&d)
-        .output()
-        .expect("run gnss-sdr");
-    let log = String::from_utf8_lossy(&run.stdout);
-    let decoded = log
-        .lines()
-        .filter(|l| l.contains("New BEIDOU B1I DNAV message") && l.contains("ephemeris"))
-        .count();
-    assert!(decoded >= 4, "{decoded} D1 ephemerides decoded:\n{log}");
-    let truth = std::fs::read_to_string(d.join("bds.truth.csv")).expect("truth");
-    let first: Vec<f64> = truth
-        .lines()
-        .nth(1)
-        .expect("a truth row")
-        .split(',')
-        .map(|v| v.parse().expect("number"))
-        .collect();
-    let truth_ecef = nalgebra::Vector3::new(first[1], first[2], first[3]);
-    let errors: Vec<f64> = fixes(&log)
-        .iter()
-        .map(|g| (g.to_ecef() - truth_ecef).norm())
-        .collect();
-    assert!(errors.len() >= 10, "{} fixes:\n{log}", errors.len());
-    let mean = errors.iter().sum::<f64>() / errors.len() as f64;
-    eprintln!(
-        "GNSS-SDR on hybridnav BeiDou B1I: {} fixes, mean 3-D error {mean:.2} m",
-        errors.len()
-    );
-    // The goal: within 15 m mean 3-D error over every fix (the anchor, gps-sdr-sim's
-    // static scenario through GNSS-SDR, gave 8.5 m). Once every ephemeris is decoded, the
-    // fixes of the last 30 s stay within 10 m.
-    assert!(mean <= 15.0, "mean 3-D error {mean:.2} m: {errors:?}");
-    let tail = &errors[errors.len().saturating_sub(30)..];
-    let tail_mean = tail.iter().sum::<f64>() / tail.len() as f64;
-    eprintln!("last {} fixes: mean 3-D error {tail_mean:.2} m", tail.len());
-    assert!(
-        tail_mean <= 10.0,
-        "last {} fixes: mean 3-D error {tail_mean:.2} m: {tail:?}",
-        tail.len()
-    );
+    };
+    let decoded = d1_ephemerides(&r.log);
+    assert!(decoded >= 4, "{decoded} D1 ephemerides decoded:\n{}", r.log);
+    assert_fixes_within("bds", &r, MEAN_MAX_M, TAIL_MAX_M);
+}
+
+/// The moving car of the GPS test, on B1I.
+#[test]
+fn gnss_iq_bds_b1i_of_a_moving_car_is_positioned_by_gnss_sdr() {
+    let bds = |data: &str, out: &str, prns: &[u64]| bds_conf(data, 4.2e6, out, prns);
+    let Some(r) = record_and_position("bds-road", ROAD, "bds-b1i", BDS_DURATION_S, 4.2e6, bds)
+    else {
+        return;
+    };
+    let decoded = d1_ephemerides(&r.log);
+    assert!(decoded >= 4, "{decoded} D1 ephemerides decoded:\n{}", r.log);
+    assert_fixes_within("bds-road", &r, MEAN_MAX_M, TAIL_MAX_M);
 }
