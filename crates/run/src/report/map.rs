@@ -484,24 +484,24 @@ fn draw_transmitters(svg: &mut String, v: &View, world: &World, labels: &mut Lab
             );
             let text = format!("{name} → {dist_km:.1} km");
             let w = text_width_px(&text, 11.0);
-            let (lx, ly) = (x0 - 10.0 * ux, y0 - 10.0 * uy);
-            texts.push((
-                text,
-                colour,
-                vec![
-                    (lx - 0.5 * w, ly + 4.0),
-                    (lx - 0.5 * w, ly - 10.0),
-                    (lx - 0.5 * w, ly + 18.0),
-                ],
-            ));
+            // Beyond the arrow's tail, then stacked a line at a time further into the
+            // drawing (away from the border the arrow points at): transmitters on one
+            // mast share the arrow and list their labels one under another.
+            let (lx, ly) = (x0 - 10.0 * ux, y0 - 10.0 * uy + 4.0);
+            let inward = if uy > 0.0 { -1.0 } else { 1.0 };
+            let candidates = (0..40)
+                .map(|k| (lx - 0.5 * w, ly + inward * 14.0 * k as f64))
+                .collect();
+            texts.push((text, colour, candidates));
         }
     }
     // Labels after every mark, so that no label is placed over a mark drawn later.
     for (text, colour, candidates) in texts {
         let (x, y) = labels.place(&text, 11.0, &candidates);
+        // A white halo keeps the label legible over the tracks and buildings under it.
         let _ = writeln!(
             svg,
-            r#"<text x="{x:.1}" y="{y:.1}" fill="{colour}">{}</text>"#,
+            r##"<text x="{x:.1}" y="{y:.1}" fill="{colour}" stroke="#fff" stroke-width="3" stroke-opacity="0.85" paint-order="stroke">{}</text>"##,
             escape(&text)
         );
     }
