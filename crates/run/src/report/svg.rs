@@ -891,11 +891,12 @@ mod tests {
 
     #[test]
     fn log_ticks_are_labelled_in_the_axis_units_with_minor_ticks_between() {
-        // 0.3 m to 700 m: labelled 1, 10, 100 m; minor ticks at 0.4…0.9, 2…9, 20…90, …
+        // 0.3 m to 700 m: labelled 1, 10, 100 m; minor ticks at 0.3…0.9, 2…9, 20…90 and
+        // 200…700 (the ends included).
         let (major, minor) = log_ticks(0.3f64.log10(), 700f64.log10());
         let labels: Vec<String> = major.iter().map(|t| tick_label(Scale::Log, *t)).collect();
         assert_eq!(labels, ["1", "10", "100"]);
-        assert_eq!(minor.len(), 6 + 8 + 8 + 6);
+        assert_eq!(minor.len(), 7 + 8 + 8 + 6);
         // Under two decades the 2s and 5s are labelled too.
         let (major, _) = log_ticks(0.1f64.log10(), 3f64.log10());
         let labels: Vec<String> = major.iter().map(|t| tick_label(Scale::Log, *t)).collect();
