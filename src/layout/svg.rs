@@ -183,7 +183,11 @@ pub fn heat_map(
         let w = text_width_px(m.label, 11.0);
         texts.push((
             m.label,
-            [(x + 8.0, y + 4.0), (x - 8.0 - w, y + 4.0), (x - 0.5 * w, y - 10.0)],
+            [
+                (x + 8.0, y + 4.0),
+                (x - 8.0 - w, y + 4.0),
+                (x - 0.5 * w, y - 10.0),
+            ],
         ));
     }
     let y0 = MARGIN_PX + span_n * px_per_m + 25.0;
@@ -220,7 +224,10 @@ pub fn heat_map(
             let bar_x = |v: f64| MARGIN_PX + (v - lo) / (hi - lo).max(1e-12) * w;
             let mut values = ticks(*lo, *hi, 8);
             // The low end is labelled too when it is not a tick and there is room for it.
-            if values.first().is_some_and(|t| bar_x(*t) - bar_x(*lo) >= 40.0) {
+            if values
+                .first()
+                .is_some_and(|t| bar_x(*t) - bar_x(*lo) >= 40.0)
+            {
                 values.insert(0, *lo);
             }
             for (k, v) in values.iter().enumerate() {
@@ -321,7 +328,14 @@ mod tests {
         assert!(s.contains("t &amp; &lt;x&gt;"));
         assert_eq!(s.matches("#bbbbbb").count(), 1);
         // The colour bar is ticked at 1-2-5 values between its ends, not only at them.
-        for tick in [">1</text>", ">2</text>", ">3</text>", ">4</text>", ">5</text>", ">≥ 6</text>"] {
+        for tick in [
+            ">1</text>",
+            ">2</text>",
+            ">3</text>",
+            ">4</text>",
+            ">5</text>",
+            ">≥ 6</text>",
+        ] {
             assert!(s.contains(tick), "no tick {tick}");
         }
         // The cell whose centre (5, 5) lies in the triangle is hatched as indoor; the

@@ -106,7 +106,13 @@ fn layout_writes_every_output_of_the_default_world() {
     }
     // The colour bars carry ticks between their ends: GDOP 1…10 at 2, 4, 6, 8 and ≥ 10.
     let gdop = std::fs::read_to_string(d.join("gdop_hybrid.svg")).unwrap();
-    for tick in [">2</text>", ">4</text>", ">6</text>", ">8</text>", ">≥ 10</text>"] {
+    for tick in [
+        ">2</text>",
+        ">4</text>",
+        ">6</text>",
+        ">8</text>",
+        ">≥ 10</text>",
+    ] {
         assert!(gdop.contains(tick), "no colour-bar tick {tick}");
     }
 

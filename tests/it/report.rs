@@ -242,7 +242,10 @@ fn chromium_command(chromium: &str, dir: &Path, window: &str) -> Command {
         "--virtual-time-budget=5000",
     ])
     .arg(format!("--window-size={window}"))
-    .arg(format!("--user-data-dir={}", dir.join("chromium-profile").display()));
+    .arg(format!(
+        "--user-data-dir={}",
+        dir.join("chromium-profile").display()
+    ));
     c
 }
 
@@ -377,7 +380,11 @@ fn report_pages_have_no_overflow_or_overlapping_labels_in_chromium() {
         for f in &files {
             assert_eq!(f.extension().unwrap(), "svg");
             let svg = std::fs::read_to_string(f).unwrap();
-            assert!(html.contains(&svg), "{} is not the page's chart", f.display());
+            assert!(
+                html.contains(&svg),
+                "{} is not the page's chart",
+                f.display()
+            );
         }
         pages.push((name, out, files));
     }
@@ -396,7 +403,8 @@ fn report_pages_have_no_overflow_or_overlapping_labels_in_chromium() {
     for f in &pages[0].2 {
         let name = f.file_name().unwrap();
         assert!(
-            std::fs::read(f).unwrap() == std::fs::read(again.join("report/figures").join(name)).unwrap(),
+            std::fs::read(f).unwrap()
+                == std::fs::read(again.join("report/figures").join(name)).unwrap(),
             "{name:?} differs between two runs of one seed"
         );
     }
@@ -463,10 +471,18 @@ print(n)
             .arg(format!("file://{}", out.join("report.html").display()))
             .output()
             .expect("run chromium");
-        assert!(shot.status.success(), "{}", String::from_utf8_lossy(&shot.stderr));
+        assert!(
+            shot.status.success(),
+            "{}",
+            String::from_utf8_lossy(&shot.stderr)
+        );
         let bytes = std::fs::read(&png).expect("screenshot written");
         assert!(bytes.starts_with(b"\x89PNG"), "not a PNG");
-        assert!(bytes.len() > 50_000, "{name}: screenshot of {} bytes", bytes.len());
+        assert!(
+            bytes.len() > 50_000,
+            "{name}: screenshot of {} bytes",
+            bytes.len()
+        );
     }
     let _ = std::fs::remove_dir_all(&d);
 }

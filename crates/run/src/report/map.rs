@@ -9,7 +9,7 @@
 //! Transmitters farther than the drawing's extent (a TV tower kilometres away) are drawn as
 //! an arrow on the border pointing towards them, labelled with their distance.
 
-use super::svg::{escape, fmt_tick, legend_sample, text_width_px, ticks, Labels, Style};
+use super::svg::{escape, fmt_tick, legend_sample, marker, text_width_px, ticks, Labels, Style};
 use crate::world::scene::TransmitterKind;
 use crate::world::World;
 use std::fmt::Write;
@@ -175,22 +175,38 @@ pub fn svg_with(world: &World, overlays: &[Overlay<'_>]) -> Result<String, Strin
             x1 - x0,
             y1 - y0
         );
-        for o in overlays {
+        // Each line carries its legend's marker every 150 px of its length, each line
+        // starting at its own offset, so that a track stays identifiable in greyscale.
+        const MARKER_EVERY_PX: f64 = 150.0;
+        for (k, o) in overlays.iter().enumerate() {
             let mut d = String::new();
-            let mut pen_up = true;
+            let mut marks = String::new();
+            let mut since_mark = MARKER_EVERY_PX - 20.0 - 23.0 * (k % 6) as f64;
+            let mut last: Option<(f64, f64)> = None;
             for p in &o.points_enu_m {
                 match p {
                     Some(p) => {
                         let (x, y) = v.px(p[0], p[1]);
-                        let _ = write!(d, "{}{x:.1},{y:.1} ", if pen_up { "M" } else { "L" });
-                        pen_up = false;
+                        let _ = write!(
+                            d,
+                            "{}{x:.1},{y:.1} ",
+                            if last.is_none() { "M" } else { "L" }
+                        );
+                        if let Some((lx, ly)) = last {
+                            since_mark += (x - lx).hypot(y - ly);
+                        }
+                        if since_mark >= MARKER_EVERY_PX {
+                            marks.push_str(&marker(o.style.marker, x, y, o.style.colour));
+                            since_mark = 0.0;
+                        }
+                        last = Some((x, y));
                     }
-                    None => pen_up = true,
+                    None => last = None,
                 }
             }
             let _ = writeln!(
                 svg,
-                r#"<path d="{}" fill="none" stroke="{}" stroke-width="1.3" stroke-opacity="0.85"{}/>"#,
+                r#"<path d="{}" fill="none" stroke="{}" stroke-width="1.3" stroke-opacity="0.85"{}/>{marks}"#,
                 d.trim_end(),
                 o.style.colour,
                 o.style.dash_attr()

@@ -49,10 +49,7 @@ impl Page {
         } else {
             format!("<figcaption>{caption}</figcaption>")
         };
-        let _ = writeln!(
-            self.h,
-            "<h2>{heading}</h2><figure>{svg}{caption}</figure>"
-        );
+        let _ = writeln!(self.h, "<h2>{heading}</h2><figure>{svg}{caption}</figure>");
         self.figures.push((format!("{name}.svg"), svg));
     }
 }
@@ -208,10 +205,7 @@ fn table(h: &mut String, s: &Summary) {
             |n| format!("{:.2} / {:.2}", n.mean, n.dof),
         );
         let resets = if e.numerical_failures > 0 {
-            format!(
-                "<span class=\"flag\">{} †</span>",
-                e.numerical_failures
-            )
+            format!("<span class=\"flag\">{} †</span>", e.numerical_failures)
         } else {
             "0".to_string()
         };
@@ -645,7 +639,10 @@ mod tests {
         assert!((mean / a - b / mean).abs() < 1e-9 * b);
         // A tight interval is left as it was to first order: 100 ± 1 → 99.005 … 101.005.
         let [a, b] = positive_ci95(Some([99.0, 101.0])).unwrap();
-        assert!((a - 99.005).abs() < 1e-3 && (b - 101.005).abs() < 1e-3, "{a} {b}");
+        assert!(
+            (a - 99.005).abs() < 1e-3 && (b - 101.005).abs() < 1e-3,
+            "{a} {b}"
+        );
         // Nothing to transform: no interval, or a mean of zero.
         assert!(positive_ci95(None).is_none());
         assert!(positive_ci95(Some([-1.0, 1.0])).is_none());

@@ -247,7 +247,10 @@ impl Labels {
                 (p, b)
             })
             .find(|(_, b)| self.free(b))
-            .map_or_else(|| clamp(candidates.first().copied().unwrap_or((0.0, 0.0))), |(p, _)| p);
+            .map_or_else(
+                || clamp(candidates.first().copied().unwrap_or((0.0, 0.0))),
+                |(p, _)| p,
+            );
         self.taken.push(Self::text_box(text, font_px, at.0, at.1));
         at
     }
@@ -335,7 +338,11 @@ pub fn log_ticks(lo: f64, hi: f64) -> (Vec<f64>, Vec<f64>) {
     if !(lo.is_finite() && hi.is_finite()) || hi <= lo {
         return (vec![lo], Vec::new());
     }
-    let labelled_mults: &[f64] = if hi - lo < 2.0 { &[1.0, 2.0, 5.0] } else { &[1.0] };
+    let labelled_mults: &[f64] = if hi - lo < 2.0 {
+        &[1.0, 2.0, 5.0]
+    } else {
+        &[1.0]
+    };
     let (mut major, mut minor) = (Vec::new(), Vec::new());
     for d in lo.floor() as i64..=hi.ceil() as i64 {
         for m in 1..10 {
@@ -407,7 +414,11 @@ fn tick_label(scale: Scale, t: f64) -> String {
     match scale {
         Scale::Linear => fmt_tick(t),
         // Rounded to 12 significant digits first: 10^log10(0.2) is 0.20000000000000004.
-        Scale::Log => fmt_tick(format!("{:.11e}", 10f64.powf(t)).parse().unwrap_or(f64::NAN)),
+        Scale::Log => fmt_tick(
+            format!("{:.11e}", 10f64.powf(t))
+                .parse()
+                .unwrap_or(f64::NAN),
+        ),
     }
 }
 
@@ -886,7 +897,11 @@ mod tests {
         // #777777 at 50.0 (CIE L* of Y = 0.184).
         assert!((lightness("#ffffff") - 100.0).abs() < 1e-9);
         assert!(lightness("#000000").abs() < 1e-9);
-        assert!((lightness("#777777") - 50.0).abs() < 0.1, "{}", lightness("#777777"));
+        assert!(
+            (lightness("#777777") - 50.0).abs() < 0.1,
+            "{}",
+            lightness("#777777")
+        );
     }
 
     #[test]
@@ -941,7 +956,10 @@ mod tests {
             assert!(a.0 >= 0.0 && a.0 + w <= 200.0, "{a:?}");
             assert!(a.1 - 11.0 >= 20.0 && a.1 <= 100.0, "{a:?}");
             for b in &placed[i + 1..] {
-                assert!((a.1 - b.1).abs() >= 11.0 || (a.0 - b.0).abs() >= w, "{a:?} {b:?}");
+                assert!(
+                    (a.1 - b.1).abs() >= 11.0 || (a.0 - b.0).abs() >= w,
+                    "{a:?} {b:?}"
+                );
             }
         }
     }
