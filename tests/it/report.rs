@@ -249,8 +249,9 @@ fn chromium_command(chromium: &str, dir: &Path, window: &str) -> Command {
     c
 }
 
-/// Lays `page` out in headless Chromium at 1280 px wide and measures it.
-fn check_layout(chromium: &str, page: &Path, dir: &Path) -> LayoutCheck {
+/// Lays `page` out in headless Chromium in a window of `window` ("W,H" px) and measures
+/// it.
+fn check_layout(chromium: &str, page: &Path, dir: &Path, window: &str) -> LayoutCheck {
     let html = std::fs::read_to_string(page).unwrap();
     let copy = dir.join(format!(
         "{}-check.html",
@@ -263,7 +264,7 @@ fn check_layout(chromium: &str, page: &Path, dir: &Path) -> LayoutCheck {
     );
     assert_ne!(with_script, html, "{} has no </body>", page.display());
     std::fs::write(&copy, with_script).unwrap();
-    let o = chromium_command(chromium, dir, "1280,2000")
+    let o = chromium_command(chromium, dir, window)
         .arg("--dump-dom")
         .arg(format!("file://{}", copy.display()))
         .output()
@@ -319,7 +320,7 @@ fn the_layout_check_finds_overlapping_labels_and_overflow() {
         ),
     )
     .unwrap();
-    let r = check_layout(chromium, &bad, &d);
+    let r = check_layout(chromium, &bad, &d, "1280,2000");
     assert_eq!(r.overlaps.len(), 1, "{r:?}");
     assert!(r.overlaps[0].contains("DTMB D01") && r.overlaps[0].contains("FM F01"));
     assert_eq!(r.clipped.len(), 1, "{r:?}");
@@ -335,7 +336,7 @@ fn the_layout_check_finds_overlapping_labels_and_overflow() {
 <table><tr><td>a</td><td>b</td></tr></table></body></html>"#,
     )
     .unwrap();
-    let r = check_layout(chromium, &good, &d);
+    let r = check_layout(chromium, &good, &d, "1280,2000");
     assert!(
         r.overlaps.is_empty() && r.clipped.is_empty() && r.overflow.is_empty(),
         "{r:?}"
@@ -346,7 +347,7 @@ fn the_layout_check_finds_overlapping_labels_and_overflow() {
 
 /// The goal of the report's figures: Beihang (four estimators, towers on one mast far
 /// off the map) and seed 003 (seven estimators, the widest table), laid out by Chromium
-/// at 1280 px, have no overflow, no label leaving its figure and no two labels over each
+/// at 1280 and at 800 px, have no overflow, no label leaving its figure and no two labels over each
 /// other; every figure is also a standalone SVG file under `report/figures/`, the same
 /// bytes for the same seed.
 #[test]
@@ -452,18 +453,33 @@ print(n)
         return;
     };
     for (name, out, _) in &pages {
-        let r = check_layout(chromium, &out.join("report.html"), &d);
-        eprintln!(
-            "{name}: {} labels, {} overflowing, {} clipped, {} overlapping pairs",
-            r.labels,
-            r.overflow.len(),
-            r.clipped.len(),
-            r.overlaps.len()
-        );
-        assert!(r.labels > 200, "{name}: only {} labels measured", r.labels);
-        assert!(r.overflow.is_empty(), "{name}: overflow {:#?}", r.overflow);
-        assert!(r.clipped.is_empty(), "{name}: clipped {:#?}", r.clipped);
-        assert!(r.overlaps.is_empty(), "{name}: overlaps {:#?}", r.overlaps);
+        // A desktop window, and a narrow one (the tables wrap, the charts scale down).
+        for window in ["1280,2000", "800,2000"] {
+            let r = check_layout(chromium, &out.join("report.html"), &d, window);
+            eprintln!(
+                "{name} at {window}: {} labels, {} overflowing, {} clipped, {} overlapping pairs",
+                r.labels,
+                r.overflow.len(),
+                r.clipped.len(),
+                r.overlaps.len()
+            );
+            assert!(r.labels > 200, "{name}: only {} labels measured", r.labels);
+            assert!(
+                r.overflow.is_empty(),
+                "{name} {window}: overflow {:#?}",
+                r.overflow
+            );
+            assert!(
+                r.clipped.is_empty(),
+                "{name} {window}: clipped {:#?}",
+                r.clipped
+            );
+            assert!(
+                r.overlaps.is_empty(),
+                "{name} {window}: overlaps {:#?}",
+                r.overlaps
+            );
+        }
         // And a screenshot of the page as a reader sees its first screens.
         let png = d.join(format!("{name}.png"));
         let shot = chromium_command(chromium, &d, "1280,2000")

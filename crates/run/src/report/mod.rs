@@ -24,7 +24,8 @@ h1{font-size:1.5em}h2{font-size:1.15em;margin-top:1.8em;border-bottom:1px solid 
 table{border-collapse:collapse;font-size:0.85em;max-width:100%}th,td{padding:3px 6px;border-bottom:1px solid #e3e3e3;text-align:right;vertical-align:top}
 th{font-weight:600;overflow-wrap:break-word}td{white-space:nowrap}td.wrap{white-space:normal}
 th:first-child,td:first-child{text-align:left}th{background:#f3f3f3}.meta{color:#555;font-size:0.9em}
-.flag{color:#b2182b;font-weight:bold}
+.flag{color:#b2182b;font-weight:bold}.band{color:#666;font-size:0.9em}
+@media (max-width:900px){th,td{padding:2px 3px}table{font-size:0.8em}}
 figure{margin:0.8em 0}figcaption{color:#555;font-size:0.85em;max-width:860px}svg{max-width:100%;height:auto}";
 
 /// A rendered report: the page, and each of its charts as a standalone SVG document.
@@ -187,17 +188,21 @@ fn table(h: &mut String, s: &Summary) {
         );
     }
     h.push_str("</table>\n<p class=\"meta\">Metres. σ-levels are the 68.27/95.45/99.73 % percentiles of the 3-D error over every epoch of every trial (seed 000's convention); horiz., of the horizontal error. Every estimator is scored at the same instants (the world's scoring epochs: the GNSS epochs unless <code>[scoring]</code> says otherwise), with the estimate after every batch of the instant. Availability counts the epochs whose estimate used a measurement within the coast limit; coasting, those among them at which the estimator used none.</p>\n");
-    h.push_str("<h3>Trajectory and consistency</h3>\n<table><tr><th>estimator</th><th>mean ATE</th><th>RMSE ATE</th><th>mean RPE</th><th>RMSE RPE</th><th>RMSE ATE aligned</th><th>mean NEES</th><th>NEES 95 % band</th><th>mean NIS / dof</th><th>PCRLB on RMSE</th><th>RMSE / PCRLB</th><th>resets</th><th>modes</th></tr>\n");
+    h.push_str("<h3>Trajectory and consistency</h3>\n<table><tr><th>estimator</th><th>mean ATE</th><th>RMSE ATE</th><th>mean RPE</th><th>RMSE RPE</th><th>RMSE ATE aligned</th><th>mean NEES [95 % band]</th><th>mean NIS / dof</th><th>PCRLB on RMSE</th><th>RMSE / PCRLB</th><th>resets</th><th>modes</th></tr>\n");
     for e in &s.estimators {
-        let (nees, band) = e.nees.as_ref().map_or_else(
-            || ("–".to_string(), "–".to_string()),
+        // The mean over its band, on two lines: the column stays narrow.
+        let nees = e.nees.as_ref().map_or_else(
+            || "–".to_string(),
             |n| {
                 let mean = if n.mean > n.band_hi {
                     format!("<span class=\"flag\">{} ‡</span>", opt(Some(n.mean), 2))
                 } else {
                     opt(Some(n.mean), 2)
                 };
-                (mean, format!("{:.2} – {:.2}", n.band_lo, n.band_hi))
+                format!(
+                    "{mean}<br><span class=\"band\">[{:.2}, {:.2}]</span>",
+                    n.band_lo, n.band_hi
+                )
             },
         );
         let nis = e.nis.as_ref().map_or_else(
@@ -212,11 +217,11 @@ fn table(h: &mut String, s: &Summary) {
         let modes: Vec<String> = e
             .modes
             .iter()
-            .map(|(m, f)| format!("{}&nbsp;{:.0}&nbsp;%", escape(m), 100.0 * f))
+            .map(|(m, f)| format!("{} {:.0}&nbsp;%", escape(m), 100.0 * f))
             .collect();
         let _ = writeln!(
             h,
-            "<tr>{}<td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td class=\"wrap\">{}</td></tr>",
+            "<tr>{}<td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td class=\"wrap\">{}</td></tr>",
             name_cell(e),
             opt(e.ate_m.as_ref().map(|x| x.mean), 2),
             opt(e.ate_m.as_ref().map(|x| x.rmse), 2),
@@ -224,12 +229,11 @@ fn table(h: &mut String, s: &Summary) {
             opt(e.rpe_m.as_ref().map(|x| x.rmse), 2),
             opt(e.ate_aligned_m.as_ref().map(|x| x.rmse), 2),
             nees,
-            band,
             nis,
             opt(e.pcrlb_pos_rmse_m, 2),
             opt(e.efficiency, 2),
             resets,
-            modes.join(", ")
+            modes.join("<br>")
         );
     }
     h.push_str("</table>\n<p class=\"meta\">Metres. ATE and RPE follow the TUM benchmark in ECEF without alignment, RPE over Δ = 1 s, as seed 000 computes them; the aligned ATE first fits each trial's trajectory to the truth by a rigid (Horn) transform. NEES is of the position (3 degrees of freedom, 3 for a consistent filter) with the two-sided 95 % χ² band of its mean; NIS is summed over each epoch's updates, against the summed dimensions (its expectation for a consistent filter; particle filters have none). The PCRLB is the posterior Cramér–Rao bound on the position RMSE (Tichavský, Muravchik &amp; Nehorai 1998) for the estimators whose process model it covers: no unbiased estimator of that model does better, so RMSE / PCRLB is 1 for an efficient one.</p>\n");
@@ -321,7 +325,8 @@ fn across(h: &mut String, s: &Summary) {
     let iv = |v: Option<[f64; 2]>| {
         positive_ci95(v).map_or_else(
             || "–".to_string(),
-            |[a, b]| format!("{} – {}", sig3(a), sig3(b)),
+            // On a narrow page an interval breaks after its dash, nowhere else.
+            |[a, b]| format!("{}&nbsp;– {}", sig3(a), sig3(b)),
         )
     };
     h.push_str("<h3>Across trials</h3>\n<table><tr><th>estimator</th><th>trials</th><th>1σ</th><th>2σ</th><th>3σ</th><th>mean</th><th>RMSE</th><th>RMSE ATE</th><th>RMSE RPE</th></tr>\n");
@@ -329,7 +334,7 @@ fn across(h: &mut String, s: &Summary) {
         let a = &e.across_trials;
         let _ = writeln!(
             h,
-            "<tr>{}<td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            "<tr>{}<td>{}</td><td class=\"wrap\">{}</td><td class=\"wrap\">{}</td><td class=\"wrap\">{}</td><td class=\"wrap\">{}</td><td class=\"wrap\">{}</td><td class=\"wrap\">{}</td><td class=\"wrap\">{}</td></tr>",
             name_cell(e),
             a.trials,
             iv(a.sigma1_ci95_m),
