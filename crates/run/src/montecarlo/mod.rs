@@ -333,11 +333,12 @@ impl Outputs {
                 let file = figures.join(name);
                 crate::io::atomic::write_atomic(&file, svg.as_bytes())
                     .map_err(|e| format!("writing {}: {e}", file.display()))?;
-                files.push(file);
             }
             crate::io::atomic::write_atomic(&path("report.html"), report.html.as_bytes())
                 .map_err(|e| e.to_string())?;
             files.push(path("report.html"));
+            // The figures' directory, once, rather than each of its files.
+            files.push(figures);
         }
         let mut json = serde_json::to_string_pretty(&summary)
             .map_err(|e| format!("encoding summary.json: {e}"))?;
