@@ -70,6 +70,7 @@ fn layout_writes_every_output_of_the_default_world() {
     let mut lines = csv.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     assert!(header.contains(&"gdop_hybrid") && header.contains(&"coverage"));
+    let indoor_col = header.iter().position(|h| *h == "indoor").unwrap();
     let rows: Vec<&str> = lines.collect();
     assert_eq!(rows.len(), nx * ny);
     assert!(rows.iter().all(|r| r.split(',').count() == header.len()));
@@ -88,6 +89,31 @@ fn layout_writes_every_output_of_the_default_world() {
         );
         // One cell rectangle per grid cell at least (plus the background and the bar).
         assert!(t.matches("<rect").count() > nx * ny, "{svg}");
+        // The cells hatched indoor (centre inside a building footprint, by the drawing's
+        // own point-in-polygon test) are the cells the evaluator marked indoor (by the
+        // scene's receiver check) in grid.csv: no building interior is painted "line of
+        // sight".
+        let indoor_csv = rows
+            .iter()
+            .filter(|r| r.split(',').nth(indoor_col) == Some("1"))
+            .count();
+        assert!(indoor_csv > 0);
+        assert_eq!(
+            t.matches(r#"fill="url(#indoor)"/>"#).count(),
+            indoor_csv,
+            "{svg}"
+        );
+    }
+    // The colour bars carry ticks between their ends: GDOP 1…10 at 2, 4, 6, 8 and ≥ 10.
+    let gdop = std::fs::read_to_string(d.join("gdop_hybrid.svg")).unwrap();
+    for tick in [
+        ">2</text>",
+        ">4</text>",
+        ">6</text>",
+        ">8</text>",
+        ">≥ 10</text>",
+    ] {
+        assert!(gdop.contains(tick), "no colour-bar tick {tick}");
     }
 
     // RFC 7946: a FeatureCollection of Polygons in lon, lat; closed, counter-clockwise

@@ -244,6 +244,9 @@ fn execute(
     Ok(())
 }
 
+/// Where, under a run's directory, the report's charts are written one SVG file each.
+pub const FIGURES_DIR: &str = "report/figures";
+
 /// The outputs of a run, written as its trials stream past in trial order.
 struct Outputs {
     dir: std::path::PathBuf,
@@ -321,10 +324,21 @@ impl Outputs {
             cdfs,
         } = self.reducer.finish(world, opts)?;
         if self.report {
-            let report = crate::report::html(world, &summary, first.as_ref(), &cdfs)?;
-            crate::io::atomic::write_atomic(&path("report.html"), report.as_bytes())
+            let report = crate::report::render(world, &summary, first.as_ref(), &cdfs)?;
+            // Each chart also as its own SVG file, for papers: `report/figures/NAME.svg`.
+            let figures = path(FIGURES_DIR);
+            std::fs::create_dir_all(&figures)
+                .map_err(|e| format!("creating {}: {e}", figures.display()))?;
+            for (name, svg) in &report.figures {
+                let file = figures.join(name);
+                crate::io::atomic::write_atomic(&file, svg.as_bytes())
+                    .map_err(|e| format!("writing {}: {e}", file.display()))?;
+            }
+            crate::io::atomic::write_atomic(&path("report.html"), report.html.as_bytes())
                 .map_err(|e| e.to_string())?;
             files.push(path("report.html"));
+            // The figures' directory, once, rather than each of its files.
+            files.push(figures);
         }
         let mut json = serde_json::to_string_pretty(&summary)
             .map_err(|e| format!("encoding summary.json: {e}"))?;

@@ -7,6 +7,7 @@
 //!                                stamped with the run's world hash, seed, trial count
 //!                                and shard, written atomically when it finishes
 //! OUT/summary.json …             the outputs, computed from the trial files alone
+//! OUT/report/figures/*.svg       the report's charts, one standalone SVG each
 //! ```
 //!
 //! Because every output is a function of the manifest and the trial files, a run that was
@@ -588,7 +589,7 @@ impl RunDir {
     }
 
     /// Removes the outputs of an earlier attempt ([`OUTPUT_FILES`], `summary.json` first,
-    /// and `datasets/`), so that nothing of it sits beside the new run's manifest.
+    /// `datasets/` and `report/`), so that nothing of it sits beside the new run's manifest.
     ///
     /// # Errors
     /// I/O errors, naming the file.
@@ -601,15 +602,13 @@ impl RunDir {
                 Err(source) => return Err(StoreError::Io { path, source }),
             }
         }
-        let datasets = self.root.join("datasets");
-        match std::fs::remove_dir_all(&datasets) {
-            Ok(()) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(source) => {
-                return Err(StoreError::Io {
-                    path: datasets,
-                    source,
-                })
+        // The datasets and the report's figures (`report/figures/`) are directories.
+        for dir in ["datasets", "report"] {
+            let path = self.root.join(dir);
+            match std::fs::remove_dir_all(&path) {
+                Ok(()) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(source) => return Err(StoreError::Io { path, source }),
             }
         }
         crate::io::atomic::sync_dir(&self.root.join(OUTPUT_FILES[0])).map_err(|source| {

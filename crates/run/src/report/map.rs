@@ -1,18 +1,26 @@
 //! A plan view of a world as SVG: surfaces, forests, buildings, indoor zones, the
-//! trajectory and the transmitters, with a scale bar and a north arrow.
+//! trajectory and the transmitters, on axes in metres east and north of the world's
+//! origin, with a legend, a scale bar and a north arrow. Labels are placed by
+//! [`Labels`]: transmitters on one mast (Beihang's DTMB and FM towers) stack their labels
+//! instead of overprinting them.
 //!
 //! Written by hand rather than with a plotting crate: the drawing is a handful of polygons
 //! and labels, and plain SVG keeps the output small, diffable and viewable anywhere.
 //! Transmitters farther than the drawing's extent (a TV tower kilometres away) are drawn as
 //! an arrow on the border pointing towards them, labelled with their distance.
 
-use super::svg::escape;
+use super::svg::{escape, fmt_tick, legend_sample, marker, text_width_px, ticks, Labels, Style};
 use crate::world::scene::TransmitterKind;
 use crate::world::World;
 use std::fmt::Write;
 
 const WIDTH_PX: f64 = 900.0;
-const MARGIN_PX: f64 = 50.0;
+/// Margins around the frame (px): the left one holds the north axis, the bottom one the
+/// east axis and the scale bar.
+const LEFT_PX: f64 = 70.0;
+const RIGHT_PX: f64 = 40.0;
+const TOP_PX: f64 = 50.0;
+const BOTTOM_PX: f64 = 75.0;
 
 struct View {
     min_e: f64,
@@ -26,8 +34,8 @@ struct View {
 impl View {
     fn px(&self, e: f64, n: f64) -> (f64, f64) {
         (
-            MARGIN_PX + (e - self.min_e) * self.scale,
-            MARGIN_PX + (self.max_n - n) * self.scale,
+            LEFT_PX + (e - self.min_e) * self.scale,
+            TOP_PX + (self.max_n - n) * self.scale,
         )
     }
 }
@@ -44,8 +52,8 @@ impl View {
         }
         let pad = 0.05 * (max_e - min_e).max(max_n - min_n).max(20.0);
         let (min_e, max_e, min_n, max_n) = (min_e - pad, max_e + pad, min_n - pad, max_n + pad);
-        let scale = (WIDTH_PX - 2.0 * MARGIN_PX) / (max_e - min_e);
-        let height_px = (max_n - min_n) * scale + 2.0 * MARGIN_PX + 30.0;
+        let scale = (WIDTH_PX - LEFT_PX - RIGHT_PX) / (max_e - min_e);
+        let height_px = (max_n - min_n) * scale + TOP_PX + BOTTOM_PX;
         View {
             min_e,
             max_e,
@@ -69,7 +77,7 @@ fn polygon(svg: &mut String, v: &View, pts: &[[f64; 2]], style: &str) {
 /// A line drawn over the map (an estimator's track in a run's report).
 pub struct Overlay<'a> {
     pub label: &'a str,
-    pub colour: &'a str,
+    pub style: Style,
     /// ENU positions (m); `None` breaks the line (an epoch without an estimate).
     pub points_enu_m: Vec<Option<[f64; 2]>>,
 }
@@ -126,16 +134,21 @@ pub fn svg_with(world: &World, overlays: &[Overlay<'_>]) -> Result<String, Strin
     let height_px = v.height_px;
 
     let mut svg = String::new();
+    let title = &world.file.world.name;
     let _ = writeln!(
         svg,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{WIDTH_PX}" height="{height_px:.0}" viewBox="0 0 {WIDTH_PX} {height_px:.0}" font-family="sans-serif" font-size="11">"#
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{WIDTH_PX}" height="{height_px:.0}" viewBox="0 0 {WIDTH_PX} {height_px:.0}" font-family="sans-serif" font-size="11" role="img"><title>{}</title>"#,
+        escape(title)
     );
     let _ = writeln!(
         svg,
-        r##"<rect width="100%" height="100%" fill="#f7f5ef"/><text x="{MARGIN_PX}" y="22" font-size="15">{}</text>"##,
-        escape(&world.file.world.name)
+        r##"<rect width="100%" height="100%" fill="#f7f5ef"/><text x="{LEFT_PX}" y="22" font-size="15">{}</text>"##,
+        escape(title)
     );
+    let mut labels = Labels::new(WIDTH_PX, height_px);
+    labels.reserve_text(title, 15.0, LEFT_PX, 22.0);
     draw_scene(&mut svg, &v, &cfg);
+    draw_axes(&mut svg, &v, &mut labels);
     // Over a report's coloured estimates the truth is drawn in black, so that no
     // estimator's colour can be mistaken for it.
     let truth_colour = if overlays.is_empty() {
@@ -162,59 +175,224 @@ pub fn svg_with(world: &World, overlays: &[Overlay<'_>]) -> Result<String, Strin
             x1 - x0,
             y1 - y0
         );
-        for o in overlays {
+        // Each line carries its legend's marker every 150 px of its length, each line
+        // starting at its own offset, so that a track stays identifiable in greyscale.
+        const MARKER_EVERY_PX: f64 = 150.0;
+        for (k, o) in overlays.iter().enumerate() {
             let mut d = String::new();
-            let mut pen_up = true;
+            let mut marks = String::new();
+            let mut since_mark = MARKER_EVERY_PX - 20.0 - 23.0 * (k % 6) as f64;
+            let mut last: Option<(f64, f64)> = None;
             for p in &o.points_enu_m {
                 match p {
                     Some(p) => {
                         let (x, y) = v.px(p[0], p[1]);
-                        let _ = write!(d, "{}{x:.1},{y:.1} ", if pen_up { "M" } else { "L" });
-                        pen_up = false;
+                        let _ = write!(
+                            d,
+                            "{}{x:.1},{y:.1} ",
+                            if last.is_none() { "M" } else { "L" }
+                        );
+                        if let Some((lx, ly)) = last {
+                            since_mark += (x - lx).hypot(y - ly);
+                        }
+                        if since_mark >= MARKER_EVERY_PX {
+                            marks.push_str(&marker(o.style.marker, x, y, o.style.colour));
+                            since_mark = 0.0;
+                        }
+                        last = Some((x, y));
                     }
-                    None => pen_up = true,
+                    None => last = None,
                 }
             }
             let _ = writeln!(
                 svg,
-                r#"<path d="{}" fill="none" stroke="{}" stroke-width="1.3" stroke-opacity="0.85"/>"#,
+                r#"<path d="{}" fill="none" stroke="{}" stroke-width="1.3" stroke-opacity="0.85"{}/>{marks}"#,
                 d.trim_end(),
-                o.colour
+                o.style.colour,
+                o.style.dash_attr()
             );
         }
         svg.push_str("</g>\n");
-        let truth = Overlay {
-            label: "truth",
-            colour: truth_colour,
-            points_enu_m: Vec::new(),
-        };
-        for (k, o) in std::iter::once(&truth).chain(overlays).enumerate() {
-            let y = MARGIN_PX + 14.0 * k as f64;
-            let _ = writeln!(
-                svg,
-                r#"<line x1="{:.1}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="{}" stroke-width="3"/><text x="{:.1}" y="{:.1}">{}</text>"#,
-                WIDTH_PX - 230.0,
-                WIDTH_PX - 210.0,
-                o.colour,
-                WIDTH_PX - 205.0,
-                y + 4.0,
-                escape(o.label)
-            );
-        }
     }
+    draw_legend(&mut svg, world, &cfg, overlays, truth_colour, &mut labels);
+    draw_scale_and_north(&mut svg, &v, &mut labels);
     let (sx, sy) = v.px(track[0][0], track[0][1]);
+    labels.reserve(sx - 4.0, sy - 4.0, sx + 4.0, sy + 4.0);
     let _ = writeln!(
         svg,
-        r##"<circle cx="{sx:.1}" cy="{sy:.1}" r="4" fill="{truth_colour}"/><text x="{:.1}" y="{:.1}">start</text>"##,
-        sx + 6.0,
-        sy - 6.0
+        r##"<circle cx="{sx:.1}" cy="{sy:.1}" r="4" fill="{truth_colour}"/>"##
     );
-
-    draw_transmitters(&mut svg, &v, world);
-
-    draw_scale_and_north(&mut svg, &v);
+    let (tx, ty) = labels.place(
+        "start",
+        11.0,
+        &[
+            (sx + 6.0, sy - 6.0),
+            (sx + 6.0, sy + 14.0),
+            (sx - 34.0, sy - 6.0),
+            (sx - 34.0, sy + 14.0),
+        ],
+    );
+    let _ = writeln!(svg, r#"<text x="{tx:.1}" y="{ty:.1}">start</text>"#);
+    draw_transmitters(&mut svg, &v, world, &mut labels);
     svg.push_str("</svg>\n");
     Ok(svg)
+}
+
+/// The frame of the drawing with ticks in metres east (below) and north (left) of the
+/// world's origin, labelled, and the axes' titles.
+fn draw_axes(svg: &mut String, v: &View, labels: &mut Labels) {
+    let (x0, y0) = v.px(v.min_e, v.max_n);
+    let (x1, y1) = v.px(v.max_e, v.min_n);
+    let _ = writeln!(
+        svg,
+        r##"<rect x="{x0:.1}" y="{y0:.1}" width="{:.1}" height="{:.1}" fill="none" stroke="#444"/>"##,
+        x1 - x0,
+        y1 - y0
+    );
+    for e in ticks(v.min_e, v.max_e, 8) {
+        let (x, _) = v.px(e, v.min_n);
+        let text = fmt_tick(e);
+        let w = text_width_px(&text, 11.0);
+        labels.reserve(x - 0.5 * w, y1 + 4.0, x + 0.5 * w, y1 + 20.0);
+        let _ = writeln!(
+            svg,
+            r##"<line x1="{x:.1}" y1="{y1:.1}" x2="{x:.1}" y2="{:.1}" stroke="#444"/><text x="{x:.1}" y="{:.1}" text-anchor="middle">{text}</text>"##,
+            y1 + 5.0,
+            y1 + 17.0
+        );
+    }
+    for n in ticks(v.min_n, v.max_n, 6) {
+        let (_, y) = v.px(v.min_e, n);
+        let text = fmt_tick(n);
+        let w = text_width_px(&text, 11.0);
+        labels.reserve(x0 - 8.0 - w, y - 8.0, x0, y + 5.0);
+        let _ = writeln!(
+            svg,
+            r##"<line x1="{:.1}" y1="{y:.1}" x2="{x0:.1}" y2="{y:.1}" stroke="#444"/><text x="{:.1}" y="{:.1}" text-anchor="end">{text}</text>"##,
+            x0 - 5.0,
+            x0 - 7.0,
+            y + 4.0
+        );
+    }
+    let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+    let east = "east of the origin (m)";
+    let w = text_width_px(east, 11.0);
+    labels.reserve(cx - 0.5 * w, y1 + 22.0, cx + 0.5 * w, y1 + 36.0);
+    labels.reserve(4.0, cy - 60.0, 20.0, cy + 60.0);
+    let _ = writeln!(
+        svg,
+        r#"<text x="{cx:.1}" y="{:.1}" text-anchor="middle">{east}</text><text transform="translate(16 {cy:.1}) rotate(-90)" text-anchor="middle">north (m)</text>"#,
+        y1 + 33.0
+    );
+}
+
+/// The legend, in a box at the frame's top right: the true path, each estimator's line,
+/// each kind of transmitter and, when the scene has them, indoor zones.
+fn draw_legend(
+    svg: &mut String,
+    world: &World,
+    cfg: &crate::propagation::SceneConfig,
+    overlays: &[Overlay<'_>],
+    truth_colour: &'static str,
+    labels: &mut Labels,
+) {
+    enum Key<'a> {
+        Line(Style),
+        Triangle(&'a str),
+        Dashed,
+    }
+    let mut rows: Vec<(Key<'_>, String)> = Vec::new();
+    let truth = Style {
+        colour: truth_colour,
+        dash: "",
+        marker: super::svg::Marker::Circle,
+    };
+    rows.push((
+        Key::Line(truth),
+        if overlays.is_empty() {
+            "trajectory".into()
+        } else {
+            "truth".into()
+        },
+    ));
+    for o in overlays {
+        rows.push((Key::Line(o.style), o.label.to_string()));
+    }
+    for kind in [
+        TransmitterKind::Dtmb,
+        TransmitterKind::Tcofdm,
+        TransmitterKind::Fm,
+    ] {
+        if world.transmitters.iter().any(|t| t.kind == kind) {
+            rows.push((
+                Key::Triangle(kind_colour(kind)),
+                format!("{} transmitter", kind.label()),
+            ));
+        }
+    }
+    if !cfg.indoor_zones.is_empty() {
+        rows.push((Key::Dashed, "indoor zone".into()));
+    }
+    let row_px = 16.0;
+    let text_w = rows
+        .iter()
+        .map(|(_, t)| text_width_px(t, 11.0))
+        .fold(0.0f64, f64::max);
+    let w = 26.0 + 8.0 + text_w + 12.0;
+    let h = row_px * rows.len() as f64 + 8.0;
+    let (x, y) = (WIDTH_PX - RIGHT_PX - w - 6.0, TOP_PX + 6.0);
+    labels.reserve(x, y, x + w, y + h);
+    let _ = writeln!(
+        svg,
+        r##"<rect x="{x:.1}" y="{y:.1}" width="{w:.1}" height="{h:.1}" fill="#fff" fill-opacity="0.9" stroke="#999"/>"##
+    );
+    for (k, (key, text)) in rows.iter().enumerate() {
+        let ry = y + 12.0 + row_px * k as f64;
+        let sample = match key {
+            Key::Line(s) => {
+                // The true path is drawn without markers, and so is its legend entry.
+                if k > 0 {
+                    legend_sample(s, x + 6.0, ry)
+                } else {
+                    format!(
+                        r#"<line x1="{:.1}" y1="{ry:.1}" x2="{:.1}" y2="{ry:.1}" stroke="{}" stroke-width="2.5"/>"#,
+                        x + 6.0,
+                        x + 32.0,
+                        s.colour
+                    )
+                }
+            }
+            Key::Triangle(c) => format!(
+                r#"<path d="M{:.1},{:.1} L{:.1},{:.1} L{:.1},{:.1} Z" fill="{c}"/>"#,
+                x + 19.0,
+                ry - 6.0,
+                x + 13.0,
+                ry + 5.0,
+                x + 25.0,
+                ry + 5.0
+            ),
+            Key::Dashed => format!(
+                r##"<rect x="{:.1}" y="{:.1}" width="26" height="9" fill="none" stroke="#d95f02" stroke-width="1.5" stroke-dasharray="5,3"/>"##,
+                x + 6.0,
+                ry - 5.0
+            ),
+        };
+        let _ = writeln!(
+            svg,
+            r#"{sample}<text x="{:.1}" y="{:.1}">{}</text>"#,
+            x + 40.0,
+            ry + 4.0,
+            escape(text)
+        );
+    }
+}
+
+fn kind_colour(kind: TransmitterKind) -> &'static str {
+    match kind {
+        TransmitterKind::Dtmb => "#1f78b4",
+        TransmitterKind::Tcofdm => "#6a3d9a",
+        TransmitterKind::Fm => "#b15928",
+    }
 }
 
 /// The scene under everything: surfaces, forests (denser is darker), buildings (taller
@@ -264,15 +442,13 @@ fn draw_scene(svg: &mut String, v: &View, cfg: &crate::propagation::SceneConfig)
 }
 
 /// Each transmitter as a labelled triangle, or, beyond the drawing (a TV tower
-/// kilometres away), as an arrow on the border pointing at it with its distance.
-fn draw_transmitters(svg: &mut String, v: &View, world: &World) {
+/// kilometres away), as an arrow on the border pointing at it with its distance. Labels
+/// go where [`Labels`] finds room: beside the mark if free, else stacked under it.
+fn draw_transmitters(svg: &mut String, v: &View, world: &World, labels: &mut Labels) {
+    let mut texts = Vec::new();
     for t in &world.transmitters {
-        let colour = match t.kind {
-            TransmitterKind::Dtmb => "#1f78b4",
-            TransmitterKind::Tcofdm => "#6a3d9a",
-            TransmitterKind::Fm => "#b15928",
-        };
-        let label = format!(
+        let colour = kind_colour(t.kind);
+        let name = format!(
             "{} {}{}",
             t.kind.label(),
             t.id,
@@ -284,19 +460,28 @@ fn draw_transmitters(svg: &mut String, v: &View, world: &World) {
         let (e, n) = (t.pos_enu_m.x, t.pos_enu_m.y);
         if (v.min_e..=v.max_e).contains(&e) && (v.min_n..=v.max_n).contains(&n) {
             let (x, y) = v.px(e, n);
+            labels.reserve(x - 6.0, y - 7.0, x + 6.0, y + 5.0);
             let _ = writeln!(
                 svg,
-                r#"<polygon points="{:.1},{:.1} {:.1},{:.1} {:.1},{:.1}" fill="{colour}"/><text x="{:.1}" y="{:.1}" fill="{colour}">{}</text>"#,
+                r#"<polygon points="{:.1},{:.1} {:.1},{:.1} {:.1},{:.1}" fill="{colour}"/>"#,
                 x,
                 y - 7.0,
                 x - 6.0,
                 y + 5.0,
                 x + 6.0,
                 y + 5.0,
-                x + 8.0,
-                y + 4.0,
-                escape(&label)
             );
+            let w = text_width_px(&name, 11.0);
+            texts.push((
+                name,
+                colour,
+                vec![
+                    (x + 8.0, y + 4.0),
+                    (x - 8.0 - w, y + 4.0),
+                    (x - 0.5 * w, y - 10.0),
+                    (x - 0.5 * w, y + 18.0),
+                ],
+            ));
         } else {
             // An arrow on the border, from the drawing's centre towards the transmitter.
             let (ce, cn) = (0.5 * (v.min_e + v.max_e), 0.5 * (v.min_n + v.max_n));
@@ -311,19 +496,36 @@ fn draw_transmitters(svg: &mut String, v: &View, world: &World) {
             let dist_km = (t.pos_enu_m - nalgebra::Vector3::new(ce, cn, 0.0)).norm() / 1e3;
             let _ = writeln!(
                 svg,
-                r#"<line x1="{x0:.1}" y1="{y0:.1}" x2="{x1:.1}" y2="{y1:.1}" stroke="{colour}" stroke-width="2.5"/><circle cx="{x1:.1}" cy="{y1:.1}" r="4" fill="{colour}"/><text x="{:.1}" y="{:.1}" fill="{colour}" text-anchor="middle">{} → {dist_km:.1} km</text>"#,
-                x0 - 10.0 * ux,
-                y0 - 10.0 * uy,
-                escape(&label)
+                r#"<line x1="{x0:.1}" y1="{y0:.1}" x2="{x1:.1}" y2="{y1:.1}" stroke="{colour}" stroke-width="2.5"/><circle cx="{x1:.1}" cy="{y1:.1}" r="4" fill="{colour}"/>"#,
             );
+            let text = format!("{name} → {dist_km:.1} km");
+            let w = text_width_px(&text, 11.0);
+            // Beyond the arrow's tail, then stacked a line at a time further into the
+            // drawing (away from the border the arrow points at): transmitters on one
+            // mast share the arrow and list their labels one under another.
+            let (lx, ly) = (x0 - 10.0 * ux, y0 - 10.0 * uy + 4.0);
+            let inward = if uy > 0.0 { -1.0 } else { 1.0 };
+            let candidates = (0..40)
+                .map(|k| (lx - 0.5 * w, ly + inward * 14.0 * k as f64))
+                .collect();
+            texts.push((text, colour, candidates));
         }
+    }
+    // Labels after every mark, so that no label is placed over a mark drawn later.
+    for (text, colour, candidates) in texts {
+        let (x, y) = labels.place(&text, 11.0, &candidates);
+        // A white halo keeps the label legible over the tracks and buildings under it.
+        let _ = writeln!(
+            svg,
+            r##"<text x="{x:.1}" y="{y:.1}" fill="{colour}" stroke="#fff" stroke-width="3" stroke-opacity="0.85" paint-order="stroke">{}</text>"##,
+            escape(&text)
+        );
     }
 }
 
-/// A scale bar of the largest 1-2-5 length under a quarter of the width, and a north
-/// arrow.
-fn draw_scale_and_north(svg: &mut String, v: &View) {
-    // Scale bar: the largest 1-2-5 length under a quarter of the width.
+/// A scale bar of the largest 1-2-5 length under a quarter of the width, under the east
+/// axis, and a north arrow in the right margin.
+fn draw_scale_and_north(svg: &mut String, v: &View, labels: &mut Labels) {
     let target_m = 0.25 * (v.max_e - v.min_e);
     let mut bar_m = 1.0;
     for mag in [1.0, 10.0, 100.0, 1000.0, 10_000.0] {
@@ -333,22 +535,27 @@ fn draw_scale_and_north(svg: &mut String, v: &View) {
             }
         }
     }
-    let y = v.height_px - 20.0;
+    let y = v.height_px - 14.0;
+    let x1 = LEFT_PX + bar_m * v.scale;
+    let text = format!("{bar_m} m");
+    labels.reserve(LEFT_PX, y - 4.0, x1, y + 4.0);
+    labels.reserve_text(&text, 11.0, x1 + 6.0, y + 4.0);
     let _ = writeln!(
         svg,
-        r##"<line x1="{MARGIN_PX}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#000" stroke-width="3"/><text x="{MARGIN_PX}" y="{:.1}">{bar_m} m</text>"##,
-        MARGIN_PX + bar_m * v.scale,
-        y - 6.0
+        r##"<line x1="{LEFT_PX}" y1="{y:.1}" x2="{x1:.1}" y2="{y:.1}" stroke="#000" stroke-width="3"/><text x="{:.1}" y="{:.1}">{text}</text>"##,
+        x1 + 6.0,
+        y + 4.0
     );
-    let nx = WIDTH_PX - MARGIN_PX + 20.0;
+    let nx = WIDTH_PX - 0.5 * RIGHT_PX;
+    labels.reserve(nx - 7.0, TOP_PX - 14.0, nx + 7.0, TOP_PX + 16.0);
     let _ = writeln!(
         svg,
         r##"<polygon points="{nx:.1},{:.1} {:.1},{:.1} {:.1},{:.1}" fill="#000"/><text x="{nx:.1}" y="{:.1}" text-anchor="middle">N</text>"##,
-        MARGIN_PX,
+        TOP_PX,
         nx - 6.0,
-        MARGIN_PX + 16.0,
+        TOP_PX + 16.0,
         nx + 6.0,
-        MARGIN_PX + 16.0,
-        MARGIN_PX - 4.0
+        TOP_PX + 16.0,
+        TOP_PX - 4.0
     );
 }

@@ -4,7 +4,9 @@
 //! empirical CDF of every estimator's error, trial 0's trajectories over the scene map,
 //! its error against time with the spans of poor satellite coverage shaded, the mode
 //! timeline, the GDOP and a sky plot of the satellites. Every chart is inline SVG
-//! ([`svg`]); there is no script, no external style sheet and no font to fetch.
+//! ([`svg`]); there is no script, no external style sheet and no font to fetch. Every
+//! chart is also a standalone SVG document ([`Report::figures`]), which the run writes
+//! under `report/figures/` for papers.
 
 pub mod map;
 pub mod svg;
@@ -15,13 +17,43 @@ use crate::metrics::summary::Summary;
 use crate::world::World;
 use map::Overlay;
 use std::fmt::Write;
-use svg::{colour, escape, Chart, ModeRow, Scale, Series, SkyTrack};
+use svg::{colour, escape, style, Chart, ModeRow, Scale, Series, SkyTrack};
 
 const STYLE: &str = "body{font-family:sans-serif;max-width:1100px;margin:1.5em auto;padding:0 1em;color:#222}
 h1{font-size:1.5em}h2{font-size:1.15em;margin-top:1.8em;border-bottom:1px solid #ccc}
-table{border-collapse:collapse;font-size:0.9em}th,td{padding:3px 8px;border-bottom:1px solid #e3e3e3;text-align:right}
+table{border-collapse:collapse;font-size:0.85em;max-width:100%}th,td{padding:3px 6px;border-bottom:1px solid #e3e3e3;text-align:right;vertical-align:top}
+th{font-weight:600;overflow-wrap:break-word}td{white-space:nowrap}td.wrap{white-space:normal}
 th:first-child,td:first-child{text-align:left}th{background:#f3f3f3}.meta{color:#555;font-size:0.9em}
-figure{margin:0.8em 0}.wide{overflow-x:auto}figcaption{color:#555;font-size:0.85em;max-width:860px}svg{max-width:100%;height:auto}";
+.flag{color:#b2182b;font-weight:bold}.band{color:#666;font-size:0.9em}
+@media (max-width:900px){th,td{padding:2px 3px}table{font-size:0.8em}}
+figure{margin:0.8em 0}figcaption{color:#555;font-size:0.85em;max-width:860px}svg{max-width:100%;height:auto}";
+
+/// A rendered report: the page, and each of its charts as a standalone SVG document.
+pub struct Report {
+    pub html: String,
+    /// `(file name, SVG document)` in page order, e.g. `("error-cdf.svg", …)`.
+    pub figures: Vec<(String, String)>,
+}
+
+/// The page being written and the figures drawn on it so far.
+struct Page {
+    h: String,
+    figures: Vec<(String, String)>,
+}
+
+impl Page {
+    /// A section holding one chart: a heading, the inline SVG and its caption; the chart
+    /// is also kept as `name.svg`.
+    fn figure(&mut self, name: &str, heading: &str, svg: String, caption: &str) {
+        let caption = if caption.is_empty() {
+            String::new()
+        } else {
+            format!("<figcaption>{caption}</figcaption>")
+        };
+        let _ = writeln!(self.h, "<h2>{heading}</h2><figure>{svg}{caption}</figure>");
+        self.figures.push((format!("{name}.svg"), svg));
+    }
+}
 
 /// Renders the report of a run from its summary, its first trial (whose trajectories are
 /// drawn) and each estimator's thinned error CDF
@@ -35,7 +67,24 @@ pub fn html(
     first: Option<&TrialResult>,
     cdfs: &[Vec<(f64, f64)>],
 ) -> Result<String, String> {
-    let mut h = String::new();
+    render(world, summary, first, cdfs).map(|r| r.html)
+}
+
+/// [`html`] and each of the page's charts as its own SVG document.
+///
+/// # Errors
+/// When the world's trajectory or map cannot be built.
+pub fn render(
+    world: &World,
+    summary: &Summary,
+    first: Option<&TrialResult>,
+    cdfs: &[Vec<(f64, f64)>],
+) -> Result<Report, String> {
+    let mut page = Page {
+        h: String::new(),
+        figures: Vec::new(),
+    };
+    let h = &mut page.h;
     let title = format!("{} — hybridnav report", summary.world);
     let _ = write!(
         h,
@@ -58,15 +107,16 @@ pub fn html(
         summary.duration_s,
         escape(&summary.hybridnav_version)
     );
-    table(&mut h, summary);
-    cdf(&mut h, summary, cdfs);
+    table(h, summary);
+    cdf(&mut page, summary, cdfs);
     if let Some(t0) = first {
-        trajectories(&mut h, world, t0)?;
-        error_vs_time(&mut h, t0);
-        modes(&mut h, t0);
-        gdop(&mut h, t0);
+        trajectories(&mut page, world, t0)?;
+        error_vs_time(&mut page, t0);
+        modes(&mut page, t0);
+        gdop(&mut page, t0);
     }
-    sky(&mut h, world)?;
+    sky(&mut page, world)?;
+    let h = &mut page.h;
     if !summary.warnings.is_empty() {
         h.push_str("<h2>Warnings</h2><ul>\n");
         for w in &summary.warnings {
@@ -75,7 +125,10 @@ pub fn html(
         h.push_str("</ul>\n");
     }
     h.push_str("</body></html>\n");
-    Ok(h)
+    Ok(Report {
+        html: page.h,
+        figures: page.figures,
+    })
 }
 
 fn opt(v: Option<f64>, digits: usize) -> String {
@@ -83,55 +136,185 @@ fn opt(v: Option<f64>, digits: usize) -> String {
         .map_or_else(|| "–".into(), |x| format!("{x:.digits$}"))
 }
 
-/// The papers' table: σ-levels of the 3-D and horizontal error, their spread, and the
-/// other statistics of `summary.json`.
+/// Whether an estimator's filter is over-confident: its mean position NEES lies above
+/// the upper end of its 95 % band (its covariance claims more accuracy than it has).
+fn over_confident(e: &crate::metrics::summary::EstimatorSummary) -> bool {
+    e.nees.as_ref().is_some_and(|n| n.mean > n.band_hi)
+}
+
+/// The estimator's name with its flags: † when it reset (numerical failures), ‡ when it
+/// is over-confident.
+fn name_cell(e: &crate::metrics::summary::EstimatorSummary) -> String {
+    let mut flags = String::new();
+    if e.numerical_failures > 0 {
+        flags.push('†');
+    }
+    if over_confident(e) {
+        flags.push('‡');
+    }
+    if flags.is_empty() {
+        format!("<td>{}</td>", escape(&e.name))
+    } else {
+        format!(
+            "<td>{} <span class=\"flag\">{flags}</span></td>",
+            escape(&e.name)
+        )
+    }
+}
+
+/// The papers' table, in two parts that each fit the page: the σ-levels and moments of
+/// the 3-D and horizontal error, then the trajectory and consistency statistics of
+/// `summary.json`; with resets and over-confident filters flagged.
 fn table(h: &mut String, s: &Summary) {
-    h.push_str("<h2>Position error</h2>\n<div class=\"wide\"><table><tr><th>estimator</th><th>1σ</th><th>2σ</th><th>3σ</th><th>mean</th><th>RMSE</th><th>max</th><th>mean ATE</th><th>RMSE ATE</th><th>mean RPE</th><th>RMSE RPE</th><th>RMSE ATE aligned</th><th>horiz. 1σ / 2σ / 3σ</th><th>mean NEES [95 % band]</th><th>mean NIS / dof</th><th>PCRLB on RMSE</th><th>RMSE / PCRLB</th><th>availability</th><th>coasting</th><th>modes</th></tr>\n");
+    h.push_str("<h2>Position error</h2>\n<table><tr><th>estimator</th><th>1σ</th><th>2σ</th><th>3σ</th><th>mean</th><th>RMSE</th><th>max</th><th>horiz. 1σ</th><th>horiz. 2σ</th><th>horiz. 3σ</th><th>avail&shy;ability</th><th>coast&shy;ing</th></tr>\n");
     for e in &s.estimators {
         let a = e.error_3d_m.as_ref();
         let b = e.error_h_m.as_ref();
-        let nees = e.nees.as_ref().map_or_else(
-            || "–".to_string(),
-            |n| format!("{:.2} [{:.2}, {:.2}]", n.mean, n.band_lo, n.band_hi),
-        );
-        let nis = e.nis.as_ref().map_or_else(
-            || "–".to_string(),
-            |n| format!("{:.2} / {:.2}", n.mean, n.dof),
-        );
-        let modes: Vec<String> = e
-            .modes
-            .iter()
-            .map(|(m, f)| format!("{} {:.0} %", escape(m), 100.0 * f))
-            .collect();
         let _ = writeln!(
             h,
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{} / {} / {}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{:.1} %</td><td>{:.1} %</td><td>{}</td></tr>",
-            escape(&e.name),
+            "<tr>{}<td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{:.1} %</td><td>{:.1} %</td></tr>",
+            name_cell(e),
             opt(a.map(|x| x.sigma1), 2),
             opt(a.map(|x| x.sigma2), 2),
             opt(a.map(|x| x.sigma3), 2),
             opt(a.map(|x| x.mean), 2),
             opt(a.map(|x| x.rmse), 2),
             opt(a.map(|x| x.max), 2),
+            opt(b.map(|x| x.sigma1), 2),
+            opt(b.map(|x| x.sigma2), 2),
+            opt(b.map(|x| x.sigma3), 2),
+            100.0 * e.availability,
+            100.0 * e.coasting_epochs as f64 / e.epochs.max(1) as f64,
+        );
+    }
+    h.push_str("</table>\n<p class=\"meta\">Metres. σ-levels are the 68.27/95.45/99.73 % percentiles of the 3-D error over every epoch of every trial (seed 000's convention); horiz., of the horizontal error. Every estimator is scored at the same instants (the world's scoring epochs: the GNSS epochs unless <code>[scoring]</code> says otherwise), with the estimate after every batch of the instant. Availability counts the epochs whose estimate used a measurement within the coast limit; coasting, those among them at which the estimator used none.</p>\n");
+    h.push_str("<h3>Trajectory and consistency</h3>\n<table><tr><th>estimator</th><th>mean ATE</th><th>RMSE ATE</th><th>mean RPE</th><th>RMSE RPE</th><th>RMSE ATE aligned</th><th>mean NEES [95 % band]</th><th>mean NIS / dof</th><th>PCRLB on RMSE</th><th>RMSE / PCRLB</th><th>resets</th><th>modes</th></tr>\n");
+    for e in &s.estimators {
+        // The mean over its band, on two lines: the column stays narrow.
+        let nees = e.nees.as_ref().map_or_else(
+            || "–".to_string(),
+            |n| {
+                let mean = if n.mean > n.band_hi {
+                    format!("<span class=\"flag\">{} ‡</span>", opt(Some(n.mean), 2))
+                } else {
+                    opt(Some(n.mean), 2)
+                };
+                format!(
+                    "{mean}<br><span class=\"band\">[{:.2}, {:.2}]</span>",
+                    n.band_lo, n.band_hi
+                )
+            },
+        );
+        let nis = e.nis.as_ref().map_or_else(
+            || "–".to_string(),
+            |n| format!("{:.2} / {:.2}", n.mean, n.dof),
+        );
+        let resets = if e.numerical_failures > 0 {
+            format!("<span class=\"flag\">{} †</span>", e.numerical_failures)
+        } else {
+            "0".to_string()
+        };
+        let modes: Vec<String> = e
+            .modes
+            .iter()
+            .map(|(m, f)| format!("{} {:.0}&nbsp;%", escape(m), 100.0 * f))
+            .collect();
+        let _ = writeln!(
+            h,
+            "<tr>{}<td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td class=\"wrap\">{}</td></tr>",
+            name_cell(e),
             opt(e.ate_m.as_ref().map(|x| x.mean), 2),
             opt(e.ate_m.as_ref().map(|x| x.rmse), 2),
             opt(e.rpe_m.as_ref().map(|x| x.mean), 2),
             opt(e.rpe_m.as_ref().map(|x| x.rmse), 2),
             opt(e.ate_aligned_m.as_ref().map(|x| x.rmse), 2),
-            opt(b.map(|x| x.sigma1), 2),
-            opt(b.map(|x| x.sigma2), 2),
-            opt(b.map(|x| x.sigma3), 2),
             nees,
             nis,
             opt(e.pcrlb_pos_rmse_m, 2),
             opt(e.efficiency, 2),
-            100.0 * e.availability,
-            100.0 * e.coasting_epochs as f64 / e.epochs.max(1) as f64,
-            modes.join(", ")
+            resets,
+            modes.join("<br>")
         );
     }
-    h.push_str("</table></div>\n<p class=\"meta\">Metres. σ-levels are the 68.27/95.45/99.73 % percentiles of the 3-D error over every epoch of every trial (seed 000's convention). ATE and RPE follow the TUM benchmark in ECEF without alignment, RPE over Δ = 1 s, as seed 000 computes them; the aligned ATE first fits each trial's trajectory to the truth by a rigid (Horn) transform. NEES is of the position (3 degrees of freedom, 3 for a consistent filter) with the two-sided 95 % χ² band of its mean; NIS is summed over each epoch's updates, against the summed dimensions (its expectation for a consistent filter; particle filters have none). The PCRLB is the posterior Cramér–Rao bound on the position RMSE (Tichavský, Muravchik &amp; Nehorai 1998) for the estimators whose process model it covers: no unbiased estimator of that model does better, so RMSE / PCRLB is 1 for an efficient one. Every estimator is scored at the same instants (the world's scoring epochs: the GNSS epochs unless <code>[scoring]</code> says otherwise), with the estimate after every batch of the instant. Availability counts the epochs whose estimate used a measurement within the coast limit; coasting, those among them at which the estimator used none.</p>\n");
+    h.push_str("</table>\n<p class=\"meta\">Metres. ATE and RPE follow the TUM benchmark in ECEF without alignment, RPE over Δ = 1 s, as seed 000 computes them; the aligned ATE first fits each trial's trajectory to the truth by a rigid (Horn) transform. NEES is of the position (3 degrees of freedom, 3 for a consistent filter) with the two-sided 95 % χ² band of its mean; NIS is summed over each epoch's updates, against the summed dimensions (its expectation for a consistent filter; particle filters have none). The PCRLB is the posterior Cramér–Rao bound on the position RMSE (Tichavský, Muravchik &amp; Nehorai 1998) for the estimators whose process model it covers: no unbiased estimator of that model does better, so RMSE / PCRLB is 1 for an efficient one.</p>\n");
+    flags(h, s);
     across(h, s);
+}
+
+/// The footnotes of the flags, naming each flagged estimator and what happened.
+fn flags(h: &mut String, s: &Summary) {
+    let reset: Vec<String> = s
+        .estimators
+        .iter()
+        .filter(|e| e.numerical_failures > 0)
+        .map(|e| {
+            let first = e
+                .first_failures
+                .first()
+                .map(|f| format!(", first in trial {} at t = {:.1} s", f.trial, f.t_s))
+                .unwrap_or_default();
+            format!(
+                "{} ({} reset(s){first})",
+                escape(&e.name),
+                e.numerical_failures
+            )
+        })
+        .collect();
+    let over: Vec<String> = s
+        .estimators
+        .iter()
+        .filter(|e| over_confident(e))
+        .filter_map(|e| {
+            e.nees.as_ref().map(|n| {
+                format!(
+                    "{} (mean NEES {:.2} against {:.2} – {:.2})",
+                    escape(&e.name),
+                    n.mean,
+                    n.band_lo,
+                    n.band_hi
+                )
+            })
+        })
+        .collect();
+    if reset.is_empty() && over.is_empty() {
+        return;
+    }
+    h.push_str("<ul class=\"meta\">\n");
+    if !reset.is_empty() {
+        let _ = writeln!(
+            h,
+            "<li><span class=\"flag\">†</span> Reset: the estimator hit a numerical failure (a covariance no longer positive definite, every particle weight zero) and re-initialised, so its figures include the re-convergence: {}.</li>",
+            reset.join("; ")
+        );
+    }
+    if !over.is_empty() {
+        let _ = writeln!(
+            h,
+            "<li><span class=\"flag\">‡</span> Over-confident: the mean NEES lies above its 95 % band, so the filter's covariance claims more accuracy than its estimates have (its σ are too small for gating or fusion downstream): {}.</li>",
+            over.join("; ")
+        );
+    }
+    h.push_str("</ul>\n");
+}
+
+/// The 95 % interval of the mean of a positive statistic over trials, from the Student t
+/// interval `[a, b]` of `summary.json` (`x̄ ± h` with `h = t · s/√n`), taken on the log
+/// scale: `x̄ · exp(∓ h / x̄)`.
+///
+/// By the delta method (Casella & Berger, "Statistical Inference", 2nd ed., §5.5.4) the
+/// standard error of `ln x̄` is `s / (√n · x̄)`, so the t interval of `ln x̄` is
+/// `ln x̄ ± h / x̄`; mapped back it is positive whatever the spread, where `x̄ ± h` falls
+/// below zero for a skewed statistic over few trials. Its two ends multiply and divide
+/// `x̄` by one factor; it is as wide as the t interval's to first order when `h ≪ x̄`.
+/// `None` without an interval or with `x̄ ≤ 0`.
+pub fn positive_ci95(t_interval: Option<[f64; 2]>) -> Option<[f64; 2]> {
+    let [a, b] = t_interval?;
+    let (mean, half) = (0.5 * (a + b), 0.5 * (b - a));
+    if !(mean > 0.0 && half.is_finite() && half >= 0.0) {
+        return None;
+    }
+    let f = (half / mean).exp();
+    Some([mean / f, mean * f])
 }
 
 /// The spread of the per-trial statistics.
@@ -140,15 +323,19 @@ fn across(h: &mut String, s: &Summary) {
         return;
     }
     let iv = |v: Option<[f64; 2]>| {
-        v.map_or_else(|| "–".to_string(), |[a, b]| format!("{a:.2} – {b:.2}"))
+        positive_ci95(v).map_or_else(
+            || "–".to_string(),
+            // On a narrow page an interval breaks after its dash, nowhere else.
+            |[a, b]| format!("{}&nbsp;– {}", sig3(a), sig3(b)),
+        )
     };
     h.push_str("<h3>Across trials</h3>\n<table><tr><th>estimator</th><th>trials</th><th>1σ</th><th>2σ</th><th>3σ</th><th>mean</th><th>RMSE</th><th>RMSE ATE</th><th>RMSE RPE</th></tr>\n");
     for e in &s.estimators {
         let a = &e.across_trials;
         let _ = writeln!(
             h,
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
-            escape(&e.name),
+            "<tr>{}<td>{}</td><td class=\"wrap\">{}</td><td class=\"wrap\">{}</td><td class=\"wrap\">{}</td><td class=\"wrap\">{}</td><td class=\"wrap\">{}</td><td class=\"wrap\">{}</td><td class=\"wrap\">{}</td></tr>",
+            name_cell(e),
             a.trials,
             iv(a.sigma1_ci95_m),
             iv(a.sigma2_ci95_m),
@@ -159,64 +346,68 @@ fn across(h: &mut String, s: &Summary) {
             iv(a.rpe_rmse_ci95_m),
         );
     }
-    h.push_str("</table>\n<p class=\"meta\">95 % confidence interval (Student t) of the mean over trials of each trial's own statistic: how much the figures above would move with another set of trials. The interval is symmetric: with few trials and a skewed statistic its lower end can fall below zero.</p>\n");
+    h.push_str("</table>\n<p class=\"meta\">Metres. 95 % confidence interval of the mean over trials of each trial's own statistic: how much the figures above would move with another set of trials. Every statistic here is positive, so the interval is taken on the log scale (a Student t interval of the log of the mean, by the delta method): x̄ · exp(∓ t·s/(√n·x̄)), which never goes below zero and is asymmetric where the spread is large against the mean. <code>summary.json</code> keeps the symmetric interval x̄ ± t·s/√n it is computed from.</p>\n");
 }
 
-fn cdf(h: &mut String, s: &Summary, cdfs: &[Vec<(f64, f64)>]) {
-    let mut series = Vec::new();
-    for (k, (e, points)) in s.estimators.iter().zip(cdfs).enumerate() {
-        if points.is_empty() {
-            continue;
-        }
-        series.push(Series {
-            label: &e.name,
-            colour: colour(k),
-            points: points.clone(),
-        });
+/// Three significant digits (at least two decimals below 10), for interval ends spanning
+/// orders of magnitude.
+fn sig3(v: f64) -> String {
+    if !v.is_finite() {
+        "–".into()
+    } else if v.abs() >= 100.0 {
+        format!("{v:.0}")
+    } else if v.abs() >= 10.0 {
+        format!("{v:.1}")
+    } else if v.abs() >= 0.01 || v == 0.0 {
+        format!("{v:.2}")
+    } else {
+        format!("{v:.1e}")
     }
-    let x_scale_note = "error axis logarithmic";
-    let chart = Chart {
-        title: "Empirical CDF of the 3-D position error",
-        x_label: "3-D position error (m)",
-        y_label: "share of epochs",
-        y_scale: Scale::Linear,
-        spans: &[],
-        span_label: "",
-    };
-    // A CDF reads best with the error on a log axis: plot log10(error) on x and label it.
-    let log_series: Vec<Series<'_>> = series
+}
+
+fn cdf(page: &mut Page, s: &Summary, cdfs: &[Vec<(f64, f64)>]) {
+    let series: Vec<Series<'_>> = s
+        .estimators
         .iter()
-        .map(|s| Series {
-            label: s.label,
-            colour: s.colour,
-            points: s
-                .points
-                .iter()
-                .map(|&(x, p)| (if x > 0.0 { x.log10() } else { f64::NAN }, p))
-                .collect(),
+        .zip(cdfs)
+        .enumerate()
+        .filter(|(_, (_, points))| !points.is_empty())
+        .map(|(k, (e, points))| Series {
+            label: &e.name,
+            style: style(k),
+            points: points.clone(),
         })
         .collect();
+    // A CDF of errors spanning decades reads best with the error on a log axis, its
+    // ticks labelled in metres.
     let svg = svg::line_chart(
         &Chart {
-            x_label: "log10 of the 3-D position error (m): 0 = 1 m, 1 = 10 m, 2 = 100 m",
-            ..chart
+            title: "Empirical CDF of the 3-D position error",
+            x_label: "3-D position error (m), log scale",
+            y_label: "share of epochs",
+            x_scale: Scale::Log,
+            y_scale: Scale::Linear,
+            spans: &[],
+            span_label: "",
         },
-        &log_series,
+        &series,
     );
-    let _ = writeln!(
-        h,
-        "<h2>Error distribution</h2><figure>{svg}<figcaption>Share of all epochs of all trials with a 3-D error at most x ({x_scale_note}).</figcaption></figure>"
+    page.figure(
+        "error-cdf",
+        "Error distribution",
+        svg,
+        "Share of all epochs of all trials with a 3-D error at most x (x on a logarithmic axis in metres).",
     );
 }
 
-fn trajectories(h: &mut String, world: &World, t0: &TrialResult) -> Result<(), String> {
+fn trajectories(page: &mut Page, world: &World, t0: &TrialResult) -> Result<(), String> {
     let overlays: Vec<Overlay<'_>> = t0
         .estimators
         .iter()
         .enumerate()
         .map(|(k, e)| Overlay {
             label: &e.name,
-            colour: colour(k),
+            style: style(k),
             points_enu_m: e
                 .epochs
                 .iter()
@@ -230,10 +421,11 @@ fn trajectories(h: &mut String, world: &World, t0: &TrialResult) -> Result<(), S
         })
         .collect();
     let map = map::svg_with(world, &overlays)?;
-    let _ = writeln!(
-        h,
-        "<h2>Trajectories (trial {})</h2><figure>{map}<figcaption>The true path in black; each estimator's estimates as a line (broken where it had none), over the scene. The frame spans the scene and the true path: estimates outside it are clipped.</figcaption></figure>",
-        t0.trial
+    page.figure(
+        "trajectories",
+        &format!("Trajectories (trial {})", t0.trial),
+        map,
+        "The true path in black; each estimator's estimates as a line (broken where it had none), over the scene. The frame spans the scene and the true path: estimates outside it are clipped. Axes in metres east and north of the world's origin.",
     );
     Ok(())
 }
@@ -278,7 +470,7 @@ fn time_series<'a>(
         .filter(|(_, e)| e.epochs.iter().any(|ep| value(ep).is_some()))
         .map(|(k, e)| Series {
             label: &e.name,
-            colour: colour(k),
+            style: style(k),
             points: e
                 .epochs
                 .iter()
@@ -288,7 +480,7 @@ fn time_series<'a>(
         .collect()
 }
 
-fn error_vs_time(h: &mut String, t0: &TrialResult) {
+fn error_vs_time(page: &mut Page, t0: &TrialResult) {
     let spans = poor_coverage_spans(t0);
     let series = time_series(t0, |ep| ep.err_3d_m);
     let svg = svg::line_chart(
@@ -296,20 +488,22 @@ fn error_vs_time(h: &mut String, t0: &TrialResult) {
             title: "3-D position error against time",
             x_label: "time since start (s)",
             y_label: "3-D error (m), log scale",
+            x_scale: Scale::Linear,
             y_scale: Scale::Log,
             spans: &spans,
             span_label: "< 4 GPS satellites",
         },
         &series,
     );
-    let _ = writeln!(
-        h,
-        "<h2>Error against time (trial {})</h2><figure>{svg}<figcaption>Shaded: epochs where fewer than four GPS satellites were tracked (blocked by buildings, foliage or a shielding window): a GPS-only receiver has no fix of its own there.</figcaption></figure>",
-        t0.trial
+    page.figure(
+        "error-vs-time",
+        &format!("Error against time (trial {})", t0.trial),
+        svg,
+        "Shaded: epochs where fewer than four GPS satellites were tracked (blocked by buildings, foliage or a shielding window): a GPS-only receiver has no fix of its own there.",
     );
 }
 
-fn modes(h: &mut String, t0: &TrialResult) {
+fn modes(page: &mut Page, t0: &TrialResult) {
     let rows: Vec<ModeRow<'_>> = t0
         .estimators
         .iter()
@@ -327,14 +521,15 @@ fn modes(h: &mut String, t0: &TrialResult) {
         return;
     }
     let svg = svg::mode_timeline("Integration mode chosen at each epoch", &rows);
-    let _ = writeln!(
-        h,
-        "<h2>Modes (trial {})</h2><figure>{svg}<figcaption>The mode each mode-selecting estimator chose (seed 000: A = GPS, B = GPS+DTMB, C = GPS+DTMB+FM; seed 003: by satellite count).</figcaption></figure>",
-        t0.trial
+    page.figure(
+        "modes",
+        &format!("Modes (trial {})", t0.trial),
+        svg,
+        "The mode each mode-selecting estimator chose (seed 000: A = GPS, B = GPS+DTMB, C = GPS+DTMB+FM; seed 003: by satellite count).",
     );
 }
 
-fn gdop(h: &mut String, t0: &TrialResult) {
+fn gdop(page: &mut Page, t0: &TrialResult) {
     let series = time_series(t0, |ep| ep.gdop);
     if series.is_empty() {
         return;
@@ -344,22 +539,19 @@ fn gdop(h: &mut String, t0: &TrialResult) {
             title: "GDOP of the ranges each estimator used",
             x_label: "time since start (s)",
             y_label: "GDOP, log scale",
+            x_scale: Scale::Linear,
             y_scale: Scale::Log,
             spans: &[],
             span_label: "",
         },
         &series,
     );
-    let _ = writeln!(
-        h,
-        "<h2>Geometry (trial {})</h2><figure>{svg}</figure>",
-        t0.trial
-    );
+    page.figure("gdop", &format!("Geometry (trial {})", t0.trial), svg, "");
 }
 
 /// The sky over the trajectory's start during the run: every satellite of the world's
 /// systems above the elevation mask, sampled every 30 s.
-fn sky(h: &mut String, world: &World) -> Result<(), String> {
+fn sky(page: &mut Page, world: &World) -> Result<(), String> {
     let Some(g) = world.file.sensors.gnss.as_ref() else {
         return Ok(());
     };
@@ -398,11 +590,7 @@ fn sky(h: &mut String, world: &World) -> Result<(), String> {
         if !az_el.is_empty() {
             tracks.push(SkyTrack {
                 label: sat.to_string(),
-                colour: match sat.system {
-                    crate::core::System::Gps => colour(0),
-                    crate::core::System::Bds => colour(2),
-                    _ => colour(4),
-                },
+                colour: system_colour(sat.system),
                 az_el_rad: az_el,
             });
         }
@@ -410,11 +598,58 @@ fn sky(h: &mut String, world: &World) -> Result<(), String> {
     if tracks.is_empty() {
         return Ok(());
     }
-    let svg = svg::sky_plot("Satellites above the mask", &tracks);
-    let _ = writeln!(
-        h,
-        "<h2>Sky</h2><figure>{svg}<figcaption>Satellites above the {:.0}° mask at the start point during the run (GPS blue, BeiDou red); the dot marks the end of each track. Buildings are not drawn: see the error plot's shading for what they blocked.</figcaption></figure>",
-        g.elevation_mask_deg
+    let mut legend: Vec<(&str, &str)> = Vec::new();
+    for (system, name) in [
+        (crate::core::System::Gps, "GPS"),
+        (crate::core::System::Bds, "BeiDou"),
+    ] {
+        if g.systems.contains(&system) {
+            legend.push((name, system_colour(system)));
+        }
+    }
+    let svg = svg::sky_plot("Satellites above the mask", &tracks, &legend);
+    page.figure(
+        "sky",
+        "Sky",
+        svg,
+        &format!(
+            "Satellites above the {:.0}° mask at the start point during the run; the dot marks the end of each track. Buildings are not drawn: see the error plot's shading for what they blocked.",
+            g.elevation_mask_deg
+        ),
     );
     Ok(())
+}
+
+/// The sky plot's colour of a satellite system.
+fn system_colour(system: crate::core::System) -> &'static str {
+    match system {
+        crate::core::System::Gps => colour(0),
+        crate::core::System::Bds => colour(1),
+        _ => colour(2),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_positive_statistics_interval_stays_positive_and_keeps_the_mean_between() {
+        // Seed 003's EKF over two trials: the t interval of the mean error is
+        // −1.50 … 14.14 m; on the log scale it is positive, with the mean 6.32 m inside
+        // and the same factor to either end.
+        let [a, b] = positive_ci95(Some([-1.5043050758396426, 14.143090424694964])).unwrap();
+        let mean = 0.5 * (-1.5043050758396426 + 14.143090424694964);
+        assert!(a > 0.0 && a < mean && mean < b, "{a} {b}");
+        assert!((mean / a - b / mean).abs() < 1e-9 * b);
+        // A tight interval is left as it was to first order: 100 ± 1 → 99.005 … 101.005.
+        let [a, b] = positive_ci95(Some([99.0, 101.0])).unwrap();
+        assert!(
+            (a - 99.005).abs() < 1e-3 && (b - 101.005).abs() < 1e-3,
+            "{a} {b}"
+        );
+        // Nothing to transform: no interval, or a mean of zero.
+        assert!(positive_ci95(None).is_none());
+        assert!(positive_ci95(Some([-1.0, 1.0])).is_none());
+    }
 }
