@@ -6,13 +6,11 @@
 //! refused before any file is written.
 
 use crate::common::{hybridnav, refused, skip, stderr, tmp_dir};
-use hybridnav::core::Geodetic;
+use hybridnav::core::{Geodetic, GpsTime};
 use std::process::Command;
 
 const WORLD: &str = "worlds/gnss-iq-open-sky.toml";
 const ROAD: &str = "worlds/gnss-iq-open-road.toml";
-/// GPS − UTC on 2020-06-25 (IERS Bulletin C: 18 s since 2017-01-01).
-const LEAP_S: f64 = 18.0;
 
 /// GNSS-SDR's configuration for an interleaved 8-bit recording at `rate` of GPS L1 C/A:
 /// file source, no filtering, 8 channels, PCPS acquisition, DLL/PLL tracking, the LNAV
@@ -73,21 +71,9 @@ PVT.dump=false
     )
 }
 
-/// Days from 1970-01-01 to the civil date `y-m-d` (proleptic Gregorian), by the
-/// era/day-of-era decomposition of the calendar's 400-year cycle.
-fn days_from_civil(y: i64, m: i64, d: i64) -> i64 {
-    let y = if m <= 2 { y - 1 } else { y };
-    let era = y.div_euclid(400);
-    let yoe = y - era * 400;
-    let mp = (m + 9) % 12;
-    let doy = (153 * mp + 2) / 5 + d - 1;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    era * 146_097 + doe - 719_468
-}
-
 /// The fixes GNSS-SDR prints, `Position at 2020-Jun-25 02:01:58.000000 UTC using 6
 /// observations is Lat = X [deg], Long = Y [deg], Height = Z [m]`, each with its time in
-/// seconds of GPS time since the GPS epoch (UTC + [`LEAP_S`]).
+/// seconds of GPS time since the GPS epoch (UTC + 18 s in 2020, by `GpsTime::from_utc`).
 fn fixes(log: &str) -> Vec<(f64, Geodetic)> {
     let num = |s: &str, key: &str| -> Option<f64> {
         let i = s.find(key)? + key.len();
@@ -98,18 +84,18 @@ fn fixes(log: &str) -> Vec<(f64, Geodetic)> {
         let mut it = s[i..].split_whitespace();
         let (date, hms) = (it.next()?, it.next()?);
         let mut d = date.split('-');
-        let y: i64 = d.next()?.parse().ok()?;
+        let y: i32 = d.next()?.parse().ok()?;
         let months = [
             "Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec",
         ];
         let mon = d.next()?;
-        let m = months.iter().position(|&n| n == mon)? as i64 + 1;
-        let day: i64 = d.next()?.parse().ok()?;
+        let m = months.iter().position(|&n| n == mon)? as u8 + 1;
+        let day: u8 = d.next()?.parse().ok()?;
         let mut t = hms.split(':');
-        let (h, mi): (f64, f64) = (t.next()?.parse().ok()?, t.next()?.parse().ok()?);
+        let (h, mi): (u8, u8) = (t.next()?.parse().ok()?, t.next()?.parse().ok()?);
         let sec: f64 = t.next()?.parse().ok()?;
-        let days = (days_from_civil(y, m, day) - days_from_civil(1980, 1, 6)) as f64;
-        Some(days * 86_400.0 + h * 3600.0 + mi * 60.0 + sec + LEAP_S)
+        let whole = GpsTime::from_utc(y, m, day, h, mi, 0, 0);
+        Some(whole.as_seconds_f64() + sec)
     };
     log.lines()
         .filter(|l| l.contains("Position at"))

@@ -24,9 +24,9 @@
 // the portable code.
 #![allow(unsafe_code)]
 
-use crate::core::noise::mix;
 use super::pn::BODY_LEN;
 use super::DtmbError;
+use crate::core::noise::mix;
 use num_complex::Complex32;
 use rand::Rng;
 use rustfft::{Fft, FftPlanner};
