@@ -296,15 +296,36 @@ fn fm_rssi_table(_world: &World, rec: &Recording) -> Option<Table> {
     None
 }
 
-/// IMU samples, with the truth's specific force in ENU for reference.
-fn imu_table(_world: &World, rec: &Recording) -> Option<Table> {
+/// IMU samples, with the truth's specific force in ENU and the body's true attitude for
+/// reference. The attitude is the one the IMU was simulated with: the world's trajectory
+/// dressed by its `[platform]` attitude model with the trial's gait stream, rebuilt here
+/// (it is a deterministic function of the world, seed and trial), as the quaternion that
+/// rotates body (FLU: x forward, y left, z up) vectors into ENU and as heading (from north,
+/// clockwise), pitch (nose up) and roll (right side down) in degrees (`truth_body_…`; the
+/// `truth_heading_deg` of the truth columns is the velocity's course).
+fn imu_table(world: &World, rec: &Recording) -> Option<Table> {
+    use crate::inertial::attitude::{euler_from_attitude, PlatformTruth};
+    let rng = crate::core::TrialRng::new(rec.seed, rec.trial);
+    let attitude = world.build_trajectory(&rng).ok().and_then(|trajectory| {
+        PlatformTruth::new(
+            trajectory,
+            &world.file.platform.attitude(),
+            &mut rng.stream(crate::inertial::source::GAIT_STREAM),
+        )
+        .ok()
+    });
     let mut tr = TruthColumns::default();
-    let mut cols: [Vec<f64>; 9] = Default::default();
+    let mut cols: [Vec<f64>; 16] = Default::default();
     for b in &rec.batches {
         for m in &b.items {
             if let Measurement::Imu(s) = m {
                 tr.push(&b.truth);
                 let a = b.truth.enu.acc_enu_mps2;
+                let q = attitude
+                    .as_ref()
+                    .map(|p| p.attitude_at(s.t_s))
+                    .unwrap_or_else(nalgebra::UnitQuaternion::identity);
+                let (h, p, r) = euler_from_attitude(&q);
                 for (k, v) in [
                     s.gyro_rps.x,
                     s.gyro_rps.y,
@@ -315,6 +336,13 @@ fn imu_table(_world: &World, rec: &Recording) -> Option<Table> {
                     a.x,
                     a.y,
                     a.z,
+                    q.w,
+                    q.i,
+                    q.j,
+                    q.k,
+                    h.to_degrees(),
+                    p.to_degrees(),
+                    r.to_degrees(),
                 ]
                 .into_iter()
                 .enumerate()
@@ -336,6 +364,13 @@ fn imu_table(_world: &World, rec: &Recording) -> Option<Table> {
             "truth_acc_e_mps2",
             "truth_acc_n_mps2",
             "truth_acc_u_mps2",
+            "truth_q_nb_w",
+            "truth_q_nb_x",
+            "truth_q_nb_y",
+            "truth_q_nb_z",
+            "truth_body_heading_deg",
+            "truth_body_pitch_deg",
+            "truth_body_roll_deg",
         ];
         for (name, v) in names.into_iter().zip(cols) {
             t.push(name, Values::F64(v));

@@ -264,6 +264,69 @@ fn measurement_tables_carry_their_truth() {
     }
 }
 
+/// The IMU table's true attitude is the one the IMU was simulated with: rotating each
+/// measured specific force into ENU with it and adding gravity gives the true
+/// acceleration (f = a − g, Groves eq. 5.28, to the IMU's errors), in the default world's
+/// accelerations and turns; the inverse rotation, a convention slip, does not.
+#[test]
+fn the_imu_table_carries_the_attitude_the_imu_was_simulated_with() {
+    let out = tmp_dir("export-imu");
+    let o = hybridnav(&[
+        "export",
+        "worlds/default.toml",
+        "--format",
+        "csv",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let rows = csv_rows(&out.join("imu.csv"));
+    assert!(rows.len() > 1000, "{} IMU rows", rows.len());
+    let g = 9.80; // Beijing's normal gravity at 45 m to 0.01 m/s² (WGS-84 Somigliana).
+    let (mut err_q, mut err_inv, mut n) = (0.0, 0.0, 0usize);
+    for r in &rows {
+        let a = nalgebra::Vector3::new(
+            num(r, "truth_acc_e_mps2"),
+            num(r, "truth_acc_n_mps2"),
+            num(r, "truth_acc_u_mps2"),
+        );
+        let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            num(r, "truth_q_nb_w"),
+            num(r, "truth_q_nb_x"),
+            num(r, "truth_q_nb_y"),
+            num(r, "truth_q_nb_z"),
+        ));
+        // The Euler columns describe the same rotation.
+        let (h, p, rl) = (
+            num(r, "truth_body_heading_deg").to_radians(),
+            num(r, "truth_body_pitch_deg").to_radians(),
+            num(r, "truth_body_roll_deg").to_radians(),
+        );
+        let from_euler = hybridnav::inertial::attitude::attitude_from_euler(h, p, rl);
+        assert!(q.angle_to(&from_euler) < 1e-9, "{r:?}");
+        // Only where the car accelerates or turns does the horizontal rotation show.
+        if a.xy().norm() < 1.0 {
+            continue;
+        }
+        let f_b = nalgebra::Vector3::new(
+            num(r, "accel_x_mps2"),
+            num(r, "accel_y_mps2"),
+            num(r, "accel_z_mps2"),
+        );
+        let gravity = nalgebra::Vector3::new(0.0, 0.0, -g);
+        err_q += (q * f_b + gravity - a).norm();
+        err_inv += (q.inverse() * f_b + gravity - a).norm();
+        n += 1;
+    }
+    assert!(n > 100, "{n} accelerating samples");
+    let (mean_q, mean_inv) = (err_q / n as f64, err_inv / n as f64);
+    println!("|C_b^n f + g − a|: {mean_q:.3} m/s² with the table's attitude, {mean_inv:.3} with its inverse, over {n} samples");
+    // The default world's IMU is the mid grade (industrial MEMS): its accelerometer errors
+    // over a 0.01 s sample are a few mg at most, 0.03 m/s².
+    assert!(mean_q < 0.05, "{mean_q} m/s²");
+    assert!(mean_inv > 10.0 * mean_q, "{mean_inv} vs {mean_q} m/s²");
+}
+
 #[test]
 fn bad_formats_are_refused_before_anything_runs() {
     let out = tmp_dir("export-bad");

@@ -288,6 +288,13 @@ pub fn attitude_from_euler(heading_rad: f64, pitch_rad: f64, roll_rad: f64) -> U
     UnitQuaternion::from_euler_angles(roll_rad, -pitch_rad, FRAC_PI_2 - heading_rad)
 }
 
+/// The heading ψ ∈ [0, 2π), pitch θ and roll φ of an attitude (rad), the inverse of
+/// [`attitude_from_euler`] for |θ| < π/2.
+pub fn euler_from_attitude(q_nb: &UnitQuaternion<f64>) -> (f64, f64, f64) {
+    let (roll, minus_pitch, yaw) = q_nb.euler_angles();
+    ((FRAC_PI_2 - yaw).rem_euclid(TAU), -minus_pitch, roll)
+}
+
 /// The pitch of a car: the slope of its direction of travel. The direction is the
 /// velocity, or at (almost) rest the acceleration (a car starting or stopping on a slope
 /// accelerates along it), signed so that its horizontal part points along the heading. A car
@@ -511,6 +518,22 @@ impl PlatformTruth {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn euler_angles_come_back_from_the_attitude() {
+        for (h, p, r) in [
+            (0.0, 0.0, 0.0),
+            (1.0, 0.2, -0.3),
+            (5.9, -1.2, 2.9),
+            (3.2, 0.7, 0.01),
+        ] {
+            let (h2, p2, r2) = euler_from_attitude(&attitude_from_euler(h, p, r));
+            assert!((h2 - h).abs() < 1e-12 && (p2 - p).abs() < 1e-12 && (r2 - r).abs() < 1e-12);
+        }
+        // Heading 90° (east): the body's forward axis points east.
+        let fwd = attitude_from_euler(FRAC_PI_2, 0.0, 0.0) * Vector3::x();
+        assert!((fwd - Vector3::x()).norm() < 1e-12, "{fwd}");
+    }
     use crate::core::TrialRng;
     use crate::motion::TrajectoryConfig;
 
