@@ -123,10 +123,13 @@ pub struct FamilyConfig {
     /// UKF: Merwe's α, β, κ. Defaults α = 0.5, β = 2, κ = 0: with twelve states a small α
     /// makes the centre weight hugely negative and the covariance indefinite in rounding.
     pub ukf_alpha: f64,
+    /// UKF: Merwe's β (2 is optimal for Gaussian priors).
     pub ukf_beta: f64,
+    /// UKF: Merwe's κ (secondary scaling, default 0).
     pub ukf_kappa: f64,
     /// STF: forgetting factor ρ (0 < ρ ≤ 1) and weakening factor β ≥ 1 (Zhou & Frank).
     pub stf_forgetting: f64,
+    /// STF: the weakening (softening) factor β ≥ 1 (Zhou & Frank); default 1.
     pub stf_weakening: f64,
     /// STF: the largest fading factor λ applied. Default 10. Not in Zhou & Frank: λ also
     /// inflates states the ranges do not observe (velocity and acceleration when there are
@@ -143,6 +146,7 @@ pub struct FamilyConfig {
     /// resamples.
     pub particles: usize,
     pub resampling: ResamplingKind,
+    /// PF: resample when N_eff < θ·N (θ in (0, 1]; default ½).
     pub neff_threshold: f64,
     /// PF: also weight by the pseudorange rates. Default false: seeds 001 and 003 use
     /// pseudoranges only, and a Doppler an order of magnitude more precise than the

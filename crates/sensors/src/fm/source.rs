@@ -78,14 +78,18 @@ pub struct FmSensorConfig {
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct FmSurveySpec {
+    /// Spacing of the surveyed reference points (m); default 24.
     pub rp_spacing_m: f64,
+    /// Spacing of the kriged fingerprint grid (m); default 3.
     pub grid_spacing_m: f64,
+    /// How far the surveyed area extends beyond the trajectory's bounding box (m).
     pub margin_m: f64,
     /// The surveyed area `[[e_min, n_min], [e_max, n_max]]` (ENU, m); default: the
     /// trajectory's bounding box widened by `margin_m`.
     pub area_enu_m: Option<[[f64; 2]; 2]>,
     /// Scans averaged per surveyed RP and the surveyor's per-scan noise σ (dB).
     pub scans_per_point: u32,
+    /// The surveyor's per-scan noise σ (dB).
     pub noise_sigma_db: f64,
 }
 

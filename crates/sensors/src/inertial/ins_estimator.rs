@@ -159,6 +159,7 @@ pub struct InsFilterConfig {
     /// STF: forgetting factor ρ (default 0.95) and weakening factor β (default 1).
     #[serde(default = "d_forgetting")]
     pub stf_forgetting: f64,
+    /// STF: the weakening factor β ≥ 1 (Zhou & Frank).
     #[serde(default = "d_noise_scale")]
     pub stf_weakening: f64,
     /// Pool the pseudoranges of every fix source at one epoch (e.g. `"gnss"` and

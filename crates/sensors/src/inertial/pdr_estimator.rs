@@ -66,6 +66,8 @@ pub struct PdrFilterConfig {
     /// (2e-25, 6e-25), the `ocxo` preset of `[receiver.clock]` (a TCXO is 2e-19, 2e-20).
     #[serde(default = "d_ocxo_h0")]
     pub range_difference_h0_s: f64,
+    /// The oscillator's random-walk FM coefficient h₋₂ (Hz) for the range differences;
+    /// default the `ocxo` preset's.
     #[serde(default = "d_ocxo_hm2")]
     pub range_difference_h_minus2_hz: f64,
     /// Duration of the static CFO calibration at the start (s); default 5, as

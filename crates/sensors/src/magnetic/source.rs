@@ -94,6 +94,7 @@ pub struct MagneticSensorConfig {
     pub matcher: Matcher,
     /// DTW: Sakoe–Chiba band (cells) and acceptance threshold (mean µT); default 4, 0.8.
     pub dtw_band: usize,
+    /// DTW: the acceptance threshold (mean µT per cell); default 0.8.
     pub dtw_threshold_ut: f64,
     /// The spiking network's settings (`matcher = "snn"`).
     pub snn: SnnConfig,
@@ -103,6 +104,7 @@ pub struct MagneticSensorConfig {
     pub dtmb_check: DtmbCheck,
     /// σ of a landmark fix, horizontal and vertical (m); default 1.5 and 5.
     pub fix_sigma_m: f64,
+    /// Vertical σ of a landmark fix (m); default 5.
     pub fix_sigma_up_m: f64,
 }
 

@@ -49,10 +49,14 @@ fn outline(
 #[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct BuildingSpec {
+    /// Footprint corners `[[e, n], …]` in the world's ENU frame (m); exactly one of this and
+    /// `footprint_lla_deg`.
     #[serde(default)]
     pub footprint_enu_m: Option<Vec<[f64; 2]>>,
+    /// Footprint corners `[[lat, lon], …]` (degrees, WGS-84).
     #[serde(default)]
     pub footprint_lla_deg: Option<Vec<[f64; 2]>>,
+    /// Roof height above the ground (m), positive.
     pub height_m: f64,
     #[serde(default)]
     pub material: WallMaterial,
@@ -67,14 +71,23 @@ pub struct BuildingSpec {
 #[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ForestSpec {
+    /// Outline `[[e, n], …]` in the world's ENU frame (m); exactly one of this and
+    /// `polygon_lla_deg`.
     #[serde(default)]
     pub polygon_enu_m: Option<Vec<[f64; 2]>>,
+    /// Outline `[[lat, lon], …]` (degrees, WGS-84).
     #[serde(default)]
     pub polygon_lla_deg: Option<Vec<[f64; 2]>>,
+    /// Top of the canopy above the ground (m), positive.
     pub height_m: f64,
+    /// Bottom of the canopy (m), in [0, `height_m`): a ray below it passes under the crowns.
     #[serde(default)]
+    #[schemars(range(min = 0.0))]
     pub canopy_base_m: f64,
+    /// In (0, 1]: scales the specific attenuation of dense in-leaf foliage (Weissberger's
+    /// slope, used as ITU-R P.833's γ; 1 = dense).
     #[serde(default = "one")]
+    #[schemars(range(min = 0.0, max = 1.0))]
     pub foliage_density: f64,
 }
 
@@ -83,18 +96,25 @@ pub struct ForestSpec {
 #[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TreeRowSpec {
+    /// The row's polyline `[[e, n], …]` in the world's ENU frame (m); exactly one of this
+    /// and `line_lla_deg`.
     #[serde(default)]
     pub line_enu_m: Option<Vec<[f64; 2]>>,
+    /// The row's polyline `[[lat, lon], …]` (degrees, WGS-84).
     #[serde(default)]
     pub line_lla_deg: Option<Vec<[f64; 2]>>,
     /// Crown diameter (m); default 6.
     #[serde(default = "six")]
     pub width_m: f64,
+    /// Top of the crowns above the ground (m), positive.
     pub height_m: f64,
     /// Trunk height below the crown (m); default 2.5.
     #[serde(default = "trunk")]
     pub canopy_base_m: f64,
+    /// In (0, 1]: scales the specific attenuation of dense in-leaf foliage (Weissberger's
+    /// slope, used as ITU-R P.833's γ; 1 = dense).
     #[serde(default = "one")]
+    #[schemars(range(min = 0.0, max = 1.0))]
     pub foliage_density: f64,
 }
 
@@ -102,11 +122,16 @@ pub struct TreeRowSpec {
 #[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct IndoorZoneSpec {
+    /// Outline `[[e, n], …]` in the world's ENU frame (m); exactly one of this and
+    /// `polygon_lla_deg`.
     #[serde(default)]
     pub polygon_enu_m: Option<Vec<[f64; 2]>>,
+    /// Outline `[[lat, lon], …]` (degrees, WGS-84).
     #[serde(default)]
     pub polygon_lla_deg: Option<Vec<[f64; 2]>>,
+    /// Floor of the zone above the ground (m).
     pub floor_m: f64,
+    /// Ceiling of the zone above the ground (m), above `floor_m`.
     pub ceiling_m: f64,
     #[serde(default)]
     pub class: BuildingClass,
@@ -116,8 +141,11 @@ pub struct IndoorZoneSpec {
 #[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SurfaceSpec {
+    /// Outline `[[e, n], …]` in the world's ENU frame (m); exactly one of this and
+    /// `polygon_lla_deg`.
     #[serde(default)]
     pub polygon_enu_m: Option<Vec<[f64; 2]>>,
+    /// Outline `[[lat, lon], …]` (degrees, WGS-84).
     #[serde(default)]
     pub polygon_lla_deg: Option<Vec<[f64; 2]>>,
     pub material: crate::propagation::GroundMaterial,
@@ -137,14 +165,19 @@ fn trunk() -> f64 {
 #[derive(Clone, Debug, Default, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SceneSection {
+    /// Buildings: prisms that block, reflect and diffract.
     #[serde(default)]
     pub buildings: Vec<BuildingSpec>,
+    /// Parks, woods and hedges: foliage that attenuates.
     #[serde(default)]
     pub forests: Vec<ForestSpec>,
+    /// Street trees along polylines.
     #[serde(default)]
     pub tree_rows: Vec<TreeRowSpec>,
+    /// Indoor volumes (the receiver inside gets the building-entry loss).
     #[serde(default)]
     pub indoor_zones: Vec<IndoorZoneSpec>,
+    /// Ground patches of another material (water, wet meadow, paving).
     #[serde(default)]
     pub surfaces: Vec<SurfaceSpec>,
     #[serde(default)]
@@ -324,8 +357,11 @@ impl TransmitterKind {
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct GeodeticSpec {
+    /// Geodetic latitude (degrees, north positive).
     pub lat_deg: f64,
+    /// Geodetic longitude (degrees, east positive).
     pub lon_deg: f64,
+    /// Antenna height above the WGS-84 ellipsoid (m).
     pub h_m: f64,
 }
 
@@ -336,8 +372,11 @@ pub struct TransmitterSpec {
     /// Identifier: `"D01"` for DTMB, `"T01"` for TC-OFDM, any label for FM.
     pub id: String,
     pub kind: TransmitterKind,
+    /// A label for maps and tables (e.g. "Central Radio and TV Tower").
     #[serde(default)]
     pub name: Option<String>,
+    /// Antenna position as latitude, longitude and height; exactly one of this and
+    /// `position_enu_m`.
     #[serde(default)]
     pub position: Option<GeodeticSpec>,
     /// Antenna position in the world's ENU frame (m).

@@ -83,7 +83,9 @@ pub struct ScoringSection {
 #[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct WorldSection {
+    /// The world's name, printed on tables and reports.
     pub name: String,
+    /// What the world is, in a sentence or two (shown by `check` and in the report).
     #[serde(default)]
     pub description: Option<String>,
     /// Origin of the local ENU frame.
@@ -196,10 +198,13 @@ pub struct ShieldingSpec {
     pub from_s: f64,
     /// End of the window (exclusive).
     pub to_s: f64,
+    /// Keep only the N highest satellites of each system.
     #[serde(default)]
     pub keep_highest: Option<usize>,
+    /// Keep only these satellites (`"G05"`, `"C19"`, …).
     #[serde(default)]
     pub keep: Option<Vec<String>>,
+    /// Remove these satellites.
     #[serde(default)]
     pub block: Option<Vec<String>>,
 }
