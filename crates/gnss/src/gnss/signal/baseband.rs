@@ -166,7 +166,7 @@ impl ReplicaCursor {
             rate: (r.chips_per_sample * one).round() as u64,
             len,
             ms: r.ms,
-            sym: nav.symbol(r.ms),
+            sym: nav.symbol(r.ms) & 1,
             phase: fixed_phase(r.phase_cycles),
             step: fixed_phase(r.cycles_per_sample),
             signed: [r.amplitude, -r.amplitude],
@@ -193,19 +193,28 @@ impl ReplicaCursor {
             signed,
         } = *self;
         let table = &carrier.table;
-        for o in out.iter_mut() {
-            let c = code[(chip >> CHIP_FRAC_BITS) as usize] ^ sym;
-            let a = signed[usize::from(c & 1)];
-            let (co, si) = table[(phase >> (32 - TABLE_BITS)) as usize];
-            o.re += a * co;
-            o.im += a * si;
-            phase = phase.wrapping_add(step);
-            chip += rate;
+        let code = &code[..(len >> CHIP_FRAC_BITS) as usize];
+        let mut rest = out;
+        while !rest.is_empty() {
+            // The samples before the code period ends: within them the chip index never
+            // wraps, so the loop below has no branch but its own.
+            let to_wrap = (len - chip).div_ceil(rate.max(1)) as usize;
+            let (run, after) = rest.split_at_mut(to_wrap.min(rest.len()));
+            let signed = [signed[usize::from(sym)], signed[usize::from(sym ^ 1)]];
+            for o in run.iter_mut() {
+                let a = signed[usize::from(code[(chip >> CHIP_FRAC_BITS) as usize] & 1)];
+                let (co, si) = table[(phase >> (32 - TABLE_BITS)) as usize];
+                o.re += a * co;
+                o.im += a * si;
+                phase = phase.wrapping_add(step);
+                chip += rate;
+            }
             if chip >= len {
                 chip -= len;
                 ms += 1;
-                sym = nav.symbol(ms);
+                sym = nav.symbol(ms) & 1;
             }
+            rest = after;
         }
         self.chip = chip;
         self.ms = ms;
