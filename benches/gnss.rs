@@ -281,6 +281,7 @@ fn baseband_benches(c: &mut Criterion) {
     use hybridnav::core::TrialRng;
     use hybridnav::gnss::signal::baseband::{
         add_noise, CarrierTable, NavSymbols, Quantiser, Replica, ReplicaCursor, SampleFormat,
+        PIECE_SAMPLES,
     };
     use hybridnav::gnss::signal::ca_code::ca_code_bits;
     use num_complex::Complex32;
@@ -327,7 +328,7 @@ fn baseband_benches(c: &mut Criterion) {
                 for (k, r) in &rs {
                     cursors.push((*k, ReplicaCursor::new(r, 1023, &mut Alternating)));
                 }
-                for piece in block.chunks_mut(2048) {
+                for piece in block.chunks_mut(PIECE_SAMPLES) {
                     for (k, cur) in cursors.iter_mut() {
                         cur.add(piece, &codes[*k], &mut Alternating, &carrier);
                     }

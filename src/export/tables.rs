@@ -306,13 +306,10 @@ fn fm_rssi_table(_world: &World, rec: &Recording) -> Option<Table> {
 fn imu_table(world: &World, rec: &Recording) -> Option<Table> {
     use crate::inertial::attitude::{euler_from_attitude, PlatformTruth};
     let rng = crate::core::TrialRng::new(rec.seed, rec.trial);
+    // The trial was recorded from this world, so both builds succeed; were one to fail,
+    // the attitude columns say NaN rather than a made-up level attitude.
     let attitude = world.build_trajectory(&rng).ok().and_then(|trajectory| {
-        PlatformTruth::new(
-            trajectory,
-            &world.file.platform.attitude(),
-            &mut rng.stream(crate::inertial::source::GAIT_STREAM),
-        )
-        .ok()
+        PlatformTruth::of_trial(trajectory, &world.file.platform.attitude(), &rng).ok()
     });
     let mut tr = TruthColumns::default();
     let mut cols: [Vec<f64>; 16] = Default::default();
@@ -321,11 +318,20 @@ fn imu_table(world: &World, rec: &Recording) -> Option<Table> {
             if let Measurement::Imu(s) = m {
                 tr.push(&b.truth);
                 let a = b.truth.enu.acc_enu_mps2;
-                let q = attitude
-                    .as_ref()
-                    .map(|p| p.attitude_at(s.t_s))
-                    .unwrap_or_else(nalgebra::UnitQuaternion::identity);
-                let (h, p, r) = euler_from_attitude(&q);
+                // [w, x, y, z, heading°, pitch°, roll°] of the true attitude.
+                let truth_attitude = attitude.as_ref().map_or([f64::NAN; 7], |body| {
+                    let q = body.attitude_at(s.t_s);
+                    let (h, p, r) = euler_from_attitude(&q);
+                    [
+                        q.w,
+                        q.i,
+                        q.j,
+                        q.k,
+                        h.to_degrees(),
+                        p.to_degrees(),
+                        r.to_degrees(),
+                    ]
+                });
                 for (k, v) in [
                     s.gyro_rps.x,
                     s.gyro_rps.y,
@@ -336,15 +342,9 @@ fn imu_table(world: &World, rec: &Recording) -> Option<Table> {
                     a.x,
                     a.y,
                     a.z,
-                    q.w,
-                    q.i,
-                    q.j,
-                    q.k,
-                    h.to_degrees(),
-                    p.to_degrees(),
-                    r.to_degrees(),
                 ]
                 .into_iter()
+                .chain(truth_attitude)
                 .enumerate()
                 {
                     cols[k].push(v);

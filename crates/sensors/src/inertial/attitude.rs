@@ -330,6 +330,20 @@ pub struct PlatformTruth {
 const STENCIL_H_S: f64 = 1e-3;
 
 impl PlatformTruth {
+    /// The body every inertial sensor of a trial carries: `trajectory` dressed as `cfg`
+    /// says with the trial's gait stream ([`super::source::GAIT_STREAM`]), so the IMU, the
+    /// PDR phone and an export of the trial all see one attitude.
+    ///
+    /// # Errors
+    /// As [`PlatformTruth::new`].
+    pub fn of_trial(
+        trajectory: Box<dyn Trajectory>,
+        cfg: &PlatformConfig,
+        rng: &crate::core::TrialRng,
+    ) -> Result<Self, ConfigIssue> {
+        Self::new(trajectory, cfg, &mut rng.stream(super::source::GAIT_STREAM))
+    }
+
     /// Dresses `trajectory` as `cfg` says, drawing the gait's slow wander from `rng`.
     ///
     /// # Errors

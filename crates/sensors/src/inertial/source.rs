@@ -212,8 +212,8 @@ impl ImuSource {
         end: SimTime,
     ) -> Result<Self, ConfigIssue> {
         let spec = imu.resolve()?;
-        let truth = PlatformTruth::new(trajectory, platform, &mut rng.stream(GAIT_STREAM))
-            .map_err(|i| under("gait", i))?;
+        let truth =
+            PlatformTruth::of_trial(trajectory, platform, rng).map_err(|i| under("gait", i))?;
         let samples_per_batch = (spec.rate_hz / MAX_BATCH_RATE_HZ).ceil().max(1.0) as u64;
         Ok(Self {
             truth,
@@ -422,8 +422,8 @@ impl PdrSource {
     ) -> Result<Self, ConfigIssue> {
         cfg.validate()?;
         let spec = cfg.imu.resolve().map_err(|i| under("imu", i))?;
-        let truth = PlatformTruth::new(trajectory, platform, &mut rng.stream(GAIT_STREAM))
-            .map_err(|i| under("gait", i))?;
+        let truth =
+            PlatformTruth::of_trial(trajectory, platform, rng).map_err(|i| under("gait", i))?;
         let mag = Magnetometer::new(&cfg.magnetometer, rng.stream(PDR_MAG_STREAM))
             .map_err(|i| under("magnetometer", i))?;
         let mut s = Self {

@@ -133,6 +133,10 @@ fn fixed_phase(cycles: f64) -> u32 {
 /// chip over a 10 ms segment at 40 Msps.
 const CHIP_FRAC_BITS: u32 = 40;
 
+/// Samples of a segment every replica is added to before the next piece: 2048 complex
+/// f32 samples are 16 KiB, half of the smallest first-level data cache in use.
+pub const PIECE_SAMPLES: usize = 2048;
+
 /// A replica's running state: where its code, symbol and carrier stand at the next sample
 /// it will add. [`ReplicaCursor::add`] can be called on consecutive pieces of a segment,
 /// so a caller can add every replica to one cache-sized piece before moving to the next.

@@ -59,6 +59,7 @@ use crate::gnss::measurement::{transmit_geometry, GnssConfig, F_L1_HZ};
 use crate::gnss::rinex_nav::NavData;
 use crate::gnss::signal::baseband::{
     add_noise, CarrierTable, NavSymbols, Quantiser, Replica, ReplicaCursor, SampleFormat,
+    PIECE_SAMPLES,
 };
 use crate::gnss::signal::{b1i, ca_code, d1d2, lnav, SignalError};
 use crate::measurement::Truth;
@@ -74,9 +75,6 @@ use std::sync::Arc;
 pub const SEGMENT_NS: i64 = 10_000_000;
 /// Truth and path rows are written every this many segments (0.1 s).
 const ROW_EVERY: i64 = 10;
-/// Samples of a segment every replica is added to before the next piece: 2048 complex
-/// f32 samples are 16 KiB, half of the smallest first-level data cache in use.
-const PIECE_SAMPLES: usize = 2048;
 /// Most samples per second a recording may use.
 pub const MAX_RATE_SPS: f64 = 100e6;
 
