@@ -61,6 +61,29 @@ pub struct EstimatorSummary {
     /// `rmse / pcrlb_pos_rmse_m`: 1 for an efficient estimator.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub efficiency: Option<f64>,
+    /// The errors inside each of the world's `[[shielding]]` windows and outside all of
+    /// them (the last entry), so a table shows where each source helps; empty for a world
+    /// without shielding windows.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub segments: Vec<SegmentStats>,
+}
+
+/// An estimator's errors over the epochs of one segment of the run's time line.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct SegmentStats {
+    /// What the segment is: `"40–80 s (3 per system)"`, or `"outside shielding"`.
+    pub label: String,
+    /// The window `[from_s, to_s)` (s since the world start); absent for the epochs
+    /// outside every window.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub window_s: Option<[f64; 2]>,
+    /// Epochs of every trial in the segment with an estimate.
+    pub epochs: usize,
+    /// Statistics of the 3-D error over them (as for the whole run); absent without an
+    /// estimate.
+    pub error_3d_m: Option<ErrorStats>,
+    /// RMS of the horizontal error over them (m).
+    pub rmse_h_m: Option<f64>,
 }
 
 /// An epoch at which an estimator reported a numerical failure.
@@ -117,9 +140,17 @@ impl Summary {
         );
         // The efficiency column appears only when some estimator has a bound.
         let bounded = self.estimators.iter().any(|e| e.efficiency.is_some());
+        // The name column fits the longest name, so the columns stay aligned.
+        let w = self
+            .estimators
+            .iter()
+            .map(|e| e.name.chars().count())
+            .max()
+            .unwrap_or(0)
+            .max(16);
         let _ = write!(
             s,
-            "{:<16} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7} {:>7}",
+            "{:<w$} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7} {:>7}",
             "estimator",
             "1σ",
             "2σ",
@@ -142,7 +173,7 @@ impl Summary {
             let x = e.error_3d_m.as_ref();
             let _ = write!(
                 s,
-                "{:<16} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6.1}% {:>6.1}%",
+                "{:<w$} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6.1}% {:>6.1}%",
                 e.name,
                 f(x.map(|x| x.sigma1)),
                 f(x.map(|x| x.sigma2)),
@@ -171,6 +202,46 @@ impl Summary {
                 "(PCRLB: the posterior Cramér–Rao bound on the position RMSE of the estimator's model)"
             );
         }
+        self.segment_table(&mut s, w);
         s
+    }
+
+    /// The RMS 3-D error of each estimator inside each shielding window and outside them
+    /// (nothing for a world without windows).
+    fn segment_table(&self, s: &mut String, w: usize) {
+        use std::fmt::Write;
+        let Some(first) = self.estimators.iter().find(|e| !e.segments.is_empty()) else {
+            return;
+        };
+        // Each segment is two columns, rmse and 2σ, under its label.
+        let widths: Vec<usize> = first
+            .segments
+            .iter()
+            .map(|g| g.label.chars().count().max(15))
+            .collect();
+        let _ = writeln!(
+            s,
+            "\n3-D error by segment (m; rmse and 2σ, the 95.45 % percentile, of the epochs inside):"
+        );
+        let _ = write!(s, "{:<w$}", "");
+        for (g, cw) in first.segments.iter().zip(&widths) {
+            let _ = write!(s, "  {:>cw$}", g.label);
+        }
+        let _ = writeln!(s);
+        let _ = write!(s, "{:<w$}", "estimator");
+        for cw in &widths {
+            let _ = write!(s, "  {:>cw$}", format!("{:>7} {:>7}", "rmse", "2σ"));
+        }
+        let _ = writeln!(s);
+        let f = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |x| format!("{x:.2}"));
+        for e in &self.estimators {
+            let _ = write!(s, "{:<w$}", e.name);
+            for (g, cw) in e.segments.iter().zip(&widths) {
+                let x = g.error_3d_m.as_ref();
+                let cell = format!("{:>7} {:>7}", f(x.map(|x| x.rmse)), f(x.map(|x| x.sigma2)));
+                let _ = write!(s, "  {cell:>cw$}");
+            }
+            let _ = writeln!(s);
+        }
     }
 }

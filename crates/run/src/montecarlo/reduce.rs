@@ -11,6 +11,7 @@
 use super::{AcrossTrials, EstimatorSummary, FailureEpoch, RunOptions, Summary};
 use crate::engine::trial::{EstimatorTrace, TrialResult};
 use crate::io::spill::SortedSpill;
+use crate::metrics::summary::SegmentStats;
 use crate::metrics::{
     ate_errors, ecdf_of, rpe_errors, summary_of_samples, Alignment, EpochSamples, ErrorStats,
     MeanCi95, TrajectoryStats,
@@ -56,6 +57,7 @@ impl RunReducer {
         // The coast limit does not depend on the trial's sources (only the default
         // instants do).
         let coast_limit_s = world.scoring(std::iter::empty()).coast_limit_s;
+        let segments = segments_of(world);
         Self {
             estimators: world
                 .file
@@ -64,6 +66,16 @@ impl RunReducer {
                 .map(|e| {
                     let mut acc = EstimatorAcc::new(&e.name, spill_dir, chunk);
                     acc.coast_limit_s = coast_limit_s;
+                    acc.segments = segments
+                        .iter()
+                        .map(|(label, window_s)| SegmentAcc {
+                            label: label.clone(),
+                            window_s: *window_s,
+                            e3: SortedSpill::with_chunk(spill_dir, chunk),
+                            n: 0,
+                            sum_eh_m2: 0.0,
+                        })
+                        .collect();
                     acc
                 })
                 .collect(),
@@ -138,6 +150,75 @@ impl RunReducer {
     }
 }
 
+/// The errors of one segment of the time line ([`SegmentStats`]): the 3-D errors for
+/// their percentiles, the horizontal ones as a running sum of squares.
+struct SegmentAcc {
+    label: String,
+    window_s: Option<[f64; 2]>,
+    e3: SortedSpill,
+    n: usize,
+    sum_eh_m2: f64,
+}
+
+impl SegmentAcc {
+    fn contains(&self, t_s: f64) -> bool {
+        self.window_s.is_some_and(|[a, b]| t_s >= a && t_s < b)
+    }
+
+    fn add(&mut self, e3: f64, eh: f64) -> std::io::Result<()> {
+        self.n += 1;
+        self.sum_eh_m2 += eh * eh;
+        self.e3.push(e3)
+    }
+
+    fn finish(mut self) -> std::io::Result<SegmentStats> {
+        // As for the whole run: a non-finite error withholds the statistics.
+        let finite = self.e3.non_finite() == 0 && self.sum_eh_m2.is_finite();
+        Ok(SegmentStats {
+            error_3d_m: if finite {
+                ErrorStats::from_sorted(&mut self.e3)?
+            } else {
+                None
+            },
+            rmse_h_m: (finite && self.n > 0).then(|| (self.sum_eh_m2 / self.n as f64).sqrt()),
+            label: self.label,
+            window_s: self.window_s,
+            epochs: self.n,
+        })
+    }
+}
+
+/// The world's `[[shielding]]` windows in time order, then the epochs outside all of them
+/// (labels and windows; none for a world without windows).
+fn segments_of(world: &World) -> Vec<(String, Option<[f64; 2]>)> {
+    let mut windows: Vec<_> = world.file.shielding.iter().collect();
+    if windows.is_empty() {
+        return Vec::new();
+    }
+    windows.sort_by(|a, b| {
+        a.from_s
+            .total_cmp(&b.from_s)
+            .then(a.to_s.total_cmp(&b.to_s))
+    });
+    let mut v: Vec<(String, Option<[f64; 2]>)> = windows
+        .iter()
+        .map(|w| {
+            let what = match (&w.keep_highest, &w.keep, &w.block) {
+                (Some(n), _, _) => format!(" ({n} per system)"),
+                (None, Some(k), _) => format!(" ({} kept)", k.len()),
+                (None, None, Some(b)) => format!(" ({} blocked)", b.len()),
+                _ => String::new(),
+            };
+            (
+                format!("{}–{} s{what}", w.from_s, w.to_s),
+                Some([w.from_s, w.to_s]),
+            )
+        })
+        .collect();
+    v.push(("outside shielding".to_string(), None));
+    v
+}
+
 /// One estimator's running reduction.
 struct EstimatorAcc {
     name: String,
@@ -166,6 +247,8 @@ struct EstimatorAcc {
     per_trial: PerTrial,
     /// Scratch of one trial, reused.
     trial_errs: Vec<f64>,
+    /// The shielding windows and the rest of the time line ([`segments_of`]).
+    segments: Vec<SegmentAcc>,
 }
 
 impl EstimatorAcc {
@@ -194,6 +277,7 @@ impl EstimatorAcc {
             nis_by_t: BTreeMap::new(),
             per_trial: PerTrial::default(),
             trial_errs: Vec::new(),
+            segments: Vec::new(),
         }
     }
 
@@ -217,6 +301,16 @@ impl EstimatorAcc {
                     self.e3.push(a)?;
                     self.eh.push(b)?;
                     self.trial_errs.push(a);
+                    if let Some((outside, windows)) = self.segments.split_last_mut() {
+                        let mut inside = false;
+                        for g in windows.iter_mut().filter(|g| g.contains(ep.t_s)) {
+                            g.add(a, b)?;
+                            inside = true;
+                        }
+                        if !inside {
+                            outside.add(a, b)?;
+                        }
+                    }
                     match ep.since_update_s {
                         Some(age) if age <= self.coast_limit_s => {
                             if age > 0.0 {
@@ -334,6 +428,11 @@ impl EstimatorAcc {
             name: self.name,
             pcrlb_pos_rmse_m: None,
             efficiency: None,
+            segments: self
+                .segments
+                .into_iter()
+                .map(SegmentAcc::finish)
+                .collect::<std::io::Result<_>>()?,
         };
         Ok((summary, cdf))
     }

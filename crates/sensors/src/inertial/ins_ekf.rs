@@ -248,6 +248,25 @@ pub fn error_dynamics(
     f
 }
 
+/// Closed-loop correction of the navigation solution by the 15 navigation error states
+/// `dx` (δr, δv, ψ, δα, δε): r̂ −= δr, v̂ −= δv, Ĉ ← exp([ψ×]) Ĉ, b̂_a += δα, b̂_g += δε.
+/// Shared by this filter and the tightly coupled one (`ins_tight`).
+pub(crate) fn feed_back_nav(
+    ins: &mut Strapdown,
+    accel_bias_mps2: &mut Vector3<f64>,
+    gyro_bias_rps: &mut Vector3<f64>,
+    dx: &SVector<f64, 15>,
+) {
+    let mut st = *ins.state();
+    st.pos_enu_m -= dx.fixed_rows::<3>(0);
+    st.vel_enu_mps -= dx.fixed_rows::<3>(3);
+    let psi: Vector3<f64> = dx.fixed_rows::<3>(6).into();
+    st.q_nb = UnitQuaternion::from_scaled_axis(psi) * st.q_nb;
+    ins.set_state(st);
+    *accel_bias_mps2 += dx.fixed_rows::<3>(9);
+    *gyro_bias_rps += dx.fixed_rows::<3>(12);
+}
+
 impl InsEkf {
     /// A filter starting at `initial` with zero bias estimates.
     pub fn new(initial: NavState, earth: LocalEarth, cfg: &InsEkfConfig) -> Self {
@@ -354,14 +373,12 @@ impl InsEkf {
     /// Closed-loop correction: applies the estimated errors to the solution and the bias
     /// estimates; the error state is thereby reset to zero.
     fn feed_back(&mut self, dx: &SVector<f64, 15>) {
-        let mut st = *self.ins.state();
-        st.pos_enu_m -= dx.fixed_rows::<3>(0);
-        st.vel_enu_mps -= dx.fixed_rows::<3>(3);
-        let psi: Vector3<f64> = dx.fixed_rows::<3>(6).into();
-        st.q_nb = UnitQuaternion::from_scaled_axis(psi) * st.q_nb;
-        self.ins.set_state(st);
-        self.accel_bias_mps2 += dx.fixed_rows::<3>(9);
-        self.gyro_bias_rps += dx.fixed_rows::<3>(12);
+        feed_back_nav(
+            &mut self.ins,
+            &mut self.accel_bias_mps2,
+            &mut self.gyro_bias_rps,
+            dx,
+        );
     }
 
     /// A position fix (ENU m) with its covariance (m²), e.g. from GNSS or TC-OFDM (eqs.

@@ -11,6 +11,7 @@
 use super::imu::ImuConfig;
 use super::ins_ekf::{InsEkf, InsEkfConfig};
 use super::ins_family::{Cov6, InsFamilyFilter, InsKalmanConfig, InsKalmanKind};
+use super::ins_tight::{InsTightEkf, TightClockConfig};
 use super::source::local_earth_of;
 use super::strapdown::NavState;
 use super::LocalEarth;
@@ -107,7 +108,21 @@ fn quadratic_fit(
         .then_some((v, a, inv[(1, 1)], inv[(2, 2)]))
 }
 
-/// `[estimator.ins]`: how the loosely coupled INS takes its fixes and initialises.
+/// How the INS takes its radio measurements.
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum InsCoupling {
+    /// Position (and velocity) fixes solved by least squares (seed 004's loose coupling).
+    #[default]
+    Loose,
+    /// Each pseudorange and range rate updates the INS directly, with the receiver clock
+    /// in the filter ([`InsTightEkf`]); fixes only initialise it.
+    Tight,
+}
+
+/// `[estimator.ins]`: how the INS takes its fixes and initialises.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct InsFilterConfig {
@@ -176,6 +191,13 @@ pub struct InsFilterConfig {
     /// and S/(√2 ω₀) ≈ 0.09 m/s for the default gait).
     #[serde(default)]
     pub fix_velocity_noise_mps: [f64; 2],
+    /// `"loose"` (default): the fixes above update the 15-state filter. `"tight"`: once
+    /// the filter has initialised from those fixes, every pseudorange (and, with
+    /// `use_gnss_velocity`, range rate) of the fix sources updates it directly, with the
+    /// receiver clock, its drift and the BeiDou inter-system bias as states, so that fewer
+    /// than four ranges still correct it ([`InsTightEkf`]; builtin filter only).
+    #[serde(default)]
+    pub coupling: InsCoupling,
 }
 
 impl Default for InsFilterConfig {
@@ -197,6 +219,7 @@ impl Default for InsFilterConfig {
             stf_weakening: 1.0,
             joint_fix: false,
             fix_velocity_noise_mps: [0.0, 0.0],
+            coupling: InsCoupling::Loose,
         }
     }
 }
@@ -310,6 +333,12 @@ impl InsFilterConfig {
                     "expected [horizontal, vertical] σ in m/s within [0, 100], got {:?}",
                     self.fix_velocity_noise_mps
                 ),
+            ));
+        }
+        if self.coupling == InsCoupling::Tight && self.kalman != InsKalmanKind::Builtin {
+            return Err(ConfigIssue::new(
+                "coupling",
+                "\"tight\" runs the builtin filter only (kalman = \"builtin\"); seed 004's filters take fixes",
             ));
         }
         if self.kalman == InsKalmanKind::Builtin {
@@ -440,10 +469,31 @@ pub struct InsEstimator {
     resets: u32,
 }
 
+/// Counts one scalar update of the tight filter: used with its NIS (watched, as the EKF
+/// rows' are), gated, or rejected; `Ok(None)` is a measurement without a range rate.
+fn tally_scalar(
+    out: &mut EpochOutcome,
+    r: Result<Option<super::ins_ekf::FixOutcome>, super::ins_ekf::InsFixError>,
+) {
+    match r {
+        Ok(Some(o)) if o.accepted => {
+            out.used += 1;
+            out.record_nis(o.nis, 1);
+        }
+        Ok(Some(_)) => {
+            out.rejected += 1;
+            out.rejected_gate += 1;
+        }
+        Ok(None) => {}
+        Err(_) => out.rejected += 1,
+    }
+}
+
 /// The error-state filter an [`InsEstimator`] runs.
 enum InsCore {
     Builtin(Box<InsEkf>),
     Family(Box<InsFamilyFilter>),
+    Tight(Box<InsTightEkf>),
 }
 
 impl InsCore {
@@ -451,6 +501,7 @@ impl InsCore {
         match self {
             InsCore::Builtin(k) => k.state(),
             InsCore::Family(k) => k.state(),
+            InsCore::Tight(k) => k.state(),
         }
     }
 
@@ -459,13 +510,17 @@ impl InsCore {
         match self {
             InsCore::Builtin(k) => k.covariance().fixed_view::<3, 3>(0, 0).into_owned(),
             InsCore::Family(k) => k.position_covariance_m2(),
+            InsCore::Tight(k) => k.position_covariance_m2(),
         }
     }
 
-    fn covariance(&self) -> &super::ins_ekf::Cov15 {
+    /// Whether every variance is finite, non-negative and below 10¹⁵.
+    fn variances_ok(&self) -> bool {
+        let ok = |v: f64| v.is_finite() && (0.0..1e15).contains(&v);
         match self {
-            InsCore::Builtin(k) => k.covariance(),
-            InsCore::Family(k) => k.covariance(),
+            InsCore::Builtin(k) => k.covariance().diagonal().iter().all(|v| ok(*v)),
+            InsCore::Family(k) => k.covariance().diagonal().iter().all(|v| ok(*v)),
+            InsCore::Tight(k) => k.covariance().diagonal().iter().all(|v| ok(*v)),
         }
     }
 
@@ -473,6 +528,7 @@ impl InsCore {
         match self {
             InsCore::Builtin(k) => k.propagate(s),
             InsCore::Family(k) => k.propagate(s),
+            InsCore::Tight(k) => k.propagate(s),
         }
     }
 }
@@ -541,15 +597,23 @@ impl InsEstimator {
     pub fn filter(&self) -> Option<&InsEkf> {
         match self.kf.as_ref()? {
             InsCore::Builtin(k) => Some(k),
-            InsCore::Family(_) => None,
+            InsCore::Family(_) | InsCore::Tight(_) => None,
         }
     }
 
     /// The generic filter (`kalman = "ekf"`, `"ckf"`, `"stf"`, `"rekf"`), once initialised.
     pub fn family_filter(&self) -> Option<&InsFamilyFilter> {
         match self.kf.as_ref()? {
-            InsCore::Builtin(_) => None,
+            InsCore::Builtin(_) | InsCore::Tight(_) => None,
             InsCore::Family(k) => Some(k),
+        }
+    }
+
+    /// The tightly coupled filter (`coupling = "tight"`), once initialised.
+    pub fn tight_filter(&self) -> Option<&InsTightEkf> {
+        match self.kf.as_ref()? {
+            InsCore::Tight(k) => Some(k),
+            _ => None,
         }
     }
 
@@ -577,12 +641,11 @@ impl InsEstimator {
 
     fn healthy(kf: &InsCore) -> bool {
         let st = kf.state();
-        let p = kf.covariance();
         let pos = kf.position_covariance_m2();
         st.pos_enu_m.iter().all(|v| v.is_finite())
             && st.vel_enu_mps.iter().all(|v| v.is_finite())
             && st.q_nb.coords.iter().all(|v| v.is_finite())
-            && (0..15).all(|i| p[(i, i)].is_finite() && p[(i, i)] >= 0.0 && p[(i, i)] < 1e15)
+            && kf.variances_ok()
             && (0..3).all(|i| pos[(i, i)].is_finite() && pos[(i, i)] >= 0.0 && pos[(i, i)] < 1e15)
     }
 
@@ -638,6 +701,17 @@ impl InsEstimator {
         }
         let pos = fix.pos_enu_m + st.vel_enu_mps * lag;
         match kf {
+            InsCore::Tight(kf) => match kf.update_position(&pos, &fix.pos_cov_m2) {
+                Ok(o) if o.accepted => {
+                    out.used += fix.n;
+                    out.record_nis(o.nis, 3);
+                }
+                Ok(o) if o.nis > IMPLAUSIBLE_FIX_NIS => {
+                    out.rejected += fix.n;
+                    self.reset(out);
+                }
+                _ => out.rejected += fix.n,
+            },
             InsCore::Builtin(kf) => {
                 let [nh, nv] = self.cfg.fix_velocity_noise_mps;
                 let extra = Matrix3::from_diagonal(&Vector3::new(nh * nh, nh * nh, nv * nv));
@@ -793,6 +867,14 @@ impl InsEstimator {
             q_nb,
         };
         let kf = match self.cfg.kalman {
+            InsKalmanKind::Builtin if self.cfg.coupling == InsCoupling::Tight => {
+                InsCore::Tight(Box::new(InsTightEkf::new(
+                    init,
+                    self.earth,
+                    &c,
+                    &TightClockConfig::default(),
+                )))
+            }
             InsKalmanKind::Builtin => InsCore::Builtin(Box::new(InsEkf::new(init, self.earth, &c))),
             _ => match InsFamilyFilter::new(init, self.earth, &c, &self.cfg.kalman_config()) {
                 Ok(k) => InsCore::Family(Box::new(k)),
@@ -802,6 +884,50 @@ impl InsEstimator {
         if Self::healthy(&kf) {
             self.kf = Some(kf);
             self.ring = [None; INIT_RING];
+        }
+    }
+
+    /// `coupling = "tight"`, once initialised: every range (and range rate) of the batch
+    /// from the estimator's systems updates the filter, and position items are fixes.
+    fn tight_batch(&mut self, batch: &MeasurementBatch, out: &mut EpochOutcome) {
+        let t_s = batch.t.seconds_since(self.start);
+        let Some(InsCore::Tight(kf)) = &mut self.kf else {
+            return;
+        };
+        let lag = t_s - kf.state().t_s;
+        if !(lag.abs() <= self.cfg.max_fix_lag_s) {
+            out.rejected += batch.items.len() as u32;
+            return;
+        }
+        let systems = &self.systems;
+        for m in batch
+            .ranges()
+            .filter(|m| systems.is_empty() || systems.contains(&m.system()))
+        {
+            tally_scalar(out, kf.update_range(m, &self.frame, lag).map(Some));
+            if self.cfg.use_gnss_velocity {
+                tally_scalar(out, kf.update_range_rate(m, &self.frame, lag));
+            }
+        }
+        for m in &batch.items {
+            if let Measurement::Position(p) = m {
+                let f = Fix {
+                    t_s,
+                    pos_enu_m: self.frame.enu_of_ecef(&p.pos_ecef_m),
+                    pos_cov_m2: enu_cov(&self.frame, &p.cov_m2),
+                    vel: None,
+                    n: 1,
+                };
+                if f.pos_enu_m
+                    .iter()
+                    .chain(f.pos_cov_m2.iter())
+                    .all(|v| v.is_finite())
+                {
+                    self.apply_fix(&f, out);
+                } else {
+                    out.rejected += 1;
+                }
+            }
         }
     }
 
@@ -913,7 +1039,9 @@ impl Estimator for InsEstimator {
                 }
             }
         } else if self.cfg.fix_sources.contains(&batch.source) {
-            if self.cfg.joint_fix {
+            if matches!(self.kf, Some(InsCore::Tight(_))) {
+                self.tight_batch(batch, &mut out);
+            } else if self.cfg.joint_fix {
                 self.collect_joint(batch, &mut out);
             } else {
                 let t_s = batch.t.seconds_since(self.start);

@@ -55,6 +55,7 @@ pub mod imu;
 pub mod ins_ekf;
 pub mod ins_estimator;
 pub mod ins_family;
+pub mod ins_tight;
 pub mod magnetometer;
 pub mod pdr;
 pub mod pdr_estimator;

@@ -1,0 +1,560 @@
+//! The tightly coupled INS: the 15-state error-state filter of [`super::ins_ekf`] extended
+//! by the receiver clock, updated with each pseudorange and pseudorange rate directly
+//! instead of with a least-squares fix (Groves, *Principles of GNSS, Inertial, and
+//! Multisensor Integrated Navigation Systems*, 2nd ed., 2013, §14.3.3; the measurement
+//! model is seed 000's, eqs. 9–17, as [`crate::fusion::ekf11`] uses it).
+//!
+//! # Why
+//!
+//! A loosely coupled INS needs a position fix, and a fix needs four ranges on one clock
+//! (five with a BeiDou inter-system bias). Under a bridge or in a deep canyon, where two
+//! satellites of each system are left, the fix is missing or poor and the INS coasts. In
+//! the tight filter every range still corrects the INS along its line of sight, with the
+//! clock carried by the filter from the epochs before: fewer than four ranges still help.
+//!
+//! # State
+//!
+//! X = [δr, δv, ψ, δα, δε, δb, δḃ, δisb_bds] (18): the loosely coupled filter's 15 error
+//! states, then the errors of the receiver clock bias `b = c·δt` (m), its drift `ḃ` (m/s)
+//! and the BeiDou inter-system bias (m). Errors are estimate minus truth throughout, and
+//! the closed loop feeds every estimated error back and resets it to zero after each
+//! update, as in [`super::ins_ekf::InsEkf`].
+//!
+//! GPS, DTMB and TC-OFDM ranges share the clock `b` (seed 000 §5.1: the DTMB receiver is
+//! triggered from the GPS 1PPS; DTMB single-frequency networks run on GPS time) and BeiDou
+//! ranges see `b + isb_bds`.
+//!
+//! # Dynamics
+//!
+//! The navigation block is the loosely coupled filter's Φ = I + F Δt. The clock is two
+//! integrators driven by white frequency and white frequency-rate noise (Brown & Hwang,
+//! 4th ed., §9.3; seed 000 eq. 8) and the inter-system bias a random walk:
+//!
+//! ```text
+//! Φ_c = [[1, Δt], [0, 1]],   Q_c = [[S_t Δt + S_f Δt³/3, S_f Δt²/2], [S_f Δt²/2, S_f Δt]]
+//! Q_isb = S_isb Δt
+//! ```
+//!
+//! # Measurements
+//!
+//! With `u` the unit vector from the receiver to the emitter (ECEF), `r̂` the INS position
+//! moved to the measurement time by its velocity, and `R` the ECEF → ENU rotation:
+//!
+//! ```text
+//! pseudorange   ρ̂ = ‖r_s − r̂‖ + b̂ (+ isb̂ for BDS)    z = ρ̂ − ρ,  H = [−(R u)ᵀ 0 0 0 0 | 1 0 (1)]
+//! range rate    ρ̂̇ = u·(v_s − v̂) + ḃ̂                  z = ρ̂̇ − ρ̇,  H = [0 −(R u)ᵀ 0 0 0 | 0 1 0]
+//! ```
+//!
+//! Each is a scalar update in the Joseph form, gated on its normalised innovation squared
+//! at the χ²(1) 99.9 % quantile by default, as the EKF rows are
+//! ([`crate::fusion::ekf11::CHI2_1DOF_P999`]); a position fix (FM, a magnetic landmark) is a
+//! three-dimensional update with H = [I₃ 0].
+//!
+//! # Clock initialisation
+//!
+//! The clock starts diffuse: b̂ = 0 with σ = 1 ms (3·10⁵ m, the span of a receiver clock
+//! that keeps itself within a millisecond of GPS time), so the first range of the first
+//! epoch sets it and nothing else; the drift and inter-system-bias priors are the EKF's
+//! ([`crate::fusion::ekf11::Ekf11Config`], [`crate::fusion::ekf11::IsbConfig`]).
+
+use super::ins_ekf::{
+    feed_back_nav, initial_covariance, mechanise, process_noise_rate, Cov15, FixOutcome,
+    InsEkfConfig, InsFixError,
+};
+use super::strapdown::{NavState, Strapdown};
+use super::LocalEarth;
+use crate::core::{EnuFrame, System};
+use crate::fusion::ekf11::{Ekf11Config, IsbConfig};
+use crate::measurement::{ImuSample, RangeMeasurement};
+use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+
+/// Number of error states.
+pub const N_TIGHT: usize = 18;
+/// The error covariance.
+pub type Cov18 = SMatrix<f64, N_TIGHT, N_TIGHT>;
+
+/// Indices of the clock states after the 15 navigation states.
+pub mod tidx {
+    /// Receiver clock bias `c·δt` (m), shared by GPS, DTMB and TC-OFDM.
+    pub const CLOCK_BIAS: usize = 15;
+    /// Receiver clock drift (m/s).
+    pub const CLOCK_DRIFT: usize = 16;
+    /// BeiDou inter-system bias (m).
+    pub const ISB_BDS: usize = 17;
+}
+
+/// One millisecond of receiver clock in metres: the diffuse prior of the clock bias.
+const DIFFUSE_CLOCK_SIGMA_M: f64 = 1.0e-3 * crate::core::C_MPS;
+
+/// The clock model and the range gate of [`InsTightEkf`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TightClockConfig {
+    /// `S_t` (m²/s).
+    pub clock_bias_psd_m2ps: f64,
+    /// `S_f` (m²/s³).
+    pub clock_drift_psd_m2ps3: f64,
+    /// Initial σ of the clock bias (m).
+    pub init_clock_bias_sigma_m: f64,
+    /// Initial σ of the clock drift (m/s).
+    pub init_clock_drift_sigma_mps: f64,
+    /// Initial σ of the BeiDou inter-system bias (m).
+    pub isb_bds_init_sigma_m: f64,
+    /// Random-walk PSD of the inter-system bias (m²/s).
+    pub isb_bds_psd_m2ps: f64,
+    /// NIS gate of each scalar range or range-rate update (χ²(1)); `None` accepts all.
+    pub gate_chi2: Option<f64>,
+}
+
+impl Default for TightClockConfig {
+    /// The EKF rows' TCXO, drift prior, inter-system-bias model and gate, and a diffuse
+    /// clock bias.
+    fn default() -> Self {
+        let ekf = Ekf11Config::default();
+        let isb = IsbConfig::default();
+        Self {
+            clock_bias_psd_m2ps: ekf.clock_bias_psd_m2ps,
+            clock_drift_psd_m2ps3: ekf.clock_drift_psd_m2ps3,
+            init_clock_bias_sigma_m: DIFFUSE_CLOCK_SIGMA_M,
+            init_clock_drift_sigma_mps: ekf.init_clock_drift_sigma_mps,
+            isb_bds_init_sigma_m: isb.initial_sigma_m,
+            isb_bds_psd_m2ps: isb.psd_m2ps,
+            gate_chi2: ekf.gate_chi2,
+        }
+    }
+}
+
+/// The closed-loop tightly coupled INS / range Kalman filter.
+#[derive(Clone, Debug)]
+pub struct InsTightEkf {
+    ins: Strapdown,
+    p: Cov18,
+    q_nav_rate: SVector<f64, 15>,
+    inv_tau: f64,
+    accel_bias_mps2: Vector3<f64>,
+    gyro_bias_rps: Vector3<f64>,
+    clock_bias_m: f64,
+    clock_drift_mps: f64,
+    isb_bds_m: f64,
+    clock: TightClockConfig,
+    /// The implausible-jump bound on a position fix's NIS (χ²(3)).
+    position_gate: Option<f64>,
+}
+
+impl InsTightEkf {
+    /// A filter starting at `initial` with zero bias estimates and the clock of `clock`.
+    pub fn new(
+        initial: NavState,
+        earth: LocalEarth,
+        cfg: &InsEkfConfig,
+        clock: &TightClockConfig,
+    ) -> Self {
+        let (q, inv_tau) = process_noise_rate(cfg);
+        let mut p = Cov18::zeros();
+        p.fixed_view_mut::<15, 15>(0, 0)
+            .copy_from(&initial_covariance(cfg));
+        p[(tidx::CLOCK_BIAS, tidx::CLOCK_BIAS)] = clock.init_clock_bias_sigma_m.powi(2);
+        p[(tidx::CLOCK_DRIFT, tidx::CLOCK_DRIFT)] = clock.init_clock_drift_sigma_mps.powi(2);
+        p[(tidx::ISB_BDS, tidx::ISB_BDS)] = clock.isb_bds_init_sigma_m.powi(2);
+        Self {
+            ins: Strapdown::new(initial, earth),
+            p,
+            q_nav_rate: q,
+            inv_tau,
+            accel_bias_mps2: Vector3::zeros(),
+            gyro_bias_rps: Vector3::zeros(),
+            clock_bias_m: 0.0,
+            clock_drift_mps: 0.0,
+            isb_bds_m: 0.0,
+            clock: *clock,
+            position_gate: cfg.nis_gate,
+        }
+    }
+
+    /// The corrected navigation solution.
+    pub fn state(&self) -> &NavState {
+        self.ins.state()
+    }
+
+    /// The error covariance (order δr, δv, ψ, δα, δε, δb, δḃ, δisb).
+    pub fn covariance(&self) -> &Cov18 {
+        &self.p
+    }
+
+    /// The position block of the covariance (ENU m²).
+    pub fn position_covariance_m2(&self) -> Matrix3<f64> {
+        self.p.fixed_view::<3, 3>(0, 0).into_owned()
+    }
+
+    /// The navigation block of the covariance, as the loosely coupled filter reports it.
+    pub fn navigation_covariance(&self) -> Cov15 {
+        self.p.fixed_view::<15, 15>(0, 0).into_owned()
+    }
+
+    /// The receiver clock bias estimate (m).
+    pub fn clock_bias_m(&self) -> f64 {
+        self.clock_bias_m
+    }
+
+    /// The receiver clock drift estimate (m/s).
+    pub fn clock_drift_mps(&self) -> f64 {
+        self.clock_drift_mps
+    }
+
+    /// The BeiDou inter-system bias estimate (m).
+    pub fn isb_bds_m(&self) -> f64 {
+        self.isb_bds_m
+    }
+
+    /// Mechanises one IMU sample and propagates the covariance and the clock over the
+    /// interval since the previous sample. Does not allocate.
+    pub fn propagate(&mut self, s: &ImuSample) {
+        let Some((dt, f, _)) = mechanise(
+            &mut self.ins,
+            s,
+            &self.accel_bias_mps2,
+            &self.gyro_bias_rps,
+            self.inv_tau,
+        ) else {
+            return;
+        };
+        let mut phi = Cov18::identity();
+        phi.fixed_view_mut::<15, 15>(0, 0)
+            .copy_from(&(Cov15::identity() + f * dt));
+        phi[(tidx::CLOCK_BIAS, tidx::CLOCK_DRIFT)] = dt;
+        self.p = phi * self.p * phi.transpose();
+        for i in 0..15 {
+            self.p[(i, i)] += self.q_nav_rate[i] * dt;
+        }
+        let (st, sf) = (
+            self.clock.clock_bias_psd_m2ps,
+            self.clock.clock_drift_psd_m2ps3,
+        );
+        let (b, d) = (tidx::CLOCK_BIAS, tidx::CLOCK_DRIFT);
+        self.p[(b, b)] += st * dt + sf * dt.powi(3) / 3.0;
+        self.p[(b, d)] += sf * dt * dt / 2.0;
+        self.p[(d, b)] += sf * dt * dt / 2.0;
+        self.p[(d, d)] += sf * dt;
+        self.p[(tidx::ISB_BDS, tidx::ISB_BDS)] += self.clock.isb_bds_psd_m2ps * dt;
+        self.p = 0.5 * (self.p + self.p.transpose());
+        self.clock_bias_m += self.clock_drift_mps * dt;
+    }
+
+    /// The Joseph-form update of an `M`-dimensional measurement with innovation `z`
+    /// (predicted minus measured), Jacobian `h` and noise `r`, gated at `gate`; the
+    /// estimated errors are then fed back. A result with a non-finite or negative variance
+    /// is refused and leaves the filter unchanged.
+    fn update<const M: usize>(
+        &mut self,
+        z: SVector<f64, M>,
+        h: SMatrix<f64, M, N_TIGHT>,
+        r: SMatrix<f64, M, M>,
+        gate: Option<f64>,
+        what: &'static str,
+    ) -> Result<FixOutcome, InsFixError> {
+        if z.iter()
+            .chain(r.iter())
+            .chain(h.iter())
+            .any(|v| !v.is_finite())
+        {
+            return Err(InsFixError::NonFinite { what });
+        }
+        let hp = h * self.p;
+        let s = hp * h.transpose() + r;
+        let chol = s
+            .cholesky()
+            .ok_or(InsFixError::NotPositiveDefinite { what })?;
+        let nis = z.dot(&chol.solve(&z));
+        if gate.is_some_and(|g| nis > g) {
+            return Ok(FixOutcome {
+                nis,
+                accepted: false,
+            });
+        }
+        // K = P Hᵀ S⁻¹ = (S⁻¹ H P)ᵀ since P and S are symmetric.
+        let k = chol.solve(&hp).transpose();
+        let dx = k * z;
+        let ikh = Cov18::identity() - k * h;
+        let p = ikh * self.p * ikh.transpose() + k * r * k.transpose();
+        if dx.iter().any(|v| !v.is_finite())
+            || (0..N_TIGHT).any(|i| !(p[(i, i)].is_finite() && p[(i, i)] >= 0.0))
+        {
+            return Err(InsFixError::NotPositiveDefinite { what });
+        }
+        self.p = 0.5 * (p + p.transpose());
+        self.feed_back(&dx);
+        Ok(FixOutcome {
+            nis,
+            accepted: true,
+        })
+    }
+
+    fn feed_back(&mut self, dx: &SVector<f64, N_TIGHT>) {
+        let nav: SVector<f64, 15> = dx.fixed_rows::<15>(0).into_owned();
+        feed_back_nav(
+            &mut self.ins,
+            &mut self.accel_bias_mps2,
+            &mut self.gyro_bias_rps,
+            &nav,
+        );
+        self.clock_bias_m -= dx[tidx::CLOCK_BIAS];
+        self.clock_drift_mps -= dx[tidx::CLOCK_DRIFT];
+        self.isb_bds_m -= dx[tidx::ISB_BDS];
+    }
+
+    /// The receiver position (ECEF) and velocity (ECEF) the INS predicts `lag_s` after its
+    /// last sample, and the unit vector from there to the emitter with its distance.
+    fn geometry(
+        &self,
+        m: &RangeMeasurement,
+        frame: &EnuFrame,
+        lag_s: f64,
+    ) -> (Vector3<f64>, Vector3<f64>, f64) {
+        let st = self.ins.state();
+        let rx = frame.ecef_of_enu(&(st.pos_enu_m + st.vel_enu_mps * lag_s));
+        let v = frame.ecef_vector_of_enu(&st.vel_enu_mps);
+        let los = m.emitter_pos_ecef_m - rx;
+        let d = los.norm();
+        (los / d, v, d)
+    }
+
+    /// One pseudorange, measured `lag_s` after the INS's last sample (see the module
+    /// documentation for the model).
+    ///
+    /// # Errors
+    /// [`InsFixError`] for a non-finite measurement or noise that is not positive.
+    pub fn update_range(
+        &mut self,
+        m: &RangeMeasurement,
+        frame: &EnuFrame,
+        lag_s: f64,
+    ) -> Result<FixOutcome, InsFixError> {
+        let what = "pseudorange";
+        if !(m.sigma_m.is_finite() && m.sigma_m > 0.0) {
+            return Err(InsFixError::NotPositiveDefinite { what });
+        }
+        let (u, _, d) = self.geometry(m, frame, lag_s);
+        let bds = m.system() == System::Bds;
+        let clock = self.clock_bias_m
+            + self.clock_drift_mps * lag_s
+            + if bds { self.isb_bds_m } else { 0.0 };
+        let z = SVector::<f64, 1>::new(d + clock - m.pseudorange_m);
+        let u_enu = frame.enu_vector_of_ecef(&u);
+        let mut h = SMatrix::<f64, 1, N_TIGHT>::zeros();
+        for i in 0..3 {
+            h[(0, i)] = -u_enu[i];
+        }
+        h[(0, tidx::CLOCK_BIAS)] = 1.0;
+        if bds {
+            h[(0, tidx::ISB_BDS)] = 1.0;
+        }
+        let r = SMatrix::<f64, 1, 1>::new(m.sigma_m * m.sigma_m);
+        self.update(z, h, r, self.clock.gate_chi2, what)
+    }
+
+    /// One pseudorange rate, if the measurement has one (`Ok(None)` otherwise).
+    ///
+    /// # Errors
+    /// As [`InsTightEkf::update_range`].
+    pub fn update_range_rate(
+        &mut self,
+        m: &RangeMeasurement,
+        frame: &EnuFrame,
+        lag_s: f64,
+    ) -> Result<Option<FixOutcome>, InsFixError> {
+        let Some(rate) = m.range_rate_mps else {
+            return Ok(None);
+        };
+        let what = "pseudorange rate";
+        if !(m.sigma_rate_mps.is_finite() && m.sigma_rate_mps > 0.0) {
+            return Err(InsFixError::NotPositiveDefinite { what });
+        }
+        let (u, v, _) = self.geometry(m, frame, lag_s);
+        let z = SVector::<f64, 1>::new(
+            u.dot(&(m.emitter_vel_ecef_mps - v)) + self.clock_drift_mps - rate,
+        );
+        let u_enu = frame.enu_vector_of_ecef(&u);
+        let mut h = SMatrix::<f64, 1, N_TIGHT>::zeros();
+        for i in 0..3 {
+            h[(0, 3 + i)] = -u_enu[i];
+        }
+        h[(0, tidx::CLOCK_DRIFT)] = 1.0;
+        let r = SMatrix::<f64, 1, 1>::new(m.sigma_rate_mps * m.sigma_rate_mps);
+        self.update(z, h, r, self.clock.gate_chi2, what).map(Some)
+    }
+
+    /// A position fix (ENU m) at the filter's time, with its covariance (m²).
+    ///
+    /// # Errors
+    /// As [`InsTightEkf::update_range`].
+    pub fn update_position(
+        &mut self,
+        pos_enu_m: &Vector3<f64>,
+        cov_m2: &Matrix3<f64>,
+    ) -> Result<FixOutcome, InsFixError> {
+        let z = self.ins.state().pos_enu_m - pos_enu_m;
+        let mut h = SMatrix::<f64, 3, N_TIGHT>::zeros();
+        h.fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&Matrix3::identity());
+        self.update(z, h, *cov_m2, self.position_gate, "position")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::{EmitterId, Geodetic};
+    use crate::inertial::imu::{ImuConfig, ImuGrade};
+    use nalgebra::UnitQuaternion;
+
+    fn frame() -> EnuFrame {
+        EnuFrame::new(Geodetic::from_deg(40.0, 116.4, 50.0))
+    }
+
+    fn filter_at_rest(frame: &EnuFrame) -> InsTightEkf {
+        let earth = crate::inertial::source::local_earth_of(frame);
+        let cfg = InsEkfConfig::from_imu(&ImuConfig::grade(ImuGrade::Mid).resolve().unwrap());
+        let st = NavState {
+            t_s: 0.0,
+            pos_enu_m: Vector3::zeros(),
+            vel_enu_mps: Vector3::zeros(),
+            q_nb: UnitQuaternion::identity(),
+        };
+        InsTightEkf::new(st, earth, &cfg, &TightClockConfig::default())
+    }
+
+    fn range(
+        frame: &EnuFrame,
+        system: System,
+        az: f64,
+        el: f64,
+        rx_enu: Vector3<f64>,
+    ) -> RangeMeasurement {
+        let d_enu = Vector3::new(el.cos() * az.sin(), el.cos() * az.cos(), el.sin());
+        let e = frame.ecef_of_enu(&(d_enu * 2.0e7));
+        RangeMeasurement {
+            emitter: EmitterId { system, number: 1 },
+            emitter_pos_ecef_m: e,
+            emitter_vel_ecef_mps: Vector3::zeros(),
+            pseudorange_m: (e - frame.ecef_of_enu(&rx_enu)).norm(),
+            sigma_m: 3.0,
+            range_rate_mps: None,
+            sigma_rate_mps: 0.1,
+            cn0_dbhz: 45.0,
+            elevation_rad: el,
+        }
+    }
+
+    #[test]
+    fn the_first_range_sets_the_diffuse_clock_and_leaves_the_position() {
+        // A diffuse clock prior (σ 3e5 m) against a 5 m position prior: the Kalman gain on
+        // the clock is σ_b²/(σ_b² + ‖h_r‖² σ_r² + σ²) → 1, on the position ≈ 5²/σ_b² → 0.
+        let f = frame();
+        let mut k = filter_at_rest(&f);
+        let mut m = range(&f, System::Gps, 0.3, 0.9, Vector3::zeros());
+        m.pseudorange_m += 30_000.0; // a clock of 100 µs
+        let o = k.update_range(&m, &f, 0.0).unwrap();
+        assert!(o.accepted);
+        let pb = DIFFUSE_CLOCK_SIGMA_M.powi(2);
+        let expect = 30_000.0 * pb / (pb + 25.0 + 9.0);
+        assert!(
+            (k.clock_bias_m() - expect).abs() < 1e-6,
+            "{}",
+            k.clock_bias_m()
+        );
+        assert!(k.state().pos_enu_m.norm() < 1e-4);
+        // The clock is now known to the range noise and the position uncertainty.
+        let sb = k.covariance()[(tidx::CLOCK_BIAS, tidx::CLOCK_BIAS)].sqrt();
+        assert!((sb - (25.0f64 + 9.0).sqrt()).abs() < 1e-3, "{sb}");
+    }
+
+    #[test]
+    fn a_range_with_a_known_clock_corrects_the_position_along_its_line_of_sight() {
+        // With the clock pinned by many ranges, one more range 4 m long from straight
+        // above moves the solution up by the scalar Kalman gain P/(P + σ²) on that axis.
+        let f = frame();
+        let mut k = filter_at_rest(&f);
+        let dirs = [(0.0, 0.3), (2.1, 0.3), (4.2, 0.3)];
+        for _ in 0..200 {
+            for &(az, el) in &dirs {
+                let m = range(&f, System::Gps, az, el, Vector3::zeros());
+                k.update_range(&m, &f, 0.0).unwrap();
+            }
+        }
+        let before = *k.state();
+        let p = k.covariance();
+        let mut m = range(
+            &f,
+            System::Gps,
+            1.0,
+            std::f64::consts::FRAC_PI_2,
+            Vector3::zeros(),
+        );
+        m.pseudorange_m -= 4.0; // the receiver is 4 m higher than the INS says
+                                // Predicted gain from the covariance: h = [−u, 1 at the clock].
+        let mut h = SVector::<f64, N_TIGHT>::zeros();
+        h[2] = -1.0;
+        h[tidx::CLOCK_BIAS] = 1.0;
+        let s = (h.transpose() * p * h)[0] + 9.0;
+        let gain_up = (p * h)[2] / s;
+        k.update_range(&m, &f, 0.0).unwrap();
+        let moved = k.state().pos_enu_m.z - before.pos_enu_m.z;
+        // z = ρ̂ − ρ = +4: δr_up = gain·4 is subtracted.
+        assert!(
+            (moved + gain_up * 4.0).abs() < 1e-6,
+            "{moved} vs {}",
+            -gain_up * 4.0
+        );
+        assert!(moved > 0.5, "{moved}");
+    }
+
+    #[test]
+    fn a_beidou_range_sees_the_inter_system_bias() {
+        let f = frame();
+        let mut k = filter_at_rest(&f);
+        for _ in 0..50 {
+            for (i, &(az, el)) in [(0.0, 0.5), (2.0, 0.6), (4.0, 0.7), (1.0, 1.2)]
+                .iter()
+                .enumerate()
+            {
+                let m = range(&f, System::Gps, az, el, Vector3::zeros());
+                k.update_range(&m, &f, 0.0).unwrap();
+                let mut b = range(&f, System::Bds, az + 0.5, el, Vector3::zeros());
+                b.emitter.number = i as u16 + 1;
+                b.pseudorange_m += 4.5; // 15 ns
+                k.update_range(&b, &f, 0.0).unwrap();
+            }
+        }
+        assert!((k.isb_bds_m() - 4.5).abs() < 0.2, "{}", k.isb_bds_m());
+        assert!(k.clock_bias_m().abs() < 0.2, "{}", k.clock_bias_m());
+        assert!(k.state().pos_enu_m.norm() < 0.2);
+    }
+
+    #[test]
+    fn bad_ranges_are_typed_errors_and_outliers_are_gated() {
+        let f = frame();
+        let mut k = filter_at_rest(&f);
+        let mut m = range(&f, System::Gps, 0.0, 0.5, Vector3::zeros());
+        m.sigma_m = 0.0;
+        assert!(k.update_range(&m, &f, 0.0).is_err());
+        m.sigma_m = 3.0;
+        m.pseudorange_m = f64::NAN;
+        assert_eq!(
+            k.update_range(&m, &f, 0.0).unwrap_err(),
+            InsFixError::NonFinite {
+                what: "pseudorange"
+            }
+        );
+        // Pin the clock, then a range 500 m long is refused by the χ²(1) gate.
+        for &(az, el) in &[(0.0, 0.5), (2.0, 0.6), (4.0, 0.7), (1.0, 1.2)] {
+            k.update_range(&range(&f, System::Gps, az, el, Vector3::zeros()), &f, 0.0)
+                .unwrap();
+        }
+        let before = k.clone();
+        let mut m = range(&f, System::Gps, 3.0, 0.8, Vector3::zeros());
+        m.pseudorange_m += 500.0;
+        let o = k.update_range(&m, &f, 0.0).unwrap();
+        assert!(!o.accepted && o.nis > 1000.0);
+        assert_eq!(k.state(), before.state());
+        assert_eq!(k.covariance(), before.covariance());
+    }
+}
