@@ -331,7 +331,8 @@ fn bad_output_directories_and_resumes_are_refused_clearly() {
 }
 
 /// `trials.parquet` as pandas reads it: the columns, the row count and the values agree
-/// with `epochs.csv` and with the ENU/ECEF geometry.
+/// with `epochs.csv` and with the ENU/ECEF geometry; and the summary's per-segment
+/// statistics are what pandas computes from `epochs.csv`.
 #[test]
 fn trials_parquet_reads_in_pandas() {
     let d = tmp_dir("mc-parquet");
@@ -371,6 +372,33 @@ h = np.hypot((p.est_e_m - p.truth_e_m)[m], (p.est_n_m - p.truth_n_m)[m])
 assert np.abs(h - p.err_h_m[m]).max() < 1e-2, np.abs(h - p.err_h_m[m]).max()
 assert str(p.numerical_failure.dtype) == "bool"
 assert p.n_gps.max() > 4 and p.n_bds.max() > 0
+# The summary's per-segment statistics, recomputed by pandas from epochs.csv: the epochs
+# inside each shielding window, then those outside every window.
+import json
+s = json.load(open(out + "/summary.json"))
+for e in s["estimators"]:
+    g = c[c.estimator == e["name"]]
+    segs = e["segments"]
+    assert [x["label"] for x in segs] == [
+        "40–80 s (3 per system)", "120–150 s (2 per system)", "outside shielding"], segs
+    inside = np.zeros(len(g), bool)
+    for x in segs:
+        if "window_s" in x:
+            a, b = x["window_s"]
+            m = ((g.t_s >= a) & (g.t_s < b)).to_numpy()
+            inside |= m
+        else:
+            m = ~inside
+        sel = g[m & g.err_3d_m.notna().to_numpy()]
+        assert x["epochs"] == len(sel), (e["name"], x["label"], x["epochs"], len(sel))
+        if len(sel) == 0:
+            assert x["error_3d_m"] is None
+            continue
+        rms = np.sqrt((sel.err_3d_m ** 2).mean())
+        q = np.quantile(sel.err_3d_m, 0.9545)
+        st = x["error_3d_m"]
+        assert abs(rms - st["rmse"]) < 1e-5 and abs(q - st["sigma2"]) < 1e-5, (e["name"], x, rms, q)
+        assert abs(np.sqrt((sel.err_h_m ** 2).mean()) - x["rmse_h_m"]) < 1e-5
 print("OK", len(p))
 "#;
     match Command::new("python3")

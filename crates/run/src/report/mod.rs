@@ -238,7 +238,35 @@ fn table(h: &mut String, s: &Summary) {
     }
     h.push_str("</table>\n<p class=\"meta\">Metres. ATE and RPE follow the TUM benchmark in ECEF without alignment, RPE over Δ = 1 s, as seed 000 computes them; the aligned ATE first fits each trial's trajectory to the truth by a rigid (Horn) transform. NEES is of the position (3 degrees of freedom, 3 for a consistent filter) with the two-sided 95 % χ² band of its mean; NIS is summed over each epoch's updates, against the summed dimensions (its expectation for a consistent filter; particle filters have none). The PCRLB is the posterior Cramér–Rao bound on the position RMSE (Tichavský, Muravchik &amp; Nehorai 1998) for the estimators whose process model it covers: no unbiased estimator of that model does better, so RMSE / PCRLB is 1 for an efficient one.</p>\n");
     flags(h, s);
+    segments(h, s);
     across(h, s);
+}
+
+/// The 3-D error inside each shielding window and outside them (worlds with windows).
+fn segments(h: &mut String, s: &Summary) {
+    let Some(first) = s.estimators.iter().find(|e| !e.segments.is_empty()) else {
+        return;
+    };
+    h.push_str("<h3>By segment</h3>\n<table><tr><th>estimator</th>");
+    for g in &first.segments {
+        let _ = write!(h, "<th>{} RMSE</th><th>2σ</th>", escape(&g.label));
+    }
+    h.push_str("</tr>\n");
+    for e in &s.estimators {
+        h.push_str("<tr>");
+        h.push_str(&name_cell(e));
+        for g in &e.segments {
+            let x = g.error_3d_m.as_ref();
+            let _ = write!(
+                h,
+                "<td>{}</td><td>{}</td>",
+                opt(x.map(|x| x.rmse), 2),
+                opt(x.map(|x| x.sigma2), 2)
+            );
+        }
+        h.push_str("</tr>\n");
+    }
+    h.push_str("</table>\n<p class=\"meta\">Metres. The 3-D error of the epochs inside each <code>[[shielding]]</code> window of the world and of those outside every window: where each source helps.</p>\n");
 }
 
 /// The footnotes of the flags, naming each flagged estimator and what happened.
