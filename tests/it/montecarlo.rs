@@ -332,7 +332,8 @@ fn bad_output_directories_and_resumes_are_refused_clearly() {
 
 /// `trials.parquet` as pandas reads it: the columns, the row count and the values agree
 /// with `epochs.csv` and with the ENU/ECEF geometry; and the summary's per-segment
-/// statistics are what pandas computes from `epochs.csv`.
+/// statistics and across-trial RMSE intervals are what pandas and scipy compute from
+/// `epochs.csv`.
 #[test]
 fn trials_parquet_reads_in_pandas() {
     let d = tmp_dir("mc-parquet");
@@ -350,6 +351,7 @@ import sys
 try:
     import pandas as pd, numpy as np
     import pyarrow  # noqa: F401
+    import scipy  # noqa: F401
 except ImportError as e:
     print("SKIP", e); sys.exit(0)
 out = sys.argv[1]
@@ -399,6 +401,18 @@ for e in s["estimators"]:
         st = x["error_3d_m"]
         assert abs(rms - st["rmse"]) < 1e-5 and abs(q - st["sigma2"]) < 1e-5, (e["name"], x, rms, q)
         assert abs(np.sqrt((sel.err_h_m ** 2).mean()) - x["rmse_h_m"]) < 1e-5
+    # The across-trial interval of the RMSE: a Student t interval of the mean of the
+    # per-trial RMSEs (scipy's t quantile) taken on the log scale, x̄·exp(∓h/x̄).
+    from scipy import stats
+    per = g.dropna(subset=["err_3d_m"]).groupby("trial").err_3d_m.apply(
+        lambda v: np.sqrt((v ** 2).mean()))
+    n = len(per)
+    xbar, sd = per.mean(), per.std(ddof=1)
+    h = stats.t.ppf(0.975, n - 1) * sd / np.sqrt(n)
+    lo, hi = e["across_trials"]["rmse_ci95_m"]
+    assert abs(lo - xbar * np.exp(-h / xbar)) < 1e-4 and abs(hi - xbar * np.exp(h / xbar)) < 1e-4, (
+        e["name"], lo, hi, xbar, h)
+    assert 0 < lo < xbar < hi
 print("OK", len(p))
 "#;
     match Command::new("python3")
@@ -411,7 +425,10 @@ print("OK", len(p))
             let text = String::from_utf8_lossy(&o.stdout);
             assert!(o.status.success(), "{text}{}", stderr(&o));
             if text.starts_with("SKIP") {
-                crate::common::skip(&format!("pandas/pyarrow not installed ({})", text.trim()));
+                crate::common::skip(&format!(
+                    "pandas/pyarrow/scipy not installed ({})",
+                    text.trim()
+                ));
             } else {
                 assert!(text.starts_with("OK"), "{text}");
             }

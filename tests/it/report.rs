@@ -346,7 +346,8 @@ fn the_layout_check_finds_overlapping_labels_and_overflow() {
 }
 
 /// The goal of the report's figures: Beihang (four estimators, towers on one mast far
-/// off the map) and seed 003 (seven estimators, the widest table), laid out by Chromium
+/// off the map), seed 003 (seven estimators, the widest table) and the default world (the
+/// per-segment table, long estimator names), laid out by Chromium
 /// at 1280 and at 800 px, have no overflow, no label leaving its figure and no two labels over each
 /// other; every figure is also a standalone SVG file under `report/figures/`, the same
 /// bytes for the same seed.
@@ -357,6 +358,7 @@ fn report_pages_have_no_overflow_or_overlapping_labels_in_chromium() {
     for (world, name) in [
         ("worlds/seed000-beihang.toml", "beihang"),
         ("worlds/seed003-seamless.toml", "seed003"),
+        ("worlds/default.toml", "default"),
     ] {
         let out = d.join(name);
         let o = hybridnav(&[

@@ -188,6 +188,52 @@ impl MeanCi95 {
     }
 }
 
+/// The 95 % interval of the mean of a positive statistic over trials, from the Student t
+/// interval `[a, b]` (`x̄ ± h` with `h = t · s/√n`, [`MeanCi95::interval`]), taken on the log
+/// scale: `x̄ · exp(∓ h / x̄)`.
+///
+/// By the delta method (Casella & Berger, "Statistical Inference", 2nd ed., §5.5.4) the
+/// standard error of `ln x̄` is `s / (√n · x̄)`, so the t interval of `ln x̄` is
+/// `ln x̄ ± h / x̄`; mapped back it is positive whatever the spread, where `x̄ ± h` falls
+/// below zero for a skewed statistic over few trials. Its two ends multiply and divide
+/// `x̄` by one factor; it is as wide as the t interval's to first order when `h ≪ x̄`.
+/// `None` without an interval or with `x̄ ≤ 0`.
+pub fn positive_ci95(t_interval: Option<[f64; 2]>) -> Option<[f64; 2]> {
+    let [a, b] = t_interval?;
+    let (mean, half) = (0.5 * (a + b), 0.5 * (b - a));
+    if !(mean > 0.0 && half.is_finite() && half >= 0.0) {
+        return None;
+    }
+    let f = (half / mean).exp();
+    Some([mean / f, mean * f])
+}
+
+/// The 95 % interval of the mean of a share in [0, 1] (an availability) over trials, from
+/// its Student t interval `[a, b]` (`p̄ ± h`), taken on the logit scale:
+/// `expit(logit p̄ ∓ h / (p̄ (1 − p̄)))`.
+///
+/// By the delta method (as [`positive_ci95`]) the standard error of `logit p̄` is
+/// `s / (√n · p̄ (1 − p̄))`; mapped back the interval stays inside (0, 1), where `p̄ ± h`
+/// can pass 100 %. A share with no spread (`h = 0`, every trial 100 %) is its own
+/// interval. `None` without an interval or with `p̄` outside [0, 1].
+pub fn unit_ci95(t_interval: Option<[f64; 2]>) -> Option<[f64; 2]> {
+    let [a, b] = t_interval?;
+    let (p, half) = (0.5 * (a + b), 0.5 * (b - a));
+    if !((0.0..=1.0).contains(&p) && half.is_finite() && half >= 0.0) {
+        return None;
+    }
+    if half == 0.0 {
+        return Some([p, p]);
+    }
+    if p == 0.0 || p == 1.0 {
+        return None;
+    }
+    let logit = (p / (1.0 - p)).ln();
+    let se = half / (p * (1.0 - p));
+    let expit = |x: f64| 1.0 / (1.0 + (-x).exp());
+    Some([expit(logit - se), expit(logit + se)])
+}
+
 /// The 95 % percentile bootstrap interval (Efron & Tibshirani, "An Introduction to the
 /// Bootstrap", 1993, §13.3) of `stat` over `values`: `resamples` samples of the same size
 /// are drawn with replacement, `stat` is evaluated on each (it may reorder its argument,
@@ -231,6 +277,46 @@ pub fn bootstrap_ci(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_positive_statistics_interval_stays_positive_and_keeps_the_mean_between() {
+        // Seed 003's EKF over two trials: the t interval of the mean error is
+        // −1.50 … 14.14 m; on the log scale it is positive, with the mean 6.32 m inside
+        // and the same factor to either end.
+        let [a, b] = positive_ci95(Some([-1.5043050758396426, 14.143090424694964])).unwrap();
+        let mean = 0.5 * (-1.5043050758396426 + 14.143090424694964);
+        assert!(a > 0.0 && a < mean && mean < b, "{a} {b}");
+        assert!((mean / a - b / mean).abs() < 1e-9 * b);
+        // A tight interval is left as it was to first order: 100 ± 1 → 99.005 … 101.005.
+        let [a, b] = positive_ci95(Some([99.0, 101.0])).unwrap();
+        assert!(
+            (a - 99.005).abs() < 1e-3 && (b - 101.005).abs() < 1e-3,
+            "{a} {b}"
+        );
+        // Nothing to transform: no interval, or a mean of zero.
+        assert!(positive_ci95(None).is_none());
+        assert!(positive_ci95(Some([-1.0, 1.0])).is_none());
+    }
+
+    #[test]
+    fn a_share_interval_stays_inside_zero_and_one() {
+        // 0.99 ± 0.02 passes 100 %; on the logit scale it stays below, with p̄ inside.
+        let [a, b] = unit_ci95(Some([0.97, 1.01])).unwrap();
+        assert!(0.0 < a && a < 0.99 && 0.99 < b && b < 1.0, "{a} {b}");
+        // Its standard error on the logit scale is h/(p(1−p)): the ends are symmetric there.
+        let logit = |x: f64| (x / (1.0 - x)).ln();
+        assert!((logit(b) - logit(0.99) - (logit(0.99) - logit(a))).abs() < 1e-9);
+        assert!((logit(b) - logit(0.99) - 0.02 / (0.99 * 0.01)).abs() < 1e-9);
+        // A tight interval is left as it was to first order.
+        let [a, b] = unit_ci95(Some([0.499, 0.501])).unwrap();
+        assert!(
+            (a - 0.499).abs() < 1e-6 && (b - 0.501).abs() < 1e-6,
+            "{a} {b}"
+        );
+        // Every trial at 100 %: no spread, the interval is the point.
+        assert_eq!(unit_ci95(Some([1.0, 1.0])), Some([1.0, 1.0]));
+        assert!(unit_ci95(Some([0.5, 1.7])).is_none());
+    }
 
     #[test]
     fn t_quantiles_match_tables() {

@@ -20,7 +20,9 @@ pub use consistency::{
     ConsistencySummary, EpochConsistency, EpochSamples,
 };
 pub use ecdf::{ecdf, ecdf_of};
-pub use interval::{bootstrap_ci, mean_ci95, student_t_cdf, student_t_quantile, MeanCi95};
+pub use interval::{
+    bootstrap_ci, mean_ci95, positive_ci95, student_t_cdf, student_t_quantile, unit_ci95, MeanCi95,
+};
 pub use trajectory::{
     ate, ate_errors, rigid_alignment, rpe, rpe_errors, write_tum, Alignment, TrajectoryStats,
 };

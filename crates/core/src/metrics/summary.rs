@@ -93,8 +93,11 @@ pub struct FailureEpoch {
     pub t_s: f64,
 }
 
-/// 95 % confidence intervals, across trials, of per-trial statistics (`[lo, hi]`; absent
-/// with fewer than two trials with an estimate).
+/// 95 % confidence intervals, across trials, of the mean of per-trial statistics (`[lo,
+/// hi]`; absent with fewer than two trials with an estimate). Each respects its
+/// statistic's support: the errors' Student t interval is taken on the log scale
+/// ([`crate::metrics::positive_ci95`]), availability's on the logit scale
+/// ([`crate::metrics::unit_ci95`]).
 #[derive(Clone, Debug, Serialize, PartialEq, Default)]
 pub struct AcrossTrials {
     /// Trials that contributed (those with at least one estimate).

@@ -13,8 +13,8 @@ use crate::engine::trial::{EstimatorTrace, TrialResult};
 use crate::io::spill::SortedSpill;
 use crate::metrics::summary::SegmentStats;
 use crate::metrics::{
-    ate_errors, ecdf_of, rpe_errors, summary_of_samples, Alignment, EpochSamples, ErrorStats,
-    MeanCi95, TrajectoryStats,
+    ate_errors, ecdf_of, positive_ci95, rpe_errors, summary_of_samples, unit_ci95, Alignment,
+    EpochSamples, ErrorStats, MeanCi95, TrajectoryStats,
 };
 use crate::world::World;
 use nalgebra::Vector3;
@@ -492,7 +492,10 @@ struct PerTrial {
 
 impl PerTrial {
     fn intervals(&self) -> AcrossTrials {
-        let ci = |m: &MeanCi95| m.interval().map(|(a, b)| [a, b]);
+        // Each statistic's interval respects its support: errors are positive (log scale),
+        // availability a share (logit scale).
+        let t = |m: &MeanCi95| m.interval().map(|(a, b)| [a, b]);
+        let ci = |m: &MeanCi95| positive_ci95(t(m));
         AcrossTrials {
             trials: self.sigma1.count(),
             sigma1_ci95_m: ci(&self.sigma1),
@@ -502,7 +505,7 @@ impl PerTrial {
             rmse_ci95_m: ci(&self.rmse),
             ate_rmse_ci95_m: ci(&self.ate_rmse),
             rpe_rmse_ci95_m: ci(&self.rpe_rmse),
-            availability_ci95: ci(&self.availability),
+            availability_ci95: unit_ci95(t(&self.availability)),
         }
     }
 }

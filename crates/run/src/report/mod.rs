@@ -325,33 +325,13 @@ fn flags(h: &mut String, s: &Summary) {
     h.push_str("</ul>\n");
 }
 
-/// The 95 % interval of the mean of a positive statistic over trials, from the Student t
-/// interval `[a, b]` of `summary.json` (`x̄ ± h` with `h = t · s/√n`), taken on the log
-/// scale: `x̄ · exp(∓ h / x̄)`.
-///
-/// By the delta method (Casella & Berger, "Statistical Inference", 2nd ed., §5.5.4) the
-/// standard error of `ln x̄` is `s / (√n · x̄)`, so the t interval of `ln x̄` is
-/// `ln x̄ ± h / x̄`; mapped back it is positive whatever the spread, where `x̄ ± h` falls
-/// below zero for a skewed statistic over few trials. Its two ends multiply and divide
-/// `x̄` by one factor; it is as wide as the t interval's to first order when `h ≪ x̄`.
-/// `None` without an interval or with `x̄ ≤ 0`.
-pub fn positive_ci95(t_interval: Option<[f64; 2]>) -> Option<[f64; 2]> {
-    let [a, b] = t_interval?;
-    let (mean, half) = (0.5 * (a + b), 0.5 * (b - a));
-    if !(mean > 0.0 && half.is_finite() && half >= 0.0) {
-        return None;
-    }
-    let f = (half / mean).exp();
-    Some([mean / f, mean * f])
-}
-
 /// The spread of the per-trial statistics.
 fn across(h: &mut String, s: &Summary) {
     if s.trials < 2 {
         return;
     }
     let iv = |v: Option<[f64; 2]>| {
-        positive_ci95(v).map_or_else(
+        v.map_or_else(
             || "–".to_string(),
             // On a narrow page an interval breaks after its dash, nowhere else.
             |[a, b]| format!("{}&nbsp;– {}", sig3(a), sig3(b)),
@@ -374,7 +354,7 @@ fn across(h: &mut String, s: &Summary) {
             iv(a.rpe_rmse_ci95_m),
         );
     }
-    h.push_str("</table>\n<p class=\"meta\">Metres. 95 % confidence interval of the mean over trials of each trial's own statistic: how much the figures above would move with another set of trials. Every statistic here is positive, so the interval is taken on the log scale (a Student t interval of the log of the mean, by the delta method): x̄ · exp(∓ t·s/(√n·x̄)), which never goes below zero and is asymmetric where the spread is large against the mean. <code>summary.json</code> keeps the symmetric interval x̄ ± t·s/√n it is computed from.</p>\n");
+    h.push_str("</table>\n<p class=\"meta\">Metres. 95 % confidence interval of the mean over trials of each trial's own statistic: how much the figures above would move with another set of trials. Every statistic here is positive, so the interval is taken on the log scale (a Student t interval of the log of the mean, by the delta method): x̄ · exp(∓ t·s/(√n·x̄)), which never goes below zero and is asymmetric where the spread is large against the mean. <code>summary.json</code> holds the same intervals (availability's on the logit scale).</p>\n");
 }
 
 /// Three significant digits (at least two decimals below 10), for interval ends spanning
@@ -654,30 +634,5 @@ fn system_colour(system: crate::core::System) -> &'static str {
         crate::core::System::Gps => colour(0),
         crate::core::System::Bds => colour(1),
         _ => colour(2),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_positive_statistics_interval_stays_positive_and_keeps_the_mean_between() {
-        // Seed 003's EKF over two trials: the t interval of the mean error is
-        // −1.50 … 14.14 m; on the log scale it is positive, with the mean 6.32 m inside
-        // and the same factor to either end.
-        let [a, b] = positive_ci95(Some([-1.5043050758396426, 14.143090424694964])).unwrap();
-        let mean = 0.5 * (-1.5043050758396426 + 14.143090424694964);
-        assert!(a > 0.0 && a < mean && mean < b, "{a} {b}");
-        assert!((mean / a - b / mean).abs() < 1e-9 * b);
-        // A tight interval is left as it was to first order: 100 ± 1 → 99.005 … 101.005.
-        let [a, b] = positive_ci95(Some([99.0, 101.0])).unwrap();
-        assert!(
-            (a - 99.005).abs() < 1e-3 && (b - 101.005).abs() < 1e-3,
-            "{a} {b}"
-        );
-        // Nothing to transform: no interval, or a mean of zero.
-        assert!(positive_ci95(None).is_none());
-        assert!(positive_ci95(Some([-1.0, 1.0])).is_none());
     }
 }

@@ -895,7 +895,7 @@ impl InsEstimator {
             return;
         };
         let lag = t_s - kf.state().t_s;
-        if !(lag.abs() <= self.cfg.max_fix_lag_s) {
+        if lag.is_nan() || lag.abs() > self.cfg.max_fix_lag_s {
             out.rejected += batch.items.len() as u32;
             return;
         }
