@@ -3,7 +3,9 @@
 //! (mechanisation + 15-state covariance prediction), and per engine epoch: the IMU source
 //! (truth with attitude, increment IMU, error model, batch) for a car and a handheld phone,
 //! the INS estimator on a one-sample IMU batch, and the INS estimator on a GNSS batch of
-//! eight pseudoranges and rates (least-squares position and velocity, 6-D update).
+//! eight pseudoranges and rates (least-squares position and velocity, 6-D update); the
+//! tightly coupled filter's step (18-state prediction) and its eight-satellite epoch (eight
+//! pseudorange and eight range-rate scalar updates).
 //!
 //! Run: `cargo bench --bench inertial -- --warm-up-time 1 --measurement-time 3`.
 
@@ -14,6 +16,7 @@ use hybridnav::inertial::attitude::{ideal_imu, Platform, PlatformConfig, Platfor
 use hybridnav::inertial::imu::{Imu, ImuConfig, ImuGrade};
 use hybridnav::inertial::ins_ekf::{InsEkf, InsEkfConfig};
 use hybridnav::inertial::ins_estimator::{InsEstimator, InsFilterConfig};
+use hybridnav::inertial::ins_tight::{InsTightEkf, TightClockConfig};
 use hybridnav::inertial::source::{local_earth_of, ImuSource};
 use hybridnav::inertial::strapdown::NavState;
 use hybridnav::inertial::LocalEarth;
@@ -96,8 +99,65 @@ fn bench(c: &mut Criterion) {
             kf.propagate(black_box(&s));
         })
     });
+    tight(&mut g, init, earth, &InsEkfConfig::from_imu(&spec));
     engine_epochs(&mut g);
     g.finish();
+}
+
+/// The tightly coupled filter: one IMU step, and one epoch of eight GPS satellites
+/// (pseudorange and range rate each) at the INS position, the clock known.
+fn tight(
+    g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    init: NavState,
+    earth: LocalEarth,
+    cfg: &InsEkfConfig,
+) {
+    let frame = EnuFrame::new(Geodetic::from_deg(40.1, 116.3, 50.0));
+    let earth = LocalEarth::new(frame.origin().lat_rad, earth.origin_h_m);
+    let mut kf = InsTightEkf::new(init, earth, cfg, &TightClockConfig::default());
+    let mut n = 0u64;
+    g.bench_function("ins_tight_step_mechanisation_and_kf_predict", |b| {
+        b.iter(|| {
+            n += 1;
+            let s = ImuSample {
+                t_s: n as f64 * 0.01,
+                gyro_rps: earth.omega_ie_enu_rps,
+                accel_mps2: Vector3::new(0.0, 0.0, earth.gravity_mps2(0.0)),
+            };
+            kf.propagate(black_box(&s));
+        })
+    });
+    let rx = frame.ecef_of_enu(&kf.state().pos_enu_m);
+    let ranges: Vec<RangeMeasurement> = (0..8)
+        .map(|i| {
+            let az = i as f64 * 0.785 + 0.2;
+            let el: f64 = if i == 7 { 1.4 } else { 0.25 + 0.12 * i as f64 };
+            let d = Vector3::new(el.cos() * az.sin(), el.cos() * az.cos(), el.sin());
+            let e = frame.ecef_of_enu(&(d * 2.0e7));
+            RangeMeasurement {
+                emitter: EmitterId {
+                    system: System::Gps,
+                    number: i + 1,
+                },
+                emitter_pos_ecef_m: e,
+                emitter_vel_ecef_mps: Vector3::zeros(),
+                pseudorange_m: (rx - e).norm() + kf.clock_bias_m(),
+                sigma_m: 3.0,
+                range_rate_mps: Some(kf.clock_drift_mps()),
+                sigma_rate_mps: 0.1,
+                cn0_dbhz: 45.0,
+                elevation_rad: el,
+            }
+        })
+        .collect();
+    g.bench_function("ins_tight_gnss_epoch_8_sats", |b| {
+        b.iter(|| {
+            for m in &ranges {
+                let _ = black_box(kf.update_range(black_box(m), &frame, 0.0));
+                let _ = black_box(kf.update_range_rate(black_box(m), &frame, 0.0));
+            }
+        })
+    });
 }
 
 fn car_config() -> TrajectoryConfig {

@@ -288,6 +288,47 @@ impl InsTightEkf {
         })
     }
 
+    /// The scalar case of [`Self::update`] in O(n²): with `c = P h`, `s = hᵀ c + r` and
+    /// `k = c / s`, the Joseph form `(I − k hᵀ) P (I − k hᵀ)ᵀ + r k kᵀ` expands to
+    /// `P − k cᵀ − c kᵀ + s k kᵀ`, written `P − (k eᵀ + e kᵀ)` with `e = c − (s/2) k`:
+    /// the same polynomial in `k` (so the same first-order insensitivity to gain errors),
+    /// symmetric by construction. Does not allocate.
+    fn update_scalar(
+        &mut self,
+        z: f64,
+        h: &SVector<f64, N_TIGHT>,
+        r: f64,
+        what: &'static str,
+    ) -> Result<FixOutcome, InsFixError> {
+        if !(z.is_finite() && r.is_finite() && h.iter().all(|v| v.is_finite())) {
+            return Err(InsFixError::NonFinite { what });
+        }
+        let c = self.p * h;
+        let s = h.dot(&c) + r;
+        if !(s.is_finite() && s > 0.0) {
+            return Err(InsFixError::NotPositiveDefinite { what });
+        }
+        let nis = z * z / s;
+        if self.clock.gate_chi2.is_some_and(|g| nis > g) {
+            return Ok(FixOutcome {
+                nis,
+                accepted: false,
+            });
+        }
+        let k = c / s;
+        let e = c - k * (0.5 * s);
+        let p = self.p - (k * e.transpose() + e * k.transpose());
+        if (0..N_TIGHT).any(|i| !(p[(i, i)].is_finite() && p[(i, i)] >= 0.0)) {
+            return Err(InsFixError::NotPositiveDefinite { what });
+        }
+        self.p = p;
+        self.feed_back(&(k * z));
+        Ok(FixOutcome {
+            nis,
+            accepted: true,
+        })
+    }
+
     fn feed_back(&mut self, dx: &SVector<f64, N_TIGHT>) {
         let nav: SVector<f64, 15> = dx.fixed_rows::<15>(0).into_owned();
         feed_back_nav(
@@ -337,18 +378,17 @@ impl InsTightEkf {
         let clock = self.clock_bias_m
             + self.clock_drift_mps * lag_s
             + if bds { self.isb_bds_m } else { 0.0 };
-        let z = SVector::<f64, 1>::new(d + clock - m.pseudorange_m);
+        let z = d + clock - m.pseudorange_m;
         let u_enu = frame.enu_vector_of_ecef(&u);
-        let mut h = SMatrix::<f64, 1, N_TIGHT>::zeros();
+        let mut h = SVector::<f64, N_TIGHT>::zeros();
         for i in 0..3 {
-            h[(0, i)] = -u_enu[i];
+            h[i] = -u_enu[i];
         }
-        h[(0, tidx::CLOCK_BIAS)] = 1.0;
+        h[tidx::CLOCK_BIAS] = 1.0;
         if bds {
-            h[(0, tidx::ISB_BDS)] = 1.0;
+            h[tidx::ISB_BDS] = 1.0;
         }
-        let r = SMatrix::<f64, 1, 1>::new(m.sigma_m * m.sigma_m);
-        self.update(z, h, r, self.clock.gate_chi2, what)
+        self.update_scalar(z, &h, m.sigma_m * m.sigma_m, what)
     }
 
     /// One pseudorange rate, if the measurement has one (`Ok(None)` otherwise).
@@ -369,17 +409,15 @@ impl InsTightEkf {
             return Err(InsFixError::NotPositiveDefinite { what });
         }
         let (u, v, _) = self.geometry(m, frame, lag_s);
-        let z = SVector::<f64, 1>::new(
-            u.dot(&(m.emitter_vel_ecef_mps - v)) + self.clock_drift_mps - rate,
-        );
+        let z = u.dot(&(m.emitter_vel_ecef_mps - v)) + self.clock_drift_mps - rate;
         let u_enu = frame.enu_vector_of_ecef(&u);
-        let mut h = SMatrix::<f64, 1, N_TIGHT>::zeros();
+        let mut h = SVector::<f64, N_TIGHT>::zeros();
         for i in 0..3 {
-            h[(0, 3 + i)] = -u_enu[i];
+            h[3 + i] = -u_enu[i];
         }
-        h[(0, tidx::CLOCK_DRIFT)] = 1.0;
-        let r = SMatrix::<f64, 1, 1>::new(m.sigma_rate_mps * m.sigma_rate_mps);
-        self.update(z, h, r, self.clock.gate_chi2, what).map(Some)
+        h[tidx::CLOCK_DRIFT] = 1.0;
+        self.update_scalar(z, &h, m.sigma_rate_mps * m.sigma_rate_mps, what)
+            .map(Some)
     }
 
     /// A position fix (ENU m) at the filter's time, with its covariance (m²).
@@ -505,6 +543,44 @@ mod tests {
             -gain_up * 4.0
         );
         assert!(moved > 0.5, "{moved}");
+    }
+
+    #[test]
+    fn the_scalar_update_is_the_joseph_form() {
+        // The O(n²) scalar update against the dense Joseph form (I − K H) P (I − K H)ᵀ +
+        // K R Kᵀ of the same range, after a few updates have correlated the states.
+        let f = frame();
+        let mut a = filter_at_rest(&f);
+        for &(az, el) in &[(0.0, 0.5), (2.0, 0.6), (4.0, 0.7)] {
+            a.update_range(&range(&f, System::Gps, az, el, Vector3::zeros()), &f, 0.0)
+                .unwrap();
+        }
+        let mut b = a.clone();
+        let mut m = range(&f, System::Bds, 1.0, 0.9, Vector3::zeros());
+        m.pseudorange_m += 2.0;
+        a.update_range(&m, &f, 0.0).unwrap();
+        // The same range through the dense path.
+        let (u, _, d) = b.geometry(&m, &f, 0.0);
+        let u_enu = f.enu_vector_of_ecef(&u);
+        let mut h = SMatrix::<f64, 1, N_TIGHT>::zeros();
+        for i in 0..3 {
+            h[(0, i)] = -u_enu[i];
+        }
+        h[(0, tidx::CLOCK_BIAS)] = 1.0;
+        h[(0, tidx::ISB_BDS)] = 1.0;
+        let z = d + b.clock_bias_m() + b.isb_bds_m() - m.pseudorange_m;
+        b.update(
+            SVector::<f64, 1>::new(z),
+            h,
+            SMatrix::<f64, 1, 1>::new(9.0),
+            None,
+            "pseudorange",
+        )
+        .unwrap();
+        let scale = b.covariance().amax();
+        assert!((a.covariance() - b.covariance()).amax() < 1e-9 * scale);
+        assert!((a.state().pos_enu_m - b.state().pos_enu_m).norm() < 1e-9);
+        assert!((a.isb_bds_m() - b.isb_bds_m()).abs() < 1e-9);
     }
 
     #[test]
