@@ -147,6 +147,10 @@ const BEYOND_A_SCHEMA: &[(&str, &str)] = &[
         "07-bad-start-date.toml",
         "a calendar date that does not exist",
     ),
+    (
+        "17-tight-coupling-with-ckf.toml",
+        "a constraint between two keys of one table (coupling needs kalman = builtin)",
+    ),
 ];
 
 #[test]

@@ -1048,11 +1048,17 @@ fn check_estimator(
         cfg.validate()
             .map_err(|m| ctx.err(&at("ekf"), m.to_string()))?;
     }
-    // An option's own complaint ("options.particles: …") points at that option.
+    // An option's own complaint ("options.particles: …", "ins.coupling: …") points at
+    // that option.
     e.build(build_ctx)
         .map(|_| ())
         .map_err(|m| match m.split_once(": ") {
-            Some((k, rest)) if k.starts_with("options.") && !k.contains(' ') => {
+            Some((k, rest))
+                if ["options.", "ins.", "pdr."]
+                    .iter()
+                    .any(|p| k.starts_with(p))
+                    && !k.contains(' ') =>
+            {
                 ctx.err(&at(k), rest)
             }
             _ => ctx.err(&at("filter"), m),
