@@ -980,3 +980,231 @@ impl<R: BufRead> ObsReader<R> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A header line: `content` in columns 1–60, `label` in 61–80.
+    fn h(content: &str, label: &str) -> String {
+        format!("{content:<60}{label:<20}\n")
+    }
+
+    /// A RINEX 2.11 mixed file with ten observation types (a continuation line of the
+    /// type list, two record lines per satellite), 13 satellites in the first epoch (a
+    /// continuation line of the satellite list), an event with header records (flag 4),
+    /// an external event without records (flag 5) and a power-failure epoch (flag 1).
+    fn v2_file() -> String {
+        let types = ["L1", "L2", "C1", "P1", "P2", "D1", "D2", "S1", "S2", "C2"];
+        let mut s = h(
+            "     2.11           OBSERVATION DATA    M (MIXED)",
+            "RINEX VERSION / TYPE",
+        );
+        s += &h("TEST", "MARKER NAME");
+        s += &h(
+            " -3976219.5082  3382372.5671  3652512.9849",
+            "APPROX POSITION XYZ",
+        );
+        let list = |ts: &[&str]| ts.iter().map(|t| format!("{t:>6}")).collect::<String>();
+        s += &h(&format!("    10{}", list(&types[..9])), "# / TYPES OF OBSERV");
+        s += &h(&format!("      {}", list(&types[9..])), "# / TYPES OF OBSERV");
+        s += &h("    30.000", "INTERVAL");
+        s += &h(
+            "  2005     4     2     0     0    0.0000000     GPS",
+            "TIME OF FIRST OBS",
+        );
+        s += &h("", "END OF HEADER");
+        let sats = [
+            "G01", "G02", "G03", "G04", "G05", "G06", "R07", "G08", "G09", "G10", "G11", "G12",
+            "E13",
+        ];
+        s += &format!(
+            " 05  4  2  0  0  0.0000000  0 13{} 0.000123456\n",
+            sats[..12].concat()
+        );
+        s += &format!("{:32}{}\n", "", sats[12]);
+        for i in 0..13 {
+            let c1 = 2.1e7 + 1000.0 * i as f64;
+            s += &format!(
+                "{:14.3}17{:14.3}  {c1:14.3} 6{:16}{:14.3}\n",
+                1e8 + i as f64,
+                7.8e7,
+                "",
+                c1 + 3.2
+            );
+            s += &format!(
+                "{:14.3}  {:14.3}  {:14.3}  {:14.3}  {:14.3}\n",
+                -1234.5,
+                -961.9,
+                45.0,
+                30.25,
+                c1 + 1.5
+            );
+        }
+        s += " 05  4  2  0  0 15.0000000  4  2\n";
+        s += &h("event: a header record", "COMMENT");
+        s += &h("        1.5000        0.0000        0.0000", "ANTENNA: DELTA H/E/N");
+        s += "                            5  0\n";
+        s += " 05  4  2  0  0 30.0000000  1  1G05\n";
+        // The second record line is blank (all five values missing), trailing blanks
+        // dropped as RINEX 2.11 §6.3 allows.
+        s += &format!("{:14.3}  {:14.3}  {:14.3}\n\n", 1e8, 7e7, 2.2e7);
+        s
+    }
+
+    fn read(text: &str) -> Result<(ObsHeader, Vec<ObsEpoch>), ObsError> {
+        let mut out = Vec::new();
+        let header = read_all(text.as_bytes(), "t.obs", |_, e| out.push(e.clone()))?;
+        Ok((header, out))
+    }
+
+    #[test]
+    fn reads_rinex2_continuations_events_and_indicators() {
+        let (hd, epochs) = read(&v2_file()).unwrap();
+        assert_eq!(hd.marker_name, "TEST");
+        assert_eq!(hd.interval_s, Some(30.0));
+        assert_eq!(hd.obs_types('G').unwrap().len(), 10);
+        assert_eq!(hd.index_of('R', "C2"), Some(9));
+        assert_eq!(
+            hd.approx_pos_ecef_m,
+            Some(Vector3::new(-3976219.5082, 3382372.5671, 3652512.9849))
+        );
+        // The events (flags 4 and 5) are skipped: two epochs remain.
+        assert_eq!(epochs.len(), 2);
+        let e = &epochs[0];
+        assert_eq!(e.len(), 13);
+        assert_eq!(e.sats()[6], SatId { system: 'R', prn: 7 });
+        assert_eq!(e.sats()[12], SatId { system: 'E', prn: 13 });
+        assert_eq!(e.clock_offset_s, Some(0.000123456));
+        assert_eq!(e.t, GpsTime::from_week_tow(1316, 518_400.0));
+        let v = e.values(4);
+        assert_eq!(v.len(), 10);
+        assert_eq!(v[0].value, Some(1e8 + 4.0));
+        assert_eq!((v[0].lli, v[0].ssi), (Some(1), Some(7)));
+        assert_eq!((v[2].value, v[2].lli, v[2].ssi), (Some(21_004_000.0), None, Some(6)));
+        assert_eq!(v[3], ObsValue::default());
+        assert_eq!(v[4].value, Some(21_004_003.2));
+        assert_eq!(v[9].value, Some(21_004_001.5));
+        let last = &epochs[1];
+        assert_eq!((last.flag, last.len()), (1, 1));
+        assert_eq!(last.t, GpsTime::from_week_tow(1316, 518_430.0));
+        // A blank record line holds five missing values.
+        let w = last.values(0);
+        assert_eq!(w.len(), 10);
+        assert_eq!(w[2].value, Some(2.2e7));
+        assert!(w[3..].iter().all(|o| o.value.is_none()));
+    }
+
+    fn v3_file(sys: char, tos: &str) -> String {
+        let mut s = h(
+            &format!("     3.04           OBSERVATION DATA    {sys}"),
+            "RINEX VERSION / TYPE",
+        );
+        s += &h("C    4 C2I L2I D2I S2I", "SYS / # / OBS TYPES");
+        s += &h(
+            "G   15 C1C L1C D1C S1C C2W L2W D2W S2W C5Q L5Q D5Q S5Q C1W",
+            "SYS / # / OBS TYPES",
+        );
+        s += &h("       L1W S1W", "SYS / # / OBS TYPES");
+        s += &h(
+            &format!("  2020     6    25     4     0    0.0000000     {tos}"),
+            "TIME OF FIRST OBS",
+        );
+        s += &h("", "END OF HEADER");
+        s += "> 2020 06 25 04 00  0.0000000  0  2       0.000000001000\n";
+        s += "C19  21284135.528 7 111848395.59017     -2601.595 7        45.701 7\n";
+        s += &format!("G05{:14.3}  {:>222}\n", 2.2e7, "42.000  ");
+        s
+    }
+
+    #[test]
+    fn reads_rinex3_per_system_types_and_bdt() {
+        let (hd, epochs) = read(&v3_file('M', "GPS")).unwrap();
+        assert_eq!(hd.obs_types('G').unwrap().len(), 15);
+        assert_eq!(hd.index_of('G', "S1W"), Some(14));
+        assert_eq!(hd.index_of('C', "C2I"), Some(0));
+        assert_eq!(hd.obs_types('E'), None);
+        let e = &epochs[0];
+        assert_eq!(e.clock_offset_s, Some(1e-9));
+        assert_eq!(e.values(0)[1].value, Some(111_848_395.590));
+        assert_eq!((e.values(0)[1].lli, e.values(0)[1].ssi), (Some(1), Some(7)));
+        assert_eq!(e.values(1).len(), 15);
+        assert_eq!(e.values(1)[0].value, Some(2.2e7));
+        assert_eq!(e.values(1)[14].value, Some(42.0));
+        let t_gps = e.t;
+        // The same tag in BeiDou time is 14 s later in GPST.
+        let (_, bdt) = read(&v3_file('C', "BDT")).unwrap();
+        assert_eq!(bdt[0].t.seconds_since(t_gps), 14.0);
+    }
+
+    #[test]
+    fn errors_name_the_line_column_and_what_was_expected() {
+        let v2 = v2_file();
+        // A value that is not a number.
+        let bad = v2.replacen("21002000.000", "2100x000.000", 1);
+        let e = read(&bad).unwrap_err();
+        assert_eq!(e.line(), Some(15), "{e}");
+        assert!(e.to_string().contains("column 33"), "{e}");
+        assert!(e.to_string().contains("an observation (F14.3)"), "{e}");
+        // The file ends inside an epoch.
+        let cut: String = v2.lines().take(20).map(|l| format!("{l}\n")).collect();
+        let e = read(&cut).unwrap_err();
+        assert!(matches!(e, ObsError::Truncated { line: 21, .. }), "{e}");
+        assert!(e.to_string().contains("of G06"), "{e}");
+        // A satellite count that is not a number.
+        let e = read(&v2.replacen("  0 13G01", "  0 1xG01", 1)).unwrap_err();
+        assert!(e.to_string().contains("line 9, column 30"), "{e}");
+        // RINEX 3: one satellite fewer than announced runs into the next epoch.
+        let v3 = v3_file('M', "GPS");
+        let two = format!("{v3}{}", v3.lines().skip(6).collect::<Vec<_>>().join("\n"));
+        let short = two.replacen("  0  2       0.0", "  0  3       0.0", 1);
+        let e = read(&short).unwrap_err();
+        assert!(e.to_string().contains("a new epoch record"), "{e}");
+        assert_eq!(e.line(), Some(10));
+        // A satellite of a system without types.
+        let e = read(&v3.replace("C19  ", "E19  ")).unwrap_err();
+        assert!(e.to_string().contains("SYS / # / OBS TYPES"), "{e}");
+        // Header problems.
+        let e = read(&v2.replacen("2.11", "4.01", 1)).unwrap_err();
+        assert!(matches!(e, ObsError::UnsupportedVersion { .. }), "{e}");
+        let e = read(&v2.replacen("OBSERVATION DATA", "NAVIGATION DATA ", 1)).unwrap_err();
+        assert!(e.to_string().contains("file type 'O'"), "{e}");
+        let e = read(&v2.replace("END OF HEADER", "END OF HEADEX")).unwrap_err();
+        assert!(e.to_string().contains("END OF HEADER"), "{e}");
+        let e = read(&v3_file('R', "GLO")).unwrap_err();
+        assert!(e.to_string().contains("GLONASS time"), "{e}");
+        let e = read("1.0                 COMPACT RINEX FORMAT                    CRINEX VERS   / TYPE\n")
+            .unwrap_err();
+        assert!(e.to_string().contains("Hatanaka"), "{e}");
+    }
+
+    #[test]
+    fn short_lines_and_non_ascii_never_panic() {
+        for text in [v2_file(), v3_file('M', "GPS")] {
+            for cut in 0..text.len() {
+                let _ = read(&text[..cut]);
+            }
+            let weird = text.replacen("0.000", "0.€00", 3).replace("TYPES", "TŸPES");
+            let _ = read(&weird);
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(400))]
+        /// Random single-character damage anywhere in a valid file gives Ok or a typed
+        /// error, never a panic, and every satellite keeps its system's number of values.
+        #[test]
+        fn damaged_files_never_panic(pos in 0usize..6000, c in proptest::char::any(), v3 in proptest::bool::ANY) {
+            let base = if v3 { v3_file('M', "GPS") } else { v2_file() };
+            let mut chars: Vec<char> = base.chars().collect();
+            let at = pos % chars.len();
+            chars[at] = c;
+            let text: String = chars.into_iter().collect();
+            let _ = read_all(text.as_bytes(), "fuzz", |hd, e| {
+                for (sat, v) in e.iter() {
+                    assert_eq!(v.len(), hd.obs_types(sat.system).map_or(0, <[String]>::len));
+                }
+            });
+        }
+    }
+}
