@@ -43,7 +43,7 @@ fn rms(v: &[f64]) -> f64 {
 /// position in its header (GSI's surveyed coordinates of the marker).
 ///
 /// Bound: the GPS Standard Positioning Service Performance Standard in force in 2005
-/// (SPS PS, 4 October 2001, §3.8, Table 3-7) specifies, for a single-frequency L1 C/A
+/// (SPS PS, 4 October 2001, §3.8, positioning accuracy standard) specifies, for a single-frequency L1 C/A
 /// user with the broadcast ephemeris, clock and Klobuchar ionosphere, a global-average
 /// positioning accuracy of ≤ 13 m horizontal and ≤ 22 m vertical (95 %). The test
 /// asserts those figures; the measured ones are in docs/validation.md.

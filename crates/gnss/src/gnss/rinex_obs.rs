@@ -43,9 +43,11 @@ use std::fmt;
 use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
 
-/// RINEX observation files: a daily 30-s multi-GNSS file of an IGS station is 20–60 MB
-/// uncompressed and a 1-Hz one thirty times that; the reader streams them, never holding
-/// more than one epoch, so the cap only refuses what no station-day could be: 8 GiB.
+/// RINEX observation files: a daily 30-s multi-GNSS file of a station tracking about 40
+/// satellites with 16 observables is about 40 × 2 880 epochs × 16 × 16 bytes ≈ 30 MB
+/// uncompressed, a 1-Hz one thirty times that (≈ 1 GB); the reader streams them, never
+/// holding more than one epoch, so the cap only refuses what no station-day could be:
+/// 8 GiB.
 pub const RINEX_OBS: Limit = Limit {
     what: "RINEX observation file",
     max_bytes: 8 << 30,
