@@ -256,12 +256,7 @@ impl<'a> Spp<'a> {
                     let tropo = saastamoinen_m(g.lat_rad, g.h_m, el, e.humidity);
                     (pos, el, iono, tropo)
                 }
-                _ => (
-                    sagnac_rotate(&c.pos_tx_ecef_m, 0.075),
-                    f64::NAN,
-                    0.0,
-                    0.0,
-                ),
+                _ => (sagnac_rotate(&c.pos_tx_ecef_m, 0.075), f64::NAN, 0.0, 0.0),
             };
             let sigma_m = if el.is_nan() {
                 1.0

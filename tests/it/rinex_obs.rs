@@ -18,7 +18,10 @@ fn header_position(path: &Path) -> Vector3<f64> {
     let text = std::fs::read_to_string(path).unwrap();
     let line = text
         .lines()
-        .find(|l| l.get(60..).is_some_and(|s| s.trim() == "APPROX POSITION XYZ"))
+        .find(|l| {
+            l.get(60..)
+                .is_some_and(|s| s.trim() == "APPROX POSITION XYZ")
+        })
         .expect("an APPROX POSITION XYZ line");
     let v: Vec<f64> = line[..42]
         .split_whitespace()
@@ -77,7 +80,13 @@ fn a_geonet_station_is_positioned_within_the_sps_accuracy_standard() {
     let mut lines = csv.lines();
     let cols: Vec<&str> = lines.next().unwrap().split(',').collect();
     let col = |name: &str| cols.iter().position(|c| *c == name).unwrap();
-    let (x, y, z, n, pdop) = (col("x_m"), col("y_m"), col("z_m"), col("n_sats"), col("pdop"));
+    let (x, y, z, n, pdop) = (
+        col("x_m"),
+        col("y_m"),
+        col("z_m"),
+        col("n_sats"),
+        col("pdop"),
+    );
     let (mut horiz, mut vert, mut n_sats, mut pdops) = (vec![], vec![], vec![], vec![]);
     for l in lines {
         let f: Vec<&str> = l.split(',').collect();
@@ -119,10 +128,13 @@ fn a_geonet_station_is_positioned_within_the_sps_accuracy_standard() {
     assert!(p95(&vabs) <= 22.0, "vertical 95 % {}", p95(&vabs));
 }
 
+/// One observation: (epoch index, satellite, observable), and [value, LLI, SSI].
+type Value = (usize, String, String, [f64; 3]);
+
 /// What georinex reads: one line per (epoch index, satellite, observable) that holds a
 /// value, with its LLI and SSI (NaN when blank, +∞ when georinex does not report that
 /// indicator).
-fn georinex_values(path: &Path, epochs: &[usize]) -> Option<Vec<(usize, String, String, [f64; 3])>> {
+fn georinex_values(path: &Path, epochs: &[usize]) -> Option<Vec<Value>> {
     if !python_has(&["georinex", "numpy"]) {
         return None;
     }
@@ -157,7 +169,13 @@ fn georinex_values(path: &Path, epochs: &[usize]) -> Option<Vec<(usize, String, 
         let f: Vec<&str> = l.split_whitespace().collect();
         // `None`: georinex has no indicator variable for this observable (it keeps LLI
         // for phase only, although RINEX 2.11 lets bit 2, AS on, mark a code too).
-        let num = |s: &str| if s == "None" { f64::INFINITY } else { s.parse::<f64>().unwrap() };
+        let num = |s: &str| {
+            if s == "None" {
+                f64::INFINITY
+            } else {
+                s.parse::<f64>().unwrap()
+            }
+        };
         out.push((
             f[0].parse().unwrap(),
             f[1].to_string(),
@@ -169,7 +187,7 @@ fn georinex_values(path: &Path, epochs: &[usize]) -> Option<Vec<(usize, String, 
 }
 
 /// The same values through the reader under test.
-fn our_values(path: &Path, epochs: &[usize]) -> Vec<(usize, String, String, [f64; 3])> {
+fn our_values(path: &Path, epochs: &[usize]) -> Vec<Value> {
     let mut r = rinex_obs::open(path).unwrap();
     let mut e = ObsEpoch::default();
     let mut k = 0;
@@ -196,7 +214,7 @@ fn compare_with_georinex(path: &Path, epochs: &[usize]) {
         return;
     };
     let ours = our_values(path, epochs);
-    let key = |v: &(usize, String, String, [f64; 3])| (v.0, v.1.clone(), v.2.clone());
+    let key = |v: &Value| (v.0, v.1.clone(), v.2.clone());
     let theirs: BTreeMap<_, _> = theirs.iter().map(|v| (key(v), v.3)).collect();
     let ours: BTreeMap<_, _> = ours.iter().map(|v| (key(v), v.3)).collect();
     assert_eq!(
@@ -256,8 +274,7 @@ fn the_exported_rinex3_file_reads_back_as_the_recorded_pseudoranges() {
     let obs = out.join("hybridnav.obs");
     // The recording the export made (same world, seed and trial: deterministic).
     let world = hybridnav::world::load_world(&world_path).unwrap();
-    let rec =
-        hybridnav::export::record_trial(&world, world.file.montecarlo.seed, 0).unwrap();
+    let rec = hybridnav::export::record_trial(&world, world.file.montecarlo.seed, 0).unwrap();
     let mut expected = Vec::new();
     for b in rec
         .batches
@@ -331,11 +348,23 @@ fn hostile_observation_files_are_refused_with_their_line() {
     let seeds = repo().join("fuzz/replay/rinex_obs");
     let v2 = std::fs::read_to_string(seeds.join("seed-07590920-head.05o")).unwrap();
     let v3 = std::fs::read_to_string(seeds.join("seed-export-head.obs")).unwrap();
-    let lines = |t: &str, n: usize| t.lines().take(n).map(|l| format!("{l}\n")).collect::<String>();
+    let lines = |t: &str, n: usize| {
+        t.lines()
+            .take(n)
+            .map(|l| format!("{l}\n"))
+            .collect::<String>()
+    };
     let run = |name: &str, text: &str, needles: &[&str]| {
         let p = crate::common::write(&dir, name, text);
         let e = refused(
-            &["gnss", "position", "--obs", p.to_str().unwrap(), "--nav", nav],
+            &[
+                "gnss",
+                "position",
+                "--obs",
+                p.to_str().unwrap(),
+                "--nav",
+                nav,
+            ],
             needles,
         );
         println!("{name}: {e}");
@@ -349,26 +378,49 @@ fn hostile_observation_files_are_refused_with_their_line() {
     run(
         "count.05o",
         &v2.replacen("  0  8G 3G 7", "  0  xG 3G 7", 1),
-        &["count.05o, line 18, column 30", "number of satellites", "'x'"],
+        &[
+            "count.05o, line 18, column 30",
+            "number of satellites",
+            "'x'",
+        ],
     );
     run(
         "count.obs",
         &v3.replacen("  0 17\n", "  0 18\n", 1),
-        &["count.obs, line 41, column 1", "satellite 18 of 18", "a new epoch record"],
+        &[
+            "count.obs, line 41, column 1",
+            "satellite 18 of 18",
+            "a new epoch record",
+        ],
     );
     run(
         "number.05o",
         &v2.replacen("24767686.375", "24767686.3x5", 1),
-        &["number.05o, line 19, column 17", "an observation (F14.3)", "'24767686.3x5'"],
+        &[
+            "number.05o, line 19, column 17",
+            "an observation (F14.3)",
+            "'24767686.3x5'",
+        ],
     );
     let e = refused(
-        &["gnss", "position", "--obs", dir.to_str().unwrap(), "--nav", nav],
+        &[
+            "gnss",
+            "position",
+            "--obs",
+            dir.to_str().unwrap(),
+            "--nav",
+            nav,
+        ],
         &["is a directory", "RINEX observation file"],
     );
     println!("directory: {e}");
     let e = refused(
         &["gnss", "position", "--obs", "/dev/zero", "--nav", nav],
-        &["/dev/zero", "is a character device", "RINEX observation file"],
+        &[
+            "/dev/zero",
+            "is a character device",
+            "RINEX observation file",
+        ],
     );
     println!("/dev/zero: {e}");
 }

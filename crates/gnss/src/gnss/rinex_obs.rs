@@ -592,9 +592,7 @@ impl<R: BufRead> ObsReader<R> {
         };
         let sec = self
             .real_opt(sec_cols.0, sec_cols.1, "seconds (F11.7)")?
-            .ok_or_else(|| {
-                self.syntax(Some(sec_cols.0 + 1), "seconds (F11.7)", "a blank field")
-            })?;
+            .ok_or_else(|| self.syntax(Some(sec_cols.0 + 1), "seconds (F11.7)", "a blank field"))?;
         let t = gpst_from_calendar(y, mo, d, h, mi, sec).ok_or_else(|| {
             self.syntax(
                 Some(1),
@@ -664,8 +662,7 @@ impl<R: BufRead> ObsReader<R> {
         let label = self.label();
         if label != "RINEX VERSION / TYPE" {
             let found = if label.starts_with("CRINEX") {
-                "a Hatanaka-compressed (CRINEX) file: decompress it with CRX2RNX first"
-                    .to_string()
+                "a Hatanaka-compressed (CRINEX) file: decompress it with CRX2RNX first".to_string()
             } else {
                 quote(&self.line)
             };
@@ -713,7 +710,7 @@ impl<R: BufRead> ObsReader<R> {
                 }
                 "INTERVAL" => {
                     let dt = self.real(0, 10, "an interval (F10.3, s)")?;
-                    if !(dt >= 0.0) {
+                    if dt < 0.0 {
                         return Err(self.syntax(Some(1), "an interval ≥ 0 s", dt.to_string()));
                     }
                     self.header.interval_s = Some(dt);
@@ -871,7 +868,11 @@ impl<R: BufRead> ObsReader<R> {
                         "observation type {} of {}{} (such as {})",
                         have + codes.len() + 1,
                         if sys == ' ' { "the file" } else { "system " },
-                        if sys == ' ' { String::new() } else { format!("'{sys}'") },
+                        if sys == ' ' {
+                            String::new()
+                        } else {
+                            format!("'{sys}'")
+                        },
                         if width == 2 { "C1 or L2" } else { "C1C or L2I" }
                     ),
                     quote(&code),
@@ -1008,8 +1009,14 @@ mod tests {
             "APPROX POSITION XYZ",
         );
         let list = |ts: &[&str]| ts.iter().map(|t| format!("{t:>6}")).collect::<String>();
-        s += &h(&format!("    10{}", list(&types[..9])), "# / TYPES OF OBSERV");
-        s += &h(&format!("      {}", list(&types[9..])), "# / TYPES OF OBSERV");
+        s += &h(
+            &format!("    10{}", list(&types[..9])),
+            "# / TYPES OF OBSERV",
+        );
+        s += &h(
+            &format!("      {}", list(&types[9..])),
+            "# / TYPES OF OBSERV",
+        );
         s += &h("    30.000", "INTERVAL");
         s += &h(
             "  2005     4     2     0     0    0.0000000     GPS",
@@ -1045,7 +1052,10 @@ mod tests {
         }
         s += " 05  4  2  0  0 15.0000000  4  2\n";
         s += &h("event: a header record", "COMMENT");
-        s += &h("        1.5000        0.0000        0.0000", "ANTENNA: DELTA H/E/N");
+        s += &h(
+            "        1.5000        0.0000        0.0000",
+            "ANTENNA: DELTA H/E/N",
+        );
         s += "                            5  0\n";
         s += " 05  4  2  0  0 30.0000000  1  1G05\n";
         // The second record line is blank (all five values missing), trailing blanks
@@ -1075,15 +1085,30 @@ mod tests {
         assert_eq!(epochs.len(), 2);
         let e = &epochs[0];
         assert_eq!(e.len(), 13);
-        assert_eq!(e.sats()[6], SatId { system: 'R', prn: 7 });
-        assert_eq!(e.sats()[12], SatId { system: 'E', prn: 13 });
+        assert_eq!(
+            e.sats()[6],
+            SatId {
+                system: 'R',
+                prn: 7
+            }
+        );
+        assert_eq!(
+            e.sats()[12],
+            SatId {
+                system: 'E',
+                prn: 13
+            }
+        );
         assert_eq!(e.clock_offset_s, Some(0.000123456));
         assert_eq!(e.t, GpsTime::from_week_tow(1316, 518_400.0));
         let v = e.values(4);
         assert_eq!(v.len(), 10);
         assert_eq!(v[0].value, Some(1e8 + 4.0));
         assert_eq!((v[0].lli, v[0].ssi), (Some(1), Some(7)));
-        assert_eq!((v[2].value, v[2].lli, v[2].ssi), (Some(21_004_000.0), None, Some(6)));
+        assert_eq!(
+            (v[2].value, v[2].lli, v[2].ssi),
+            (Some(21_004_000.0), None, Some(6))
+        );
         assert_eq!(v[3], ObsValue::default());
         assert_eq!(v[4].value, Some(21_004_003.2));
         assert_eq!(v[9].value, Some(21_004_001.5));
@@ -1175,8 +1200,10 @@ mod tests {
         assert!(e.to_string().contains("END OF HEADER"), "{e}");
         let e = read(&v3_file('R', "GLO")).unwrap_err();
         assert!(e.to_string().contains("GLONASS time"), "{e}");
-        let e = read("1.0                 COMPACT RINEX FORMAT                    CRINEX VERS   / TYPE\n")
-            .unwrap_err();
+        let e = read(
+            "1.0                 COMPACT RINEX FORMAT                    CRINEX VERS   / TYPE\n",
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("Hatanaka"), "{e}");
     }
 
