@@ -457,8 +457,12 @@ impl<R: BufRead> ObsReader<R> {
                 ));
             };
             if (2..=5).contains(&flag) {
-                // Event records: n special lines follow (header lines for flag 4).
+                // Event records: n special lines follow. Those of flag 4 are header lines,
+                // and a new observation-type list among them (RINEX 2.11 §5.4, RINEX 3.04
+                // §5.2: a receiver that changes its signals mid-file) governs the epochs
+                // after it; the other header lines change nothing this reader keeps.
                 let line = self.line_no;
+                let mut pending = None;
                 for k in 0..n {
                     if !self.next_line()? {
                         return Err(self.truncated(format!(
@@ -466,6 +470,19 @@ impl<R: BufRead> ObsReader<R> {
                             k + 1
                         )));
                     }
+                    if flag == 4 {
+                        self.types_header_line(&mut pending)?;
+                    }
+                }
+                if let Some((sys, missing)) = pending {
+                    return Err(self.syntax(
+                        None,
+                        format!(
+                            "{missing} more observation types of system '{sys}' among the \
+                             header records of the event at line {line}"
+                        ),
+                        "the end of those records",
+                    ));
                 }
                 continue;
             }
@@ -732,14 +749,7 @@ impl<R: BufRead> ObsReader<R> {
                     self.header.time_of_first_obs = Some(t);
                     time_system_text = self.field(48, 51)?.trim().to_string();
                 }
-                "# / TYPES OF OBSERV" if self.header.is_v2() => {
-                    self.obs_types_line(&mut pending, ' ', (0, 6), 10, 6, 9, 2)?;
-                }
-                "SYS / # / OBS TYPES" if !self.header.is_v2() => {
-                    let letter = self.line.chars().next().unwrap_or(' ');
-                    self.obs_types_line(&mut pending, letter, (3, 6), 7, 4, 13, 3)?;
-                }
-                _ => {}
+                _ => self.types_header_line(&mut pending)?,
             }
         }
         if let Some((sys, missing)) = pending {
@@ -778,6 +788,21 @@ impl<R: BufRead> ObsReader<R> {
             }
         }
         Ok(())
+    }
+
+    /// An observation-type header line (`# / TYPES OF OBSERV` in RINEX 2, `SYS / # / OBS
+    /// TYPES` in RINEX 3) read into the header; any other line is left alone.
+    fn types_header_line(&mut self, pending: &mut Option<(char, usize)>) -> Result<(), ObsError> {
+        match self.label() {
+            "# / TYPES OF OBSERV" if self.header.is_v2() => {
+                self.obs_types_line(pending, ' ', (0, 6), 10, 6, 9, 2)
+            }
+            "SYS / # / OBS TYPES" if !self.header.is_v2() => {
+                let letter = self.line.chars().next().unwrap_or(' ');
+                self.obs_types_line(pending, letter, (3, 6), 7, 4, 13, 3)
+            }
+            _ => Ok(()),
+        }
     }
 
     fn time_system_error(&self, found: &str) -> ObsError {
@@ -1205,6 +1230,31 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().contains("Hatanaka"), "{e}");
+    }
+
+    #[test]
+    fn an_event_with_a_new_type_list_governs_the_epochs_after_it() {
+        // Flag 4 with a header record that cuts the list to two types (C1, P2).
+        let mut s = v2_file();
+        s += " 05  4  2  0  1  0.0000000  4  1\n";
+        s += &h("     2    C1    P2", "# / TYPES OF OBSERV");
+        s += " 05  4  2  0  1 30.0000000  0  1G05\n";
+        s += &format!("{:14.3}  {:14.3}\n", 2.2e7, 2.2e7 + 1.0);
+        let (hd, epochs) = read(&s).unwrap();
+        assert_eq!(epochs.len(), 3);
+        assert_eq!(hd.obs_types('G').unwrap(), ["C1", "P2"]);
+        assert_eq!(epochs[2].values(0).len(), 2);
+        assert_eq!(epochs[2].values(0)[1].value, Some(2.2e7 + 1.0));
+        // A list announced longer than its line, without the continuation line.
+        let bad = s.replace(
+            "     2    C1    P2",
+            "    10    C1    P2    L1    L2    D1    D2    S1    S2    C2",
+        );
+        let e = read(&bad).unwrap_err();
+        assert!(
+            e.to_string().contains("1 more observation types of system ' ' among the header records of the event at line 44"),
+            "{e}"
+        );
     }
 
     #[test]
