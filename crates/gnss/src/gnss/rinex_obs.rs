@@ -25,7 +25,8 @@
 //! indicators. Epoch flags 0 (OK), 1 (power failure since the previous epoch) and 6
 //! (cycle-slip records, which have the observation layout) are returned; the event
 //! records of flags 2–5 (antenna moving, new occupation, header information, external
-//! event) are skipped with the `n` special lines that follow them. In RINEX 2 a blank
+//! event) are skipped with the `n` special lines that follow them, except that a new
+//! observation-type list among the header lines of a flag-4 event replaces the old one. In RINEX 2 a blank
 //! satellite letter means GPS. Epoch times are read in the file's time system (`TIME OF
 //! FIRST OBS`, GPS when absent): GPST and GST are used as they are, BDT is moved to GPST
 //! (GPST = BDT + 14 s); GLONASS (UTC-based) time is refused rather than guessed.
