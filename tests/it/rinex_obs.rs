@@ -427,7 +427,8 @@ fn the_exported_rinex3_file_reads_back_as_the_recorded_pseudoranges() {
 }
 
 /// Hostile observation files: each refused with exit code 2 and a message naming the file,
-/// the line (and column for a field) and what was expected.
+/// the line (and column for a field) and what was expected; a directory, `/dev/zero` and
+/// a file over the cap before anything is read.
 #[test]
 fn hostile_observation_files_are_refused_with_their_line() {
     let dir = tmp_dir("obs-hostile");
@@ -511,4 +512,16 @@ fn hostile_observation_files_are_refused_with_their_line() {
         ],
     );
     println!("/dev/zero: {e}");
+    // One byte over the cap, as a sparse file (no disk used): refused before a read.
+    let huge = dir.join("huge.obs");
+    std::fs::File::create(&huge)
+        .unwrap()
+        .set_len(hybridnav::gnss::rinex_obs::RINEX_OBS.max_bytes + 1)
+        .unwrap();
+    let e = refused(
+        &["gnss", "position", "--obs", huge.to_str().unwrap(), "--nav", nav],
+        &["huge.obs", "more than the 8 GiB a RINEX observation file may have"],
+    );
+    println!("over the cap: {e}");
+    let _ = std::fs::remove_file(&huge);
 }
