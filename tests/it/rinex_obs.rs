@@ -519,8 +519,18 @@ fn hostile_observation_files_are_refused_with_their_line() {
         .set_len(hybridnav::gnss::rinex_obs::RINEX_OBS.max_bytes + 1)
         .unwrap();
     let e = refused(
-        &["gnss", "position", "--obs", huge.to_str().unwrap(), "--nav", nav],
-        &["huge.obs", "more than the 8 GiB a RINEX observation file may have"],
+        &[
+            "gnss",
+            "position",
+            "--obs",
+            huge.to_str().unwrap(),
+            "--nav",
+            nav,
+        ],
+        &[
+            "huge.obs",
+            "more than the 8 GiB a RINEX observation file may have",
+        ],
     );
     println!("over the cap: {e}");
     let _ = std::fs::remove_file(&huge);
