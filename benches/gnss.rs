@@ -343,5 +343,51 @@ fn baseband_benches(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(gnss, benches, iq_benches, baseband_benches);
+/// The RINEX observation reader on the GEONET file `07590920.05o` (RINEX 2.10, 120
+/// epochs, 68 kB) held in memory, in bytes per second, and `gnss position`'s solver on
+/// every epoch of it; skipped without `../shared`.
+fn obs_benches(c: &mut Criterion) {
+    let Some(dir) = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(|p| p.join("shared/data/gnss"))
+    else {
+        return;
+    };
+    let (Ok(text), Ok(nav)) = (
+        std::fs::read(dir.join("07590920.05o")),
+        read_nav_file(&dir.join("07590920.05n")),
+    ) else {
+        eprintln!("skipped: the GEONET files are not in ../shared");
+        return;
+    };
+    let mut g = c.benchmark_group("rinex_obs");
+    g.throughput(criterion::Throughput::Bytes(text.len() as u64));
+    g.bench_function("read_geonet_day_hour", |b| {
+        b.iter(|| {
+            let mut n = 0usize;
+            hybridnav::gnss::rinex_obs::read_all(&text, "07590920.05o", |_, e| n += e.len())
+                .expect("the GEONET file reads");
+            black_box(n)
+        })
+    });
+    let mut epochs = Vec::new();
+    let header = hybridnav::gnss::rinex_obs::read_all(&text, "07590920.05o", |_, e| {
+        epochs.push(e.clone());
+    })
+    .expect("the GEONET file reads");
+    g.throughput(criterion::Throughput::Elements(epochs.len() as u64));
+    g.bench_function("spp_120_epochs", |b| {
+        b.iter(|| {
+            let mut spp = hybridnav::spp::Spp::new(&nav, &header).expect("C1 present");
+            let mut sum = 0.0;
+            for e in &epochs {
+                sum += spp.solve(e).map_or(0.0, |f| f.pdop);
+            }
+            black_box(sum)
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(gnss, benches, iq_benches, baseband_benches, obs_benches);
 criterion_main!(gnss);

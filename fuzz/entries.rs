@@ -115,3 +115,14 @@ pub fn ts_payload(data: &[u8]) {
         "more packets than the file holds"
     );
 }
+
+/// The RINEX 2/3 observation reader on arbitrary bytes: the header, then every epoch,
+/// checking that each satellite holds exactly the values its system's types announce.
+pub fn rinex_obs(data: &[u8]) {
+    let _ = hybridnav::gnss::rinex_obs::read_all(data, "fuzz.obs", |header, epoch| {
+        for (k, (sat, values)) in epoch.iter().enumerate() {
+            let n_types = header.obs_types(sat.system).map_or(0, <[String]>::len);
+            assert_eq!(values.len(), n_types, "satellite {k} ({sat})");
+        }
+    });
+}

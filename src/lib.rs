@@ -21,3 +21,4 @@ pub mod cli;
 pub mod export;
 pub mod layout;
 pub mod reproduce;
+pub mod spp;

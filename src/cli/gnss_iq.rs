@@ -20,6 +20,10 @@ pub enum GnssCommand {
     /// annotation per satellite), BASE.truth.csv (receiver ECEF truth) and BASE.paths.csv
     /// (per satellite and path: code phase, Doppler, C/N0, excess delay, LOS/NLOS).
     Iq(GnssIqArgs),
+    /// Single-point positioning of a RINEX observation file (GPS L1 C/A and BeiDou B1I
+    /// code) with a RINEX navigation file: one weighted least-squares fix per epoch, as CSV
+    /// (t_gpst, ECEF, latitude/longitude/height, satellites used, PDOP).
+    Position(super::gnss_position::GnssPositionArgs),
 }
 
 /// Options of `gnss iq`.
@@ -65,7 +69,10 @@ fn with_ext(base: &Path, ext: &str) -> PathBuf {
 /// Bad options or a request the world cannot satisfy (before any sample is written), or an
 /// output that cannot be written.
 pub fn run(cmd: GnssCommand) -> Result<()> {
-    let GnssCommand::Iq(a) = cmd;
+    let a = match cmd {
+        GnssCommand::Iq(a) => a,
+        GnssCommand::Position(a) => return super::gnss_position::run(&a),
+    };
     let signal = match a.signal.to_ascii_lowercase().as_str() {
         "gps-l1ca" => Signal::GpsL1Ca,
         "bds-b1i" => Signal::BdsB1i,

@@ -3,6 +3,7 @@
 mod dtmb;
 mod ephemeris;
 mod gnss_iq;
+mod gnss_position;
 
 use crate::core::GpsTime;
 use crate::io::atomic::write_atomic;

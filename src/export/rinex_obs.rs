@@ -44,7 +44,10 @@ fn header(out: &mut String, content: &str, label: &str) {
 
 fn calendar(t: GpsTime) -> (i32, u8, u8, u8, u8, f64) {
     // Rounded to 100 ns first (the record's 7 decimals), so a carry reaches the minutes.
-    let t = GpsTime::from_ns((t.as_seconds_f64() * 1e7).round() as i64 * 100);
+    // In integer nanoseconds: through f64 seconds since 1980 (spacing 2⁻²² s near
+    // 1.3·10⁹ s, and 2 units of 100 ns once scaled by 10⁷) the tag was off by up to
+    // 0.3 µs, which the observation reader's round trip found.
+    let t = GpsTime::from_ns((t.ns() + 50).div_euclid(100) * 100);
     let (y, mo, d, h, mi, s, ns) = t.to_gpst_calendar();
     (y, mo, d, h, mi, f64::from(s) + f64::from(ns) * 1e-9)
 }

@@ -32,6 +32,7 @@ const MODULES: &[(&str, &str, u8)] = &[
     ("world", "crates/sim", 7),
     ("report", "crates/run", 8),
     ("montecarlo", "crates/run", 9),
+    ("spp", ".", 5),
     ("export", ".", 9),
     ("layout", ".", 9),
     ("reproduce", ".", 10),

@@ -32,6 +32,7 @@ mod reliability;
 mod report;
 mod reproductions;
 mod reproductions_abstract;
+mod rinex_obs;
 mod skeleton;
 mod tcofdm;
 mod world_mistakes;

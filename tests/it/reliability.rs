@@ -784,7 +784,7 @@ mod fuzz_entries {
 #[test]
 fn the_fuzz_corpora_and_crashes_replay_without_a_panic() {
     type Entry = fn(&[u8]);
-    let targets: [(&str, Entry); 7] = [
+    let targets: [(&str, Entry); 8] = [
         ("world_file", fuzz_entries::world_file),
         ("rinex_nav", fuzz_entries::rinex_nav),
         ("sp3", fuzz_entries::sp3),
@@ -792,6 +792,7 @@ fn the_fuzz_corpora_and_crashes_replay_without_a_panic() {
         ("sigmf_fmdb", fuzz_entries::sigmf_fmdb),
         ("cli_args", fuzz_entries::cli_args),
         ("ts_payload", fuzz_entries::ts_payload),
+        ("rinex_obs", fuzz_entries::rinex_obs),
     ];
     let fuzz = repo().join("fuzz");
     let scratch = std::env::temp_dir().join(format!("hybridnav-fuzz-{}", std::process::id()));

@@ -7,6 +7,7 @@ pub mod link;
 pub mod measurement;
 pub mod multipath;
 pub mod rinex_nav;
+pub mod rinex_obs;
 pub mod signal;
 pub mod sp3;
 pub mod synth;
