@@ -297,8 +297,9 @@ impl Ctx<'_> {
     }
 }
 
-/// Quotes a piece of text for an error message, shortened to 40 characters.
-fn quote(s: &str) -> String {
+/// Quotes a piece of text for an error message, shortened to 40 characters (trailing
+/// blanks dropped; the observation reader also drops leading ones).
+pub(crate) fn quote(s: &str) -> String {
     let t = s.trim_end();
     if t.is_empty() {
         return "a blank field".to_string();
@@ -322,24 +323,25 @@ fn cols(line: &str, start: usize, end: usize) -> Option<&str> {
 }
 
 /// Parses a Fortran real (`D` or `E` exponent). `Ok(None)` for a blank field; `Err` with
-/// the offending text for anything that is not a finite number.
+/// the offending text for anything that is not a finite number. Allocates only for a `D`
+/// exponent or an error (the observation reader calls it for every value).
 pub(crate) fn parse_fortran_f64(field: &str) -> Result<Option<f64>, String> {
     let t = field.trim();
     if t.is_empty() {
         return Ok(None);
     }
-    let normalised: String = t
-        .chars()
-        .map(|c| if c == 'D' || c == 'd' { 'E' } else { c })
-        .collect();
     // Rust accepts "inf" and "NaN", which are never valid RINEX numbers.
-    if normalised
-        .chars()
-        .any(|c| c.is_ascii_alphabetic() && c != 'E' && c != 'e')
+    if t.bytes()
+        .any(|b| b.is_ascii_alphabetic() && !matches!(b, b'E' | b'e' | b'D' | b'd'))
     {
         return Err(t.to_string());
     }
-    match normalised.parse::<f64>() {
+    let parsed = if t.bytes().any(|b| b == b'D' || b == b'd') {
+        t.replace(['D', 'd'], "E").parse::<f64>()
+    } else {
+        t.parse::<f64>()
+    };
+    match parsed {
         Ok(v) if v.is_finite() => Ok(Some(v)),
         _ => Err(t.to_string()),
     }

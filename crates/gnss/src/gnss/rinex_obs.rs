@@ -37,7 +37,7 @@
 
 use crate::core::time::NS_PER_S;
 use crate::core::{EmitterId, GpsTime, System};
-use crate::gnss::rinex_nav::gpst_from_calendar;
+use crate::gnss::rinex_nav::{gpst_from_calendar, parse_fortran_f64};
 use crate::io::read::{Capped, Limit};
 use nalgebra::Vector3;
 use std::fmt;
@@ -291,42 +291,9 @@ impl ObsError {
     }
 }
 
-/// Quotes a piece of text for an error message, shortened to 40 characters.
+/// Quotes a piece of text for an error message, shortened to 40 characters and trimmed.
 fn quote(s: &str) -> String {
-    let t = s.trim();
-    if t.is_empty() {
-        return "a blank field".to_string();
-    }
-    let short: String = t.chars().take(40).collect();
-    if short.len() < t.len() {
-        format!("'{short}…'")
-    } else {
-        format!("'{short}'")
-    }
-}
-
-/// Parses a RINEX real (F format; `D` exponents accepted). `Ok(None)` for a blank field.
-fn parse_real(field: &str) -> Result<Option<f64>, ()> {
-    let t = field.trim();
-    if t.is_empty() {
-        return Ok(None);
-    }
-    // Rust would accept "inf" and "NaN", which are never RINEX numbers.
-    if t.bytes()
-        .any(|b| b.is_ascii_alphabetic() && !matches!(b, b'E' | b'e' | b'D' | b'd'))
-    {
-        return Err(());
-    }
-    let v: f64 = if t.bytes().any(|b| b == b'D' || b == b'd') {
-        t.replace(['D', 'd'], "E").parse().map_err(|_| ())?
-    } else {
-        t.parse().map_err(|_| ())?
-    };
-    if v.is_finite() {
-        Ok(Some(v))
-    } else {
-        Err(())
-    }
+    super::rinex_nav::quote(s.trim_start())
 }
 
 /// A streaming reader of one observation file: the header is read by [`ObsReader::new`],
@@ -978,7 +945,7 @@ impl<R: BufRead> ObsReader<R> {
 
     fn real_opt(&self, start: usize, end: usize, what: &str) -> Result<Option<f64>, ObsError> {
         let f = self.field(start, end)?;
-        parse_real(f).map_err(|()| self.syntax(Some(start + 1), what, quote(f)))
+        parse_fortran_f64(f).map_err(|_| self.syntax(Some(start + 1), what, quote(f)))
     }
 
     fn real(&self, start: usize, end: usize, what: &str) -> Result<f64, ObsError> {

@@ -6,7 +6,7 @@
 use crate::core::{EnuFrame, System};
 use crate::fusion::wls::{self, WlsOptions};
 use crate::measurement::{
-    EpochOutcome, Measurement, MeasurementBatch, RangeMeasurement, SourceKind,
+    EpochOutcome, Measurement, MeasurementBatch, PositionFix, RangeMeasurement, SourceKind,
 };
 use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
 
@@ -128,23 +128,28 @@ pub(crate) fn fixes_of_batch(
     }
     for m in &batch.items {
         if let Measurement::Position(p) = m {
-            if p.pos_ecef_m
-                .iter()
-                .chain(p.cov_m2.iter())
-                .all(|v| v.is_finite())
-            {
-                fixes.push(Fix {
-                    t_s,
-                    pos_enu_m: frame.enu_of_ecef(&p.pos_ecef_m),
-                    pos_cov_m2: enu_cov(frame, &p.cov_m2),
-                    vel: None,
-                    n: 1,
-                });
-            } else {
-                *rejected += 1;
+            match fix_of_position(frame, t_s, p) {
+                Some(f) => fixes.push(f),
+                None => *rejected += 1,
             }
         }
     }
+}
+
+/// A fix source's position item at `t_s` as a fix in the world frame; `None` when a value
+/// is not finite.
+pub(crate) fn fix_of_position(frame: &EnuFrame, t_s: f64, p: &PositionFix) -> Option<Fix> {
+    p.pos_ecef_m
+        .iter()
+        .chain(p.cov_m2.iter())
+        .all(|v| v.is_finite())
+        .then(|| Fix {
+            t_s,
+            pos_enu_m: frame.enu_of_ecef(&p.pos_ecef_m),
+            pos_cov_m2: enu_cov(frame, &p.cov_m2),
+            vel: None,
+            n: 1,
+        })
 }
 
 /// Adds one update's NIS of `dof` components to the epoch's record, outside the

@@ -248,6 +248,63 @@ pub fn error_dynamics(
     f
 }
 
+/// What a Joseph-form update computed: a gated innovation, or the error estimate and
+/// the new (symmetrised) covariance, for the caller to check and apply.
+pub(crate) enum JosephStep<const N: usize> {
+    Gated {
+        nis: f64,
+    },
+    Update {
+        nis: f64,
+        dx: SVector<f64, N>,
+        p: SMatrix<f64, N, N>,
+    },
+}
+
+/// The Joseph-form Kalman update of an `M`-dimensional measurement on an `N`-state error
+/// covariance `p`: innovation `z` (predicted minus measured), Jacobian `h`, noise `r`,
+/// NIS gate `gate`. `P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ`, `K = P Hᵀ S⁻¹`. Shared by this
+/// filter and the tightly coupled one (`ins_tight`). Does not allocate.
+///
+/// # Errors
+/// [`InsFixError`] for a non-finite input or an innovation covariance that is not
+/// positive definite.
+pub(crate) fn joseph_update<const N: usize, const M: usize>(
+    p: &SMatrix<f64, N, N>,
+    z: &SVector<f64, M>,
+    h: &SMatrix<f64, M, N>,
+    r: &SMatrix<f64, M, M>,
+    gate: Option<f64>,
+    what: &'static str,
+) -> Result<JosephStep<N>, InsFixError> {
+    if z.iter()
+        .chain(r.iter())
+        .chain(h.iter())
+        .any(|v| !v.is_finite())
+    {
+        return Err(InsFixError::NonFinite { what });
+    }
+    let hp = h * p;
+    let s = hp * h.transpose() + r;
+    let chol = s
+        .cholesky()
+        .ok_or(InsFixError::NotPositiveDefinite { what })?;
+    let nis = z.dot(&chol.solve(z));
+    if gate.is_some_and(|g| nis > g) {
+        return Ok(JosephStep::Gated { nis });
+    }
+    // K = P Hᵀ S⁻¹ = (S⁻¹ H P)ᵀ since P and S are symmetric.
+    let k = chol.solve(&hp).transpose();
+    let dx = k * z;
+    let ikh = SMatrix::<f64, N, N>::identity() - k * h;
+    let p = ikh * p * ikh.transpose() + k * r * k.transpose();
+    Ok(JosephStep::Update {
+        nis,
+        dx,
+        p: 0.5 * (p + p.transpose()),
+    })
+}
+
 /// Closed-loop correction of the navigation solution by the 15 navigation error states
 /// `dx` (δr, δv, ψ, δα, δε): r̂ −= δr, v̂ −= δv, Ĉ ← exp([ψ×]) Ĉ, b̂_a += δα, b̂_g += δε.
 /// Shared by this filter and the tightly coupled one (`ins_tight`).
@@ -340,34 +397,20 @@ impl InsEkf {
         r: SMatrix<f64, M, M>,
         what: &'static str,
     ) -> Result<FixOutcome, InsFixError> {
-        if z.iter().chain(r.iter()).any(|v| !v.is_finite()) {
-            return Err(InsFixError::NonFinite { what });
-        }
-        let hp = h * self.p;
-        let s = hp * h.transpose() + r;
-        let chol = s
-            .cholesky()
-            .ok_or(InsFixError::NotPositiveDefinite { what })?;
-        let nis = z.dot(&chol.solve(&z));
-        if let Some(g) = self.nis_gate {
-            if nis > g {
-                return Ok(FixOutcome {
+        match joseph_update(&self.p, &z, &h, &r, self.nis_gate, what)? {
+            JosephStep::Gated { nis } => Ok(FixOutcome {
+                nis,
+                accepted: false,
+            }),
+            JosephStep::Update { nis, dx, p } => {
+                self.p = p;
+                self.feed_back(&dx);
+                Ok(FixOutcome {
                     nis,
-                    accepted: false,
-                });
+                    accepted: true,
+                })
             }
         }
-        // K = P Hᵀ S⁻¹ = (S⁻¹ H P)ᵀ since P and S are symmetric.
-        let k = chol.solve(&hp).transpose();
-        let dx = k * z;
-        let ikh = Cov15::identity() - k * h;
-        self.p = ikh * self.p * ikh.transpose() + k * r * k.transpose();
-        self.p = 0.5 * (self.p + self.p.transpose());
-        self.feed_back(&dx);
-        Ok(FixOutcome {
-            nis,
-            accepted: true,
-        })
     }
 
     /// Closed-loop correction: applies the estimated errors to the solution and the bias

@@ -26,7 +26,8 @@ use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::fixes::{
-    ecef_cov, enu_cov, fixes_of_batch, tally_unwatched_nis, velocity_from_rates, Fix,
+    ecef_cov, enu_cov, fix_of_position, fixes_of_batch, tally_unwatched_nis, velocity_from_rates,
+    Fix,
 };
 
 fn d_fix_sources() -> Vec<SourceKind> {
@@ -909,23 +910,17 @@ impl InsEstimator {
                 tally_scalar(out, kf.update_range_rate(m, &self.frame, lag));
             }
         }
+        self.apply_position_items(batch, t_s, out);
+    }
+
+    /// Applies the batch's position items (a fix source such as "fm") as fixes of their
+    /// own; one with a non-finite value is rejected.
+    fn apply_position_items(&mut self, batch: &MeasurementBatch, t_s: f64, out: &mut EpochOutcome) {
         for m in &batch.items {
             if let Measurement::Position(p) = m {
-                let f = Fix {
-                    t_s,
-                    pos_enu_m: self.frame.enu_of_ecef(&p.pos_ecef_m),
-                    pos_cov_m2: enu_cov(&self.frame, &p.cov_m2),
-                    vel: None,
-                    n: 1,
-                };
-                if f.pos_enu_m
-                    .iter()
-                    .chain(f.pos_cov_m2.iter())
-                    .all(|v| v.is_finite())
-                {
-                    self.apply_fix(&f, out);
-                } else {
-                    out.rejected += 1;
+                match fix_of_position(&self.frame, t_s, p) {
+                    Some(f) => self.apply_fix(&f, out),
+                    None => out.rejected += 1,
                 }
             }
         }
@@ -992,26 +987,7 @@ impl InsEstimator {
         }
         // Position items of the batch (a fix source such as "fm") are fixes of their own.
         let t_s = batch.t.seconds_since(self.start);
-        for m in &batch.items {
-            if let Measurement::Position(p) = m {
-                if p.pos_ecef_m
-                    .iter()
-                    .chain(p.cov_m2.iter())
-                    .all(|v| v.is_finite())
-                {
-                    let f = Fix {
-                        t_s,
-                        pos_enu_m: self.frame.enu_of_ecef(&p.pos_ecef_m),
-                        pos_cov_m2: enu_cov(&self.frame, &p.cov_m2),
-                        vel: None,
-                        n: 1,
-                    };
-                    self.apply_fix(&f, out);
-                } else {
-                    out.rejected += 1;
-                }
-            }
-        }
+        self.apply_position_items(batch, t_s, out);
         if self.pending_seen.iter().all(|s| *s) {
             self.flush_joint(out);
         }

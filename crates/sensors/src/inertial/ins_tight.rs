@@ -58,8 +58,8 @@
 //! ([`crate::fusion::ekf11::Ekf11Config`], [`crate::fusion::ekf11::IsbConfig`]).
 
 use super::ins_ekf::{
-    feed_back_nav, initial_covariance, mechanise, process_noise_rate, Cov15, FixOutcome,
-    InsEkfConfig, InsFixError,
+    feed_back_nav, initial_covariance, joseph_update, mechanise, process_noise_rate, Cov15,
+    FixOutcome, InsEkfConfig, InsFixError, JosephStep,
 };
 use super::strapdown::{NavState, Strapdown};
 use super::LocalEarth;
@@ -240,9 +240,9 @@ impl InsTightEkf {
     }
 
     /// The Joseph-form update of an `M`-dimensional measurement with innovation `z`
-    /// (predicted minus measured), Jacobian `h` and noise `r`, gated at `gate`; the
-    /// estimated errors are then fed back. A result with a non-finite or negative variance
-    /// is refused and leaves the filter unchanged.
+    /// (predicted minus measured), Jacobian `h` and noise `r`, gated at `gate`
+    /// ([`joseph_update`]); the estimated errors are then fed back. A result with a
+    /// non-finite or negative variance is refused and leaves the filter unchanged.
     fn update<const M: usize>(
         &mut self,
         z: SVector<f64, M>,
@@ -251,41 +251,25 @@ impl InsTightEkf {
         gate: Option<f64>,
         what: &'static str,
     ) -> Result<FixOutcome, InsFixError> {
-        if z.iter()
-            .chain(r.iter())
-            .chain(h.iter())
-            .any(|v| !v.is_finite())
-        {
-            return Err(InsFixError::NonFinite { what });
-        }
-        let hp = h * self.p;
-        let s = hp * h.transpose() + r;
-        let chol = s
-            .cholesky()
-            .ok_or(InsFixError::NotPositiveDefinite { what })?;
-        let nis = z.dot(&chol.solve(&z));
-        if gate.is_some_and(|g| nis > g) {
-            return Ok(FixOutcome {
+        match joseph_update(&self.p, &z, &h, &r, gate, what)? {
+            JosephStep::Gated { nis } => Ok(FixOutcome {
                 nis,
                 accepted: false,
-            });
+            }),
+            JosephStep::Update { nis, dx, p } => {
+                if dx.iter().any(|v| !v.is_finite())
+                    || (0..N_TIGHT).any(|i| !(p[(i, i)].is_finite() && p[(i, i)] >= 0.0))
+                {
+                    return Err(InsFixError::NotPositiveDefinite { what });
+                }
+                self.p = p;
+                self.feed_back(&dx);
+                Ok(FixOutcome {
+                    nis,
+                    accepted: true,
+                })
+            }
         }
-        // K = P Hᵀ S⁻¹ = (S⁻¹ H P)ᵀ since P and S are symmetric.
-        let k = chol.solve(&hp).transpose();
-        let dx = k * z;
-        let ikh = Cov18::identity() - k * h;
-        let p = ikh * self.p * ikh.transpose() + k * r * k.transpose();
-        if dx.iter().any(|v| !v.is_finite())
-            || (0..N_TIGHT).any(|i| !(p[(i, i)].is_finite() && p[(i, i)] >= 0.0))
-        {
-            return Err(InsFixError::NotPositiveDefinite { what });
-        }
-        self.p = 0.5 * (p + p.transpose());
-        self.feed_back(&dx);
-        Ok(FixOutcome {
-            nis,
-            accepted: true,
-        })
     }
 
     /// The scalar case of [`Self::update`] in O(n²): with `c = P h`, `s = hᵀ c + r` and
