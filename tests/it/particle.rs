@@ -349,3 +349,103 @@ fn a_run_reports_the_worlds_bound_in_its_summary_and_report() {
     assert!(bounded >= 3, "seed 003's EKF and PFs share one model");
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// The report's RMSE-against-time curves, checked against the trials they come from: for
+/// seed 003 (4 trials), each estimator's curve equals the RMSE across trials computed
+/// here from the trials' own records at every instant, and its epoch-mean square equals
+/// the square of the summary's RMSE (a second path: the sorted spill of every error).
+/// The bound curve is the world's: its epoch-mean square is `pcrlb_pos_rmse_m`², it lies
+/// under the RMSE of every estimator that shares its model once the prior has been
+/// forgotten (the mean over the second half, where the filters are in steady state), and
+/// the EKF, efficient on this nearly linear model, stays within 1.5× of it there.
+#[test]
+fn the_rmse_against_time_lies_on_or_above_its_bound() {
+    use hybridnav::montecarlo::{reduce::RunReducer, run_trials, store::Shard, RunOptions};
+    let world = hybridnav::world::load_world(&repo().join("worlds/seed003-seamless.toml"))
+        .expect("seed 003 world");
+    let opts = RunOptions {
+        trials: 4,
+        seed: 3,
+        threads: 2,
+        progress: false,
+        shard: Shard::WHOLE,
+    };
+    let trials = run_trials(&world, &opts).expect("trials");
+    let spill = crate::common::tmp_dir("rmse-vs-time");
+    std::fs::create_dir_all(&spill).unwrap();
+    let mut reducer = RunReducer::new(&world, &spill);
+    for t in &trials {
+        reducer.push(t).unwrap();
+    }
+    let reduced = reducer.finish(&world, &opts).unwrap();
+    let curves = &reduced.curves;
+    let n_est = world.file.estimators.len();
+    assert_eq!(curves.rmse_vs_time.len(), n_est);
+    assert_eq!(curves.pcrlb_vs_time.len(), n_est);
+    let mut bounded = 0;
+    for (k, est) in reduced.summary.estimators.iter().enumerate() {
+        // Independently: the last record of each instant of each trial, squared, averaged.
+        let mut by_t: std::collections::BTreeMap<u64, Vec<f64>> = Default::default();
+        for t in &trials {
+            let mut last: std::collections::BTreeMap<u64, f64> = Default::default();
+            for ep in &t.estimators[k].epochs {
+                if let Some(e) = ep.err_3d_m {
+                    last.insert(ep.t_s.to_bits(), e);
+                }
+            }
+            for (ts, e) in last {
+                by_t.entry(ts).or_default().push(e);
+            }
+        }
+        let curve = &curves.rmse_vs_time[k];
+        assert_eq!(curve.len(), by_t.len(), "{}", est.name);
+        for ((t_s, rmse), (ts, errs)) in curve.iter().zip(&by_t) {
+            assert_eq!(t_s.to_bits(), *ts);
+            let want = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
+            assert!(
+                (rmse - want).abs() <= 1e-12 * want.max(1.0),
+                "{rmse} vs {want}"
+            );
+        }
+        let full = by_t.values().all(|v| v.len() == trials.len());
+        if full {
+            let ms = curve.iter().map(|(_, r)| r * r).sum::<f64>() / curve.len() as f64;
+            let rmse = est.error_3d_m.as_ref().unwrap().rmse;
+            assert!(
+                (ms.sqrt() - rmse).abs() <= 1e-9 * rmse,
+                "{} vs {rmse}",
+                ms.sqrt()
+            );
+        }
+        let Some(bound) = &curves.pcrlb_vs_time[k] else {
+            continue;
+        };
+        bounded += 1;
+        let b_rmse = est.pcrlb_pos_rmse_m.unwrap();
+        let ms = bound.iter().map(|(_, b)| b * b).sum::<f64>() / bound.len() as f64;
+        assert!((ms.sqrt() - b_rmse).abs() <= 1e-9 * b_rmse);
+        // The second half of the run, where both curves are on the same instants.
+        let half = world.duration_s / 2.0;
+        let mean_sq = |c: &[(f64, f64)]| {
+            let v: Vec<f64> = c
+                .iter()
+                .filter(|(t, _)| *t >= half)
+                .map(|(_, y)| y * y)
+                .collect();
+            (v.iter().sum::<f64>() / v.len() as f64).sqrt()
+        };
+        let (r2, b2) = (mean_sq(curve), mean_sq(bound));
+        // Four trials give the RMSE a relative standard error of about 1/√(2·4·50) over
+        // the 50 s half: a 10 % margin is three of them.
+        assert!(
+            r2 >= 0.9 * b2,
+            "{}: RMSE {r2:.2} m under its bound {b2:.2} m",
+            est.name
+        );
+        if est.name == "EKF" {
+            assert!(r2 <= 1.5 * b2, "EKF RMSE {r2:.2} m vs bound {b2:.2} m");
+        }
+    }
+    assert!(bounded >= 3, "seed 003's EKF and PFs share one model");
+    let _ = std::fs::remove_dir_all(&spill);
+}

@@ -48,7 +48,11 @@ fn the_report_is_self_contained_and_opens_in_headless_chromium() {
         );
     }
     let n_svg = html.matches("<svg ").count();
-    assert_eq!(n_svg, 6, "six charts expected");
+    assert_eq!(
+        n_svg, 7,
+        "seven charts expected (two trials: RMSE against time too)"
+    );
+    assert!(html.contains("<h2>RMSE against time</h2>"));
 
     // Every chart parses as XML (what a strict SVG reader requires).
     let script = r#"
@@ -68,7 +72,7 @@ print(len(svgs))
     {
         Ok(o) => {
             assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-            assert_eq!(String::from_utf8_lossy(&o.stdout).trim(), "6");
+            assert_eq!(String::from_utf8_lossy(&o.stdout).trim(), n_svg.to_string());
         }
         Err(e) => crate::common::skip(&format!("python3 not found ({e}); SVGs not parsed as XML")),
     }

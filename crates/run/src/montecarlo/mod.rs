@@ -321,10 +321,10 @@ impl Outputs {
         let reduce::Reduced {
             summary,
             first,
-            cdfs,
+            curves,
         } = self.reducer.finish(world, opts)?;
         if self.report {
-            let report = crate::report::render(world, &summary, first.as_ref(), &cdfs)?;
+            let report = crate::report::render(world, &summary, first.as_ref(), &curves)?;
             // Each chart also as its own SVG file, for papers: `report/figures/NAME.svg`.
             let figures = path(FIGURES_DIR);
             std::fs::create_dir_all(&figures)

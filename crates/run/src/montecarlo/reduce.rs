@@ -32,9 +32,25 @@ pub struct Reduced {
     pub summary: Summary,
     /// The first trial reduced (trial 0 of a whole run): the report draws its trajectories.
     pub first: Option<TrialResult>,
-    /// Each estimator's empirical CDF of the 3-D error, `(error_m, share)`, thinned to
-    /// [`CDF_POINTS`] (empty without an estimate).
-    pub cdfs: Vec<Vec<(f64, f64)>>,
+    /// The curves the report draws from every trial, not only the first.
+    pub curves: Curves,
+}
+
+/// A curve of `(x, y)` points.
+pub type Curve = Vec<(f64, f64)>;
+
+/// What the report draws across trials, per estimator in the world's order.
+#[derive(Clone, Debug, Default)]
+pub struct Curves {
+    /// The empirical CDF of the 3-D error, `(error_m, share)`, thinned to [`CDF_POINTS`]
+    /// (empty without an estimate).
+    pub cdfs: Vec<Curve>,
+    /// `(t_s, rmse_m)`: at each scored instant, the RMSE of the 3-D error across the trials
+    /// that had an estimate then, `√(Σ e² / n)` (empty without an estimate).
+    pub rmse_vs_time: Vec<Curve>,
+    /// The PCRLB on that RMSE at each epoch ([`crate::world::bound::PositionBound`]), for
+    /// the estimators whose model it covers.
+    pub pcrlb_vs_time: Vec<Option<Curve>>,
 }
 
 /// Accumulates trials, in trial order, into a [`Summary`].
@@ -116,20 +132,23 @@ impl RunReducer {
     /// When spilled errors cannot be read back.
     pub fn finish(self, world: &World, opts: &RunOptions) -> Result<Reduced, String> {
         let mut estimators = Vec::with_capacity(self.estimators.len());
-        let mut cdfs = Vec::with_capacity(self.estimators.len());
+        let mut curves = Curves::default();
         // The PCRLB of each estimator's model over the run's truth trajectories
         // (world::bound), and each estimator's efficiency against it.
-        let bounds = world.pcrlb_pos_rmse_m(opts.seed, opts.trials);
+        let mut bounds = world.pcrlb(opts.seed, opts.trials);
         for (i, acc) in self.estimators.into_iter().enumerate() {
-            let (mut s, cdf) = acc.finish().map_err(|e| e.to_string())?;
-            s.pcrlb_pos_rmse_m = bounds.get(i).copied().flatten();
+            let (mut s, cdf, rmse_vs_time) = acc.finish().map_err(|e| e.to_string())?;
+            let bound = bounds.get_mut(i).and_then(Option::take);
+            s.pcrlb_pos_rmse_m = bound.as_ref().map(|b| b.rmse_m);
+            curves.pcrlb_vs_time.push(bound.map(|b| b.by_epoch));
+            curves.rmse_vs_time.push(rmse_vs_time);
             s.efficiency = s
                 .pcrlb_pos_rmse_m
                 .zip(s.error_3d_m.as_ref().map(|x| x.rmse))
                 .filter(|(b, _)| *b > 0.0)
                 .map(|(b, rmse)| rmse / b);
             estimators.push(s);
-            cdfs.push(cdf);
+            curves.cdfs.push(cdf);
         }
         Ok(Reduced {
             summary: Summary {
@@ -145,7 +164,7 @@ impl RunReducer {
                 warnings: self.warnings.into_iter().collect(),
             },
             first: self.first,
-            cdfs,
+            curves,
         })
     }
 }
@@ -244,6 +263,9 @@ struct EstimatorAcc {
     /// Per epoch time (its bits: positive times order as their bits do), across trials.
     nees_by_t: BTreeMap<u64, EpochSamples>,
     nis_by_t: BTreeMap<u64, EpochSamples>,
+    /// Per epoch time (its bits), the sum of the squared 3-D errors across trials and
+    /// the number of trials in it.
+    sq_err_by_t: BTreeMap<u64, (f64, u32)>,
     per_trial: PerTrial,
     /// Scratch of one trial, reused.
     trial_errs: Vec<f64>,
@@ -275,6 +297,7 @@ impl EstimatorAcc {
             moded: 0,
             nees_by_t: BTreeMap::new(),
             nis_by_t: BTreeMap::new(),
+            sq_err_by_t: BTreeMap::new(),
             per_trial: PerTrial::default(),
             trial_errs: Vec::new(),
             segments: Vec::new(),
@@ -287,6 +310,7 @@ impl EstimatorAcc {
         // (GNSS and FM at the same second), as the TUM tracks below keep.
         let mut trial_nees: BTreeMap<u64, f64> = BTreeMap::new();
         let mut trial_nis: BTreeMap<u64, (f64, usize)> = BTreeMap::new();
+        let mut trial_sq: BTreeMap<u64, f64> = BTreeMap::new();
         for ep in &trace.epochs {
             self.epochs += 1;
             if ep.numerical_failure {
@@ -301,6 +325,7 @@ impl EstimatorAcc {
                     self.e3.push(a)?;
                     self.eh.push(b)?;
                     self.trial_errs.push(a);
+                    trial_sq.insert(ep.t_s.to_bits(), a * a);
                     if let Some((outside, windows)) = self.segments.split_last_mut() {
                         let mut inside = false;
                         for g in windows.iter_mut().filter(|g| g.contains(ep.t_s)) {
@@ -344,6 +369,11 @@ impl EstimatorAcc {
         for (t, (n, dof)) in trial_nis {
             self.nis_by_t.entry(t).or_default().push(n, dof as f64);
         }
+        for (t, e2) in trial_sq {
+            let slot = self.sq_err_by_t.entry(t).or_default();
+            slot.0 += e2;
+            slot.1 += 1;
+        }
         let tr = track(trace);
         let a = ate_errors(&tr.truth, &tr.est, Alignment::None);
         let r = rpe_errors(&tr.t_s, &tr.truth, &tr.est, 1.0, Alignment::None);
@@ -382,7 +412,7 @@ impl EstimatorAcc {
         Ok(())
     }
 
-    fn finish(mut self) -> std::io::Result<(EstimatorSummary, Vec<(f64, f64)>)> {
+    fn finish(mut self) -> std::io::Result<(EstimatorSummary, Curve, Curve)> {
         // A diverged estimate (non-finite error) withholds the statistics rather than
         // averaging NaN; the failure count and epochs say what happened.
         fn error_stats(s: &mut SortedSpill) -> std::io::Result<Option<ErrorStats>> {
@@ -434,7 +464,12 @@ impl EstimatorAcc {
                 .map(SegmentAcc::finish)
                 .collect::<std::io::Result<_>>()?,
         };
-        Ok((summary, cdf))
+        let rmse_vs_time = self
+            .sq_err_by_t
+            .iter()
+            .map(|(t, (sum, n))| (f64::from_bits(*t), (sum / f64::from(*n)).sqrt()))
+            .collect();
+        Ok((summary, cdf, rmse_vs_time))
     }
 }
 

@@ -14,6 +14,7 @@ pub mod svg;
 use crate::core::{SimTime, TrialRng};
 use crate::engine::trial::{truth_at, EpochRecord, TrialResult};
 use crate::metrics::summary::Summary;
+use crate::montecarlo::reduce::Curves;
 use crate::world::World;
 use map::Overlay;
 use std::fmt::Write;
@@ -56,8 +57,8 @@ impl Page {
 }
 
 /// Renders the report of a run from its summary, its first trial (whose trajectories are
-/// drawn) and each estimator's thinned error CDF
-/// ([`crate::montecarlo::reduce::Reduced::cdfs`]).
+/// drawn) and the curves taken across every trial
+/// ([`crate::montecarlo::reduce::Curves`]: error CDFs, RMSE against time, the PCRLB).
 ///
 /// # Errors
 /// When the world's trajectory or map cannot be built.
@@ -65,9 +66,9 @@ pub fn html(
     world: &World,
     summary: &Summary,
     first: Option<&TrialResult>,
-    cdfs: &[Vec<(f64, f64)>],
+    curves: &Curves,
 ) -> Result<String, String> {
-    render(world, summary, first, cdfs).map(|r| r.html)
+    render(world, summary, first, curves).map(|r| r.html)
 }
 
 /// [`html`] and each of the page's charts as its own SVG document.
@@ -78,7 +79,7 @@ pub fn render(
     world: &World,
     summary: &Summary,
     first: Option<&TrialResult>,
-    cdfs: &[Vec<(f64, f64)>],
+    curves: &Curves,
 ) -> Result<Report, String> {
     let mut page = Page {
         h: String::new(),
@@ -108,7 +109,8 @@ pub fn render(
         escape(&summary.hybridnav_version)
     );
     table(h, summary);
-    cdf(&mut page, summary, cdfs);
+    cdf(&mut page, summary, &curves.cdfs);
+    rmse_vs_time(&mut page, summary, curves);
     if let Some(t0) = first {
         trajectories(&mut page, world, t0)?;
         error_vs_time(&mut page, t0);
@@ -371,6 +373,94 @@ fn sig3(v: f64) -> String {
     } else {
         format!("{v:.1e}")
     }
+}
+
+/// The style of the PCRLB curves: black, a dash pattern of its own, no estimator's.
+const BOUND_STYLE: svg::Style = svg::Style {
+    colour: "#000000",
+    dash: "3,4",
+    marker: svg::Marker::Cross,
+};
+
+/// The RMSE across trials at each instant for every estimator, and under it the PCRLB of
+/// the estimators whose model it covers: one curve per distinct bound, naming the
+/// estimators that share it. Drawn when there are at least two trials (with one, the
+/// RMSE is the error of the chart below).
+fn rmse_vs_time(page: &mut Page, s: &Summary, curves: &Curves) {
+    if s.trials < 2 {
+        return;
+    }
+    let mut series: Vec<Series<'_>> = s
+        .estimators
+        .iter()
+        .zip(&curves.rmse_vs_time)
+        .enumerate()
+        .filter(|(_, (_, points))| !points.is_empty())
+        .map(|(k, (e, points))| Series {
+            label: &e.name,
+            style: style(k),
+            points: points.clone(),
+        })
+        .collect();
+    // Estimators of one model and one source set share one bound; draw it once.
+    let mut bounds: Vec<(&Vec<(f64, f64)>, Vec<&str>)> = Vec::new();
+    for (e, b) in s.estimators.iter().zip(&curves.pcrlb_vs_time) {
+        let Some(b) = b else { continue };
+        match bounds.iter_mut().find(|(c, _)| *c == b) {
+            Some((_, names)) => names.push(&e.name),
+            None => bounds.push((b, vec![&e.name])),
+        }
+    }
+    if series.is_empty() {
+        return;
+    }
+    // A legend entry names one estimator at most, so that it fits beside the chart; the
+    // caption lists every estimator under each bound.
+    let labels: Vec<String> = if bounds.len() == 1 {
+        vec!["PCRLB".to_string()]
+    } else {
+        bounds
+            .iter()
+            .map(|(_, names)| format!("PCRLB · {}", names[0]))
+            .collect()
+    };
+    let under: Vec<String> = bounds
+        .iter()
+        .zip(&labels)
+        .map(|((_, names), label)| format!("{label}: {}", escape(&names.join(", "))))
+        .collect();
+    for ((points, _), label) in bounds.iter().zip(&labels) {
+        series.push(Series {
+            label,
+            style: BOUND_STYLE,
+            points: (*points).clone(),
+        });
+    }
+    let svg = svg::line_chart(
+        &Chart {
+            title: "RMSE of the 3-D position across trials against time",
+            x_label: "time since start (s)",
+            y_label: "RMSE across trials (m), log scale",
+            x_scale: Scale::Linear,
+            y_scale: Scale::Log,
+            spans: &[],
+            span_label: "",
+        },
+        &series,
+    );
+    let caption = if labels.is_empty() {
+        format!(
+            "At each instant, the root mean square of the 3-D error over the {} trials that had an estimate then.",
+            s.trials
+        )
+    } else {
+        format!(
+            "At each instant, the root mean square of the 3-D error over the {} trials that had an estimate then. Black dashes: the posterior Cramér–Rao bound on that RMSE (Tichavský, Muravchik &amp; Nehorai 1998) from the world's process model and emitters along the trials' truth, below which no unbiased estimator of that model goes ({}).",
+            s.trials,
+            under.join("; ")
+        )
+    };
+    page.figure("rmse-vs-time", "RMSE against time", svg, &caption);
 }
 
 fn cdf(page: &mut Page, s: &Summary, cdfs: &[Vec<(f64, f64)>]) {

@@ -7,15 +7,36 @@ use crate::core::{SimTime, TrialRng};
 use crate::fusion::paper::ProcessSpec;
 use crate::fusion::pcrlb::PaperBound;
 
+/// The PCRLB of one estimator's model over a run: its position-RMSE bound at every epoch
+/// and over the run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PositionBound {
+    /// The square root of the epoch-averaged trace of the bound's position block (m): the
+    /// figure `summary.json` reports as `pcrlb_pos_rmse_m`.
+    pub rmse_m: f64,
+    /// `(t_s, bound_m)` at every epoch `t_s = (k + 1)·Δt` of the emitters' rate: the square
+    /// root of the trace of the position block at that epoch, the floor under an RMSE
+    /// taken across trials at that instant.
+    pub by_epoch: Vec<(f64, f64)>,
+}
+
 impl World {
-    /// The bound on the position RMSE (m) of each estimator, in the world's order: the
-    /// square root of the epoch-averaged trace of the PCRLB's position block, with the
-    /// measurement information averaged over the truth trajectories of trials
-    /// `0..trials` of `seed`. `None` for an estimator whose model the bound does not cover
-    /// (seed 000's 12-state model, the INS, PDR, WLS) or a world without
-    /// `[sensors.emitters]`. Every emitter of the estimator's systems is counted at every
-    /// epoch (outages excepted): a mode selection that drops ranges is not modelled.
+    /// The bound on the position RMSE (m) of each estimator, in the world's order
+    /// ([`PositionBound::rmse_m`] of [`World::pcrlb`]).
     pub fn pcrlb_pos_rmse_m(&self, seed: u64, trials: u64) -> Vec<Option<f64>> {
+        self.pcrlb(seed, trials)
+            .into_iter()
+            .map(|b| b.map(|b| b.rmse_m))
+            .collect()
+    }
+
+    /// The PCRLB of each estimator's model, in the world's order, with the measurement
+    /// information averaged over the truth trajectories of trials `0..trials` of `seed`.
+    /// `None` for an estimator whose model the bound does not cover (seed 000's 12-state
+    /// model, the INS, PDR, WLS) or a world without `[sensors.emitters]`. Every emitter of
+    /// the estimator's systems is counted at every epoch (outages excepted): a mode
+    /// selection that drops ranges is not modelled.
+    pub fn pcrlb(&self, seed: u64, trials: u64) -> Vec<Option<PositionBound>> {
         let n_est = self.file.estimators.len();
         let Some(cfg) = self.file.sensors.emitters.as_ref() else {
             return vec![None; n_est];
@@ -59,7 +80,17 @@ impl World {
                 }
                 let mse = bound.position_mse_m2().ok()?;
                 let mean = mse.iter().sum::<f64>() / mse.len() as f64;
-                (mean.is_finite() && mean >= 0.0).then(|| mean.sqrt())
+                (mean.is_finite() && mean >= 0.0).then(|| PositionBound {
+                    rmse_m: mean.sqrt(),
+                    by_epoch: mse
+                        .iter()
+                        .enumerate()
+                        .map(|(k, m)| {
+                            let t_s = SimTime::from_seconds((k + 1) as f64 * dt_s).seconds();
+                            (t_s, m.max(0.0).sqrt())
+                        })
+                        .collect(),
+                })
             })
             .collect()
     }
