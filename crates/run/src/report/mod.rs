@@ -14,7 +14,7 @@ pub mod svg;
 use crate::core::{SimTime, TrialRng};
 use crate::engine::trial::{truth_at, EpochRecord, TrialResult};
 use crate::metrics::summary::Summary;
-use crate::montecarlo::reduce::Curves;
+use crate::montecarlo::reduce::{Curve, Curves};
 use crate::world::World;
 use map::Overlay;
 use std::fmt::Write;
@@ -403,7 +403,7 @@ fn rmse_vs_time(page: &mut Page, s: &Summary, curves: &Curves) {
         })
         .collect();
     // Estimators of one model and one source set share one bound; draw it once.
-    let mut bounds: Vec<(&Vec<(f64, f64)>, Vec<&str>)> = Vec::new();
+    let mut bounds: Vec<(&Curve, Vec<&str>)> = Vec::new();
     for (e, b) in s.estimators.iter().zip(&curves.pcrlb_vs_time) {
         let Some(b) = b else { continue };
         match bounds.iter_mut().find(|(c, _)| *c == b) {
