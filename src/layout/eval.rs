@@ -11,6 +11,9 @@ use super::metrics::{
 };
 use crate::core::geodesy::ecef_to_enu_rotation;
 use crate::core::{Geodetic, GpsTime, System};
+use crate::dtmb::ldpc::CodeRate;
+use crate::dtmb::mapping::Constellation;
+use crate::dtmb::service::{awgn_threshold_db, DEFAULT_PROFILE};
 use crate::dtmb::source::DtmbSensorConfig;
 use crate::gnss::measurement::satellite_in_view;
 use crate::gnss::visibility::LinkClass;
@@ -128,6 +131,10 @@ impl<'a> Context<'a> {
                     TransmitterKind::Tcofdm => System::Tcofdm,
                     TransmitterKind::Fm => return None,
                 };
+                // The world's loader has checked the data-layer keys; a tower without
+                // them stands for `dtmb iq`'s default profile.
+                let constellation = t.spec.qam.as_deref().and_then(|q| q.parse().ok());
+                let rate = t.spec.fec.as_deref().and_then(|f| f.parse().ok());
                 Some(ctx.site(
                     &t.id,
                     system,
@@ -135,6 +142,10 @@ impl<'a> Context<'a> {
                     t.freq_hz,
                     t.erp_dbw,
                     t.pn_mode(),
+                    (
+                        constellation.unwrap_or(DEFAULT_PROFILE.0),
+                        rate.unwrap_or(DEFAULT_PROFILE.1),
+                    ),
                 ))
             })
             .collect();
@@ -142,7 +153,9 @@ impl<'a> Context<'a> {
     }
 
     /// A terrestrial site with the world's receiver parameters for its system; `erp_dbw`
-    /// is the station's ERP (the TC-OFDM navigation component is set below it here).
+    /// is the station's ERP (the TC-OFDM navigation component is set below it here), and
+    /// a DTMB tower's `profile` sets its service threshold.
+    #[allow(clippy::too_many_arguments)]
     pub fn site(
         &self,
         id: &str,
@@ -151,6 +164,7 @@ impl<'a> Context<'a> {
         freq_hz: f64,
         erp_dbw: f64,
         pn_mode: crate::dtmb::PnMode,
+        profile: (Constellation, CodeRate),
     ) -> Site {
         let (rx, ranging_erp_dbw) = if system == System::Tcofdm {
             (self.tcofdm_rx, erp_dbw + self.tcofdm_nav_power_db)
@@ -165,6 +179,11 @@ impl<'a> Context<'a> {
             ranging_erp_dbw,
             pn_mode,
             rx,
+            service_threshold_db: if system == System::Tcofdm {
+                f64::NAN
+            } else {
+                awgn_threshold_db(profile.0, profile.1).unwrap_or(f64::NAN)
+            },
         }
     }
 
@@ -184,6 +203,11 @@ impl<'a> Context<'a> {
         for site in &self.sites {
             let link = site_link(site, rx, self.scene, self.clocks, scratch);
             m.best_terr_snr_db = m.best_terr_snr_db.max(link.snr_db);
+            if site.service_threshold_db.is_finite() {
+                m.dtmb_service_margin_db = m
+                    .dtmb_service_margin_db
+                    .max(link.service_snr_db - site.service_threshold_db);
+            }
             if !link.usable {
                 continue;
             }

@@ -230,6 +230,9 @@ pub struct Site {
     pub ranging_erp_dbw: f64,
     pub pn_mode: PnMode,
     pub rx: TerrestrialRx,
+    /// The SNR (dB) at which a viewer's receiver decodes the tower's programme
+    /// ([`crate::dtmb::service`]); NaN for a TC-OFDM station (no broadcast service).
+    pub service_threshold_db: f64,
 }
 
 /// The receiver parameters of a terrestrial system (`[sensors.dtmb]`/`[sensors.tcofdm]`).
@@ -288,6 +291,9 @@ pub struct SiteLink {
     pub class: LinkClass,
     /// Reference SNR of the budget (dB over 7.56 MHz).
     pub snr_db: f64,
+    /// The SNR of every path's power together (dB over 7.56 MHz): what a broadcast
+    /// receiver, whose guard interval holds the echoes, demodulates. −∞ without a path.
+    pub service_snr_db: f64,
     pub row: Row,
 }
 
@@ -320,6 +326,7 @@ pub fn site_link(
         usable: false,
         class: LinkClass::Lost,
         snr_db: f64::NEG_INFINITY,
+        service_snr_db: f64::NEG_INFINITY,
         row: Row::default(),
     };
     if !(range_m > 1e-3 && range_m.is_finite()) {
@@ -377,10 +384,12 @@ pub fn site_link(
             link.class = LinkClass::Los;
         }
     }
-    if scratch.taps.iter().all(|t| t.gain.norm_sqr() == 0.0) {
+    let path_power: f64 = scratch.taps.iter().map(|t| t.gain.norm_sqr()).sum();
+    if path_power == 0.0 {
         link.class = LinkClass::Lost;
         return link;
     }
+    link.service_snr_db = link.snr_db + 10.0 * path_power.log10();
     let mp = multipath_estimate(
         site.pn_mode,
         &scratch.taps,
@@ -504,6 +513,9 @@ pub struct CellMetrics {
     pub coverage: Coverage,
     /// The strongest terrestrial reference SNR (dB), usable or not.
     pub best_terr_snr_db: f64,
+    /// The best DTMB tower's service SNR less its profile's decoding threshold (dB): a
+    /// viewer can watch some channel where it is ≥ 0. −∞ without a DTMB tower.
+    pub dtmb_service_margin_db: f64,
     pub gdop_gnss: f64,
     pub gdop_hybrid: f64,
     pub sigma_gnss_m: f64,
@@ -523,6 +535,7 @@ impl Default for CellMetrics {
             n_terr_nlos: 0,
             coverage: Coverage::None,
             best_terr_snr_db: f64::NEG_INFINITY,
+            dtmb_service_margin_db: f64::NEG_INFINITY,
             gdop_gnss: f64::INFINITY,
             gdop_hybrid: f64::INFINITY,
             sigma_gnss_m: f64::INFINITY,

@@ -434,6 +434,7 @@ pub fn candidate_site(ctx: &Context<'_>, c: &Candidate) -> metrics::Site {
         c.freq_mhz * 1e6,
         10.0 * (c.erp_kw * 1e3).log10(),
         crate::dtmb::PnMode::Pn945,
+        crate::dtmb::service::DEFAULT_PROFILE,
     )
 }
 
@@ -501,6 +502,8 @@ fn stats_json(cells: &[CellMetrics], considered: &[usize]) -> Value {
             "nlos_only": share(&|m| m.coverage == Coverage::Nlos),
             "none": share(&|m| m.coverage == Coverage::None),
         },
+        "dtmb_service_margin_db": metric_stats(cells, considered, |m| m.dtmb_service_margin_db),
+        "dtmb_service_share": share(&|m| m.dtmb_service_margin_db >= 0.0),
         "hybrid_fix_share": share(&|m| m.gdop_hybrid.is_finite()),
         "gnss_fix_share": share(&|m| m.gdop_gnss.is_finite()),
     })
@@ -587,7 +590,7 @@ fn grid_csv(
     height_m: f64,
 ) -> String {
     let mut s = String::with_capacity(cells.len() * 180);
-    s.push_str("i,j,east_m,north_m,lat_deg,lon_deg,height_m,indoor,n_gps,n_bds,n_dtmb,n_tcofdm,n_terr_los,n_terr_foliage,n_terr_nlos,coverage,best_terr_snr_db,gdop_gnss,gdop_hybrid,sigma_gnss_m,sigma_hybrid_m");
+    s.push_str("i,j,east_m,north_m,lat_deg,lon_deg,height_m,indoor,n_gps,n_bds,n_dtmb,n_tcofdm,n_terr_los,n_terr_foliage,n_terr_nlos,coverage,best_terr_snr_db,gdop_gnss,gdop_hybrid,sigma_gnss_m,sigma_hybrid_m,dtmb_service_margin_db");
     if after.is_some() {
         s.push_str(",gdop_hybrid_placed,sigma_hybrid_placed_m");
     }
@@ -600,7 +603,7 @@ fn grid_csv(
             let (lon, lat) = lon_lat(world, e, n);
             let _ = write!(
                 s,
-                "{i},{j},{e:.2},{n:.2},{lat:.8},{lon:.8},{height_m},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                "{i},{j},{e:.2},{n:.2},{lat:.8},{lon:.8},{height_m},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
                 u8::from(m.indoor),
                 m.n_gps,
                 m.n_bds,
@@ -614,7 +617,8 @@ fn grid_csv(
                 fmt_num(m.gdop_gnss),
                 fmt_num(m.gdop_hybrid),
                 fmt_num(m.sigma_gnss_m),
-                fmt_num(m.sigma_hybrid_m)
+                fmt_num(m.sigma_hybrid_m),
+                fmt_num(m.dtmb_service_margin_db)
             );
             if let Some(a) = after {
                 let _ = write!(
@@ -666,6 +670,7 @@ fn geojson(world: &World, grid: &Grid, cells: &[CellMetrics]) -> String {
                 "gdop_hybrid": num(m.gdop_hybrid),
                 "sigma_gnss_m": num(m.sigma_gnss_m),
                 "sigma_hybrid_m": num(m.sigma_hybrid_m),
+                "dtmb_service_margin_db": num(m.dtmb_service_margin_db),
             });
             let _ = write!(
                 s,
@@ -690,11 +695,22 @@ fn write_maps(
     outlines: &[Vec<[f64; 2]>],
     markers: &[svg::Marker<'_>],
 ) -> Result<(), LayoutError> {
+    let has_dtmb = world
+        .transmitters
+        .iter()
+        .any(|t| t.kind == crate::world::scene::TransmitterKind::Dtmb);
     const COVERAGE: &[(&str, &str)] = &[
         ("no usable DTMB/TC-OFDM", "#d7191c"),
         ("NLOS only", "#fdae61"),
         ("foliage", "#a6d96a"),
         ("line of sight", "#1a9641"),
+    ];
+    const SERVICE: &[(&str, &str)] = &[
+        ("no DTMB programme decodable", "#d7191c"),
+        (
+            "DTMB programme decodable (SNR over its AWGN threshold)",
+            "#1a9641",
+        ),
     ];
     let name = &world.file.world.name;
     let finite_max = |f: &dyn Fn(&CellMetrics) -> f64, cap: f64| {
@@ -756,9 +772,22 @@ fn write_maps(
             cells.iter().map(|m| m.coverage as u8 as f64).collect(),
             svg::Scale::Categories(COVERAGE),
         ),
+        (
+            "service",
+            format!("{name}: DTMB service (best tower's SNR over its profile's threshold)"),
+            cells
+                .iter()
+                .map(|m| f64::from(u8::from(m.dtmb_service_margin_db >= 0.0)))
+                .collect(),
+            svg::Scale::Categories(SERVICE),
+        ),
     ];
     for (file, title, values, scale) in &maps {
         if !prefix.is_empty() && !matches!(*file, "gdop_hybrid" | "error_hybrid") {
+            continue;
+        }
+        // A world without a DTMB tower has no programme to map.
+        if *file == "service" && !has_dtmb {
             continue;
         }
         let title = if prefix.is_empty() {

@@ -552,3 +552,104 @@ fn bad_input_is_refused_with_clear_messages() {
         &["--time \"yesterday\""],
     );
 }
+
+/// The service map follows each tower's link budget and profile: on the scene-free square
+/// (tests/data/layout/symmetric.toml), with the centre mast carrying 64QAM 0.8 and the
+/// corner towers 4QAM 0.4, every cell's `dtmb_service_margin_db` in grid.csv equals the
+/// best of `ERP + G − L_Hata − kTB − NF − threshold(profile)` over the four towers,
+/// computed here with Boltzmann's constant and the thresholds of `dtmb::service`; the
+/// layout.json share is the share of outdoor cells with a margin ≥ 0; and asking every
+/// tower for 64QAM 0.8 shrinks the service area (it needs 8 dB more than 4QAM 0.4).
+#[test]
+fn service_coverage_follows_each_towers_budget_and_profile() {
+    use hybridnav::dtmb::ldpc::CodeRate;
+    use hybridnav::dtmb::mapping::Constellation;
+    use hybridnav::dtmb::service::awgn_threshold_db;
+    let text = std::fs::read_to_string(repo().join("tests/data/layout/symmetric.toml")).unwrap();
+    let dir = tmp_dir("layout-service");
+    // 0.3 W ERP, so that part of the square falls below the denser profile.
+    let weak = text.replace("erp_kw = 1.0", "erp_kw = 0.0003");
+    let mixed = weak.replacen(
+        "position_enu_m = [0, 0, 300]\nchannel = 21\nerp_kw = 0.0003",
+        "position_enu_m = [0, 0, 300]\nchannel = 21\nerp_kw = 0.0003\nqam = \"64qam\"\nfec = \"0.8\"",
+        1,
+    );
+    assert_ne!(mixed, weak, "the centre mast's block moved");
+    let mixed = mixed.replace(
+        "channel = 21\nerp_kw = 0.0003\n\n",
+        "channel = 21\nerp_kw = 0.0003\nqam = \"4qam\"\nfec = \"0.4\"\n\n",
+    );
+    let dense = weak.replace(
+        "channel = 21\nerp_kw = 0.0003",
+        "channel = 21\nerp_kw = 0.0003\nqam = \"64qam\"\nfec = \"0.8\"",
+    );
+    let mut shares = Vec::new();
+    for (name, world_text) in [("mixed", &mixed), ("dense", &dense)] {
+        let path = write(&dir, &format!("{name}.toml"), world_text);
+        let out = dir.join(name);
+        run_ok(&[
+            "layout",
+            path.to_str().unwrap(),
+            "--grid",
+            "100",
+            "--region=-1500,-1500,1500,1500",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let world = hybridnav::world::load_world(&path).unwrap();
+        let cfg = world.file.sensors.dtmb.clone().unwrap_or_default();
+        let ktb_dbw = 10.0 * (1.380_649e-23 * 290.0 * 7.56e6_f64).log10();
+        let csv = std::fs::read_to_string(out.join("grid.csv")).unwrap();
+        let mut lines = csv.lines();
+        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let col = |h: &str| header.iter().position(|c| *c == h).unwrap();
+        let (ce, cn, cm) = (col("east_m"), col("north_m"), col("dtmb_service_margin_db"));
+        let (mut served, mut cells) = (0usize, 0usize);
+        for row in lines {
+            let f: Vec<&str> = row.split(',').collect();
+            let rx = nalgebra::Vector3::new(
+                f[ce].parse::<f64>().unwrap(),
+                f[cn].parse::<f64>().unwrap(),
+                1.5,
+            );
+            let mut want = f64::NEG_INFINITY;
+            for t in &world.transmitters {
+                let constellation: Constellation =
+                    t.spec.qam.as_deref().unwrap_or("64qam").parse().unwrap();
+                let rate: CodeRate = t.spec.fec.as_deref().unwrap_or("0.6").parse().unwrap();
+                // The square's [sensors.dtmb] keeps the default environment: urban, a
+                // small or medium city in Hata's classes.
+                assert_eq!(cfg.environment, hybridnav::dtmb::source::Environment::Urban);
+                let (l_db, _) = hybridnav::propagation::pathloss::extended_hata_db(
+                    hybridnav::propagation::pathloss::HataEnvironment::UrbanSmallMedium,
+                    t.freq_hz * 1e-6,
+                    t.pos_enu_m.z,
+                    cfg.rx_antenna_height_m,
+                    (t.pos_enu_m - rx).norm() * 1e-3,
+                );
+                let snr = t.erp_dbw + cfg.antenna_gain_dbi - l_db - ktb_dbw - cfg.noise_figure_db;
+                want = want.max(snr - awgn_threshold_db(constellation, rate).unwrap());
+            }
+            let got: f64 = f[cm].parse().unwrap();
+            // grid.csv prints four decimals.
+            assert!(
+                (got - want).abs() <= 5.1e-5,
+                "{name} at {rx:?}: {got} vs {want}"
+            );
+            cells += 1;
+            served += usize::from(got >= 0.0);
+        }
+        let s = json(&out.join("layout.json"));
+        let share = s["statistics"]["dtmb_service_share"].as_f64().unwrap();
+        assert!(
+            (share - served as f64 / cells as f64).abs() < 1e-12,
+            "{share}"
+        );
+        assert!(out.join("service.svg").exists());
+        shares.push(share);
+    }
+    assert!(
+        shares[1] < shares[0] && shares[0] > 0.0,
+        "64QAM 0.8 everywhere must serve less than 4QAM 0.4 at the corners: {shares:?}"
+    );
+}

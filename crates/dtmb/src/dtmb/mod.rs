@@ -42,6 +42,7 @@ pub use crate::core::noise;
 pub mod pn;
 pub mod receiver;
 pub mod scrambler;
+pub mod service;
 pub mod sigmf;
 pub mod source;
 pub mod system_info;
