@@ -54,6 +54,27 @@ pub fn parity_of_bytes(bytes: &[u8]) -> u16 {
     })
 }
 
+/// [`parity_of_bytes`] of up to eight consecutive 94-byte messages, computed in lockstep
+/// (each division is a chain of dependent table lookups; interleaving the blocks' chains
+/// lets them overlap).
+///
+/// # Panics
+/// When `bytes` is not `94 · parity.len()` long or `parity` is longer than 8.
+pub fn parities_of_bytes(bytes: &[u8], parity: &mut [u16]) {
+    const K8: usize = BCH_K / 8;
+    let n = parity.len();
+    assert!(n <= 8);
+    assert_eq!(bytes.len(), n * K8);
+    let table = byte_table();
+    let mut reg = [0u16; 8];
+    for i in 0..K8 {
+        for (b, r) in reg[..n].iter_mut().enumerate() {
+            *r = ((*r << 8) & 0x3ff) ^ table[usize::from((*r >> 2) as u8 ^ bytes[b * K8 + i])];
+        }
+    }
+    parity.copy_from_slice(&reg[..n]);
+}
+
 /// `table[i]`: the remainder after shifting the byte `i` (most significant bit first)
 /// into an empty register.
 fn byte_table() -> &'static [u16; 256] {
@@ -161,8 +182,18 @@ mod tests {
             let mut cw = vec![0u8; BCH_N];
             encode(&bits, &mut cw);
             let r = parity_of_bytes(&bytes);
+            let mut lockstep = [0u16; 1];
+            parities_of_bytes(&bytes, &mut lockstep);
+            assert_eq!(lockstep[0], r);
             let fast: Vec<u8> = (0..10).map(|i| ((r >> (9 - i)) & 1) as u8).collect();
             assert_eq!(&cw[BCH_K..], &fast[..]);
+        }
+        // Eight blocks in lockstep equal eight separate divisions.
+        let bytes: Vec<u8> = (0..8 * BCH_K / 8).map(|i| (i * 37 % 251) as u8).collect();
+        let mut lockstep = [0u16; 8];
+        parities_of_bytes(&bytes, &mut lockstep);
+        for (b, &r) in lockstep.iter().enumerate() {
+            assert_eq!(r, parity_of_bytes(&bytes[b * 94..(b + 1) * 94]));
         }
     }
 

@@ -167,19 +167,14 @@ pub fn map_bits(points: &[Complex32], bits_per_symbol: usize, bits: &[u8], out: 
     }
 }
 
-/// [`map_bits`] on a packed bit stream: bit `k` of the stream is bit `k mod 64` of
-/// `stream[k / 64]`, so symbol `n`'s label (`b₀` its least significant bit) is simply the
-/// `bits_per_symbol` bits from stream bit `n·bits_per_symbol` on. `stream` carries one
-/// word beyond the symbols' last bit (read, not used).
+/// The labels [`map_bits`] maps, from a packed bit stream: bit `k` of the stream is bit
+/// `k mod 64` of `stream[k / 64]`, so symbol `n`'s label (`b₀` its least significant bit)
+/// is simply the `bits_per_symbol` bits from stream bit `n·bits_per_symbol` on. `stream`
+/// carries one word beyond the symbols' last bit (read, not used).
 ///
 /// # Panics
 /// When `stream` is shorter than `out`'s bits plus one word (an internal invariant).
-pub fn map_packed(
-    points: &[Complex32],
-    bits_per_symbol: usize,
-    stream: &[u64],
-    out: &mut [Complex32],
-) {
+pub fn labels_packed(bits_per_symbol: usize, stream: &[u64], out: &mut [u8]) {
     assert!(stream.len() * 64 >= out.len() * bits_per_symbol + 64);
     let mask = (1u64 << bits_per_symbol) - 1;
     for (n, o) in out.iter_mut().enumerate() {
@@ -187,7 +182,7 @@ pub fn map_packed(
         let (w, sh) = (start / 64, (start % 64) as u32);
         // `<< 1 << (63 − sh)` is `<< (64 − sh)` without the undefined shift by 64 at sh = 0.
         let v = (stream[w] >> sh) | ((stream[w + 1] << 1) << (63 - sh));
-        *o = points[(v & mask) as usize];
+        *o = (v & mask) as u8;
     }
 }
 
@@ -253,7 +248,7 @@ mod tests {
         }
     }
 
-    /// The packed mapper gives the bit-per-byte mapper's symbols for every constellation.
+    /// The packed labels give the bit-per-byte mapper's symbols for every constellation.
     #[test]
     fn packed_mapping_equals_bit_mapping() {
         let mut state = 0x0123_4567_89ab_cdefu64;
@@ -273,9 +268,10 @@ mod tests {
             let bps = c.bits_per_symbol();
             let n = bits.len() / bps;
             let mut a = vec![Complex32::default(); n];
-            let mut b = vec![Complex32::default(); n];
+            let mut labels = vec![0u8; n];
             map_bits(&p, bps, &bits, &mut a);
-            map_packed(&p, bps, &words, &mut b);
+            labels_packed(bps, &words, &mut labels);
+            let b: Vec<Complex32> = labels.iter().map(|&l| p[usize::from(l)]).collect();
             assert_eq!(a, b, "{c:?}");
         }
     }
