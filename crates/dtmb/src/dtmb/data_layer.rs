@@ -318,8 +318,8 @@ impl DataLayer {
         let group_symbols = profile.frames_per_group() * DATA_SYMBOLS;
         let code = ldpc::code(profile.rate);
         let cw_per_group = profile.codewords_per_group();
-        let per_frame = cw_per_group * profile.rate.ts_bytes_per_codeword()
-            / profile.frames_per_group();
+        let per_frame =
+            cw_per_group * profile.rate.ts_bytes_per_codeword() / profile.frames_per_group();
         Self {
             profile,
             code,
@@ -330,7 +330,11 @@ impl DataLayer {
             frame_bits: vec![0; if nr { DATA_SYMBOLS } else { 0 }],
             key: Scrambler::keystream(per_frame),
             group: vec![0; group_symbols],
-            group_pos: if nr { cw_per_group * CODEWORD_BITS } else { group_symbols },
+            group_pos: if nr {
+                cw_per_group * CODEWORD_BITS
+            } else {
+                group_symbols
+            },
             ts: vec![0; profile.rate.ts_bytes_per_codeword()],
             bits: vec![0; if nr { cw_per_group * CODEWORD_BITS } else { 0 }],
             message: vec![0; profile.rate.message_bits().div_ceil(64) + 2],
@@ -595,8 +599,11 @@ mod tests {
                     } else {
                         let mut want = vec![Complex32::default(); layer.group.len()];
                         map_bits(&points, c.bits_per_symbol(), &bits, &mut want);
-                        let got: Vec<Complex32> =
-                            layer.group.iter().map(|&l| points[usize::from(l)]).collect();
+                        let got: Vec<Complex32> = layer
+                            .group
+                            .iter()
+                            .map(|&l| points[usize::from(l)])
+                            .collect();
                         let first = got.iter().zip(&want).position(|(a, b)| a != b);
                         assert_eq!(first, None, "{} group {group}", p.name());
                     }

@@ -259,6 +259,14 @@ impl LdpcCode {
         self.rate
     }
 
+    /// The parity-check matrix by block rows: each block row's circulants as
+    /// `(block column, shift)`, check row `127·r + s` having a one in column
+    /// `127·c + (shift + s) mod 127`. No block column occurs twice in a block row, so the
+    /// 127 rows of a block row share no variable.
+    pub fn circulants(&self) -> &'static [&'static [(u8, u8)]] {
+        self.rate.table()
+    }
+
     /// The check rows (full-codeword column indices, 0..7493).
     pub fn checks(&self) -> &[Vec<u16>] {
         &self.checks
@@ -533,6 +541,23 @@ mod tests {
                 let deleted: [u8; DELETED_BITS] = std::array::from_fn(|i| (fast[0] >> i) as u8 & 1);
                 assert_eq!(deleted, c.deleted_bits(msg));
                 assert!(fast.iter().all(|&p| p >> 127 == 0));
+            }
+        }
+    }
+
+    /// The block rows' circulants sit in distinct block columns (what lets a decoder
+    /// update the 127 rows of a block row at once), and expand to the check rows.
+    #[test]
+    fn block_rows_have_distinct_columns() {
+        for rate in CodeRate::ALL {
+            let c = code(rate);
+            assert_eq!(c.circulants().len(), rate.parity_blocks());
+            for (r, row) in c.circulants().iter().enumerate() {
+                let mut cols: Vec<u8> = row.iter().map(|&(col, _)| col).collect();
+                cols.sort_unstable();
+                cols.dedup();
+                assert_eq!(cols.len(), row.len(), "rate {} block row {r}", rate.name());
+                assert_eq!(c.checks()[r * Z].len(), row.len());
             }
         }
     }
