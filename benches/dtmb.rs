@@ -334,6 +334,14 @@ fn bench_data_layer(c: &mut Criterion) {
         .collect();
     let mut dec = LdpcDecoder::new(code);
     let mut out = vec![0u8; FULL_BITS];
+    let (ok, iterations) = dec.decode(&llr, &mut out);
+    println!("ldpc_decode_codeword_r0.6: converged {ok} after {iterations} iterations");
+    // The same LLRs for dtmb-sdr's CPU decoder (benches/python/ldpc_dtmb_sdr_bench.py):
+    // 7488 little-endian f32 in transmitted order, positive for 0, as it reads them.
+    if let Some(path) = std::env::var_os("HYBRIDNAV_LDPC_LLR_OUT") {
+        let bytes: Vec<u8> = llr.iter().flat_map(|x| x.to_le_bytes()).collect();
+        std::fs::write(&path, bytes).expect("write the LLR file");
+    }
     g.bench_function("ldpc_decode_codeword_r0.6", |b| {
         b.iter(|| black_box(dec.decode(&llr, &mut out)))
     });

@@ -167,6 +167,25 @@ pub fn map_bits(points: &[Complex32], bits_per_symbol: usize, bits: &[u8], out: 
     }
 }
 
+/// The labels [`map_bits`] maps, from a packed bit stream: bit `k` of the stream is bit
+/// `k mod 64` of `stream[k / 64]`, so symbol `n`'s label (`b₀` its least significant bit)
+/// is simply the `bits_per_symbol` bits from stream bit `n·bits_per_symbol` on. `stream`
+/// carries one word beyond the symbols' last bit (read, not used).
+///
+/// # Panics
+/// When `stream` is shorter than `out`'s bits plus one word (an internal invariant).
+pub fn labels_packed(bits_per_symbol: usize, stream: &[u64], out: &mut [u8]) {
+    assert!(stream.len() * 64 >= out.len() * bits_per_symbol + 64);
+    let mask = (1u64 << bits_per_symbol) - 1;
+    for (n, o) in out.iter_mut().enumerate() {
+        let start = n * bits_per_symbol;
+        let (w, sh) = (start / 64, (start % 64) as u32);
+        // `<< 1 << (63 − sh)` is `<< (64 − sh)` without the undefined shift by 64 at sh = 0.
+        let v = (stream[w] >> sh) | ((stream[w + 1] << 1) << (63 - sh));
+        *o = (v & mask) as u8;
+    }
+}
+
 /// The Nordstrom–Robinson (16, 8) codeword of `byte` (GB 20600-2006 §4.5.1): the byte
 /// (first bit most significant) followed by 7 parity bits and an overall parity bit,
 ///
@@ -226,6 +245,34 @@ mod tests {
                     assert!((p[i] - p[j]).norm() > 0.1, "{c:?} {i} {j}");
                 }
             }
+        }
+    }
+
+    /// The packed labels give the bit-per-byte mapper's symbols for every constellation.
+    #[test]
+    fn packed_mapping_equals_bit_mapping() {
+        let mut state = 0x0123_4567_89ab_cdefu64;
+        let words: Vec<u64> = (0..120)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                state
+            })
+            .collect();
+        let bits: Vec<u8> = (0..119 * 64)
+            .map(|k| (words[k / 64] >> (k % 64)) as u8 & 1)
+            .collect();
+        for c in Constellation::ALL {
+            let p = c.points();
+            let bps = c.bits_per_symbol();
+            let n = bits.len() / bps;
+            let mut a = vec![Complex32::default(); n];
+            let mut labels = vec![0u8; n];
+            map_bits(&p, bps, &bits, &mut a);
+            labels_packed(bps, &words, &mut labels);
+            let b: Vec<Complex32> = labels.iter().map(|&l| p[usize::from(l)]).collect();
+            assert_eq!(a, b, "{c:?}");
         }
     }
 

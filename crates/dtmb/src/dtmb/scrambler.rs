@@ -51,6 +51,15 @@ impl Scrambler {
         v
     }
 
+    /// The first `len` bytes of the sequence after a reset. The scrambler restarts at
+    /// every signal frame's share of the transport stream, so the data layer XORs each
+    /// frame's bytes with this one precomputed key instead of clocking the register bit
+    /// by bit.
+    pub fn keystream(len: usize) -> Vec<u8> {
+        let mut s = Scrambler::new();
+        (0..len).map(|_| s.next_byte()).collect()
+    }
+
     /// Scrambles (or descrambles: the operation is its own inverse) `bytes` in place.
     pub fn apply(&mut self, bytes: &mut [u8]) {
         for b in bytes {
