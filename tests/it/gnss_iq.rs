@@ -497,6 +497,8 @@ fn assert_geo_decoded_and_used(tag: &str, r: &Positioned) {
         .find("<PRN>5</PRN>")
         .expect("C05 in GNSS-SDR's decoded ephemerides");
     let block = &xml[i..i + xml[i..].find("</second>").expect("block end")];
+    // The BDS ICD's rounded π, with which the message's semicircles are converted.
+    #[allow(clippy::approx_constant)]
     let pi = 3.141_592_653_589_8;
     let lsb = |e: i32| 2f64.powi(e);
     let toe_sow = sent.toe_sow_s();

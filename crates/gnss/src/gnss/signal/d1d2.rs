@@ -827,10 +827,10 @@ mod tests {
         // C20: D1 subframe 2 (6 s in), each bit over 20 periods ⊕ the NH code.
         let mut meo = BdsNavStream::new(Arc::clone(&nav), c20.sat);
         d1_subframe(&c20, Some(&k), week, sow0 + 6, &mut want);
-        for i in 0..300 {
+        for (i, &bit) in want.iter().enumerate() {
             for m in 0..20 {
                 let ms = at(sow0 + 6, 20 * i as i64 + m);
-                assert_eq!(meo.symbol(ms), want[i] ^ NH[m as usize], "bit {i} chip {m}");
+                assert_eq!(meo.symbol(ms), bit ^ NH[m as usize], "bit {i} chip {m}");
             }
         }
     }
