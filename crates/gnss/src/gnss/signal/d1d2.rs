@@ -586,8 +586,8 @@ mod tests {
     }
 
     /// α0…β3 of a decoded subframe, read with the ICD's positions and scale factors
-    /// (written out here from BDS-SIS-ICD-B1I-3.0 Fig. 5-5 / §5.2.4.7 for D1 subframe 1
-    /// and Fig. 5-11 / §5.3.3 for D2 subframe 1 page 2, not taken from the encoder).
+    /// (BDS-SIS-ICD-B1I-3.0 §5.2.4.7 and §5.3.3 as GNSS-SDR's decoder and SignalSim's
+    /// encoder place them, written out here rather than taken from the encoder).
     fn decode_iono(d: &[u8; 300], d2: bool) -> [f64; 8] {
         let d1: [(&[(usize, usize)], i32); 8] = [
             (&[(127, 8)], -30),
@@ -685,7 +685,8 @@ mod tests {
             })
             .collect();
         let pg = |n: usize| &pages[n - 1];
-        // The ICD's D2 subframe 1 layout (Fig. 5-11 and §5.3.3), written out here.
+        // The ICD's D2 subframe 1 layout (§5.3.3, as RTKLIB's `decode_bds_d2` reads it),
+        // written out here.
         assert_eq!(uget(pg(1), &[(47, 1)]), 0, "SatH1");
         assert_eq!(uget(pg(1), &[(48, 5)]), u64::from(e.iodc), "AODC");
         assert_eq!(uget(pg(1), &[(65, 13)]), week as u64, "WN");
