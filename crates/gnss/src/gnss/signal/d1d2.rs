@@ -30,9 +30,10 @@
 //! Field positions below are those of the de-interleaved subframe (words of 30 bits, each
 //! word's information bits first, then its check bits), as the ICD's figures number them;
 //! scale factors as the ICD's tables (angles in semicircles, π = 3.1415926535898). The
-//! positions agree with two independent decoders read for the purpose, RTKLIB's
-//! `decode_bds_d1`/`decode_bds_d2` and GNSS-SDR's `Beidou_DNAV.h`, and D2's page 2 with the
-//! SignalSim generator's.
+//! positions agree with independent code read for the purpose: the ephemeris and clock
+//! fields with RTKLIB's `decode_bds_d1`/`decode_bds_d2` and GNSS-SDR's `Beidou_DNAV.h`, the
+//! α/β of D1 and of D2's page 2 with GNSS-SDR's and the SignalSim generator's (RTKLIB
+//! does not decode them).
 //!
 //! - D1 subframe 1: SatH1, AODC, URAI, WN, toc, TGD1/2, the BDS Klobuchar α0–α3 (bits
 //!   127–166) and β0–β3 (167–172 + 181–182, 183–198, 199–202 + 211–214), a0–a2, AODE;
