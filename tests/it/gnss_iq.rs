@@ -143,6 +143,8 @@ struct Positioned {
     log: String,
     prns: Vec<u64>,
     truth: Truth,
+    /// GNSS-SDR's output directory (RINEX, NMEA, the decoded ephemerides as XML).
+    dir: std::path::PathBuf,
 }
 
 /// Records `world` for `duration_s` at `rate` sps ci8 on `signal` (`gps-l1ca` or
@@ -225,6 +227,7 @@ fn record_and_position(
         log: String::from_utf8_lossy(&run.stdout).into_owned(),
         prns,
         truth: Truth::read(&file("truth.csv")),
+        dir: d,
     })
 }
 
@@ -385,7 +388,9 @@ fn gnss_iq_refuses_bad_requests_before_writing() {
 /// GNSS-SDR's BeiDou B1I configuration: as [`gps_conf`] with the B1 blocks (and the same
 /// four-dwell acquisition, which also acquires the 38 dB-Hz C07, C11 and C28), and one
 /// channel assigned to each PRN of the recording's annotations (a warm start: GNSS-SDR
-/// otherwise searches all 63 PRNs one channel at a time).
+/// otherwise searches all 63 PRNs one channel at a time). The PVT's elevation mask is the
+/// worlds' 10° (`[sensors.gnss] elevation_mask_deg`) instead of GNSS-SDR's default 15°,
+/// which would leave out the GEO C05, 11.5° above Esbjerg.
 fn bds_conf(data: &str, rate: f64, out: &str, prns: &[u64]) -> String {
     let mut c = format!(
         "[GNSS-SDR]
@@ -423,6 +428,7 @@ PVT.implementation=RTKLIB_PVT
 PVT.positioning_mode=Single
 PVT.iono_model=OFF
 PVT.trop_model=Saastamoinen
+PVT.elevation_mask=10
 PVT.output_rate_ms=1000
 PVT.display_rate_ms=1000
 PVT.output_path={out}
@@ -437,8 +443,8 @@ PVT.dump=false
     c
 }
 
-/// BeiDou B1I (D1, MEO/IGSO) through GNSS-SDR's log: how many D1 ephemerides it decoded.
-fn d1_ephemerides(log: &str) -> usize {
+/// BeiDou B1I through GNSS-SDR's log: how many ephemerides (D1 or D2) it decoded.
+fn bds_ephemerides(log: &str) -> usize {
     log.lines()
         .filter(|l| l.contains("New BEIDOU B1I DNAV message") && l.contains("ephemeris"))
         .count()
@@ -446,32 +452,219 @@ fn d1_ephemerides(log: &str) -> usize {
 
 // 120 s: BDT subframe 1 starts 26 s in, the ephemeris is complete ~44 s in; a channel
 // that loses lock (C20 and C22 do, now and then: docs/validation.md) waits for the next
-// 30 s D1 frame, so 120 s leaves room for one loss before the fixes.
+// 30 s D1 frame, so 120 s leaves room for one loss before the fixes. The GEO's D2 repeats
+// its ten pages of subframe 1 every 30 s, so it too has a whole cycle after any 60 s.
 const BDS_DURATION_S: u32 = 120;
 
-/// BeiDou B1I (D1, MEO/IGSO) through GNSS-SDR. Not every satellite is acquired (see
-/// docs/validation.md: C36 and C37 never are), so this asserts the fix, from the four or
-/// more whose D1 ephemerides GNSS-SDR decodes.
+/// The world's navigation file and the instant the B1I recordings start (both worlds').
+const ESBC_NAV: &str = "ephemeris/ESBC00DNK_R_20201770000_01D_MN.rnx";
+
+/// The value of the first `<tag>…</tag>` in `xml` (GNSS-SDR's boost serialisations).
+fn xml_value(xml: &str, tag: &str) -> Option<f64> {
+    let open = format!("<{tag}>");
+    let i = xml.find(&open)? + open.len();
+    let j = xml[i..].find('<')? + i;
+    xml[i..j].trim().parse().ok()
+}
+
+/// The GEO C05 (BDS-2 GEO at 58.75° E, 11.5° above Esbjerg), whose navigation message is
+/// D2 at 500 bit/s: it is in the recording, GNSS-SDR decodes its D2 ephemeris (ten pages of
+/// subframe 1), every element of which equals the world's broadcast record to half an LSB
+/// of the ICD's scale, and uses it in its fixes (its NMEA GSA sentences, the satellites of
+/// each fix, list PRN 05).
+fn assert_geo_decoded_and_used(tag: &str, r: &Positioned) {
+    use hybridnav::core::{EmitterId, System};
+    assert!(
+        r.prns.contains(&5),
+        "{tag}: C05 not in the recording: {:?}",
+        r.prns
+    );
+    assert!(
+        r.log
+            .lines()
+            .any(|l| l.contains("ephemeris from satellite Beidou PRN 05")),
+        "{tag}: no D2 ephemeris decoded from C05:\n{}",
+        r.log
+    );
+    let nav = hybridnav::gnss::rinex_nav::read_nav_file(&crate::common::repo().join(ESBC_NAV))
+        .expect("world navigation file");
+    let start = GpsTime::from_gpst_calendar(2020, 6, 25, 2, 0, 18, 0);
+    let sent = nav
+        .select(EmitterId::new(System::Bds, 5), start)
+        .expect("C05 ephemeris");
+    let xml = std::fs::read_to_string(r.dir.join("bds_dnav_ephemeris.xml")).expect("ephemeris xml");
+    let i = xml
+        .find("<PRN>5</PRN>")
+        .expect("C05 in GNSS-SDR's decoded ephemerides");
+    let block = &xml[i..i + xml[i..].find("</second>").expect("block end")];
+    // The BDS ICD's rounded π, with which the message's semicircles are converted.
+    #[allow(clippy::approx_constant)]
+    let pi = 3.141_592_653_589_8;
+    let lsb = |e: i32| 2f64.powi(e);
+    let toe_sow = sent.toe_sow_s();
+    let checks = [
+        ("M_0", sent.m0, pi * lsb(-31)),
+        ("delta_n", sent.delta_n, pi * lsb(-43)),
+        ("ecc", sent.e, lsb(-33)),
+        ("sqrtA", sent.sqrt_a, lsb(-19)),
+        ("OMEGA_0", sent.omega0, pi * lsb(-31)),
+        ("i_0", sent.i0, pi * lsb(-31)),
+        ("omega", sent.omega, pi * lsb(-31)),
+        ("OMEGAdot", sent.omega_dot, pi * lsb(-43)),
+        ("idot", sent.idot, pi * lsb(-43)),
+        ("Cuc", sent.cuc, lsb(-31)),
+        ("Cus", sent.cus, lsb(-31)),
+        ("Crc", sent.crc, lsb(-6)),
+        ("Crs", sent.crs, lsb(-6)),
+        ("Cic", sent.cic, lsb(-31)),
+        ("Cis", sent.cis, lsb(-31)),
+        ("af0", sent.af0, lsb(-33)),
+        ("af1", sent.af1, lsb(-50)),
+        ("TGD1", sent.tgd_s, 1e-10),
+        ("toe", toe_sow, 8.0),
+        ("AODE", f64::from(sent.iode), 1.0),
+    ];
+    for (name, want, step) in checks {
+        let got = xml_value(block, name).unwrap_or(f64::NAN);
+        assert!(
+            (got - want).abs() <= 0.5 * step * (1.0 + 1e-6),
+            "{tag}: C05 {name}: the world's record {want:e}, GNSS-SDR decoded {got:e}"
+        );
+    }
+    assert_eq!(
+        xml_value(block, "nav_type"),
+        Some(2.0),
+        "{tag}: decoded as D2"
+    );
+    let nmea = std::fs::read_to_string(r.dir.join("nmea_pvt.nmea")).expect("NMEA output");
+    let gsa: Vec<&str> = nmea.lines().filter(|l| l.starts_with("$BDGSA")).collect();
+    // $BDGSA,A,3,sv1,…,sv12,PDOP,HDOP,VDOP,system*cs: fields 3–14 are the satellites used.
+    let with_geo = gsa
+        .iter()
+        .filter(|l| l.split(',').skip(3).take(12).any(|f| f == "05"))
+        .count();
+    eprintln!(
+        "{tag}: C05's D2 ephemeris decoded; C05 used in {with_geo} of {} fixes",
+        gsa.len()
+    );
+    assert!(
+        with_geo >= 10,
+        "{tag}: C05 in {with_geo} GSA sentences:\n{nmea}"
+    );
+}
+
+/// BeiDou B1I through GNSS-SDR: MEO/IGSO (D1) and the GEO C05 (D2). Not every satellite is
+/// acquired (see docs/validation.md: C36 and C37 never are), so this asserts the fix, from
+/// the four or more whose ephemerides GNSS-SDR decodes, and the GEO's D2.
 #[test]
 fn gnss_iq_bds_b1i_is_positioned_by_gnss_sdr_in_open_sky() {
     let bds = |data: &str, out: &str, prns: &[u64]| bds_conf(data, 4.2e6, out, prns);
     let Some(r) = record_and_position("bds", WORLD, "bds-b1i", BDS_DURATION_S, 4.2e6, bds) else {
         return;
     };
-    let decoded = d1_ephemerides(&r.log);
-    assert!(decoded >= 4, "{decoded} D1 ephemerides decoded:\n{}", r.log);
+    let decoded = bds_ephemerides(&r.log);
+    assert!(decoded >= 4, "{decoded} ephemerides decoded:\n{}", r.log);
+    assert_geo_decoded_and_used("bds", &r);
     assert_fixes_within("bds", &r, MEAN_MAX_M, TAIL_MAX_M);
 }
 
-/// The moving car of the GPS test, on B1I.
+/// A BeiDou Klobuchar set: the `BDSA`/`BDSB` lines of an IGS merged broadcast file's header
+/// (CDDIS, March 2016, as quoted in the Norwegian Mapping Authority's Where software), the
+/// set the moving-car test adds to the station's file, which has none.
+const BDS_IONO_LINES: &str =
+    "BDSA    .1397E-07   .0000E+00  -.5960E-07   .5960E-07       IONOSPHERIC CORR
+BDSB    .1106E+06  -.3277E+05  -.2621E+06   .1966E+06       IONOSPHERIC CORR
+";
+
+/// The moving car of the GPS test, on B1I, with a BeiDou Klobuchar set added to the
+/// navigation file's header: GNSS-SDR decodes the set the D1 subframes 1 (and D2 pages 2)
+/// carry (`bds_dnav_iono.xml`, the last set it received) to half an LSB.
 #[test]
 fn gnss_iq_bds_b1i_of_a_moving_car_is_positioned_by_gnss_sdr() {
     let bds = |data: &str, out: &str, prns: &[u64]| bds_conf(data, 4.2e6, out, prns);
-    let Some(r) = record_and_position("bds-road", ROAD, "bds-b1i", BDS_DURATION_S, 4.2e6, bds)
-    else {
+    // The road world with its navigation file's header extended by the BeiDou set.
+    let w = tmp_dir("bds-road-world");
+    let nav_text =
+        std::fs::read_to_string(crate::common::repo().join(ESBC_NAV)).expect("navigation file");
+    let leap = nav_text.find("LEAP SECONDS").expect("LEAP SECONDS line");
+    let at = nav_text[..leap].rfind('\n').expect("a line before") + 1;
+    let nav_path = w.join("esbc-with-bdsa.rnx");
+    std::fs::write(
+        &nav_path,
+        format!("{}{BDS_IONO_LINES}{}", &nav_text[..at], &nav_text[at..]),
+    )
+    .expect("write nav");
+    let world_text = std::fs::read_to_string(crate::common::repo().join(ROAD)).expect("road world");
+    let world_text = world_text.replace(
+        &format!("\"../{ESBC_NAV}\""),
+        &format!("{:?}", nav_path.to_str().expect("utf-8")),
+    );
+    assert!(
+        world_text.contains("esbc-with-bdsa.rnx"),
+        "ephemeris line replaced"
+    );
+    let world = w.join("road-bdsa.toml");
+    std::fs::write(&world, world_text).expect("write world");
+    let Some(r) = record_and_position(
+        "bds-road",
+        world.to_str().expect("utf-8"),
+        "bds-b1i",
+        BDS_DURATION_S,
+        4.2e6,
+        bds,
+    ) else {
         return;
     };
-    let decoded = d1_ephemerides(&r.log);
-    assert!(decoded >= 4, "{decoded} D1 ephemerides decoded:\n{}", r.log);
+    let decoded = bds_ephemerides(&r.log);
+    assert!(decoded >= 4, "{decoded} ephemerides decoded:\n{}", r.log);
+    assert_geo_decoded_and_used("bds-road", &r);
+    // The sets GNSS-SDR decoded, against the header's, at the ICD's scales: the first (it
+    // heads GNSS-SDR's RINEX navigation file, read back with hybridnav's own parser) and
+    // the last (bds_dnav_iono.xml).
+    let sent = [
+        0.1397e-7, 0.0, -0.5960e-7, 0.5960e-7, 0.1106e6, -0.3277e5, -0.2621e6, 0.1966e6,
+    ];
+    let lsb_log2 = [-30, -27, -24, -24, 11, 14, 16, 16];
+    let close = |got: f64, want: f64, e: i32| (got - want).abs() <= 0.5 * 2f64.powi(e) * 1.001;
+    let rinex = std::fs::read_dir(&r.dir)
+        .expect("output dir")
+        .filter_map(|f| f.ok().map(|f| f.path()))
+        .find(|p| {
+            let name = p.file_name().and_then(|n| n.to_str()).unwrap_or("");
+            name.starts_with("GSDR") && name.ends_with('N')
+        })
+        .expect("GNSS-SDR's RINEX navigation file");
+    let first = hybridnav::gnss::rinex_nav::read_nav_file(&rinex)
+        .expect("GNSS-SDR's RINEX navigation file parses")
+        .klobuchar_bds
+        .expect("BDSA/BDSB in GNSS-SDR's RINEX header");
+    let header = first.alpha.iter().chain(&first.beta);
+    for (k, ((got, want), e)) in header.zip(sent).zip(lsb_log2).enumerate() {
+        // The header prints 4 digits: 0.05 % of the value at most, far below half an LSB.
+        assert!(
+            close(*got, want, e),
+            "bds-road: coefficient {k} sent {want:e}, GNSS-SDR's RINEX header {got:e}"
+        );
+    }
+    eprintln!(
+        "bds-road: GNSS-SDR's RINEX header: BDSA {:?} BDSB {:?}",
+        first.alpha, first.beta
+    );
+    let xml = std::fs::read_to_string(r.dir.join("bds_dnav_iono.xml")).expect("iono xml");
+    let names = [
+        "alpha0", "alpha1", "alpha2", "alpha3", "beta0", "beta1", "beta2", "beta3",
+    ];
+    for ((name, want), e) in names.iter().zip(sent).zip(lsb_log2) {
+        let got = xml_value(&xml, name).unwrap_or(f64::NAN);
+        let ok = close(got, want, e);
+        // GNSS-SDR 0.0.17 reads a D2 page 2's α3 at D1's position (bits 159–166,
+        // reserved zeros on that page): when the GEO's page 2 was the last set received,
+        // its α3 is 0 whatever was sent.
+        let geo_a3 = *name == "alpha3" && got == 0.0;
+        assert!(
+            ok || geo_a3,
+            "bds-road: {name} sent {want:e}, GNSS-SDR decoded {got:e}:\n{xml}"
+        );
+    }
     assert_fixes_within("bds-road", &r, MEAN_MAX_M, TAIL_MAX_M);
 }

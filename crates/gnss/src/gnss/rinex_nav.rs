@@ -235,6 +235,15 @@ pub struct NavData {
     pub ephemerides: Vec<Ephemeris>,
     /// The GPS Klobuchar coefficients from the header, when both α and β are present.
     pub klobuchar: Option<Klobuchar>,
+    /// The BeiDou Klobuchar coefficients from a RINEX 3 header (`IONOSPHERIC CORR` lines
+    /// `BDSA` and `BDSB`), when both are present: the α/β that BDS broadcasts in D1
+    /// subframe 1 and D2 subframe 1 page 2 (BDS-SIS-ICD-B1I-3.0 §5.2.4.7), for its own
+    /// model (geographic latitude, delay on B1I). Only the signal level uses them (they
+    /// are sent in the generated D1/D2 messages); the measurement model's ionosphere is
+    /// the GPS set's. When a header carries several `BDSA` (or `BDSB`) lines, as RINEX
+    /// 3.04 allows for sets of different transmission times and satellites, the last one
+    /// is kept, as for `GPSA`/`GPSB`.
+    pub klobuchar_bds: Option<Klobuchar>,
     /// GPST − UTC leap seconds from the header.
     pub leap_seconds: Option<i32>,
     /// Number of records skipped per system letter (systems other than G and C).
@@ -271,6 +280,7 @@ struct Header {
     version: f64,
     file_type: char,
     klobuchar: Option<Klobuchar>,
+    klobuchar_bds: Option<Klobuchar>,
     leap_seconds: Option<i32>,
     /// Index (0-based) of the first body line.
     body_start: usize,
@@ -465,6 +475,7 @@ pub fn parse_nav(text: &str, file_name: &str) -> Result<NavData, RinexError> {
     let header = parse_header(&ctx, &lines)?;
     let mut nav = NavData {
         klobuchar: header.klobuchar,
+        klobuchar_bds: header.klobuchar_bds,
         leap_seconds: header.leap_seconds,
         ..NavData::default()
     };
@@ -528,6 +539,8 @@ fn parse_header(ctx: &Ctx<'_>, lines: &[&str]) -> Result<Header, RinexError> {
 
     let mut alpha: Option<[f64; 4]> = None;
     let mut beta: Option<[f64; 4]> = None;
+    let mut alpha_bds: Option<[f64; 4]> = None;
+    let mut beta_bds: Option<[f64; 4]> = None;
     let mut leap_seconds = None;
     for (idx, line) in lines.iter().enumerate().skip(1) {
         let label = cols(line, 60, 80).unwrap_or("").trim();
@@ -537,10 +550,15 @@ fn parse_header(ctx: &Ctx<'_>, lines: &[&str]) -> Result<Header, RinexError> {
                     (Some(alpha), Some(beta)) => Some(Klobuchar { alpha, beta }),
                     _ => None,
                 };
+                let klobuchar_bds = match (alpha_bds, beta_bds) {
+                    (Some(alpha), Some(beta)) => Some(Klobuchar { alpha, beta }),
+                    _ => None,
+                };
                 return Ok(Header {
                     version,
                     file_type,
                     klobuchar,
+                    klobuchar_bds,
                     leap_seconds,
                     body_start: idx + 1,
                 });
@@ -550,8 +568,10 @@ fn parse_header(ctx: &Ctx<'_>, lines: &[&str]) -> Result<Header, RinexError> {
             "IONOSPHERIC CORR" => match cols(line, 0, 4).unwrap_or("") {
                 "GPSA" => alpha = Some(header_coefficients(ctx, idx, line, 5)?),
                 "GPSB" => beta = Some(header_coefficients(ctx, idx, line, 5)?),
-                // Galileo NeQuick (GAL), BeiDou (BDSA/BDSB), QZSS and NavIC sets are not
-                // used by this simulator.
+                "BDSA" => alpha_bds = Some(header_coefficients(ctx, idx, line, 5)?),
+                "BDSB" => beta_bds = Some(header_coefficients(ctx, idx, line, 5)?),
+                // Galileo NeQuick (GAL), QZSS and NavIC sets are not used by this
+                // simulator.
                 _ => {}
             },
             "LEAP SECONDS" => {
@@ -1287,6 +1307,7 @@ impl NavData {
         Self {
             ephemerides,
             klobuchar,
+            klobuchar_bds: None,
             leap_seconds,
             skipped: BTreeMap::new(),
             dropped: Vec::new(),
@@ -1574,6 +1595,44 @@ G01 2020 06 25 04 00 00 1.604342833161e-05 7.048583938740e-12 0.000000000000e+00
         let msg = parse_nav(&text, "bad.10n").unwrap_err().to_string();
         assert!(
             msg.contains("line 6") && msg.contains("valid epoch"),
+            "{msg}"
+        );
+    }
+
+    /// The BeiDou Klobuchar set of a RINEX 3 header. The two lines are those of an IGS
+    /// merged broadcast file's header (CDDIS, `CCRINEXN V1.6.0`, March 2016) as quoted in
+    /// the RINEX 3 navigation parser of the Norwegian Mapping Authority's Where software;
+    /// then the same with RINEX 3.04's optional time mark and satellite columns.
+    #[test]
+    fn reads_the_beidou_klobuchar_set_of_a_rinex3_header() {
+        let bds = "BDSA    .1397E-07   .0000E+00  -.5960E-07   .5960E-07       IONOSPHERIC CORR
+BDSB    .1106E+06  -.3277E+05  -.2621E+06   .1966E+06       IONOSPHERIC CORR
+";
+        let with = V3_MIXED.replacen("    18 ", &format!("{bds}    18 "), 1);
+        let nav = parse_nav(&with, "bds.rnx").unwrap();
+        let k = nav.klobuchar_bds.expect("BDSA/BDSB read");
+        assert_eq!(k.alpha, [0.1397e-7, 0.0, -0.5960e-7, 0.5960e-7]);
+        assert_eq!(k.beta, [0.1106e6, -0.3277e5, -0.2621e6, 0.1966e6]);
+        // The GPS set is read as before and kept apart.
+        assert_eq!(nav.klobuchar.unwrap().beta[1], 9.8304e+04);
+        // RINEX 3.04's optional time mark (column 55) and satellite (columns 57-58).
+        let marked = with.replace(".5960E-07       IONOSPHERIC", ".5960E-07 A 05  IONOSPHERIC");
+        assert_eq!(
+            parse_nav(&marked, "bds.rnx").unwrap().klobuchar_bds,
+            Some(k)
+        );
+        // Without BDSA/BDSB, or with only one of them, there is no BeiDou set.
+        assert_eq!(parse_nav(V3_MIXED, "x.rnx").unwrap().klobuchar_bds, None);
+        let first = bds.lines().next().unwrap_or("");
+        let half = V3_MIXED.replacen("    18 ", &format!("{first}\n    18 "), 1);
+        assert_eq!(parse_nav(&half, "x.rnx").unwrap().klobuchar_bds, None);
+        // A damaged coefficient names the file, the line and what was expected.
+        let bad = with.replace("-.3277E+05", "-.3277X+05");
+        let err = parse_nav(&bad, "bds.rnx").unwrap_err();
+        assert_eq!(err.line(), Some(5));
+        let msg = err.to_string();
+        assert!(
+            msg.contains("bds.rnx") && msg.contains("ionospheric coefficient 2 of 4"),
             "{msg}"
         );
     }

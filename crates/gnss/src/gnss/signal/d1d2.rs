@@ -1,11 +1,25 @@
-//! The BeiDou D1 navigation message on B1I (BDS-SIS-ICD-B1I-3.0 §5.2): the message of the
-//! MEO and IGSO satellites. (D2, the GEO satellites' 500 bit/s message, is not generated:
-//! a recording leaves the GEO satellites out.)
+//! The BeiDou navigation messages on B1I (BDS-SIS-ICD-B1I-3.0 §5): D1 (§5.2), the message
+//! of the MEO and IGSO satellites, and D2 (§5.3), the message of the GEO satellites
+//! (C01–C05, C59–C63).
+//!
+//! # D1
 //!
 //! A subframe is 300 bits at 50 bit/s (6 s), starting at a BDT second of week that is a
 //! multiple of 6; five subframes make a 30 s frame (FraID = SOW/6 mod 5 + 1). Each bit is
 //! spread by the 20-chip Neumann–Hoffman code 00000100110101001110, one chip per 1 ms code
 //! period, so the symbol of code period `m` (BDT ms of week) is `bit(m/20) ⊕ NH(m mod 20)`.
+//!
+//! # D2
+//!
+//! 500 bit/s without NH code: one bit per two code periods, the symbol of code period `m`
+//! is `bit(m/2)`. A subframe is 300 bits (0.6 s); five make a 3 s frame, the subframe of
+//! code period `m` is `(m/600 mod 5) + 1`. Every subframe of a frame carries the frame's
+//! SOW (the BDT second of week of its subframe 1, a multiple of 3). Subframe 1 has 10
+//! pages, page `SOW/3 mod 10 + 1`, so the basic navigation information (clock, group
+//! delays, Klobuchar α/β, ephemeris; fields split across pages MSBs first) repeats every
+//! 30 s; a receiver has an ephemeris after 10 frames.
+//!
+//! # Both
 //!
 //! Word 1 is the 11-bit preamble 11100010010, 4 reserved bits and 11 information bits (FraID,
 //! the 8 MSBs of SOW) protected by a BCH(15,11) code; words 2–10 carry 22 information bits as
@@ -14,13 +28,34 @@
 //! the remainder of info(X)·X⁴ divided by g(X) (§5.1.3).
 //!
 //! Field positions below are those of the de-interleaved subframe (words of 30 bits, each
-//! word's information bits first, then its check bits), as the ICD's figures number them:
-//! SOW = SOW at the subframe's first bit. Subframe 1: SatH1, AODC, URAI, WN, toc, TGD1/2, the
-//! Klobuchar α/β (GPS-style coefficients broadcast by BDS), a0–a2, AODE; subframes 2–3: the
-//! Keplerian elements (angles in semicircles, π = 3.1415926535898); subframes 4–5: the page
-//! number only (no almanac is broadcast).
+//! word's information bits first, then its check bits), as the ICD's figures number them;
+//! scale factors as the ICD's tables (angles in semicircles, π = 3.1415926535898). The
+//! positions agree with independent code read for the purpose: the ephemeris and clock
+//! fields with RTKLIB's `decode_bds_d1`/`decode_bds_d2` and GNSS-SDR's `Beidou_DNAV.h`, the
+//! α/β of D1 and of D2's page 2 with GNSS-SDR's and the SignalSim generator's (RTKLIB
+//! does not decode them).
+//!
+//! - D1 subframe 1: SatH1, AODC, URAI, WN, toc, TGD1/2, the BDS Klobuchar α0–α3 (bits
+//!   127–166) and β0–β3 (167–172 + 181–182, 183–198, 199–202 + 211–214), a0–a2, AODE;
+//!   subframes 2–3: the Keplerian elements; subframes 4–5: the page number only (no
+//!   almanac is broadcast).
+//! - D2 subframe 1 pages 1–10 as §5.3.3 (page 1: SatH1, AODC, URAI, WN, toc, TGD1/2; page 2:
+//!   α/β; page 3: a0, a1's 4 MSBs; … page 10: ω's 5 LSBs, IDOT). Subframes 2–5 (integrity
+//!   and differential corrections, almanac, health, time offsets) carry the preamble,
+//!   FraID and SOW and zeros elsewhere (page numbers included): receivers that position
+//!   from D2 read subframe 1 only.
+//!
+//! The Klobuchar α/β are BeiDou's own set (`BDSA`/`BDSB` of a RINEX 3 header,
+//! [`NavData::klobuchar_bds`]). When the file has none they are sent as zeros, which keeps
+//! a receiver's broadcast model off. The GPS set is not substituted: the BDS model is not
+//! the GPS one (the ICD's §5.2.4.7 evaluates it at the geographic, not geomagnetic,
+//! latitude of a 375 km pierce point and gives the delay on B1I, where the GPS model gives
+//! L1's at 350 km; "BDS-2 slightly modifies the Klobuchar model", Park et al., J. Position.
+//! Navig. Timing 12(2), 2023), so GPS coefficients would describe an ionosphere neither
+//! constellation broadcast.
 
 use crate::core::{EmitterId, GpsTime};
+use crate::gnss::atmosphere::Klobuchar;
 use crate::gnss::ephemeris::Ephemeris;
 use crate::gnss::rinex_nav::NavData;
 use crate::gnss::signal::baseband::NavSymbols;
@@ -48,6 +83,18 @@ pub fn bch15_11(info: u32) -> u32 {
     reg
 }
 
+/// `x/scale` rounded to a `width`-bit two's complement field, saturated at its range.
+fn signed_raw(x: f64, scale: f64, width: usize) -> u64 {
+    let half = 1i64 << (width - 1);
+    let v = ((x / scale).round() as i64).clamp(-half, half - 1);
+    v as u64 & ((1u64 << width) - 1)
+}
+
+/// `x/scale` rounded to a `width`-bit unsigned field, saturated at its range.
+fn unsigned_raw(x: f64, scale: f64, width: usize) -> u64 {
+    ((x / scale).round().max(0.0) as u64).min((1u64 << width) - 1)
+}
+
 /// The 300 decoded bits of a subframe (1-based positions) being filled.
 struct Fields([u8; 300]);
 
@@ -71,14 +118,12 @@ impl Fields {
 
     fn signed(&mut self, slices: &[(usize, usize)], x: f64, scale: f64) {
         let total: usize = slices.iter().map(|s| s.1).sum();
-        let v = (x / scale).round() as i64 as u64 & ((1u64 << total) - 1);
-        self.put_slices(slices, v);
+        self.put_slices(slices, signed_raw(x, scale, total));
     }
 
     fn unsigned(&mut self, slices: &[(usize, usize)], x: f64, scale: f64) {
         let total: usize = slices.iter().map(|s| s.1).sum();
-        let v = (x / scale).round().max(0.0) as u64 & ((1u64 << total) - 1);
-        self.put_slices(slices, v);
+        self.put_slices(slices, unsigned_raw(x, scale, total));
     }
 
     /// Encodes into the 300 transmitted bits (BCH and interleaving).
@@ -107,14 +152,69 @@ impl Fields {
     }
 }
 
+/// 2^x.
+fn p2(x: i32) -> f64 {
+    2f64.powi(x)
+}
+
+/// Where the eight Klobuchar coefficients go: α0–α3 then β0–β3, each as slices.
+type IonoSlots = [&'static [(usize, usize)]; 8];
+
+/// D1 subframe 1 (§5.2.4.7).
+const D1_IONO: IonoSlots = [
+    &[(127, 8)],
+    &[(135, 8)],
+    &[(151, 8)],
+    &[(159, 8)],
+    &[(167, 6), (181, 2)],
+    &[(183, 8)],
+    &[(191, 8)],
+    &[(199, 4), (211, 4)],
+];
+
+/// D2 subframe 1 page 2 (§5.3.3).
+const D2_IONO: IonoSlots = [
+    &[(47, 6), (61, 2)],
+    &[(63, 8)],
+    &[(71, 8)],
+    &[(79, 4), (91, 4)],
+    &[(95, 8)],
+    &[(103, 8)],
+    &[(111, 2), (121, 6)],
+    &[(127, 8)],
+];
+
+/// The scale factors (LSBs) of α0–α3 (s, s/π, s/π², s/π³) and β0–β3 (s, s/π, …) as powers
+/// of two: the ICD's table, the same as GPS's.
+pub const IONO_LSB_LOG2: [i32; 8] = [-30, -27, -24, -24, 11, 14, 16, 16];
+
+impl Fields {
+    /// The Klobuchar set (zeros without one) into `slots`.
+    fn iono(&mut self, k: Option<&Klobuchar>, slots: &IonoSlots) {
+        let values = k.map_or([0.0; 8], |k| {
+            [
+                k.alpha[0], k.alpha[1], k.alpha[2], k.alpha[3], k.beta[0], k.beta[1], k.beta[2],
+                k.beta[3],
+            ]
+        });
+        for ((slot, v), lsb) in slots.iter().zip(values).zip(IONO_LSB_LOG2) {
+            self.signed(slot, v, p2(lsb));
+        }
+    }
+
+    /// Word 1 and the SOW of word 2 (both messages).
+    fn header(&mut self, fra_id: u32, sow: i64) {
+        self.put(1, 11, PREAMBLE);
+        self.put(16, 3, u64::from(fra_id));
+        self.put_slices(&[(19, 8), (31, 12)], sow as u64 & 0xf_ffff);
+    }
+}
+
 /// The decoded bits of D1 subframe `fra_id` (1–5) starting at BDT `week`, `sow`.
-fn d1_fields(e: &Ephemeris, week: i64, sow: i64, fra_id: u32) -> Fields {
+fn d1_fields(e: &Ephemeris, iono: Option<&Klobuchar>, week: i64, sow: i64, fra_id: u32) -> Fields {
     let mut f = Fields([0; 300]);
-    f.put(1, 11, PREAMBLE);
-    f.put(16, 3, u64::from(fra_id));
-    f.put_slices(&[(19, 8), (31, 12)], sow as u64 & 0xf_ffff);
+    f.header(fra_id, sow);
     let sc = BDS_PI;
-    let p = |x: i32| 2f64.powi(x);
     match fra_id {
         1 => {
             f.put(43, 1, u64::from(e.health != 0));
@@ -124,36 +224,34 @@ fn d1_fields(e: &Ephemeris, week: i64, sow: i64, fra_id: u32) -> Fields {
             f.unsigned(&[(74, 9), (91, 8)], e.toc.bdt_week_sow().1, 8.0);
             f.signed(&[(99, 10)], e.tgd_s, 1e-10);
             f.signed(&[(109, 4), (121, 6)], e.tgd2_s, 1e-10);
-            // The Klobuchar coefficients of the file's header are GPS's; BDS broadcasts its
-            // own, which RINEX files carry apart (BDSA/BDSB). Zero keeps the receiver's
-            // model off rather than wrong.
-            f.signed(&[(215, 11)], e.af2, p(-66));
-            f.signed(&[(226, 7), (241, 17)], e.af0, p(-33));
-            f.signed(&[(258, 5), (271, 17)], e.af1, p(-50));
+            f.iono(iono, &D1_IONO);
+            f.signed(&[(215, 11)], e.af2, p2(-66));
+            f.signed(&[(226, 7), (241, 17)], e.af0, p2(-33));
+            f.signed(&[(258, 5), (271, 17)], e.af1, p2(-50));
             f.put(288, 5, u64::from(e.iode) & 0x1f);
         }
         2 => {
-            f.signed(&[(43, 10), (61, 6)], e.delta_n / sc, p(-43));
-            f.signed(&[(67, 16), (91, 2)], e.cuc, p(-31));
-            f.signed(&[(93, 20), (121, 12)], e.m0 / sc, p(-31));
-            f.unsigned(&[(133, 10), (151, 22)], e.e, p(-33));
-            f.signed(&[(181, 18)], e.cus, p(-31));
-            f.signed(&[(199, 4), (211, 14)], e.crc, p(-6));
-            f.signed(&[(225, 8), (241, 10)], e.crs, p(-6));
-            f.unsigned(&[(251, 12), (271, 20)], e.sqrt_a, p(-19));
+            f.signed(&[(43, 10), (61, 6)], e.delta_n / sc, p2(-43));
+            f.signed(&[(67, 16), (91, 2)], e.cuc, p2(-31));
+            f.signed(&[(93, 20), (121, 12)], e.m0 / sc, p2(-31));
+            f.unsigned(&[(133, 10), (151, 22)], e.e, p2(-33));
+            f.signed(&[(181, 18)], e.cus, p2(-31));
+            f.signed(&[(199, 4), (211, 14)], e.crc, p2(-6));
+            f.signed(&[(225, 8), (241, 10)], e.crs, p2(-6));
+            f.unsigned(&[(251, 12), (271, 20)], e.sqrt_a, p2(-19));
             let toe = (e.toe_sow_s() / 8.0).round() as u64;
             f.put(291, 2, toe >> 15);
         }
         3 => {
             let toe = (e.toe_sow_s() / 8.0).round() as u64;
             f.put_slices(&[(43, 10), (61, 5)], toe & 0x7fff);
-            f.signed(&[(66, 17), (91, 15)], e.i0 / sc, p(-31));
-            f.signed(&[(106, 7), (121, 11)], e.cic, p(-31));
-            f.signed(&[(132, 11), (151, 13)], e.omega_dot / sc, p(-43));
-            f.signed(&[(164, 9), (181, 9)], e.cis, p(-31));
-            f.signed(&[(190, 13), (211, 1)], e.idot / sc, p(-43));
-            f.signed(&[(212, 21), (241, 11)], e.omega0 / sc, p(-31));
-            f.signed(&[(252, 11), (271, 21)], e.omega / sc, p(-31));
+            f.signed(&[(66, 17), (91, 15)], e.i0 / sc, p2(-31));
+            f.signed(&[(106, 7), (121, 11)], e.cic, p2(-31));
+            f.signed(&[(132, 11), (151, 13)], e.omega_dot / sc, p2(-43));
+            f.signed(&[(164, 9), (181, 9)], e.cis, p2(-31));
+            f.signed(&[(190, 13), (211, 1)], e.idot / sc, p2(-43));
+            f.signed(&[(212, 21), (241, 11)], e.omega0 / sc, p2(-31));
+            f.signed(&[(252, 11), (271, 21)], e.omega / sc, p2(-31));
         }
         _ => {
             // Page number: pages 1–24 cycle with the frames.
@@ -163,48 +261,200 @@ fn d1_fields(e: &Ephemeris, week: i64, sow: i64, fra_id: u32) -> Fields {
     f
 }
 
-/// The 300 transmitted bits of the D1 subframe of `e` that starts at BDT `week`, `sow`.
-pub fn d1_subframe(e: &Ephemeris, week: i64, sow: i64, out: &mut [u8; 300]) {
-    let fra_id = ((sow / 6).rem_euclid(5) + 1) as u32;
-    d1_fields(e, week, sow, fra_id).encode(out);
+/// A field of `width` bits split over two pages: its `msb` most significant bits on one,
+/// the rest on the next.
+fn split(raw: u64, width: usize, msb: usize) -> (u64, u64) {
+    (raw >> (width - msb), raw & ((1u64 << (width - msb)) - 1))
 }
 
-/// A MEO/IGSO satellite's D1 symbols over time (subframes rebuilt every 6 s).
+/// The decoded bits of D2 subframe `fra_id` (1–5) of the frame starting at BDT `week`,
+/// `sow` (a multiple of 3); subframe 1 is page `sow/3 mod 10 + 1`.
+fn d2_fields(e: &Ephemeris, iono: Option<&Klobuchar>, week: i64, sow: i64, fra_id: u32) -> Fields {
+    let mut f = Fields([0; 300]);
+    f.header(fra_id, sow);
+    if fra_id != 1 {
+        return f;
+    }
+    let sc = BDS_PI;
+    let page = (sow / 3).rem_euclid(10) + 1;
+    f.put(43, 4, page as u64);
+    match page {
+        1 => {
+            f.put(47, 1, u64::from(e.health != 0));
+            f.put(48, 5, u64::from(e.iodc) & 0x1f);
+            f.put(61, 4, crate::gnss::signal::lnav::ura_index(e.ura_m));
+            f.put(65, 13, (week as u64) & 0x1fff);
+            f.unsigned(&[(78, 5), (91, 12)], e.toc.bdt_week_sow().1, 8.0);
+            f.signed(&[(103, 10)], e.tgd_s, 1e-10);
+            f.signed(&[(121, 10)], e.tgd2_s, 1e-10);
+        }
+        2 => f.iono(iono, &D2_IONO),
+        3 => {
+            f.signed(&[(101, 12), (121, 12)], e.af0, p2(-33));
+            let (hi, _) = split(signed_raw(e.af1, p2(-50), 22), 22, 4);
+            f.put(133, 4, hi);
+        }
+        4 => {
+            let (_, lo) = split(signed_raw(e.af1, p2(-50), 22), 22, 4);
+            f.put_slices(&[(47, 6), (61, 12)], lo);
+            f.signed(&[(73, 10), (91, 1)], e.af2, p2(-66));
+            f.put(92, 5, u64::from(e.iode) & 0x1f);
+            f.signed(&[(97, 16)], e.delta_n / sc, p2(-43));
+            let (hi, _) = split(signed_raw(e.cuc, p2(-31), 18), 18, 14);
+            f.put(121, 14, hi);
+        }
+        5 => {
+            let (_, lo) = split(signed_raw(e.cuc, p2(-31), 18), 18, 14);
+            f.put(47, 4, lo);
+            f.signed(&[(51, 2), (61, 22), (91, 8)], e.m0 / sc, p2(-31));
+            f.signed(&[(99, 14), (121, 4)], e.cus, p2(-31));
+            let (hi, _) = split(unsigned_raw(e.e, p2(-33), 32), 32, 10);
+            f.put(125, 10, hi);
+        }
+        6 => {
+            let (_, lo) = split(unsigned_raw(e.e, p2(-33), 32), 32, 10);
+            f.put_slices(&[(47, 6), (61, 16)], lo);
+            f.unsigned(&[(77, 6), (91, 22), (121, 4)], e.sqrt_a, p2(-19));
+            let (hi, _) = split(signed_raw(e.cic, p2(-31), 18), 18, 10);
+            f.put(125, 10, hi);
+        }
+        7 => {
+            let (_, lo) = split(signed_raw(e.cic, p2(-31), 18), 18, 10);
+            f.put_slices(&[(47, 6), (61, 2)], lo);
+            f.signed(&[(63, 18)], e.cis, p2(-31));
+            let toe = (e.toe_sow_s() / 8.0).round() as u64;
+            f.put_slices(&[(81, 2), (91, 15)], toe & 0x1_ffff);
+            let (hi, _) = split(signed_raw(e.i0 / sc, p2(-31), 32), 32, 21);
+            f.put_slices(&[(106, 7), (121, 14)], hi);
+        }
+        8 => {
+            let (_, lo) = split(signed_raw(e.i0 / sc, p2(-31), 32), 32, 21);
+            f.put_slices(&[(47, 6), (61, 5)], lo);
+            f.signed(&[(66, 17), (91, 1)], e.crc, p2(-6));
+            f.signed(&[(92, 18)], e.crs, p2(-6));
+            let (hi, _) = split(signed_raw(e.omega_dot / sc, p2(-43), 24), 24, 19);
+            f.put_slices(&[(110, 3), (121, 16)], hi);
+        }
+        9 => {
+            let (_, lo) = split(signed_raw(e.omega_dot / sc, p2(-43), 24), 24, 19);
+            f.put(47, 5, lo);
+            f.signed(&[(52, 1), (61, 22), (91, 9)], e.omega0 / sc, p2(-31));
+            let (hi, _) = split(signed_raw(e.omega / sc, p2(-31), 32), 32, 27);
+            f.put_slices(&[(100, 13), (121, 14)], hi);
+        }
+        _ => {
+            let (_, lo) = split(signed_raw(e.omega / sc, p2(-31), 32), 32, 27);
+            f.put(47, 5, lo);
+            f.signed(&[(52, 1), (61, 13)], e.idot / sc, p2(-43));
+        }
+    }
+    f
+}
+
+/// The 300 transmitted bits of the D1 subframe of `e` that starts at BDT `week`, `sow`,
+/// with the Klobuchar set `iono` (zeros when `None`).
+pub fn d1_subframe(
+    e: &Ephemeris,
+    iono: Option<&Klobuchar>,
+    week: i64,
+    sow: i64,
+    out: &mut [u8; 300],
+) {
+    let fra_id = ((sow / 6).rem_euclid(5) + 1) as u32;
+    d1_fields(e, iono, week, sow, fra_id).encode(out);
+}
+
+/// The 300 transmitted bits of D2 subframe `fra_id` (1–5) of `e` in the frame that starts
+/// at BDT `week`, `sow` (a multiple of 3), with the Klobuchar set `iono`.
+pub fn d2_subframe(
+    e: &Ephemeris,
+    iono: Option<&Klobuchar>,
+    week: i64,
+    sow: i64,
+    fra_id: u32,
+    out: &mut [u8; 300],
+) {
+    d2_fields(e, iono, week, sow, fra_id).encode(out);
+}
+
+/// D1 subframes last 6 s, D2 subframes 0.6 s.
+const D1_SUBFRAME_MS: i64 = 6000;
+const D2_SUBFRAME_MS: i64 = 600;
+/// D2's frame (3 s) and the cycle of subframe 1's ten pages (30 s).
+const D2_FRAME_MS: i64 = 3000;
+const D2_PAGES_MS: i64 = 30_000;
+
+/// A satellite's navigation symbols over time: D1 for MEO/IGSO, D2 for GEO; the subframe
+/// is rebuilt when a code period enters a new one.
 pub struct BdsNavStream {
     nav: Arc<NavData>,
     sat: EmitterId,
+    geo: bool,
     subframe: i64,
     bits: [u8; 300],
 }
 
 impl BdsNavStream {
-    /// The D1 stream of `sat`; `None` for a GEO satellite (D2 is not generated).
-    pub fn new(nav: Arc<NavData>, sat: EmitterId) -> Option<Self> {
-        (!sat.is_bds_geo()).then_some(Self {
+    /// The stream of `sat`: D2 when it is a GEO satellite, D1 otherwise.
+    pub fn new(nav: Arc<NavData>, sat: EmitterId) -> Self {
+        Self {
             nav,
+            geo: sat.is_bds_geo(),
             sat,
             subframe: i64::MIN,
             bits: [0; 300],
-        })
+        }
+    }
+
+    /// Builds the subframe with index `sf` (subframes since the BDT epoch).
+    fn build(&mut self, sf: i64) {
+        let iono = self.nav.klobuchar_bds;
+        let bdt = |ms: i64| GpsTime::from_ns((ms + BDT_EPOCH_MS) * 1_000_000);
+        if self.geo {
+            let start_ms = sf * D2_SUBFRAME_MS;
+            let frame_ms = start_ms.div_euclid(D2_FRAME_MS) * D2_FRAME_MS;
+            let week = frame_ms.div_euclid(WEEK_MS);
+            let sow = frame_ms.rem_euclid(WEEK_MS) / 1000;
+            let fra_id = (sf.rem_euclid(5) + 1) as u32;
+            // One ephemeris for a whole 30 s cycle of pages, so that a receiver never
+            // joins pages of two different ephemerides.
+            let cycle_ms = start_ms.div_euclid(D2_PAGES_MS) * D2_PAGES_MS;
+            match self.nav.select(self.sat, bdt(cycle_ms)) {
+                Some(e) => d2_subframe(e, iono.as_ref(), week, sow, fra_id, &mut self.bits),
+                None => self.bits = [0; 300],
+            }
+        } else {
+            let start_ms = sf * D1_SUBFRAME_MS;
+            let week = start_ms.div_euclid(WEEK_MS);
+            let sow = start_ms.rem_euclid(WEEK_MS) / 1000;
+            match self.nav.select(self.sat, bdt(start_ms)) {
+                Some(e) => d1_subframe(e, iono.as_ref(), week, sow, &mut self.bits),
+                None => self.bits = [0; 300],
+            }
+        }
     }
 }
 
 impl NavSymbols for BdsNavStream {
     fn symbol(&mut self, ms: i64) -> u8 {
         let bdt_ms = ms - BDT_EPOCH_MS;
-        let sf = bdt_ms.div_euclid(6000);
+        let len = if self.geo {
+            D2_SUBFRAME_MS
+        } else {
+            D1_SUBFRAME_MS
+        };
+        let sf = bdt_ms.div_euclid(len);
         if sf != self.subframe {
             self.subframe = sf;
-            let week = (sf * 6000).div_euclid(WEEK_MS);
-            let sow = (sf * 6000).rem_euclid(WEEK_MS) / 1000;
-            let t = GpsTime::from_ns((sf * 6000 + BDT_EPOCH_MS) * 1_000_000);
-            match self.nav.select(self.sat, t) {
-                Some(e) => d1_subframe(e, week, sow, &mut self.bits),
-                None => self.bits = [0; 300],
-            }
+            self.build(sf);
         }
-        let in_sf = bdt_ms.rem_euclid(6000);
-        self.bits[(in_sf / 20) as usize] ^ NH[(in_sf % 20) as usize]
+        let in_sf = bdt_ms.rem_euclid(len);
+        if self.geo {
+            // 500 bit/s: two code periods a bit, no overlay code.
+            self.bits[(in_sf / 2) as usize]
+        } else {
+            self.bits[(in_sf / 20) as usize] ^ NH[(in_sf % 20) as usize]
+        }
     }
 }
 
@@ -263,7 +513,7 @@ mod tests {
         let (week, sow) = e.toe.bdt_week_sow();
         let sow = sow as i64 + 6; // FraID 2 (toe is a multiple of 30 s)
         let mut tx = [0u8; 300];
-        d1_subframe(&e, week, sow, &mut tx);
+        d1_subframe(&e, None, week, sow, &mut tx);
         let d = deinterleave(&tx);
         let get = |sl: &[(usize, usize)]| -> u64 {
             sl.iter()
@@ -295,5 +545,295 @@ mod tests {
             NH.iter().fold(0u32, |a, &b| (a << 1) | u32::from(b)),
             0b0000_0100_1101_0100_1110
         );
+    }
+
+    /// An unsigned field of decoded bits `d` over `slices` (1-based, MSBs first).
+    fn uget(d: &[u8; 300], slices: &[(usize, usize)]) -> u64 {
+        slices
+            .iter()
+            .flat_map(|&(f, w)| (0..w).map(move |k| f - 1 + k))
+            .fold(0u64, |a, i| (a << 1) | u64::from(d[i]))
+    }
+
+    /// Two's complement value of the low `width` bits of `raw`.
+    fn sext(raw: u64, width: u32) -> i64 {
+        let shift = 64 - width;
+        ((raw << shift) as i64) >> shift
+    }
+
+    fn sget(d: &[u8; 300], slices: &[(usize, usize)]) -> i64 {
+        let width: usize = slices.iter().map(|s| s.1).sum();
+        sext(uget(d, slices), width as u32)
+    }
+
+    /// Every BCH(15,11) codeword of the 300 transmitted bits is valid.
+    fn assert_codewords_valid(tx: &[u8; 300]) {
+        assert_eq!(rem((15..30).fold(0, |a, k| (a << 1) | u32::from(tx[k]))), 0);
+        for w in 1..10 {
+            for r in 0..2 {
+                let cw = (0..15).fold(0, |a, k| (a << 1) | u32::from(tx[w * 30 + 2 * k + r]));
+                assert_eq!(rem(cw), 0, "word {}", w + 1);
+            }
+        }
+    }
+
+    /// A BeiDou Klobuchar set as RINEX headers carry it (the `BDSA`/`BDSB` lines of the
+    /// rinex_nav test).
+    fn bds_klobuchar() -> Klobuchar {
+        Klobuchar {
+            alpha: [0.1397e-7, 0.0, -0.5960e-7, 0.5960e-7],
+            beta: [0.1106e6, -0.3277e5, -0.2621e6, 0.1966e6],
+        }
+    }
+
+    /// α0…β3 of a decoded subframe, read with the ICD's positions and scale factors
+    /// (BDS-SIS-ICD-B1I-3.0 §5.2.4.7 and §5.3.3 as GNSS-SDR's decoder and SignalSim's
+    /// encoder place them, written out here rather than taken from the encoder).
+    fn decode_iono(d: &[u8; 300], d2: bool) -> [f64; 8] {
+        let d1: [(&[(usize, usize)], i32); 8] = [
+            (&[(127, 8)], -30),
+            (&[(135, 8)], -27),
+            (&[(151, 8)], -24),
+            (&[(159, 8)], -24),
+            (&[(167, 6), (181, 2)], 11),
+            (&[(183, 8)], 14),
+            (&[(191, 8)], 16),
+            (&[(199, 4), (211, 4)], 16),
+        ];
+        let p2: [(&[(usize, usize)], i32); 8] = [
+            (&[(47, 6), (61, 2)], -30),
+            (&[(63, 8)], -27),
+            (&[(71, 8)], -24),
+            (&[(79, 4), (91, 4)], -24),
+            (&[(95, 8)], 11),
+            (&[(103, 8)], 14),
+            (&[(111, 2), (121, 6)], 16),
+            (&[(127, 8)], 16),
+        ];
+        let table = if d2 { p2 } else { d1 };
+        table.map(|(sl, e)| sget(d, sl) as f64 * 2f64.powi(e))
+    }
+
+    fn assert_iono(got: [f64; 8], k: &Klobuchar) {
+        let want = [
+            k.alpha[0], k.alpha[1], k.alpha[2], k.alpha[3], k.beta[0], k.beta[1], k.beta[2],
+            k.beta[3],
+        ];
+        for (i, ((g, w), lsb)) in got.iter().zip(want).zip(IONO_LSB_LOG2).enumerate() {
+            assert!(
+                (g - w).abs() <= 0.5 * 2f64.powi(lsb),
+                "coefficient {i}: sent {w}, decoded {g}"
+            );
+        }
+    }
+
+    #[test]
+    fn d1_subframe_1_carries_the_bds_klobuchar_set() {
+        let mut e = c05_2020();
+        e.sat = EmitterId::new(crate::core::System::Bds, 20);
+        let (week, sow) = e.toe.bdt_week_sow();
+        let sow = sow as i64; // FraID 1
+        let k = bds_klobuchar();
+        let (mut with, mut without) = ([0u8; 300], [0u8; 300]);
+        d1_subframe(&e, Some(&k), week, sow, &mut with);
+        d1_subframe(&e, None, week, sow, &mut without);
+        assert_codewords_valid(&with);
+        let (dw, dn) = (deinterleave(&with), deinterleave(&without));
+        assert_eq!(uget(&dw, &[(16, 3)]), 1);
+        assert_iono(decode_iono(&dw, false), &k);
+        // Without a BeiDou set the coefficients are zeros …
+        assert_eq!(decode_iono(&dn, false), [0.0; 8]);
+        // … and the set changes no other information bit (a0–a2, AODE, TGD2 around it).
+        let iono_bits: Vec<usize> = [(127, 40), (167, 6), (181, 22), (211, 4)]
+            .iter()
+            .flat_map(|&(f, w)| (f..f + w).collect::<Vec<_>>())
+            .collect();
+        for w in 0..10 {
+            for i in (w * 30 + 1)..=(w * 30 + 22) {
+                if !iono_bits.contains(&i) {
+                    assert_eq!(dw[i - 1], dn[i - 1], "bit {i}");
+                }
+            }
+        }
+        let a0 = sget(&dw, &[(226, 7), (241, 17)]) as f64 * 2f64.powi(-33);
+        assert!((a0 - e.af0).abs() <= 2f64.powi(-34));
+        // A coefficient outside its 8-bit range saturates instead of wrapping.
+        let mut big = k;
+        big.beta[0] = 1e6;
+        d1_subframe(&e, Some(&big), week, sow, &mut with);
+        assert_eq!(sget(&deinterleave(&with), &[(167, 6), (181, 2)]), 127);
+    }
+
+    #[test]
+    fn d2_pages_decode_back_to_the_ephemeris() {
+        let e = c05_2020();
+        assert!(e.sat.is_bds_geo());
+        let k = bds_klobuchar();
+        let (week, toe_sow) = e.toe.bdt_week_sow();
+        let sow0 = toe_sow as i64; // a multiple of 30 s: page 1
+        let pages: Vec<[u8; 300]> = (0..10)
+            .map(|p| {
+                let sow = sow0 + 3 * p;
+                let mut tx = [0u8; 300];
+                d2_subframe(&e, Some(&k), week, sow, 1, &mut tx);
+                assert_codewords_valid(&tx);
+                let d = deinterleave(&tx);
+                assert_eq!(uget(&d, &[(1, 11)]), PREAMBLE);
+                assert_eq!(uget(&d, &[(16, 3)]), 1);
+                assert_eq!(uget(&d, &[(19, 8), (31, 12)]), sow as u64);
+                assert_eq!(uget(&d, &[(43, 4)]), p as u64 + 1, "Pnum");
+                d
+            })
+            .collect();
+        let pg = |n: usize| &pages[n - 1];
+        // The ICD's D2 subframe 1 layout (§5.3.3, as RTKLIB's `decode_bds_d2` reads it),
+        // written out here.
+        assert_eq!(uget(pg(1), &[(47, 1)]), 0, "SatH1");
+        assert_eq!(uget(pg(1), &[(48, 5)]), u64::from(e.iodc), "AODC");
+        assert_eq!(uget(pg(1), &[(65, 13)]), week as u64, "WN");
+        assert_eq!(uget(pg(1), &[(78, 5), (91, 12)]) * 8, toe_sow as u64, "toc");
+        let close = |name: &str, got: f64, want: f64, lsb: f64| {
+            assert!(
+                (got - want).abs() <= 0.5 * lsb * (1.0 + 1e-9),
+                "{name}: sent {want}, decoded {got}"
+            );
+        };
+        close(
+            "TGD1",
+            sget(pg(1), &[(103, 10)]) as f64 * 1e-10,
+            e.tgd_s,
+            1e-10,
+        );
+        close(
+            "TGD2",
+            sget(pg(1), &[(121, 10)]) as f64 * 1e-10,
+            e.tgd2_s,
+            1e-10,
+        );
+        assert_iono(decode_iono(pg(2), true), &k);
+        let s = |x: i64, e: i32| x as f64 * 2f64.powi(e);
+        close(
+            "a0",
+            s(sget(pg(3), &[(101, 12), (121, 12)]), -33),
+            e.af0,
+            2f64.powi(-33),
+        );
+        let a1 = (uget(pg(3), &[(133, 4)]) << 18) | uget(pg(4), &[(47, 6), (61, 12)]);
+        close("a1", s(sext(a1, 22), -50), e.af1, 2f64.powi(-50));
+        close(
+            "a2",
+            s(sget(pg(4), &[(73, 10), (91, 1)]), -66),
+            e.af2,
+            2f64.powi(-66),
+        );
+        assert_eq!(uget(pg(4), &[(92, 5)]), u64::from(e.iode), "AODE");
+        let pi = BDS_PI;
+        let ang = |x: i64, e: i32| x as f64 * 2f64.powi(e) * pi;
+        close(
+            "Δn",
+            ang(sget(pg(4), &[(97, 16)]), -43),
+            e.delta_n,
+            pi * 2f64.powi(-43),
+        );
+        let cuc = (uget(pg(4), &[(121, 14)]) << 4) | uget(pg(5), &[(47, 4)]);
+        close("Cuc", s(sext(cuc, 18), -31), e.cuc, 2f64.powi(-31));
+        let m0 = sget(pg(5), &[(51, 2), (61, 22), (91, 8)]);
+        close("M0", ang(m0, -31), e.m0, pi * 2f64.powi(-31));
+        close(
+            "Cus",
+            s(sget(pg(5), &[(99, 14), (121, 4)]), -31),
+            e.cus,
+            2f64.powi(-31),
+        );
+        let ecc = (uget(pg(5), &[(125, 10)]) << 22) | uget(pg(6), &[(47, 6), (61, 16)]);
+        close("e", ecc as f64 * 2f64.powi(-33), e.e, 2f64.powi(-33));
+        let sqrt_a = uget(pg(6), &[(77, 6), (91, 22), (121, 4)]);
+        close(
+            "√A",
+            sqrt_a as f64 * 2f64.powi(-19),
+            e.sqrt_a,
+            2f64.powi(-19),
+        );
+        let cic = (uget(pg(6), &[(125, 10)]) << 8) | uget(pg(7), &[(47, 6), (61, 2)]);
+        close("Cic", s(sext(cic, 18), -31), e.cic, 2f64.powi(-31));
+        close(
+            "Cis",
+            s(sget(pg(7), &[(63, 18)]), -31),
+            e.cis,
+            2f64.powi(-31),
+        );
+        assert_eq!(uget(pg(7), &[(81, 2), (91, 15)]) * 8, toe_sow as u64, "toe");
+        let i0 = (uget(pg(7), &[(106, 7), (121, 14)]) << 11) | uget(pg(8), &[(47, 6), (61, 5)]);
+        close("i0", ang(sext(i0, 32), -31), e.i0, pi * 2f64.powi(-31));
+        close(
+            "Crc",
+            s(sget(pg(8), &[(66, 17), (91, 1)]), -6),
+            e.crc,
+            2f64.powi(-6),
+        );
+        close("Crs", s(sget(pg(8), &[(92, 18)]), -6), e.crs, 2f64.powi(-6));
+        let od = (uget(pg(8), &[(110, 3), (121, 16)]) << 5) | uget(pg(9), &[(47, 5)]);
+        close(
+            "Ω̇",
+            ang(sext(od, 24), -43),
+            e.omega_dot,
+            pi * 2f64.powi(-43),
+        );
+        let o0 = sget(pg(9), &[(52, 1), (61, 22), (91, 9)]);
+        close("Ω0", ang(o0, -31), e.omega0, pi * 2f64.powi(-31));
+        let w = (uget(pg(9), &[(100, 13), (121, 14)]) << 5) | uget(pg(10), &[(47, 5)]);
+        close("ω", ang(sext(w, 32), -31), e.omega, pi * 2f64.powi(-31));
+        let idot = sget(pg(10), &[(52, 1), (61, 13)]);
+        close("IDOT", ang(idot, -43), e.idot, pi * 2f64.powi(-43));
+        // The other subframes of a frame: the frame's SOW (not their own start), their
+        // FraID, valid codewords.
+        for fra_id in 2..=5 {
+            let mut tx = [0u8; 300];
+            d2_subframe(&e, Some(&k), week, sow0, fra_id, &mut tx);
+            assert_codewords_valid(&tx);
+            let d = deinterleave(&tx);
+            assert_eq!(uget(&d, &[(16, 3)]), u64::from(fra_id));
+            assert_eq!(uget(&d, &[(19, 8), (31, 12)]), sow0 as u64);
+        }
+    }
+
+    #[test]
+    fn geo_satellites_send_d2_at_500_bps_and_the_others_d1_with_nh() {
+        let c05 = c05_2020();
+        let mut c20 = c05_2020();
+        c20.sat = EmitterId::new(crate::core::System::Bds, 20);
+        let mut nav = NavData::new(vec![c05.clone(), c20.clone()], None, Some(18));
+        nav.klobuchar_bds = Some(bds_klobuchar());
+        let nav = Arc::new(nav);
+        let (week, toe_sow) = c05.toe.bdt_week_sow();
+        // Satellite time (ms since the GPS epoch) of BDT week `week`, `sow` + `ms`.
+        let at = |sow: i64, ms: i64| BDT_EPOCH_MS + week * WEEK_MS + sow * 1000 + ms;
+        let sow0 = toe_sow as i64;
+        let k = bds_klobuchar();
+        // C05: subframe 3 of the frame at sow0 + 3 starts 1.2 s into the frame; each of its
+        // 300 bits lasts two code periods, with no overlay code.
+        let mut geo = BdsNavStream::new(Arc::clone(&nav), c05.sat);
+        let mut want = [0u8; 300];
+        d2_subframe(&c05, Some(&k), week, sow0 + 3, 3, &mut want);
+        for (i, &bit) in want.iter().enumerate() {
+            let ms = at(sow0 + 3, 1200 + 2 * i as i64);
+            assert_eq!(geo.symbol(ms), bit, "bit {i}");
+            assert_eq!(geo.symbol(ms + 1), bit, "bit {i}, second period");
+        }
+        // Page 2 of subframe 1 (3 s after page 1) carries the BeiDou Klobuchar set.
+        let mut tx = [0u8; 300];
+        for (i, b) in tx.iter_mut().enumerate() {
+            *b = geo.symbol(at(sow0 + 3, 2 * i as i64));
+        }
+        assert_iono(decode_iono(&deinterleave(&tx), true), &k);
+        // C20: D1 subframe 2 (6 s in), each bit over 20 periods ⊕ the NH code.
+        let mut meo = BdsNavStream::new(Arc::clone(&nav), c20.sat);
+        d1_subframe(&c20, Some(&k), week, sow0 + 6, &mut want);
+        for (i, &bit) in want.iter().enumerate() {
+            for m in 0..20 {
+                let ms = at(sow0 + 6, 20 * i as i64 + m);
+                assert_eq!(meo.symbol(ms), bit ^ NH[m as usize], "bit {i} chip {m}");
+            }
+        }
     }
 }

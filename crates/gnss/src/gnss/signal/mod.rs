@@ -3,8 +3,9 @@
 //!
 //! - [`ca_code`]: GPS L1 C/A Gold codes (IS-GPS-200 §3.3.2.3).
 //! - [`lnav`]: the GPS LNAV message (subframes 1–5, TLM/HOW, parity; IS-GPS-200 §20.3).
-//! - [`b1i`]: BeiDou B1I ranging codes; [`d1d2`]: the D1 message with its NH code, BCH(15,11)
-//!   and interleaving (MEO/IGSO; GEO satellites, whose D2 is not generated, are left out).
+//! - [`b1i`]: BeiDou B1I ranging codes; [`d1d2`]: the D1 message with its NH code (MEO/IGSO)
+//!   and the 500 bit/s D2 message (GEO), both with BCH(15,11), interleaving and the BDS
+//!   Klobuchar set of the RINEX header.
 //! - [`baseband`]: replicas, noise, AGC and quantisation; the sample formats.
 //! - [`scenario`]: a world's geometry per epoch (the measurement level's orbits, clocks,
 //!   atmosphere, Sagnac and the scene's paths) turned into replicas and streamed.

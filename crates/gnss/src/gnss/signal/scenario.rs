@@ -291,8 +291,6 @@ pub fn validate(w: &IqWorld<'_>, req: &IqRequest) -> Result<Vec<EmitterId>, Sign
         .satellites()
         .into_iter()
         .filter(|s| s.system == sys && ranging_code(req.signal, s.number).is_some())
-        // The GEO satellites' D2 message is not generated (see `d1d2`).
-        .filter(|s| !s.is_bds_geo())
         .collect();
     let t_start = w.start.add_seconds(req.from_s);
     let t_end = w.start.add_seconds(req.from_s + req.duration_s);
@@ -481,7 +479,7 @@ pub fn record(
                     sat,
                     w.leap_seconds,
                 )),
-                Signal::BdsB1i => Box::new(d1d2::BdsNavStream::new(Arc::clone(&w.nav), sat)?),
+                Signal::BdsB1i => Box::new(d1d2::BdsNavStream::new(Arc::clone(&w.nav), sat)),
             };
             Some(Channel {
                 sat,
