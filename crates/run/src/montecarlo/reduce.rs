@@ -33,24 +33,7 @@ pub struct Reduced {
     /// The first trial reduced (trial 0 of a whole run): the report draws its trajectories.
     pub first: Option<TrialResult>,
     /// The curves the report draws from every trial, not only the first.
-    pub curves: Curves,
-}
-
-/// A curve of `(x, y)` points.
-pub type Curve = Vec<(f64, f64)>;
-
-/// What the report draws across trials, per estimator in the world's order.
-#[derive(Clone, Debug, Default)]
-pub struct Curves {
-    /// The empirical CDF of the 3-D error, `(error_m, share)`, thinned to [`CDF_POINTS`]
-    /// (empty without an estimate).
-    pub cdfs: Vec<Curve>,
-    /// `(t_s, rmse_m)`: at each scored instant, the RMSE of the 3-D error across the trials
-    /// that had an estimate then, `√(Σ e² / n)` (empty without an estimate).
-    pub rmse_vs_time: Vec<Curve>,
-    /// The PCRLB on that RMSE at each epoch ([`crate::world::bound::PositionBound`]), for
-    /// the estimators whose model it covers.
-    pub pcrlb_vs_time: Vec<Option<Curve>>,
+    pub curves: crate::report::Curves,
 }
 
 /// Accumulates trials, in trial order, into a [`Summary`].
@@ -132,7 +115,7 @@ impl RunReducer {
     /// When spilled errors cannot be read back.
     pub fn finish(self, world: &World, opts: &RunOptions) -> Result<Reduced, String> {
         let mut estimators = Vec::with_capacity(self.estimators.len());
-        let mut curves = Curves::default();
+        let mut curves = crate::report::Curves::default();
         // The PCRLB of each estimator's model over the run's truth trajectories
         // (world::bound), and each estimator's efficiency against it.
         let mut bounds = world.pcrlb(opts.seed, opts.trials);
@@ -412,7 +395,9 @@ impl EstimatorAcc {
         Ok(())
     }
 
-    fn finish(mut self) -> std::io::Result<(EstimatorSummary, Curve, Curve)> {
+    fn finish(
+        mut self,
+    ) -> std::io::Result<(EstimatorSummary, crate::report::Curve, crate::report::Curve)> {
         // A diverged estimate (non-finite error) withholds the statistics rather than
         // averaging NaN; the failure count and epochs say what happened.
         fn error_stats(s: &mut SortedSpill) -> std::io::Result<Option<ErrorStats>> {

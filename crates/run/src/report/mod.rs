@@ -14,7 +14,6 @@ pub mod svg;
 use crate::core::{SimTime, TrialRng};
 use crate::engine::trial::{truth_at, EpochRecord, TrialResult};
 use crate::metrics::summary::Summary;
-use crate::montecarlo::reduce::{Curve, Curves};
 use crate::world::World;
 use map::Overlay;
 use std::fmt::Write;
@@ -42,6 +41,23 @@ struct Page {
     figures: Vec<(String, String)>,
 }
 
+/// A curve of `(x, y)` points.
+pub type Curve = Vec<(f64, f64)>;
+
+/// What the report draws across trials, per estimator in the world's order.
+#[derive(Clone, Debug, Default)]
+pub struct Curves {
+    /// The empirical CDF of the 3-D error, `(error_m, share)`, thinned to [`crate::montecarlo::reduce::CDF_POINTS`]
+    /// (empty without an estimate).
+    pub cdfs: Vec<Curve>,
+    /// `(t_s, rmse_m)`: at each scored instant, the RMSE of the 3-D error across the trials
+    /// that had an estimate then, `√(Σ e² / n)` (empty without an estimate).
+    pub rmse_vs_time: Vec<Curve>,
+    /// The PCRLB on that RMSE at each epoch ([`crate::world::bound::PositionBound`]), for
+    /// the estimators whose model it covers.
+    pub pcrlb_vs_time: Vec<Option<Curve>>,
+}
+
 impl Page {
     /// A section holding one chart: a heading, the inline SVG and its caption; the chart
     /// is also kept as `name.svg`.
@@ -58,7 +74,7 @@ impl Page {
 
 /// Renders the report of a run from its summary, its first trial (whose trajectories are
 /// drawn) and the curves taken across every trial
-/// ([`crate::montecarlo::reduce::Curves`]: error CDFs, RMSE against time, the PCRLB).
+/// ([`Curves`]: error CDFs, RMSE against time, the PCRLB).
 ///
 /// # Errors
 /// When the world's trajectory or map cannot be built.
