@@ -406,18 +406,7 @@ fn rmse_vs_time(page: &mut Page, s: &Summary, curves: &Curves) {
     if s.trials < 2 {
         return;
     }
-    let mut series: Vec<Series<'_>> = s
-        .estimators
-        .iter()
-        .zip(&curves.rmse_vs_time)
-        .enumerate()
-        .filter(|(_, (_, points))| !points.is_empty())
-        .map(|(k, (e, points))| Series {
-            label: &e.name,
-            style: style(k),
-            points: points.clone(),
-        })
-        .collect();
+    let mut series = estimator_series(s, &curves.rmse_vs_time);
     // Estimators of one model and one source set share one bound; draw it once.
     let mut bounds: Vec<(&Curve, Vec<&str>)> = Vec::new();
     for (e, b) in s.estimators.iter().zip(&curves.pcrlb_vs_time) {
@@ -479,11 +468,11 @@ fn rmse_vs_time(page: &mut Page, s: &Summary, curves: &Curves) {
     page.figure("rmse-vs-time", "RMSE against time", svg, &caption);
 }
 
-fn cdf(page: &mut Page, s: &Summary, cdfs: &[Vec<(f64, f64)>]) {
-    let series: Vec<Series<'_>> = s
-        .estimators
+/// One series per estimator with a non-empty curve, in the world's styles.
+fn estimator_series<'a>(s: &'a Summary, curves: &[Curve]) -> Vec<Series<'a>> {
+    s.estimators
         .iter()
-        .zip(cdfs)
+        .zip(curves)
         .enumerate()
         .filter(|(_, (_, points))| !points.is_empty())
         .map(|(k, (e, points))| Series {
@@ -491,7 +480,11 @@ fn cdf(page: &mut Page, s: &Summary, cdfs: &[Vec<(f64, f64)>]) {
             style: style(k),
             points: points.clone(),
         })
-        .collect();
+        .collect()
+}
+
+fn cdf(page: &mut Page, s: &Summary, cdfs: &[Curve]) {
+    let series = estimator_series(s, cdfs);
     // A CDF of errors spanning decades reads best with the error on a log axis, its
     // ticks labelled in metres.
     let svg = svg::line_chart(
