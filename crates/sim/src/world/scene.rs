@@ -410,6 +410,8 @@ pub struct TransmitterSpec {
     /// time-interleaver depth (240, 720), carriers (3780, 1) and the transport stream it
     /// carries (a path relative to the world file; null packets after it, or only null
     /// packets without it). With none of these keys the tower's bodies are random 64QAM.
+    /// `hybridnav layout` takes the constellation and rate for the tower's service
+    /// threshold (64QAM 0.6 without them).
     #[serde(default)]
     pub qam: Option<String>,
     /// See `qam`.
