@@ -103,6 +103,16 @@ pub fn default_world_text() -> String {
     )
 }
 
+/// Whether RTKLIB's `rnx2rtkp` can be started; prints why not (the test then reports
+/// itself skipped; CI installs Debian's rtklib in `.ci/run`).
+pub fn has_rnx2rtkp() -> bool {
+    let found = Command::new("rnx2rtkp").arg("-?").output().is_ok();
+    if !found {
+        skip("rnx2rtkp not found (Debian package rtklib; .ci/run installs it)");
+    }
+    found
+}
+
 /// Whether `python3` can import every one of `modules`; prints why not (the test then
 /// reports itself skipped; CI installs them in `.ci/run`).
 pub fn python_has(modules: &[&str]) -> bool {

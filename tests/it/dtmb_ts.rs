@@ -239,13 +239,7 @@ fn tail(b: &[u8]) -> String {
 /// The C = 3780 profiles 3–24.
 fn c3780_profiles() -> Vec<Profile> {
     let mut v = Vec::new();
-    for c in [
-        Constellation::Qam4Nr,
-        Constellation::Qam4,
-        Constellation::Qam16,
-        Constellation::Qam32,
-        Constellation::Qam64,
-    ] {
+    for c in Constellation::ALL {
         for rate in CodeRate::ALL {
             if matches!(c, Constellation::Qam32 | Constellation::Qam4Nr) && rate != CodeRate::R08 {
                 continue;

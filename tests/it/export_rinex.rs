@@ -253,12 +253,7 @@ fn run_tools(world: &Path, out: &Path) {
     if !python_has(&["georinex", "pandas"]) {
         return;
     }
-    if std::process::Command::new("rnx2rtkp")
-        .arg("-?")
-        .output()
-        .is_err()
-    {
-        crate::common::skip("rnx2rtkp not found (Debian package rtklib; .ci/run installs it)");
+    if !crate::common::has_rnx2rtkp() {
         return;
     }
     export(world, out);

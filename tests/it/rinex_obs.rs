@@ -137,12 +137,7 @@ fn a_geonet_station_is_positioned_within_the_sps_accuracy_standard() {
 /// post-fit residuals carried through the geometry: each epoch must agree within its
 /// PDOP × residual RMS.
 fn against_rtklib(obs: &Path, nav: &Path, csv: &str, dir: &Path) {
-    if std::process::Command::new("rnx2rtkp")
-        .arg("-?")
-        .output()
-        .is_err()
-    {
-        crate::common::skip("rnx2rtkp not found (Debian package rtklib; .ci/run installs it)");
+    if !crate::common::has_rnx2rtkp() {
         return;
     }
     let conf = crate::common::write(

@@ -64,14 +64,8 @@ mod tests {
     #[test]
     fn every_threshold_is_where_the_packet_error_rate_falls_through_one_percent() {
         let mut checked = 0;
-        for c in [
-            Constellation::Qam4Nr,
-            Constellation::Qam4,
-            Constellation::Qam16,
-            Constellation::Qam32,
-            Constellation::Qam64,
-        ] {
-            for r in [CodeRate::R04, CodeRate::R06, CodeRate::R08] {
+        for c in Constellation::ALL {
+            for r in CodeRate::ALL {
                 let Some(th) = awgn_threshold_db(c, r) else {
                     assert!(Profile::new(c, r, 240, CarrierMode::Multi3780).is_err());
                     continue;
