@@ -44,6 +44,9 @@ pub struct FigureResult {
     /// The posterior Cramér–Rao bound on the estimator's position RMSE, where the world
     /// has one for it (`summary.json`'s `pcrlb_pos_rmse_m`).
     pub pcrlb_m: Option<f64>,
+    /// Whether the row's estimator departs from the world's comparison protocol (marked
+    /// † in the tables, with the paper's citation below them).
+    pub deviates: bool,
 }
 
 impl FigureResult {
@@ -77,7 +80,11 @@ impl FigureResult {
     /// PCRLB and the mark.
     fn cells(&self) -> [String; 7] {
         [
-            self.row.to_string(),
+            if self.deviates {
+                format!("{} †", self.row)
+            } else {
+                self.row.to_string()
+            },
             self.metric.label().to_string(),
             format!("{:.2}", self.paper_m),
             fmt_opt(self.simulated_m, 2),
@@ -125,6 +132,19 @@ pub struct PaperResult {
     pub seed: u64,
     pub figures: Vec<FigureResult>,
     pub orderings: Vec<OrderingResult>,
+    /// What the world's compared estimators share, and each departure with its citation
+    /// (empty for a world without `[comparison]`).
+    pub protocol: Vec<String>,
+    /// `(estimator, resets, share of its epochs)` of every estimator of the world that was
+    /// reset at least once.
+    pub resets: Vec<(String, usize, f64)>,
+}
+
+impl PaperResult {
+    /// The largest share of epochs at which an estimator of the world was reset.
+    pub fn worst_reset_share(&self) -> f64 {
+        self.resets.iter().map(|r| r.2).fold(0.0, f64::max)
+    }
 }
 
 /// The value of `metric` on one estimator's summary line.
@@ -170,6 +190,7 @@ pub fn score(paper: &'static Paper, s: &Summary) -> Result<PaperResult, String> 
                 simulated_m: metric_of(e, f.metric),
                 rmse_m: metric_of(e, Metric::Rmse),
                 pcrlb_m: e.pcrlb_pos_rmse_m,
+                deviates: !e.protocol.deviations.is_empty(),
             })
         })
         .collect::<Result<Vec<_>, String>>()?;
@@ -187,12 +208,44 @@ pub fn score(paper: &'static Paper, s: &Summary) -> Result<PaperResult, String> 
             })
         })
         .collect::<Result<Vec<_>, String>>()?;
+    let compared: Vec<&EstimatorSummary> =
+        s.estimators.iter().filter(|e| e.protocol.compared).collect();
+    let mut protocol = Vec::new();
+    if let Some(p) = compared
+        .iter()
+        .find(|e| e.protocol.deviations.is_empty())
+        .map(|e| &e.protocol)
+    {
+        let names: Vec<&str> = compared.iter().map(|e| e.name.as_str()).collect();
+        protocol.push(format!(
+            "Protocol shared by {}: data-layer gate {}; divergence after {} instants out of bounds at {:e} each; on divergence: {}.",
+            names.join(", "),
+            p.residual_gate_c
+                .map_or_else(|| "none".to_string(), |c| format!("C = {c}")),
+            p.divergence_window_epochs,
+            p.divergence_false_alarm,
+            p.reset
+        ));
+    }
+    for e in &compared {
+        for d in &e.protocol.deviations {
+            protocol.push(format!("† {} keeps its own {}: {}", e.name, d.key, d.cite));
+        }
+    }
+    let resets = s
+        .estimators
+        .iter()
+        .filter(|e| e.numerical_failures > 0)
+        .map(|e| (e.name.clone(), e.numerical_failures, e.reset_share))
+        .collect();
     Ok(PaperResult {
         paper,
         trials: s.trials,
         seed: s.seed,
         figures,
         orderings,
+        protocol,
+        resets,
     })
 }
 
@@ -301,10 +354,29 @@ pub fn text(results: &[PaperResult]) -> String {
         for o in &r.orderings {
             let _ = writeln!(s, "  {} {}", tick(o.holds()), ordering_text(o));
         }
+        for line in r.protocol.iter().chain(&resets_lines(r)) {
+            let _ = writeln!(s, "  {line}");
+        }
         s.push('\n');
     }
     let _ = writeln!(s, "{}", totals(results));
     s
+}
+
+/// One line per estimator that was reset, or one saying none was.
+fn resets_lines(r: &PaperResult) -> Vec<String> {
+    if r.resets.is_empty() {
+        return vec!["Resets: none.".to_string()];
+    }
+    r.resets
+        .iter()
+        .map(|(name, n, share)| {
+            format!(
+                "Resets: {name} {n} times, {:.2} % of its epochs.",
+                100.0 * share
+            )
+        })
+        .collect()
 }
 
 fn totals(results: &[PaperResult]) -> String {
@@ -342,6 +414,9 @@ pub fn markdown(results: &[PaperResult]) -> String {
         }
         for o in &r.orderings {
             let _ = writeln!(s, "- {} {}", tick(o.holds()), ordering_text(o));
+        }
+        for line in r.protocol.iter().chain(&resets_lines(r)) {
+            let _ = writeln!(s, "- {line}");
         }
         s.push('\n');
     }
@@ -384,6 +459,7 @@ mod tests {
             simulated_m: Some(sim),
             rmse_m: Some(sim),
             pcrlb_m: None,
+            deviates: false,
         };
         assert!(f(5.0).within() && f(20.0).within() && f(12.0).within());
         assert!(!f(4.99).within() && !f(20.01).within());

@@ -823,6 +823,7 @@ fn imu_source_is_consistent_with_the_engine_truth() {
             estimators: vec![Box::new(integrator)],
             end,
             scoring: hybridnav::engine::trial::Scoring::every_batch(),
+            health: Vec::new(),
         };
         let traces = simulate(&frame, start, &mut setup);
         let worst = max_err(&traces[0]);
@@ -1021,6 +1022,7 @@ fn ins_trial(grade: ImuGrade, seed: u64, outage: (f64, f64)) -> InsTrial {
         })],
         end,
         scoring: hybridnav::engine::trial::Scoring::every_batch(),
+        health: Vec::new(),
     };
     let traces = simulate(&frame, start, &mut setup);
     let ep = &traces[0].epochs;
@@ -1265,6 +1267,7 @@ fn pdr_drift_trial(seed: u64, sensor: &PdrSensorConfig) -> PdrDrift {
         estimators: vec![Box::new(est)],
         end,
         scoring: hybridnav::engine::trial::Scoring::every_batch(),
+        health: Vec::new(),
     };
     let traces = simulate(&frame, start, &mut setup);
     let mut errs: Vec<f64> = traces[0].epochs.iter().filter_map(|e| e.err_h_m).collect();
@@ -1403,6 +1406,7 @@ fn ins_initialises_and_runs_on_position_only_fixes() {
             estimators: vec![Box::new(ins)],
             end,
             scoring: hybridnav::engine::trial::Scoring::every_batch(),
+            health: Vec::new(),
         };
         let traces = simulate(&frame, start, &mut setup);
         let ep = &traces[0].epochs;

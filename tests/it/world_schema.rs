@@ -151,6 +151,10 @@ const BEYOND_A_SCHEMA: &[(&str, &str)] = &[
         "17-tight-coupling-with-ckf.toml",
         "a constraint between two keys of one table (coupling needs kalman = builtin)",
     ),
+    (
+        "18-comparison-row-with-its-own-gate.toml",
+        "a constraint across tables (a compared estimator's gate against [comparison])",
+    ),
 ];
 
 #[test]

@@ -19,6 +19,9 @@ pub struct TrialSetup {
     pub end: SimTime,
     /// When the estimators are scored.
     pub scoring: Scoring,
+    /// Each estimator's divergence watch (the world's `[comparison]`); an estimator
+    /// without an entry gets the default.
+    pub health: Vec<HealthConfig>,
 }
 
 /// The instants at which every estimator of a world is scored.
@@ -265,7 +268,7 @@ pub fn simulate_observed(
     let n_est = setup.estimators.len();
     let mut latest: Vec<Option<Estimate>> = vec![None; n_est];
     let mut health: Vec<HealthMonitor> = (0..n_est)
-        .map(|_| HealthMonitor::new(HealthConfig::default()))
+        .map(|k| HealthMonitor::new(setup.health.get(k).copied().unwrap_or_default()))
         .collect();
     let mut pending: Vec<Pending> = (0..n_est).map(|_| Pending::default()).collect();
     let mut last_update: Vec<Option<SimTime>> = vec![None; n_est];
@@ -601,6 +604,7 @@ mod tests {
                 },
                 coast_limit_s: 2.0,
             },
+            health: Vec::new(),
         };
         let traces = simulate(
             &EnuFrame::new(Geodetic::from_deg(40.0, 116.0, 0.0)),
@@ -641,6 +645,7 @@ mod tests {
             estimators: vec![Box::new(Echo(None))],
             end: SimTime::from_seconds(3.0),
             scoring: Scoring::every_batch(),
+            health: Vec::new(),
         };
         let start = GpsTime::from_ns(0);
         let traces = simulate(
@@ -735,6 +740,7 @@ mod tests {
             })],
             end: SimTime::from_seconds(30.0),
             scoring: Scoring::every_batch(),
+            health: Vec::new(),
         };
         let traces = simulate(
             &EnuFrame::new(Geodetic::from_deg(40.0, 116.0, 0.0)),

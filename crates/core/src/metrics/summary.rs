@@ -32,6 +32,14 @@ pub struct EstimatorSummary {
     /// Epochs where the estimator reported a numerical failure (a non-finite state or a
     /// divergence it detected), after which it re-initialised.
     pub numerical_failures: usize,
+    /// `numerical_failures / epochs`: the share of scoring epochs at which the estimator
+    /// was reset.
+    pub reset_share: f64,
+    /// Measurements its gates refused (innovation and data-layer gates), over all trials.
+    pub gated_measurements: u64,
+    /// The comparison protocol it ran under: its gates, divergence watch and reset policy,
+    /// and where it departs from the world's `[comparison]`, with the paper's citation.
+    pub protocol: EstimatorProtocol,
     /// The first of them (at most `montecarlo::reduce::FAILURES_LISTED`), in trial and time order.
     pub first_failures: Vec<FailureEpoch>,
     /// Absolute trajectory error as seed 000 computes it (TUM definition, ECEF, no
@@ -66,6 +74,47 @@ pub struct EstimatorSummary {
     /// without shielding windows.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub segments: Vec<SegmentStats>,
+}
+
+impl EstimatorSummary {
+    /// The estimator's name, marked † when it departs from the comparison protocol.
+    pub fn row_name(&self) -> String {
+        if self.protocol.deviations.is_empty() {
+            self.name.clone()
+        } else {
+            format!("{} †", self.name)
+        }
+    }
+}
+
+/// The protocol one estimator ran under (`[comparison]` of the world file;
+/// `world::comparison`).
+#[derive(Clone, Debug, Default, Serialize, PartialEq)]
+pub struct EstimatorProtocol {
+    /// Whether the estimator is a row of the world's `[comparison]`.
+    pub compared: bool,
+    /// The data-layer residual gate `C` it applies (seed 004 eq. 24); `null`: none.
+    pub residual_gate_c: Option<f64>,
+    /// Its innovation gate on each scalar range or rate (a χ²(1) quantile); `null`: none,
+    /// or a filter without one.
+    pub gate_chi2: Option<f64>,
+    /// The divergence watch: consecutive scoring instants out of bounds that declare a
+    /// divergence, and the per-instant tail probability of the bound (`engine::health`).
+    pub divergence_window_epochs: u32,
+    pub divergence_false_alarm: f64,
+    /// What the engine does on a divergence.
+    pub reset: String,
+    /// Where it departs from the shared protocol, each with where its paper says so.
+    pub deviations: Vec<ProtocolDeviation>,
+}
+
+/// One departure from the comparison protocol.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct ProtocolDeviation {
+    /// The protocol key (`"residual_gate_c"`, `"divergence"`).
+    pub key: String,
+    /// Where the estimator's paper says so.
+    pub cite: String,
 }
 
 /// An estimator's errors over the epochs of one segment of the run's time line.
@@ -143,11 +192,11 @@ impl Summary {
         );
         // The efficiency column appears only when some estimator has a bound.
         let bounded = self.estimators.iter().any(|e| e.efficiency.is_some());
-        // The name column fits the longest name, so the columns stay aligned.
+        // The name column fits the longest (marked) name, so the columns stay aligned.
         let w = self
             .estimators
             .iter()
-            .map(|e| e.name.chars().count())
+            .map(|e| e.row_name().chars().count())
             .max()
             .unwrap_or(0)
             .max(16);
@@ -177,7 +226,7 @@ impl Summary {
             let _ = write!(
                 s,
                 "{:<w$} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6.1}% {:>6.1}%",
-                e.name,
+                e.row_name(),
                 f(x.map(|x| x.sigma1)),
                 f(x.map(|x| x.sigma2)),
                 f(x.map(|x| x.sigma3)),
@@ -205,8 +254,46 @@ impl Summary {
                 "(PCRLB: the posterior Cramér–Rao bound on the position RMSE of the estimator's model)"
             );
         }
+        self.protocol_notes(&mut s);
         self.segment_table(&mut s, w);
         s
+    }
+
+    /// The comparison protocol under the table: what the compared rows share, the rows
+    /// that depart from it (marked †) with their papers' citations, and every reset.
+    fn protocol_notes(&self, s: &mut String) {
+        use std::fmt::Write;
+        let compared: Vec<&EstimatorSummary> =
+            self.estimators.iter().filter(|e| e.protocol.compared).collect();
+        if let Some(first) = compared.iter().find(|e| e.protocol.deviations.is_empty()) {
+            let p = &first.protocol;
+            let gate = p
+                .residual_gate_c
+                .map_or_else(|| "none".to_string(), |c| format!("C = {c}"));
+            let names: Vec<&str> = compared.iter().map(|e| e.name.as_str()).collect();
+            let _ = writeln!(
+                s,
+                "(comparison protocol of {}: data-layer gate {gate}; divergence after {} instants out of bounds at {:e}; reset: {})",
+                names.join(", "),
+                p.divergence_window_epochs,
+                p.divergence_false_alarm,
+                p.reset
+            );
+        }
+        for e in &compared {
+            for d in &e.protocol.deviations {
+                let _ = writeln!(s, "(† {} keeps its own {}: {})", e.name, d.key, d.cite);
+            }
+        }
+        for e in self.estimators.iter().filter(|e| e.numerical_failures > 0) {
+            let _ = writeln!(
+                s,
+                "(resets: {} {} times, {:.2} % of its epochs)",
+                e.name,
+                e.numerical_failures,
+                100.0 * e.reset_share
+            );
+        }
     }
 
     /// The RMS 3-D error of each estimator inside each shielding window and outside them

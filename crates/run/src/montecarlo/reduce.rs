@@ -121,6 +121,9 @@ impl RunReducer {
         let mut bounds = world.pcrlb(opts.seed, opts.trials);
         for (i, acc) in self.estimators.into_iter().enumerate() {
             let (mut s, cdf, rmse_vs_time) = acc.finish().map_err(|e| e.to_string())?;
+            if let Some(p) = world.comparison.protocols.get(i) {
+                s.protocol = p.clone();
+            }
             let bound = bounds.get_mut(i).and_then(Option::take);
             s.pcrlb_pos_rmse_m = bound.as_ref().map(|b| b.rmse_m);
             curves.pcrlb_vs_time.push(bound.map(|b| b.by_epoch));
@@ -238,6 +241,7 @@ struct EstimatorAcc {
     stale: usize,
     coast_limit_s: f64,
     failures: usize,
+    gated: u64,
     first_failures: Vec<FailureEpoch>,
     nees_sum: f64,
     nees_n: usize,
@@ -273,6 +277,7 @@ impl EstimatorAcc {
             stale: 0,
             coast_limit_s: crate::engine::trial::Scoring::DEFAULT_COAST_LIMIT_S,
             failures: 0,
+            gated: 0,
             first_failures: Vec::new(),
             nees_sum: 0.0,
             nees_n: 0,
@@ -296,6 +301,7 @@ impl EstimatorAcc {
         let mut trial_sq: BTreeMap<u64, f64> = BTreeMap::new();
         for ep in &trace.epochs {
             self.epochs += 1;
+            self.gated += u64::from(ep.rejected_gate);
             if ep.numerical_failure {
                 self.failures += 1;
                 if self.first_failures.len() < FAILURES_LISTED {
@@ -427,6 +433,9 @@ impl EstimatorAcc {
             stale_epochs: self.stale,
             mean_nees_pos: (self.nees_n > 0).then(|| self.nees_sum / self.nees_n as f64),
             numerical_failures: self.failures,
+            reset_share: self.failures as f64 / self.epochs.max(1) as f64,
+            gated_measurements: self.gated,
+            protocol: Default::default(),
             first_failures: self.first_failures,
             ate_m: traj_stats(&mut self.ate)?,
             ate_aligned_m: traj_stats(&mut self.ate_al)?,

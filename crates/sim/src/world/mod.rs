@@ -6,6 +6,7 @@
 
 pub mod bound;
 pub mod cache;
+pub mod comparison;
 pub mod dtmb_iq;
 pub mod fm;
 pub mod locate;
@@ -95,6 +96,9 @@ pub struct World {
     pub fm_db: fm::FmDatabase,
     /// The deterministic epochs every trial shares (see [`crate::engine::cache`]).
     pub epoch_cache: cache::CacheSlot,
+    /// The comparison protocol as applied: per estimator, its record for `summary.json`
+    /// and its divergence watch.
+    pub comparison: comparison::Applied,
 }
 
 struct Ctx<'a> {
@@ -223,7 +227,7 @@ pub fn load_world(path: &Path) -> Result<World, WorldError> {
 /// As [`load_world`].
 pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
     let ctx = Ctx { path, text };
-    let file: WorldFile = deserialize_world(text).map_err(|(key, span, message)| {
+    let mut file: WorldFile = deserialize_world(text).map_err(|(key, span, message)| {
         let segs = parse_path(&key);
         // The parser's span is exact for syntax errors and values; the key path is what
         // locates errors inside tables the parser only saw as a whole (`[[estimator]]`,
@@ -394,6 +398,10 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
     if file.estimators.is_empty() {
         return Err(ctx.err("", "expected at least one [[estimator]] table"));
     }
+    // The comparison protocol is applied before the estimators are checked, so what is
+    // checked (and built) is what runs.
+    let comparison = comparison::apply(file.comparison.as_ref(), &mut file.estimators)
+        .map_err(|(key, message)| ctx.err(&key, message))?;
     let build_ctx = BuildContext {
         frame: &frame,
         start,
@@ -437,6 +445,7 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
         transmitters,
         fm_db,
         epoch_cache: Default::default(),
+        comparison,
         file,
     })
 }
@@ -1325,6 +1334,7 @@ impl World {
             estimators,
             end,
             scoring,
+            health: self.comparison.health.clone(),
         })
     }
 

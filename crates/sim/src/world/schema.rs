@@ -56,6 +56,9 @@ pub struct WorldFile {
     pub montecarlo: MonteCarloSection,
     #[serde(default)]
     pub scoring: ScoringSection,
+    /// What the estimators of the world's comparison share (`world::comparison`).
+    #[serde(default)]
+    pub comparison: Option<crate::world::comparison::ComparisonSection>,
 }
 
 /// `[scoring]`: when every estimator of the world is scored (one record per estimator per
