@@ -240,7 +240,9 @@ pub enum DtmbCommand {
         #[arg(long)]
         out: PathBuf,
         /// The data layer (GB 20600 transmitter: scrambler, BCH, LDPC, mapping, time
-        /// interleaver, system information): see `hybridnav_dtmb::dtmb::data_layer`.
+        /// interleaver, system information): see `hybridnav_dtmb::dtmb::data_layer`. With
+        /// --world each option replaces the recorded tower's own ([[transmitter]] qam,
+        /// fec, interleaver, carriers, payload).
         #[command(flatten)]
         profile: dtmb::ProfileArgs,
     },
@@ -815,13 +817,9 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
         }
         Ok(())
     };
+    // Bad data-layer options are refused before anything is created.
     let data = a.profile.data_layer()?;
     if let Some(path) = &a.world {
-        if data.is_some() {
-            bail!(
-                "--payload/--qam/--fec/--interleaver/--carriers are not supported with --world yet"
-            );
-        }
         if a.snr_db.is_some() {
             bail!("--snr-db cannot be given with --world: the world's link budget sets the SNR");
         }
@@ -838,6 +836,14 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
             frames: a.frames,
             seed: a.seed.unwrap_or(w.file.montecarlo.seed),
             trial: a.trial,
+            // The profile options replace the tower table's, key by key.
+            data_layer: crate::world::dtmb_iq::DataLayerOverride {
+                payload: a.profile.payload.clone(),
+                qam: a.profile.qam.clone(),
+                fec: a.profile.fec.clone(),
+                interleaver: a.profile.interleaver,
+                carriers: a.profile.carriers,
+            },
         };
         // The mode is known before the recording: check it first.
         if let Some(m) = &a.mode {

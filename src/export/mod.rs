@@ -315,6 +315,7 @@ fn write_sigmf(world: &World, rec: &Recording, dir: &Path) -> Result<Vec<PathBuf
             frames: SIGMF_FRAMES,
             seed: rec.seed,
             trial: rec.trial,
+            data_layer: Default::default(),
         };
         let base = dir.join(format!("dtmb-{}", file_stem(&t.id)));
         crate::world::dtmb_iq::write_world_sigmf(world, &req, &base, SampleFormat::Cf32)

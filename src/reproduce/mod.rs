@@ -208,8 +208,11 @@ pub fn score(paper: &'static Paper, s: &Summary) -> Result<PaperResult, String> 
             })
         })
         .collect::<Result<Vec<_>, String>>()?;
-    let compared: Vec<&EstimatorSummary> =
-        s.estimators.iter().filter(|e| e.protocol.compared).collect();
+    let compared: Vec<&EstimatorSummary> = s
+        .estimators
+        .iter()
+        .filter(|e| e.protocol.compared)
+        .collect();
     let mut protocol = Vec::new();
     if let Some(p) = compared
         .iter()

@@ -459,10 +459,13 @@ fn dtmb_ts_a_bad_payload_is_refused_with_its_byte_offset() {
 }
 
 /// A world's tower carrying a programme: the Kehui Road world's D01 with `qam = "16qam"`,
-/// `fec = "0.6"`, `interleaver = 240` and `payload = "pay.ts"` in its `[[transmitter]]`,
-/// recorded by `dtmb iq --world` from 5 s through the scene's paths at the link budget's
-/// SNR; dtmb-sdr decodes a contiguous run of the payload's packets (the recording starts
-/// inside the tower's first data frame, so the run may start a frame in), none wrong.
+/// `fec = "0.8"` and `payload = "pay.ts"` in its `[[transmitter]]`, recorded by `dtmb iq
+/// --world --fec 0.6 --interleaver 240` (the command line replaces the table's code rate
+/// and sets the interleaver; the rest stays the table's) from 5 s through the scene's
+/// paths at the link budget's SNR; dtmb-sdr, told 16QAM 0.6 M = 240 by the system
+/// information index, decodes a contiguous run of the payload's packets (the recording
+/// starts inside the tower's first data frame, so the run may start a frame in), none
+/// wrong. A code rate left at the table's 0.8 would not decode as 0.6.
 #[test]
 fn dtmb_ts_a_world_tower_carries_its_payload_through_the_scene() {
     if dtmb_sdr_bin().is_none() {
@@ -475,7 +478,7 @@ fn dtmb_ts_a_world_tower_carries_its_payload_through_the_scene() {
         std::fs::read_to_string(crate::common::repo().join("worlds/seed000-kehui.toml")).unwrap();
     let text = text.replace(
         "pn_mode = \"pn945\"\n",
-        "pn_mode = \"pn945\"\nqam = \"16qam\"\nfec = \"0.6\"\ninterleaver = 240\npayload = \"pay.ts\"\n",
+        "pn_mode = \"pn945\"\nqam = \"16qam\"\nfec = \"0.8\"\npayload = \"pay.ts\"\n",
     );
     assert!(text.contains("payload = \"pay.ts\""));
     let world = dir.join("kehui.toml");
@@ -490,6 +493,10 @@ fn dtmb_ts_a_world_tower_carries_its_payload_through_the_scene() {
         "5",
         "--frames",
         "190",
+        "--fec",
+        "0.6",
+        "--interleaver",
+        "240",
         "--out",
         base.to_str().unwrap(),
     ]);

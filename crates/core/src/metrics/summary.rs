@@ -263,8 +263,11 @@ impl Summary {
     /// that depart from it (marked †) with their papers' citations, and every reset.
     fn protocol_notes(&self, s: &mut String) {
         use std::fmt::Write;
-        let compared: Vec<&EstimatorSummary> =
-            self.estimators.iter().filter(|e| e.protocol.compared).collect();
+        let compared: Vec<&EstimatorSummary> = self
+            .estimators
+            .iter()
+            .filter(|e| e.protocol.compared)
+            .collect();
         if let Some(first) = compared.iter().find(|e| e.protocol.deviations.is_empty()) {
             let p = &first.protocol;
             let gate = p

@@ -136,7 +136,11 @@ enum GateSlot<'a> {
 
 fn gate_slot(e: &mut EstimatorSpec) -> GateSlot<'_> {
     match e.filter {
-        FilterKind::Ekf | FilterKind::Ukf | FilterKind::Ckf | FilterKind::Stf | FilterKind::Rekf => {
+        FilterKind::Ekf
+        | FilterKind::Ukf
+        | FilterKind::Ckf
+        | FilterKind::Stf
+        | FilterKind::Rekf => {
             // The RE-KF's data layer defaults to C = 3 (family and paper models alike).
             let default = (e.filter == FilterKind::Rekf).then_some(3.0);
             let options = e.options.get_or_insert_with(Default::default);
@@ -226,12 +230,19 @@ pub fn apply(
             if !known(n) {
                 return Err((
                     format!("comparison.estimators[{j}]"),
-                    format!("no estimator is named '{n}'; the world's are {}", list(&all)),
+                    format!(
+                        "no estimator is named '{n}'; the world's are {}",
+                        list(&all)
+                    ),
                 ));
             }
         }
     }
-    let compared = |name: &str| c.estimators.as_ref().is_none_or(|r| r.iter().any(|n| n == name));
+    let compared = |name: &str| {
+        c.estimators
+            .as_ref()
+            .is_none_or(|r| r.iter().any(|n| n == name))
+    };
     if let Some(GateSetting::Factor(g)) = c.residual_gate_c {
         if !(g.is_finite() && g > 0.0 && g <= 1.0e3) {
             return Err((
@@ -433,9 +444,7 @@ filter = "wls"
     #[test]
     fn the_shared_gate_reaches_every_row_and_departures_need_a_citation() {
         let mut e = estimators(FOUR);
-        let only3 = section(
-            "estimators = [\"EKF\", \"RE-KF\", \"STF\"]\nresidual_gate_c = 3.0\n",
-        );
+        let only3 = section("estimators = [\"EKF\", \"RE-KF\", \"STF\"]\nresidual_gate_c = 3.0\n");
         let (key, msg) = apply(Some(&only3), &mut e).unwrap_err();
         assert_eq!(key, "estimator[2].options.residual_gate_c");
         assert!(msg.contains("'STF'") && msg.contains("C = 2") && msg.contains("C = 3"));
@@ -488,7 +497,10 @@ filter = "wls"
         assert_eq!(a.health[1].false_alarm, 1e-6);
         assert_eq!(a.health[2], HealthConfig::default());
         let a = apply(None, &mut estimators(FOUR)).unwrap();
-        assert!(a.protocols.iter().all(|p| !p.compared && p.deviations.is_empty()));
+        assert!(a
+            .protocols
+            .iter()
+            .all(|p| !p.compared && p.deviations.is_empty()));
         assert_eq!(a.protocols[1].residual_gate_c, Some(3.0));
     }
 

@@ -80,6 +80,21 @@ pub struct WorldIqRequest {
     pub seed: u64,
     /// Trial index.
     pub trial: u64,
+    /// Data-layer options that replace, key by key, those of the recorded tower's
+    /// `[[transmitter]]` (`dtmb iq --world --payload/--qam/--fec/--interleaver/--carriers`);
+    /// for a tower of a single-frequency network they apply to the network's signal.
+    pub data_layer: DataLayerOverride,
+}
+
+/// Data-layer options given for a recording, each replacing the tower table's own.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DataLayerOverride {
+    /// A transport stream, as a path (not relative to the world file).
+    pub payload: Option<std::path::PathBuf>,
+    pub qam: Option<String>,
+    pub fec: Option<String>,
+    pub interleaver: Option<usize>,
+    pub carriers: Option<usize>,
 }
 
 /// A recording made by [`world_iq`], ready for [`crate::dtmb::sigmf::write_sigmf_with`].
@@ -223,7 +238,15 @@ pub fn world_iq_stream(
         if !signals.iter().any(|sg| sg.owner == o) {
             signals.push(Signal {
                 owner: o,
-                tx: owner_transmitter(world, &specs[o], tx_cfg, &rng)?,
+                // The options given for the recording go to the recorded tower's signal
+                // (its network's, in a single-frequency network).
+                tx: owner_transmitter(
+                    world,
+                    &specs[o],
+                    tx_cfg,
+                    &rng,
+                    (o == owner_of(me)).then_some(&req.data_layer),
+                )?,
                 channel: None,
                 offset: None,
                 paths: Vec::new(),
@@ -780,35 +803,39 @@ fn frame_annotation(
 
 /// The transmitter of the tower `id`: with a data layer when its `[[transmitter]]` names a
 /// profile or payload (`qam`, `fec`, `interleaver`, `carriers`, `payload`; the payload path
-/// relative to the world file), else random bodies.
+/// relative to the world file) or `overrides` gives one (each of its options replacing the
+/// table's), else random bodies.
 fn owner_transmitter(
     world: &World,
     tower: &TowerSpec,
     tx_cfg: TxConfig,
     rng: &TrialRng,
+    overrides: Option<&DataLayerOverride>,
 ) -> Result<Transmitter, DtmbError> {
     let mut stream = rng.stream(&format!("dtmb/{}/tx", tower.id));
-    let Some(t) = world
+    let none = DataLayerOverride::default();
+    let o = overrides.unwrap_or(&none);
+    let own = world
         .transmitters
         .iter()
-        .find(|t| t.kind == TransmitterKind::Dtmb && t.tower_spec(System::Dtmb).id == tower.id)
-    else {
-        return Ok(Transmitter::new(tx_cfg, &mut stream));
-    };
-    let (id, spec) = (&t.id, &t.spec);
-    let payload = spec.payload.as_ref().map(|p| {
-        world
-            .path
-            .parent()
-            .map(|d| d.join(p))
-            .unwrap_or_else(|| std::path::PathBuf::from(p))
+        .find(|t| t.kind == TransmitterKind::Dtmb && t.tower_spec(System::Dtmb).id == tower.id);
+    let id = own.map_or_else(|| tower.id.to_string(), |t| t.id.clone());
+    let spec = own.map(|t| &t.spec);
+    let payload = o.payload.clone().or_else(|| {
+        spec.and_then(|s| s.payload.as_ref()).map(|p| {
+            world
+                .path
+                .parent()
+                .map(|d| d.join(p))
+                .unwrap_or_else(|| std::path::PathBuf::from(p))
+        })
     });
     let layer = crate::dtmb::data_layer::data_layer_from_options(
         payload.as_deref(),
-        spec.qam.as_deref(),
-        spec.fec.as_deref(),
-        spec.interleaver,
-        spec.carriers,
+        o.qam.as_deref().or(spec.and_then(|s| s.qam.as_deref())),
+        o.fec.as_deref().or(spec.and_then(|s| s.fec.as_deref())),
+        o.interleaver.or(spec.and_then(|s| s.interleaver)),
+        o.carriers.or(spec.and_then(|s| s.carriers)),
     )
     .map_err(|e| bad("transmitter data layer", format!("transmitter {id}: {e}")))?;
     Ok(match layer {
