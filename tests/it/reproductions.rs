@@ -142,10 +142,16 @@ fn seed004_bupt_four_filters_with_one_gate_bounded_stf_and_no_resets() {
     }
     for other in ["EKF", "CKF"] {
         let rel = (d("RE-KF").rmse - d(other).rmse).abs() / d(other).rmse;
-        assert!(rel < 1e-6, "RE-KF and {other} differ by {rel} on the linear model");
+        assert!(
+            rel < 1e-6,
+            "RE-KF and {other} differ by {rel} on the linear model"
+        );
     }
     let rel = (d("CKF (tight)").rmse - d("EKF (tight)").rmse).abs() / d("EKF (tight)").rmse;
-    assert!(rel > 1e-6, "tight CKF and EKF equal ({rel}) on nonlinear ranges");
+    assert!(
+        rel > 1e-6,
+        "tight CKF and EKF equal ({rel}) on nonlinear ranges"
+    );
     for e in &s.estimators {
         let err = e.error_3d_m.unwrap();
         assert!(err.max < 1000.0, "{}: largest error {} m", e.name, err.max);

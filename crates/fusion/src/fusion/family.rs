@@ -787,9 +787,10 @@ impl FamilyEstimator {
             Some(v) => *v = (source, t, far),
             None => self.verdicts.push((source, t, far)),
         }
-        far && !self.verdicts.iter().any(|&(s, tv, f)| {
-            s != source && !f && t.seconds_since(tv).abs() <= SAME_EPOCH_S
-        })
+        far && !self
+            .verdicts
+            .iter()
+            .any(|&(s, tv, f)| s != source && !f && t.seconds_since(tv).abs() <= SAME_EPOCH_S)
     }
 
     /// Whether the median squared normalised residual of this batch's pseudoranges at `x`

@@ -1543,7 +1543,10 @@ mod tests {
             let nu: f64 = z - 1.0;
             let c = (nu * nu - q - beta * r) / fpf;
             let want = c.clamp(1.0, lambda_max);
-            assert!(stf.update(&fix, &SVector::<f64, 1>::new(z)).outcome.is_accepted());
+            assert!(stf
+                .update(&fix, &SVector::<f64, 1>::new(z))
+                .outcome
+                .is_accepted());
             let got = stf.last_fading_factor();
             assert!(got <= lambda_max, "λ = {got} above λ_max = {lambda_max}");
             assert!((got - want).abs() < 1e-12, "λ = {got}, analytic {want}");

@@ -181,8 +181,8 @@ pub struct InsFilterConfig {
     /// STF: the weakening factor β ≥ 1 (Zhou & Frank).
     #[serde(default = "d_noise_scale")]
     pub stf_weakening: f64,
-    /// STF: the largest fading factor λ_max ≥ 1; default 10
-    /// ([`super::ins_family::DEFAULT_STF_MAX_FADING`]).
+    /// STF: the largest fading factor λ_max ≥ 1; default 10, the limit of the 12-state
+    /// range STF (Zhou & Frank's factor has no upper limit).
     #[serde(default = "d_stf_max_fading")]
     pub stf_max_fading: f64,
     /// Pool the pseudoranges of every fix source at one epoch (e.g. `"gnss"` and

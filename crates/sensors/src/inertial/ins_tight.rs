@@ -61,10 +61,10 @@ use super::ins_ekf::{
     feed_back_nav, initial_covariance, joseph_update, mechanise, process_noise_rate, Cov15,
     FixOutcome, InsEkfConfig, InsFixError, JosephStep,
 };
+use super::ins_family::{InsKalmanConfig, InsKalmanKind};
 use super::strapdown::{NavState, Strapdown};
 use super::LocalEarth;
 use crate::core::{EnuFrame, System};
-use super::ins_family::{InsKalmanConfig, InsKalmanKind};
 use crate::fusion::ekf11::{Ekf11Config, IsbConfig, RejectReason, UpdateOutcome};
 use crate::fusion::kalman::{
     Ekf, FilterError, Gating, RelativeEntropyKf, ResidualGate, SigmaPointKf,
@@ -1061,7 +1061,10 @@ mod tests {
         let dx_ckf: Vector3<f64> = ckf.state().fixed_rows::<3>(0).into_owned();
         let dx_ekf: Vector3<f64> = ekf.state().fixed_rows::<3>(0).into_owned();
         assert!(dx_mc.norm() > 0.1, "{dx_mc}");
-        assert!((dx_ckf - dx_mc).norm() < 0.02, "CKF {dx_ckf} against MC {dx_mc}");
+        assert!(
+            (dx_ckf - dx_mc).norm() < 0.02,
+            "CKF {dx_ckf} against MC {dx_mc}"
+        );
         assert!(dx_ekf.norm() < 1e-12, "EKF moved {dx_ekf}");
         assert!((dx_ckf - dx_ekf).norm() > 0.1);
         // The RE-KF with no component left out is the cubature update, and its coupling
@@ -1125,7 +1128,13 @@ mod tests {
         let want = fd.fpf * 3.0 + fd.q;
         let ms: Vec<RangeMeasurement> = (0..6)
             .map(|j| {
-                let mut m = range(&f, System::Gps, j as f64, 0.5 + 0.1 * j as f64, Vector3::zeros());
+                let mut m = range(
+                    &f,
+                    System::Gps,
+                    j as f64,
+                    0.5 + 0.1 * j as f64,
+                    Vector3::zeros(),
+                );
                 m.pseudorange_m += 40.0;
                 m
             })
