@@ -968,7 +968,7 @@ impl<const N: usize, const M: usize> StrongTrackingFilter<N, M> {
     /// # Errors
     /// When `λ_max` is NaN or below 1.
     pub fn with_max_fading(mut self, max_fading: f64) -> Result<Self, FilterError> {
-        if !(max_fading >= 1.0) {
+        if max_fading.is_nan() || max_fading < 1.0 {
             return Err(FilterError::InvalidParameter(format!(
                 "λ_max = {max_fading}: expected ≥ 1"
             )));

@@ -387,9 +387,7 @@ impl InsTightEkf {
                 if self.residual_gate.is_some_and(|g| !g.keeps(z, eps)) {
                     continue;
                 }
-                let Some(f) = self.fading.as_ref() else {
-                    return None;
-                };
+                let f = self.fading.as_ref()?;
                 nu2 += nu * nu;
                 hqh += h.dot(&(f.q * h));
                 hfh += h.dot(&(f.fpf * h));
