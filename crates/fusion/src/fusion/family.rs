@@ -569,8 +569,16 @@ pub struct FamilyEstimator {
     /// batch's admitted ranges.
     front: FrontEnd,
     residual_scratch: Vec<f64>,
+    /// The residual verdict of each source's last batch with four ranges or more: the
+    /// source, the batch time and whether the estimate was far from its ranges.
+    verdicts: Vec<(SourceKind, GpsTime, bool)>,
     geometry: Vec<(Vector3<f64>, usize)>,
 }
+
+/// Two batches this close in time (s) are of one epoch for the divergence watch: the
+/// sources of a 1 Hz world arrive at the same second, or one epoch apart in the order the
+/// engine delivers them.
+const SAME_EPOCH_S: f64 = 1.0;
 
 impl FamilyEstimator {
     /// An estimator named `name` running `kind` on the ranges of `systems` and the
@@ -638,6 +646,7 @@ impl FamilyEstimator {
             last_t: None,
             front,
             residual_scratch: Vec::with_capacity(64),
+            verdicts: Vec::with_capacity(8),
             geometry: Vec::with_capacity(64),
         })
     }
@@ -759,13 +768,34 @@ impl FamilyEstimator {
     fn reset(&mut self, out: &mut EpochOutcome) {
         self.core = None;
         self.moments = None;
+        self.verdicts.clear();
         out.numerical_failure = true;
         out.estimate = None;
     }
 
-    /// True when this epoch's pseudoranges say the estimate `x` is far from them all (see
-    /// [`FamilyConfig::divergence_residual_nis`]); needs at least four ranges.
-    fn lost(&mut self, x: &State) -> bool {
+    /// True when the estimate `x` is far from the ranges of every source of this epoch
+    /// (see [`FamilyConfig::divergence_residual_nis`]). Each source's batch with at least
+    /// four ranges gives a verdict; the track is lost when this batch's verdict is "far"
+    /// and no other source's batch of the same epoch fits. A filter that fits one source
+    /// (TC-OFDM indoors) and gates another that is biased (GNSS through a roof, every range
+    /// tens of metres long) has not diverged: a diverged filter is far from them all.
+    fn lost(&mut self, x: &State, source: SourceKind, t: GpsTime) -> bool {
+        let Some(far) = self.far_from_ranges(x) else {
+            return false;
+        };
+        match self.verdicts.iter_mut().find(|v| v.0 == source) {
+            Some(v) => *v = (source, t, far),
+            None => self.verdicts.push((source, t, far)),
+        }
+        far && !self
+            .verdicts
+            .iter()
+            .any(|&(s, tv, f)| s != source && !f && t.seconds_since(tv).abs() <= SAME_EPOCH_S)
+    }
+
+    /// Whether the median squared normalised residual of this batch's pseudoranges at `x`
+    /// exceeds [`FamilyConfig::divergence_residual_nis`]; `None` with fewer than four.
+    fn far_from_ranges(&mut self, x: &State) -> Option<bool> {
         let nu2 = &mut self.residual_scratch;
         nu2.clear();
         for r in &self.front.ranges {
@@ -775,12 +805,12 @@ impl FamilyEstimator {
             }
         }
         if nu2.len() < 4 {
-            return false;
+            return None;
         }
         // The median, so that a few NLOS outliers (which the gates handle) do not count.
         let mid = nu2.len() / 2;
         let (_, median, _) = nu2.select_nth_unstable_by(mid, f64::total_cmp);
-        *median > self.cfg.divergence_residual_nis
+        Some(*median > self.cfg.divergence_residual_nis)
     }
 
     fn usable(&self, x: &State, p: &Cov) -> bool {
@@ -893,7 +923,7 @@ impl Estimator for FamilyEstimator {
             regularise(p, self.cfg.neff_threshold, &q);
         }
         let (x, p) = core.moments();
-        if !self.usable(&x, &p) || self.lost(&x) {
+        if !self.usable(&x, &p) || self.lost(&x, batch.source, batch.t) {
             self.reset(&mut out);
             return out;
         }

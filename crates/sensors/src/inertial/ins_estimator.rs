@@ -57,6 +57,9 @@ fn d_window() -> f64 {
 fn d_aleph() -> f64 {
     crate::fusion::kalman::DEFAULT_ALEPH_THRESHOLD
 }
+fn d_stf_max_fading() -> f64 {
+    super::ins_family::DEFAULT_STF_MAX_FADING
+}
 fn d_forgetting() -> f64 {
     0.95
 }
@@ -178,6 +181,10 @@ pub struct InsFilterConfig {
     /// STF: the weakening factor β ≥ 1 (Zhou & Frank).
     #[serde(default = "d_noise_scale")]
     pub stf_weakening: f64,
+    /// STF: the largest fading factor λ_max ≥ 1; default 10, the limit of the 12-state
+    /// range STF (Zhou & Frank's factor has no upper limit).
+    #[serde(default = "d_stf_max_fading")]
+    pub stf_max_fading: f64,
     /// Pool the pseudoranges of every fix source at one epoch (e.g. `"gnss"` and
     /// `"tcofdm"` or `"dtmb"`) into one least-squares fix, seed 004's joint TC-OFDM/GNSS
     /// solution (eqs. 10–13; DTMB ranges on the GPS clock); default false (one fix per
@@ -196,7 +203,8 @@ pub struct InsFilterConfig {
     /// the filter has initialised from those fixes, every pseudorange (and, with
     /// `use_gnss_velocity`, range rate) of the fix sources updates it directly, with the
     /// receiver clock, its drift and the BeiDou inter-system bias as states, so that fewer
-    /// than four ranges still correct it ([`InsTightEkf`]; builtin filter only).
+    /// than four ranges still correct it ([`InsTightEkf`]; with `kalman` one of seed 004's
+    /// filters, that filter decides each scalar update, [`InsTightEkf::with_kalman`]).
     #[serde(default)]
     pub coupling: InsCoupling,
 }
@@ -218,6 +226,7 @@ impl Default for InsFilterConfig {
             aleph_threshold: d_aleph(),
             stf_forgetting: d_forgetting(),
             stf_weakening: 1.0,
+            stf_max_fading: d_stf_max_fading(),
             joint_fix: false,
             fix_velocity_noise_mps: [0.0, 0.0],
             coupling: InsCoupling::Loose,
@@ -323,6 +332,15 @@ impl InsFilterConfig {
                 ),
             ));
         }
+        if !(self.stf_max_fading.is_finite() && (1.0..=1.0e6).contains(&self.stf_max_fading)) {
+            return Err(ConfigIssue::new(
+                "stf_max_fading",
+                format!(
+                    "expected a largest fading factor λ_max within [1, 1e6], got {}",
+                    self.stf_max_fading
+                ),
+            ));
+        }
         if self
             .fix_velocity_noise_mps
             .iter()
@@ -334,12 +352,6 @@ impl InsFilterConfig {
                     "expected [horizontal, vertical] σ in m/s within [0, 100], got {:?}",
                     self.fix_velocity_noise_mps
                 ),
-            ));
-        }
-        if self.coupling == InsCoupling::Tight && self.kalman != InsKalmanKind::Builtin {
-            return Err(ConfigIssue::new(
-                "coupling",
-                "\"tight\" runs the builtin filter only (kalman = \"builtin\"); seed 004's filters take fixes",
             ));
         }
         if self.kalman == InsKalmanKind::Builtin {
@@ -365,6 +377,7 @@ impl InsFilterConfig {
             aleph_threshold: self.aleph_threshold,
             stf_forgetting: self.stf_forgetting,
             stf_weakening: self.stf_weakening,
+            stf_max_fading: self.stf_max_fading,
         }
     }
 }
@@ -868,13 +881,13 @@ impl InsEstimator {
             q_nb,
         };
         let kf = match self.cfg.kalman {
-            InsKalmanKind::Builtin if self.cfg.coupling == InsCoupling::Tight => {
-                InsCore::Tight(Box::new(InsTightEkf::new(
-                    init,
-                    self.earth,
-                    &c,
-                    &TightClockConfig::default(),
-                )))
+            _ if self.cfg.coupling == InsCoupling::Tight => {
+                match InsTightEkf::new(init, self.earth, &c, &TightClockConfig::default())
+                    .with_kalman(&self.cfg.kalman_config())
+                {
+                    Ok(k) => InsCore::Tight(Box::new(k)),
+                    Err(_) => return,
+                }
             }
             InsKalmanKind::Builtin => InsCore::Builtin(Box::new(InsEkf::new(init, self.earth, &c))),
             _ => match InsFamilyFilter::new(init, self.earth, &c, &self.cfg.kalman_config()) {
@@ -901,6 +914,16 @@ impl InsEstimator {
             return;
         }
         let systems = &self.systems;
+        // The strong tracking filter's one fading factor of the epoch, from all of its
+        // scalars at the prediction (a no-op for the other filters).
+        kf.stf_inflate(
+            batch
+                .ranges()
+                .filter(|m| systems.is_empty() || systems.contains(&m.system())),
+            &self.frame,
+            lag,
+            self.cfg.use_gnss_velocity,
+        );
         for m in batch
             .ranges()
             .filter(|m| systems.is_empty() || systems.contains(&m.system()))

@@ -78,6 +78,13 @@ pub enum InsKalmanKind {
     Rekf,
 }
 
+/// The default upper limit λ_max of the strong tracking filter's fading factor: 10, the
+/// same limit as the 12-state range filters' STF (`FamilyConfig::stf_max_fading` in
+/// hybridnav-fusion). Zhou & Frank (1996) define no upper limit and seed 004 gives none;
+/// 10 is an order of magnitude of inflation, a round value chosen before the seed-004
+/// results were looked at, not fitted to them.
+pub const DEFAULT_STF_MAX_FADING: f64 = 10.0;
+
 /// The tuning of the generic filters on the INS error state.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct InsKalmanConfig {
@@ -91,6 +98,8 @@ pub struct InsKalmanConfig {
     /// STF: forgetting factor ρ and weakening factor β.
     pub stf_forgetting: f64,
     pub stf_weakening: f64,
+    /// STF: the largest fading factor λ_max (`∞`: Zhou & Frank's unbounded factor).
+    pub stf_max_fading: f64,
 }
 
 impl Default for InsKalmanConfig {
@@ -101,6 +110,7 @@ impl Default for InsKalmanConfig {
             aleph_threshold: DEFAULT_ALEPH_THRESHOLD,
             stf_forgetting: 0.95,
             stf_weakening: 1.0,
+            stf_max_fading: DEFAULT_STF_MAX_FADING,
         }
     }
 }
@@ -249,6 +259,7 @@ impl InsFamilyFilter {
             )),
             InsKalmanKind::Stf => Core::Stf(Box::new(
                 StrongTrackingFilter::new(x0, p0, k.stf_forgetting, k.stf_weakening)?
+                    .with_max_fading(k.stf_max_fading)?
                     .with_gating(gating)?,
             )),
             InsKalmanKind::Rekf => Core::Rekf(Box::new(RelativeEntropyKf::new(

@@ -117,7 +117,7 @@ residual_gate_c = 3.0"#,
     },
     Preset {
         name: "seed004-stf",
-        about: "seed 004's comparison 'STF': strong tracking filter on the same INS error state and fixes",
+        about: "seed 004's comparison 'STF': strong tracking filter (Zhou & Frank, fading factor limited to 10) on the same INS error state and fixes, with the same eq. 24 gate, C = 3",
         toml: r#"name = "STF"
 sources = ["gps", "bds", "tcofdm"]
 filter = "ins"
@@ -125,11 +125,12 @@ filter = "ins"
 kalman = "stf"
 fix_sources = ["gnss", "tcofdm"]
 joint_fix = true
-fix_velocity_noise_mps = [0.1, 0.25]"#,
+fix_velocity_noise_mps = [0.1, 0.25]
+residual_gate_c = 3.0"#,
     },
     Preset {
         name: "seed004-ckf",
-        about: "seed 004's comparison 'CKF': cubature Kalman filter on the same INS error state and fixes",
+        about: "seed 004's comparison 'CKF': cubature Kalman filter on the same INS error state and fixes, with the same eq. 24 gate, C = 3",
         toml: r#"name = "CKF"
 sources = ["gps", "bds", "tcofdm"]
 filter = "ins"
@@ -137,11 +138,12 @@ filter = "ins"
 kalman = "ckf"
 fix_sources = ["gnss", "tcofdm"]
 joint_fix = true
-fix_velocity_noise_mps = [0.1, 0.25]"#,
+fix_velocity_noise_mps = [0.1, 0.25]
+residual_gate_c = 3.0"#,
     },
     Preset {
         name: "seed004-ekf",
-        about: "seed 004's comparison 'EKF': the generic EKF (Joseph form) on the same INS error state and fixes",
+        about: "seed 004's comparison 'EKF': the generic EKF (Joseph form) on the same INS error state and fixes, with the same eq. 24 gate, C = 3",
         toml: r#"name = "EKF"
 sources = ["gps", "bds", "tcofdm"]
 filter = "ins"
@@ -149,7 +151,64 @@ filter = "ins"
 kalman = "ekf"
 fix_sources = ["gnss", "tcofdm"]
 joint_fix = true
-fix_velocity_noise_mps = [0.1, 0.25]"#,
+fix_velocity_noise_mps = [0.1, 0.25]
+residual_gate_c = 3.0"#,
+    },
+    Preset {
+        name: "seed004-rekf-tight",
+        about: "seed 004's 'RE-KF' tightly coupled: the relative-entropy KF (eqs. 33-41) on the 18-state INS error state + receiver clock, updated by each GNSS and TC-OFDM pseudorange and GNSS range rate (ranges nonlinear in the error state), with the eq. 24 gate, C = 3",
+        toml: r#"name = "RE-KF (tight)"
+sources = ["gps", "bds", "tcofdm"]
+filter = "ins"
+[ins]
+kalman = "rekf"
+coupling = "tight"
+fix_sources = ["gnss", "tcofdm"]
+joint_fix = true
+fix_velocity_noise_mps = [0.1, 0.25]
+residual_gate_c = 3.0"#,
+    },
+    Preset {
+        name: "seed004-stf-tight",
+        about: "seed 004's 'STF' tightly coupled: the strong tracking filter (fading factor limited to 10) on the 18-state INS error state + receiver clock, updated by each GNSS and TC-OFDM pseudorange and GNSS range rate (ranges nonlinear in the error state), with the eq. 24 gate, C = 3",
+        toml: r#"name = "STF (tight)"
+sources = ["gps", "bds", "tcofdm"]
+filter = "ins"
+[ins]
+kalman = "stf"
+coupling = "tight"
+fix_sources = ["gnss", "tcofdm"]
+joint_fix = true
+fix_velocity_noise_mps = [0.1, 0.25]
+residual_gate_c = 3.0"#,
+    },
+    Preset {
+        name: "seed004-ckf-tight",
+        about: "seed 004's 'CKF' tightly coupled: the cubature Kalman filter on the 18-state INS error state + receiver clock, updated by each GNSS and TC-OFDM pseudorange and GNSS range rate (ranges nonlinear in the error state), with the eq. 24 gate, C = 3",
+        toml: r#"name = "CKF (tight)"
+sources = ["gps", "bds", "tcofdm"]
+filter = "ins"
+[ins]
+kalman = "ckf"
+coupling = "tight"
+fix_sources = ["gnss", "tcofdm"]
+joint_fix = true
+fix_velocity_noise_mps = [0.1, 0.25]
+residual_gate_c = 3.0"#,
+    },
+    Preset {
+        name: "seed004-ekf-tight",
+        about: "seed 004's 'EKF' tightly coupled: the generic EKF on the 18-state INS error state + receiver clock, updated by each GNSS and TC-OFDM pseudorange and GNSS range rate (ranges nonlinear in the error state), with the eq. 24 gate, C = 3",
+        toml: r#"name = "EKF (tight)"
+sources = ["gps", "bds", "tcofdm"]
+filter = "ins"
+[ins]
+kalman = "ekf"
+coupling = "tight"
+fix_sources = ["gnss", "tcofdm"]
+joint_fix = true
+fix_velocity_noise_mps = [0.1, 0.25]
+residual_gate_c = 3.0"#,
     },
     Preset {
         name: "seed004-rekf-ranges",
