@@ -396,7 +396,11 @@ pub fn markdown(results: &[PaperResult]) -> String {
             let _ = writeln!(s, "- {} {}", tick(o.holds()), ordering_text(o));
         }
         for v in &r.variants {
-            let _ = writeln!(s, "\nExtra rows, not counted in the totals: {}.\n", v.variant.about);
+            let _ = writeln!(
+                s,
+                "\nExtra rows, not counted in the totals: {}.\n",
+                v.variant.about
+            );
             s.push_str("| row | figure | paper (m) | hybridnav (m) | ratio | PCRLB on RMSE (m) | within 2× |\n|---|---|---:|---:|---:|---:|:-:|\n");
             for f in &v.figures {
                 let _ = writeln!(s, "| {} |", f.cells().join(" | "));

@@ -520,7 +520,11 @@ mod tests {
         let d_m = (30.0f64 * 30.0 + 10.0 * 10.0).sqrt();
         let p_w = eirp_w * (lambda_m / (4.0 * std::f64::consts::PI * d_m)).powi(2);
         let friis_dbm = 10.0 * p_w.log10() + 30.0;
-        assert!((out[0] - friis_dbm).abs() < 0.06, "{} vs {friis_dbm}", out[0]);
+        assert!(
+            (out[0] - friis_dbm).abs() < 0.06,
+            "{} vs {friis_dbm}",
+            out[0]
+        );
     }
 
     #[test]

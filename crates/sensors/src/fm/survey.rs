@@ -300,7 +300,10 @@ mod tests {
         let v = run(&mut field);
         assert_eq!(
             v.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
-            run(&mut field).iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+            run(&mut field)
+                .iter()
+                .map(|x| x.to_bits())
+                .collect::<Vec<_>>()
         );
         let mut mean = [0.0];
         let e: Vec<f64> = pts
@@ -315,7 +318,10 @@ mod tests {
         let m = e.iter().sum::<f64>() / n;
         let sd = (e.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
         let want = (9.0f64 + 4.0 / 16.0).sqrt();
-        assert!((sd - want).abs() < 3.0 * want / (2.0 * n).sqrt(), "{sd} vs {want}");
+        assert!(
+            (sd - want).abs() < 3.0 * want / (2.0 * n).sqrt(),
+            "{sd} vs {want}"
+        );
         let bad = SurveyConfig {
             time_variation_decorrelation_m: 0.0,
             ..cfg
