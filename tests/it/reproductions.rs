@@ -76,6 +76,7 @@ fn seed000_beihang_gps_dtmb_beats_gps_and_proposed_has_the_tightest_core() {
 ///   through the two-satellite windows on Doppler, while the single tower's NLOS ranges
 ///   in the street canyons pull GPS+DTMB off (seed 1: 3σ 532.6 against 147.1 m, 2σ 117.7
 ///   against 31.0 m, mean ATE 19.1 against 7.3 m).
+///
 /// The paper's GPS+DTMB < GPS needs its printed eq. 17 (rows "(eq. 17)", printed here but
 /// not asserted): there it holds at 3σ and in mean ATE but not at 2σ at 100 trials, seed
 /// 1 (535.9 < 781.7, 18.4 < 19.4, 110.4 > 85.1), with margins too thin (and at 20 trials,
