@@ -30,7 +30,7 @@
 //! multipath or NLOS code error the scene puts on the link (a bias, counted at its size).
 //!
 //! **Terrestrial.** As the DTMB and TC-OFDM sources (module `dtmb::source`): the
-//! reference SNR `γ = ERP (+ nav_power_db for TC-OFDM) + G_rx − L_Hata(d) − (kTB + NF)`,
+//! reference SNR `γ = ERP + 2.15 (the EIRP; + nav_power_db for TC-OFDM) + G_rx − L_Hata(d) − (kTB + NF)`,
 //! the scene's paths as taps, the correlation peak's SNR after multipath
 //! ([`multipath_estimate`]) and the calibrated sync statistics ([`thermal_stats`]). A
 //! link is *usable* when the sources would use it: some path arrives and the outlier
@@ -339,8 +339,10 @@ pub fn site_link(
         site.rx.rx_antenna_height_m,
         (range_m * 1e-3).max(1e-3),
     );
+    // The site's ERP is relative to a half-wave dipole; the budget takes its EIRP.
     link.snr_db = link_snr_db(
-        site.ranging_erp_dbw + site.rx.antenna_gain_dbi,
+        crate::propagation::pathloss::eirp_dbw_from_erp(site.ranging_erp_dbw)
+            + site.rx.antenna_gain_dbi,
         pl_db,
         site.rx.noise_figure_db,
         BANDWIDTH_HZ,

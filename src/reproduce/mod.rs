@@ -13,7 +13,7 @@ pub mod papers;
 use crate::montecarlo::store::Shard;
 use crate::montecarlo::{run_trials, summarise, EstimatorSummary, RunOptions, Summary};
 use crate::world::load_world;
-use papers::{Metric, Paper, PAPERS};
+use papers::{Figure, Metric, Ordering, Paper, Variant, PAPERS, VARIANTS};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -138,6 +138,17 @@ pub struct PaperResult {
     /// `(estimator, resets, share of its epochs)` of every estimator of the world that was
     /// reset at least once.
     pub resets: Vec<(String, usize, f64)>,
+    /// The paper's [`Variant`] rows, scored the same way and printed apart; they count in
+    /// no total.
+    pub variants: Vec<VariantResult>,
+}
+
+/// One variant's rows and orderings.
+#[derive(Clone, Debug)]
+pub struct VariantResult {
+    pub variant: &'static Variant,
+    pub figures: Vec<FigureResult>,
+    pub orderings: Vec<OrderingResult>,
 }
 
 impl PaperResult {
@@ -172,42 +183,35 @@ pub fn metric_of(e: &EstimatorSummary, metric: Metric) -> Option<f64> {
 /// # Errors
 /// When the world has no estimator of a name the paper's table needs.
 pub fn score(paper: &'static Paper, s: &Summary) -> Result<PaperResult, String> {
-    let find = |name: &str| {
-        s.estimators
-            .iter()
-            .find(|e| e.name == name)
-            .ok_or_else(|| format!("{} has no estimator named {name:?}", paper.world))
-    };
-    let figures = paper
-        .figures
+    let (figures, orderings) = score_rows(paper.world, paper.figures, paper.orderings, s)?;
+    let variants = VARIANTS
         .iter()
-        .map(|f| {
-            let e = find(f.estimator)?;
-            Ok(FigureResult {
-                row: f.row,
-                metric: f.metric,
-                paper_m: f.paper_m,
-                simulated_m: metric_of(e, f.metric),
-                rmse_m: metric_of(e, Metric::Rmse),
-                pcrlb_m: e.pcrlb_pos_rmse_m,
-                deviates: !e.protocol.deviations.is_empty(),
+        .filter(|v| v.paper == paper.id)
+        .map(|v| {
+            let (figures, orderings) = score_rows(paper.world, v.figures, v.orderings, s)?;
+            Ok(VariantResult {
+                variant: v,
+                figures,
+                orderings,
             })
         })
         .collect::<Result<Vec<_>, String>>()?;
-    let orderings = paper
-        .orderings
-        .iter()
-        .map(|o| {
-            Ok(OrderingResult {
-                metric: o.metric,
-                values: o
-                    .ascending
-                    .iter()
-                    .map(|n| Ok((*n, metric_of(find(n)?, o.metric))))
-                    .collect::<Result<Vec<_>, String>>()?,
-            })
-        })
-        .collect::<Result<Vec<_>, String>>()?;
+    let (protocol, resets) = protocol_and_resets(s);
+    Ok(PaperResult {
+        paper,
+        trials: s.trials,
+        seed: s.seed,
+        figures,
+        orderings,
+        protocol,
+        resets,
+        variants,
+    })
+}
+
+/// The lines saying what a world's compared estimators share and where a row departs
+/// from it, and every estimator's resets.
+fn protocol_and_resets(s: &Summary) -> (Vec<String>, Vec<(String, usize, f64)>) {
     let compared: Vec<&EstimatorSummary> = s
         .estimators
         .iter()
@@ -241,15 +245,51 @@ pub fn score(paper: &'static Paper, s: &Summary) -> Result<PaperResult, String> 
         .filter(|e| e.numerical_failures > 0)
         .map(|e| (e.name.clone(), e.numerical_failures, e.reset_share))
         .collect();
-    Ok(PaperResult {
-        paper,
-        trials: s.trials,
-        seed: s.seed,
-        figures,
-        orderings,
-        protocol,
-        resets,
-    })
+    (protocol, resets)
+}
+
+/// Scores a list of figures and orderings against a run's summary.
+fn score_rows(
+    world: &str,
+    figures: &[Figure],
+    orderings: &[Ordering],
+    s: &Summary,
+) -> Result<(Vec<FigureResult>, Vec<OrderingResult>), String> {
+    let find = |name: &str| {
+        s.estimators
+            .iter()
+            .find(|e| e.name == name)
+            .ok_or_else(|| format!("{world} has no estimator named {name:?}"))
+    };
+    let figures = figures
+        .iter()
+        .map(|f| {
+            let e = find(f.estimator)?;
+            Ok(FigureResult {
+                row: f.row,
+                metric: f.metric,
+                paper_m: f.paper_m,
+                simulated_m: metric_of(e, f.metric),
+                rmse_m: metric_of(e, Metric::Rmse),
+                pcrlb_m: e.pcrlb_pos_rmse_m,
+                deviates: !e.protocol.deviations.is_empty(),
+            })
+        })
+        .collect::<Result<Vec<_>, String>>()?;
+    let orderings = orderings
+        .iter()
+        .map(|o| {
+            Ok(OrderingResult {
+                metric: o.metric,
+                values: o
+                    .ascending
+                    .iter()
+                    .map(|n| Ok((*n, metric_of(find(n)?, o.metric))))
+                    .collect::<Result<Vec<_>, String>>()?,
+            })
+        })
+        .collect::<Result<Vec<_>, String>>()?;
+    Ok((figures, orderings))
 }
 
 /// The papers named by `ids` (a world's stem, or any unambiguous prefix such as
@@ -357,6 +397,25 @@ pub fn text(results: &[PaperResult]) -> String {
         for o in &r.orderings {
             let _ = writeln!(s, "  {} {}", tick(o.holds()), ordering_text(o));
         }
+        for v in &r.variants {
+            let _ = writeln!(
+                s,
+                "  extra rows, not counted: {}\n  {:<20} {:<12} {:>10} {:>10} {:>7} {:>12}",
+                v.variant.about, "row", "figure", "paper", "hybridnav", "ratio", "PCRLB rmse"
+            );
+            for f in &v.figures {
+                let [row, fig, paper, sim, ratio, bound, mark] = f.cells();
+                let _ = writeln!(
+                    s,
+                    "  {row:<20} {fig:<12} {paper:>10} {sim:>10} {ratio:>7} {bound:>12} {mark}"
+                );
+            }
+            let n = v.figures.iter().filter(|f| f.within()).count();
+            let _ = writeln!(s, "  within 2× (not counted): {n} of {}", v.figures.len());
+            for o in &v.orderings {
+                let _ = writeln!(s, "  {} {}", tick(o.holds()), ordering_text(o));
+            }
+        }
         for line in r.protocol.iter().chain(&resets_lines(r)) {
             let _ = writeln!(s, "  {line}");
         }
@@ -418,6 +477,21 @@ pub fn markdown(results: &[PaperResult]) -> String {
         for o in &r.orderings {
             let _ = writeln!(s, "- {} {}", tick(o.holds()), ordering_text(o));
         }
+        for v in &r.variants {
+            let _ = writeln!(
+                s,
+                "\nExtra rows, not counted in the totals: {}.\n",
+                v.variant.about
+            );
+            s.push_str("| row | figure | paper (m) | hybridnav (m) | ratio | PCRLB on RMSE (m) | within 2× |\n|---|---|---:|---:|---:|---:|:-:|\n");
+            for f in &v.figures {
+                let _ = writeln!(s, "| {} |", f.cells().join(" | "));
+            }
+            s.push('\n');
+            for o in &v.orderings {
+                let _ = writeln!(s, "- {} {}", tick(o.holds()), ordering_text(o));
+            }
+        }
         for line in r.protocol.iter().chain(&resets_lines(r)) {
             let _ = writeln!(s, "- {line}");
         }
@@ -438,6 +512,16 @@ mod tests {
         assert!(PAPERS
             .iter()
             .all(|p| p.figures.iter().all(|f| f.paper_m > 0.0)));
+        // Every variant extends a paper that exists, with figures the paper also has.
+        for v in VARIANTS {
+            let p = PAPERS.iter().find(|p| p.id == v.paper).expect(v.paper);
+            for f in v.figures {
+                assert!(p
+                    .figures
+                    .iter()
+                    .any(|g| g.metric == f.metric && g.paper_m == f.paper_m));
+            }
+        }
     }
 
     #[test]

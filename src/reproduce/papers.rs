@@ -107,6 +107,71 @@ macro_rules! seed000_rows {
     };
 }
 
+/// Extra rows a paper world runs beside the paper's own: another form of a paper's system
+/// (e.g. seed 000's filter with the range-rate Jacobian exactly as eq. 17 prints it),
+/// scored against the same published figures and printed by `hybridnav reproduce`, but
+/// not counted among the papers' figures or claimed orderings.
+#[derive(Clone, Copy, Debug)]
+pub struct Variant {
+    /// The [`Paper::id`] whose table the rows extend.
+    pub paper: &'static str,
+    /// What the variant is, in one line.
+    pub about: &'static str,
+    pub figures: &'static [Figure],
+    pub orderings: &'static [Ordering],
+}
+
+/// Seed 000's rows with eq. 17's Jacobian (presets `seed000-*-eq17`): the paper's table
+/// rows map to the default presets, whose range-rate Jacobian is exact.
+const SEED000_EQ17: &str =
+    "the paper's filter with the range-rate Jacobian as eq. 17 prints it (presets seed000-*-eq17)";
+
+/// Every variant, by paper.
+pub const VARIANTS: &[Variant] = &[
+    Variant {
+        paper: "seed000-beihang",
+        about: SEED000_EQ17,
+        figures: seed000_rows![
+            "GPS (eq. 17)" => "GPS (eq. 17)": [29.49, 74.51, 87.46, 24.52, 32.45, 16.61, 21.72],
+            "GPS + DTMB (eq. 17)" => "GPS+DTMB (eq. 17)": [14.46, 28.50, 35.31, 13.53, 15.57, 13.38, 15.80],
+            "Proposed (eq. 17)" => "Proposed (eq. 17)": [10.56, 22.57, 27.80, 9.90, 11.23, 10.92, 12.29],
+        ],
+        orderings: &[
+            Ordering {
+                metric: Sigma3,
+                ascending: &["Proposed (eq. 17)", "GPS+DTMB (eq. 17)", "GPS (eq. 17)"],
+            },
+            Ordering {
+                metric: AteMean,
+                ascending: &["Proposed (eq. 17)", "GPS+DTMB (eq. 17)", "GPS (eq. 17)"],
+            },
+        ],
+    },
+    Variant {
+        paper: "seed000-kehui",
+        about: SEED000_EQ17,
+        figures: seed000_rows![
+            "GPS (eq. 17)" => "GPS (eq. 17)": [6.47, 96.89, 416.60, 21.60, 53.42, 5.57, 25.93],
+            "GPS + DTMB (eq. 17)" => "GPS+DTMB (eq. 17)": [6.45, 71.31, 262.80, 11.78, 27.32, 5.68, 25.76],
+            "Proposed (eq. 17)" => "Proposed (eq. 17)": [6.42, 28.23, 60.23, 7.88, 11.87, 2.79, 4.84],
+        ],
+        orderings: &[
+            Ordering {
+                metric: Sigma2,
+                ascending: &["Proposed (eq. 17)", "GPS+DTMB (eq. 17)", "GPS (eq. 17)"],
+            },
+            Ordering {
+                metric: Sigma3,
+                ascending: &["Proposed (eq. 17)", "GPS+DTMB (eq. 17)", "GPS (eq. 17)"],
+            },
+            Ordering {
+                metric: AteMean,
+                ascending: &["Proposed (eq. 17)", "GPS+DTMB (eq. 17)", "GPS (eq. 17)"],
+            },
+        ],
+    },
+];
+
 /// Every paper table hybridnav reproduces, in the papers' order.
 pub const PAPERS: &[Paper] = &[
     Paper {

@@ -414,7 +414,14 @@ fn terrestrial_and_inertial_sources_are_deterministic_across_threads() {
             );
         }
         for e in summary["estimators"].as_array().unwrap() {
-            assert_eq!(e["numerical_failures"], 0, "{world}: {}", e["name"]);
+            // Seed 000's "(eq. 17)" rows run the paper's filter as printed, without the
+            // range rate's position terms: on Kehui Road it can lose its covariance in a
+            // two-satellite window and is then reset, which the summary reports (one reset
+            // of GPS+DTMB (eq. 17) in these 3 trials). The default rows may not fail.
+            let name = e["name"].as_str().unwrap();
+            if !name.ends_with("(eq. 17)") {
+                assert_eq!(e["numerical_failures"], 0, "{world}: {name}");
+            }
             assert!(e["error_3d_m"]["rmse"].as_f64().unwrap().is_finite());
         }
     }

@@ -228,7 +228,6 @@ fn dtmb_clock_correction_removes_a_tower_clock_offset() {
 name = \"raw\"
 sources = [\"gps\", \"dtmb\"]
 filter = \"ekf11\"
-ekf = {{ rate_position_jacobian = false }}
 
 [[estimator]]
 preset = \"seed000-gps-dtmb\"

@@ -627,7 +627,9 @@ fn service_coverage_follows_each_towers_budget_and_profile() {
                     cfg.rx_antenna_height_m,
                     (t.pos_enu_m - rx).norm() * 1e-3,
                 );
-                let snr = t.erp_dbw + cfg.antenna_gain_dbi - l_db - ktb_dbw - cfg.noise_figure_db;
+                // The tower's EIRP is its ERP plus a half-wave dipole's 2.15 dBi.
+                let eirp_dbw = t.erp_dbw + 2.15;
+                let snr = eirp_dbw + cfg.antenna_gain_dbi - l_db - ktb_dbw - cfg.noise_figure_db;
                 want = want.max(snr - awgn_threshold_db(constellation, rate).unwrap());
             }
             let got: f64 = f[cm].parse().unwrap();

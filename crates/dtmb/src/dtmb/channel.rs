@@ -512,7 +512,8 @@ mod tests {
 
     #[test]
     fn link_budget_uses_ktb() {
-        // kTB over 7.56 MHz is −135.2 dBW; 50 dBW ERP, 120 dB loss, 5 dB NF → 60.2 dB.
+        // kTB over 7.56 MHz is −135.2 dBW; 50 dBW EIRP (with the receive gain), 120 dB
+        // loss, 5 dB NF → 60.2 dB.
         let snr = link_snr_db(50.0, 120.0, 5.0, 7.56e6);
         assert!((snr - 60.18).abs() < 0.05, "{snr}");
     }

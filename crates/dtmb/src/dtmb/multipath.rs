@@ -60,14 +60,17 @@ impl ChannelConfig {
     }
 }
 
-/// Link SNR over `bandwidth_hz` from the budget: `ERP − L − (kTB + NF)` with
-/// `kT = 1.380649e-23 · 290` W/Hz (−203.98 dBW/Hz). DTMB's band is 7.56 MHz.
+/// Link SNR over `bandwidth_hz` from the budget: `EIRP + G_rx − L − (kTB + NF)` with
+/// `kT = 1.380649e-23 · 290` W/Hz (−203.98 dBW/Hz). DTMB's band is 7.56 MHz. The first
+/// argument is the e.i.r.p. plus the receive antenna gain (dBW); `L` is a loss between
+/// isotropic antennas (free space, Extended Hata). A transmitter's ERP becomes an EIRP
+/// through [`crate::propagation::pathloss::eirp_dbw_from_erp`] (+2.15 dB).
 pub fn link_snr_db(
-    erp_dbw: f64,
+    eirp_plus_rx_gain_dbw: f64,
     path_loss_db: f64,
     noise_figure_db: f64,
     bandwidth_hz: f64,
 ) -> f64 {
     let ktb_dbw = 10.0 * (1.380_649e-23 * 290.0 * bandwidth_hz).log10();
-    erp_dbw - path_loss_db - ktb_dbw - noise_figure_db
+    eirp_plus_rx_gain_dbw - path_loss_db - ktb_dbw - noise_figure_db
 }

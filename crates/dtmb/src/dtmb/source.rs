@@ -5,7 +5,8 @@
 //! Per sample and tower, with the receiver truth `r` and the tower at `r_t`:
 //!
 //! ```text
-//! γ_ref = ERP + G_rx − L_Hata(d) − S(r) − (kTB + NF)      (SNR of a free-space-LoS path)
+//! γ_ref = ERP + 2.15 + G_rx − L_Hata(d) − S(r) − (kTB + NF)   (SNR of a free-space-LoS path;
+//!         ERP + 2.15 dB is the EIRP, the ERP being relative to a half-wave dipole)
 //! taps  = scene.link(r, r_t): (excess delay, amplitude·e^{jφ}) per path, or the direct path
 //! e     = timing error of the aided sync (signal chain, or the calibrated model)
 //! ρ     = ‖r_t − r‖ + c (δt_rx(t) + ISB_DTMB(t) − δt_tower(t)) + e · c/f_s
@@ -48,7 +49,9 @@ use crate::measurement::{
     Measurement, MeasurementBatch, RangeDifference, RangeMeasurement, SampleContext, Source,
     SourceKind,
 };
-use crate::propagation::pathloss::{extended_hata_db, HataEnvironment, Model, ValidityLog};
+use crate::propagation::pathloss::{
+    eirp_dbw_from_erp, extended_hata_db, HataEnvironment, Model, ValidityLog,
+};
 use crate::propagation::{
     Emitter, LinkParams, LinkPaths, Polarisation, Scene, ShadowingConfig, ShadowingField,
 };
@@ -615,8 +618,9 @@ impl DtmbSource {
             .shadow
             .as_ref()
             .map_or(0.0, |f| f.value_db(rx_enu.x, rx_enu.y));
+        // The tower's ERP is relative to a half-wave dipole; the budget takes its EIRP.
         let snr_ref_db = link_snr_db(
-            spec.erp_dbw + self.cfg.antenna_gain_dbi,
+            eirp_dbw_from_erp(spec.erp_dbw) + self.cfg.antenna_gain_dbi,
             pl_db + shadow_db,
             self.cfg.noise_figure_db,
             BANDWIDTH_HZ,

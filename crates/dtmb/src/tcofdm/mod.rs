@@ -14,7 +14,8 @@
 //!   and its measurement-level error model is DTMB's calibrated one.
 //! * **Band and power**: an LTE-like carrier (default 1.9 GHz, inside Extended Hata's
 //!   30–3000 MHz) and a navigation component `nav_power_db` below the station's ERP
-//!   (default −10 dB), so its SNR is `ERP + nav_power_db − L − N`.
+//!   (default −10 dB), so its SNR is `ERP + 2.15 + nav_power_db − L − N` (ERP + 2.15 dB
+//!   is the EIRP).
 //! * **Synchronisation**: each base station's clock is offset from GPS time by a
 //!   configured value plus a random `N(0, σ_sync²)` drawn once per trial from stream
 //!   `tcofdm/Tnn/sync` (σ_sync default 3 ns, seed 004), which enters the pseudorange as

@@ -47,8 +47,8 @@
 //! sign used here and in [`crate::measurement::RangeMeasurement`]. Eq. 17 also drops
 //! the position derivative of the range rate; it is kept here by default because it costs
 //! nothing and is the exact Jacobian, and dropped with
-//! [`Ekf11Config::rate_position_jacobian`] = false, as seed 000's presets do to run the
-//! paper's filter. For satellites it is the transverse velocity over the range, about
+//! [`Ekf11Config::rate_position_jacobian`] = false, as seed 000's `-eq17` presets do to
+//! run the paper's filter as printed (the default seed 000 presets keep the exact one). For satellites it is the transverse velocity over the range, about
 //! 3.9 km/s / 20 000 km ≈ 2·10⁻⁴ (m/s) per metre: small beside the ranges when four or
 //! more satellites fix the position, but at a range-rate σ of a few cm/s each Doppler
 //! then weighs like a ~150 m position observation, enough to hold a filter through a
@@ -194,7 +194,7 @@ pub struct Ekf11Config {
     pub init_clock_drift_sigma_mps: f64,
     /// Whether the range-rate Jacobian keeps its position terms `∂ρ̇/∂r = −(w − u(u·w))/‖r_s −
     /// r‖` (default true, the exact linearisation). The paper's eq. 17 drops them, and seed
-    /// 000's presets follow the paper: through them a satellite's transverse velocity
+    /// 000's `-eq17` presets follow the paper (its default presets do not): through them a satellite's transverse velocity
     /// (≈ 3.9 km/s over 20 000 km, 2·10⁻⁴ (m/s) per metre) makes each Doppler a weak
     /// observation of position, which keeps a GPS-only filter bounded through a
     /// two-satellite outage that the paper's filter cannot coast through.

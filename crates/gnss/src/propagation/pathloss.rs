@@ -82,6 +82,18 @@ impl ValidityLog {
     }
 }
 
+/// The gain of a lossless half-wave dipole over an isotropic antenna (dBi): 10·log10(1.64)
+/// = 2.15 dB (ITU-R BS.561 / ITU-R V.573 definitions of e.r.p. and e.i.r.p.).
+pub const HALF_WAVE_DIPOLE_GAIN_DBI: f64 = 2.15;
+
+/// The e.i.r.p. of a transmitter whose e.r.p. (relative to a half-wave dipole, the figure
+/// broadcast licences give) is `erp_dbw`: EIRP = ERP + 2.15 dB. The path losses here (free
+/// space, Hata, Extended Hata) are between isotropic antennas, so a link budget takes
+/// the EIRP.
+pub fn eirp_dbw_from_erp(erp_dbw: f64) -> f64 {
+    erp_dbw + HALF_WAVE_DIPOLE_GAIN_DBI
+}
+
 /// Free-space basic transmission loss (ITU-R P.525): `L = 20 log10(4π d f / c)` dB, any
 /// distance and frequency (far field: d ≫ λ).
 pub fn free_space_db(distance_m: f64, freq_hz: f64) -> f64 {

@@ -5,11 +5,13 @@
 //! The RSSI of station s at the ENU point x (dBm) is
 //!
 //! ```text
-//! P̄_s(x) = ERP_s + 30 + G_rx − L_EH(f_s, h_b, h_m, d) − L_scene(x) − S_s(x)      (mean)
+//! P̄_s(x) = ERP_s + 2.15 + 30 + G_rx − L_EH(f_s, h_b, h_m, d) − L_scene(x) − S_s(x)  (mean)
 //! P_s(x) = Q( P̄_s(x) + n ),  n ~ N(0, σ_rx²);  missing (NaN) when P < P_sens
 //! Q(p)   = step · round(p / step)
 //! ```
 //!
+//! - `ERP_s + 2.15` is the station's e.i.r.p. (dBW): a broadcast ERP is relative to a
+//!   half-wave dipole (2.15 dBi), and `L_EH` is a loss between isotropic antennas.
 //! - `L_EH` is the Extended Hata median loss (ITU-R SM.2028 §6.1, see
 //!   [`crate::propagation::pathloss::extended_hata_db`]). It is stated for 30–3000 MHz,
 //!   so it covers the 87.5–108 MHz FM band, base heights 30–200 m, mobile heights
@@ -36,7 +38,9 @@
 use crate::core::config::check;
 use crate::core::rng::StreamRng;
 use crate::core::{ConfigIssue, TrialRng};
-use crate::propagation::pathloss::{extended_hata_db, HataEnvironment, Model, ValidityLog};
+use crate::propagation::pathloss::{
+    eirp_dbw_from_erp, extended_hata_db, HataEnvironment, Model, ValidityLog,
+};
 use crate::propagation::{
     Emitter, LinkParams, LinkPaths, Polarisation, Scene, ShadowingConfig, ShadowingField,
 };
@@ -425,7 +429,7 @@ impl FmField {
                 }
                 None => 0.0,
             };
-            out[k] = s.erp_dbw + 30.0 + self.cfg.antenna_gain_dbi
+            out[k] = eirp_dbw_from_erp(s.erp_dbw) + 30.0 + self.cfg.antenna_gain_dbi
                 - l
                 - scene_db
                 - self.shadowing[k].value_db(p_enu_m.x, p_enu_m.y);
@@ -474,7 +478,7 @@ mod tests {
     }
 
     #[test]
-    fn mean_is_erp_minus_extended_hata_without_shadowing() {
+    fn mean_is_eirp_minus_extended_hata_without_shadowing() {
         let cfg = FmFieldConfig {
             shadowing: ShadowingConfig {
                 sigma_db: 0.0,
@@ -487,9 +491,40 @@ mod tests {
         f.mean_rssi_dbm(&Vector3::zeros(), &mut out);
         let (l, v) = extended_hata_db(HataEnvironment::UrbanSmallMedium, 100.0, 150.0, 1.5, 5.0);
         assert!(v.ok());
-        assert!((out[0] - (70.0 - l)).abs() < 1e-9);
+        // 40 dBW ERP = 42.15 dBW EIRP = 72.15 dBm, less the loss between isotropic antennas.
+        assert!((out[0] - (72.15 - l)).abs() < 1e-9);
         // Urban Hata at 5 km is well above free space (a sanity check on the model choice).
         assert!(l > free_space_db(5_000.0, 100e6) + 20.0);
+    }
+
+    /// Within 40 m Extended Hata is free space, so the mean RSSI is Friis's received power
+    /// from the station's EIRP, computed here by hand: 1 W ERP is 10^0.215 W EIRP; over
+    /// d = √(30² + 10²) m at λ = c / 100 MHz an isotropic antenna receives
+    /// EIRP · (λ / 4πd)². (Extended Hata's short-range form rounds 32.45 dB to 32.4, hence
+    /// the 0.06 dB tolerance.)
+    #[test]
+    fn short_range_mean_is_friis_from_the_eirp() {
+        let cfg = FmFieldConfig {
+            shadowing: ShadowingConfig {
+                sigma_db: 0.0,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let st = FmStation::new("F01", Vector3::new(30.0, 0.0, 11.5), 100e6, 0.0, 0.0);
+        let mut f = FmField::new(cfg, vec![st], None, 1).unwrap();
+        let mut out = [0.0];
+        f.mean_rssi_dbm(&Vector3::new(0.0, 0.0, 1.5), &mut out);
+        let eirp_w = 10f64.powf(0.215);
+        let lambda_m = 299_792_458.0 / 100e6;
+        let d_m = (30.0f64 * 30.0 + 10.0 * 10.0).sqrt();
+        let p_w = eirp_w * (lambda_m / (4.0 * std::f64::consts::PI * d_m)).powi(2);
+        let friis_dbm = 10.0 * p_w.log10() + 30.0;
+        assert!(
+            (out[0] - friis_dbm).abs() < 0.06,
+            "{} vs {friis_dbm}",
+            out[0]
+        );
     }
 
     #[test]

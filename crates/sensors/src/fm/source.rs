@@ -91,6 +91,11 @@ pub struct FmSurveySpec {
     pub scans_per_point: u32,
     /// The surveyor's per-scan noise σ (dB).
     pub noise_sigma_db: f64,
+    /// σ (dB) of the field's change between the survey and the test (another time and
+    /// receiver; [`SurveyConfig::time_variation_sigma_db`]), default 0.
+    pub time_variation_sigma_db: f64,
+    /// Decorrelation distance (m) of that change, default 37.
+    pub time_variation_decorrelation_m: f64,
 }
 
 impl Default for FmSurveySpec {
@@ -103,6 +108,8 @@ impl Default for FmSurveySpec {
             area_enu_m: None,
             scans_per_point: s.scans_per_point,
             noise_sigma_db: s.noise_sigma_db,
+            time_variation_sigma_db: s.time_variation_sigma_db,
+            time_variation_decorrelation_m: s.time_variation_decorrelation_m,
         }
     }
 }
@@ -113,6 +120,8 @@ impl FmSurveySpec {
         SurveyConfig {
             scans_per_point: self.scans_per_point,
             noise_sigma_db: self.noise_sigma_db,
+            time_variation_sigma_db: self.time_variation_sigma_db,
+            time_variation_decorrelation_m: self.time_variation_decorrelation_m,
         }
     }
 

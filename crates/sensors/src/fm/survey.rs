@@ -7,12 +7,27 @@
 //! (NaN), because a mean of the few strong outliers above the floor would be biased high.
 //! Averaging N scans divides the noise variance by N (before quantisation), which is why
 //! a survey is more accurate than one online scan.
+//!
+//! The survey is also done at another time than the test, and usually with another
+//! receiver: the field the surveyor measures is not the one the user later sees. What
+//! averaging cannot remove is modelled as one more, independent, spatially correlated
+//! log-normal draw per station, `Δ_s(x)` of σ `time_variation_sigma_db` and decorrelation
+//! distance `time_variation_decorrelation_m` (a [`ShadowingField`] drawn from the
+//! surveyor's own stream before the first scan), added to the mean the surveyor measures:
+//!
+//! ```text
+//! fingerprint_s(x) = mean_k Q( P̄_s(x) + Δ_s(x) + n_k ),   n_k ~ N(0, σ_survey²)
+//! ```
+//!
+//! so that the database error at an RP has variance σ_Δ² + σ_survey²/N (before
+//! quantisation). With σ_Δ = 0 (the default) the survey sees exactly the user's field.
 
 use super::field::FmField;
 use super::FmError;
 use crate::core::config::check;
 use crate::core::rng::StreamRng;
 use crate::core::ConfigIssue;
+use crate::propagation::{ShadowingConfig, ShadowingField};
 use nalgebra::Vector3;
 use serde::Deserialize;
 
@@ -21,6 +36,9 @@ fn default_scans() -> u32 {
 }
 fn default_noise() -> f64 {
     2.0
+}
+fn default_time_decorrelation() -> f64 {
+    ShadowingConfig::default().decorrelation_m
 }
 
 /// How the surveyor measures.
@@ -33,6 +51,13 @@ pub struct SurveyConfig {
     /// The surveyor's per-scan noise σ (dB), default 2.
     #[serde(default = "default_noise")]
     pub noise_sigma_db: f64,
+    /// σ (dB) of the field's change between the survey and the test (another time,
+    /// another receiver), an independent log-normal draw per station; default 0.
+    #[serde(default)]
+    pub time_variation_sigma_db: f64,
+    /// Decorrelation distance (m) of that change, default 37 (the default shadowing's).
+    #[serde(default = "default_time_decorrelation")]
+    pub time_variation_decorrelation_m: f64,
 }
 
 impl Default for SurveyConfig {
@@ -40,6 +65,8 @@ impl Default for SurveyConfig {
         Self {
             scans_per_point: default_scans(),
             noise_sigma_db: default_noise(),
+            time_variation_sigma_db: 0.0,
+            time_variation_decorrelation_m: default_time_decorrelation(),
         }
     }
 }
@@ -66,7 +93,19 @@ impl SurveyConfig {
                     self.noise_sigma_db
                 )
             },
-        )
+        )?;
+        self.time_variation()
+            .validate()
+            .map_err(|c| ConfigIssue::new(format!("time_variation_{}", c.key), c.message))
+    }
+
+    /// The survey-to-test change as a shadowing configuration.
+    fn time_variation(&self) -> ShadowingConfig {
+        ShadowingConfig {
+            sigma_db: self.time_variation_sigma_db,
+            decorrelation_m: self.time_variation_decorrelation_m,
+            ..ShadowingConfig::default()
+        }
     }
 }
 
@@ -142,7 +181,8 @@ pub fn polyline_points(vertices: &[[f64; 2]], spacing_m: f64) -> Result<Vec<[f64
 
 /// Surveys `points` (horizontal ENU, at ENU height `up_m`) with `field`: returns the
 /// fingerprints row-major (point × station, dBm, NaN where missing). `rng` is the
-/// surveyor's named stream (e.g. `fm/survey`).
+/// surveyor's named stream (e.g. `fm/survey`); when `time_variation_sigma_db` > 0 the
+/// survey-to-test change of every station is drawn from it first, in station order.
 pub fn survey(
     field: &mut FmField,
     points: &[[f64; 2]],
@@ -157,8 +197,18 @@ pub fn survey(
     let mut sum = vec![0.0; c];
     let mut hits = vec![0u32; c];
     let field_cfg = field.config().clone();
+    let change: Vec<ShadowingField> = if cfg.time_variation_sigma_db > 0.0 {
+        (0..c)
+            .map(|_| ShadowingField::new(&cfg.time_variation(), rng))
+            .collect::<Result<_, _>>()?
+    } else {
+        Vec::new()
+    };
     for (i, p) in points.iter().enumerate() {
         field.mean_rssi_dbm(&Vector3::new(p[0], p[1], up_m), &mut mean);
+        for (m, d) in mean.iter_mut().zip(&change) {
+            *m += d.value_db(p[0], p[1]);
+        }
         sum.iter_mut().for_each(|s| *s = 0.0);
         hits.iter_mut().for_each(|h| *h = 0);
         for _ in 0..cfg.scans_per_point {
@@ -202,6 +252,7 @@ mod tests {
         let cfg = SurveyConfig {
             scans_per_point: 16,
             noise_sigma_db: 2.0,
+            ..Default::default()
         };
         let mut rng = TrialRng::new(1, 0).stream("test/fm/survey");
         let v = survey(&mut field, &pts, 1.5, &cfg, &mut rng).unwrap();
@@ -214,6 +265,72 @@ mod tests {
         let rms = (sq / pts.len() as f64).sqrt();
         // 2 dB / √16 = 0.5 dB; 400 points give the RMS to about ±4 % (1σ).
         assert!((rms - 0.5).abs() < 0.06, "{rms}");
+    }
+
+    /// With a survey-to-test change of σ_Δ = 3 dB decorrelating over 1 m, RPs 10 m apart
+    /// see independent changes: the database error over 400 RPs has the standard deviation
+    /// √(σ_Δ² + σ_survey²/N) = √(9 + 4/16) = 3.041 dB, to within 3 standard errors
+    /// (σ/√(2n) = 0.11 dB). The same seed gives the same bits; without the change the
+    /// error is the averaged scan noise alone.
+    #[test]
+    fn the_survey_to_test_change_has_its_stated_sigma() {
+        use crate::core::TrialRng;
+        use crate::fm::field::{FmFieldConfig, FmStation};
+        let fcfg = FmFieldConfig {
+            quantisation_db: 0.0,
+            shadowing: ShadowingConfig {
+                sigma_db: 0.0,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let st = FmStation::new("F01", Vector3::new(3_000.0, 0.0, 100.0), 98e6, 40.0, 0.0);
+        let mut field = FmField::new(fcfg, vec![st], None, 1).unwrap();
+        let pts = grid_points([0.0, 0.0], [190.0, 190.0], 10.0).unwrap();
+        let cfg = SurveyConfig {
+            scans_per_point: 16,
+            noise_sigma_db: 2.0,
+            time_variation_sigma_db: 3.0,
+            time_variation_decorrelation_m: 1.0,
+        };
+        let run = |field: &mut FmField| {
+            let mut rng = TrialRng::new(7, 0).stream("test/fm/survey");
+            survey(field, &pts, 1.5, &cfg, &mut rng).unwrap()
+        };
+        let v = run(&mut field);
+        assert_eq!(
+            v.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+            run(&mut field)
+                .iter()
+                .map(|x| x.to_bits())
+                .collect::<Vec<_>>()
+        );
+        let mut mean = [0.0];
+        let e: Vec<f64> = pts
+            .iter()
+            .zip(&v)
+            .map(|(p, x)| {
+                field.mean_rssi_dbm(&Vector3::new(p[0], p[1], 1.5), &mut mean);
+                x - mean[0]
+            })
+            .collect();
+        let n = e.len() as f64;
+        let m = e.iter().sum::<f64>() / n;
+        let sd = (e.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+        let want = (9.0f64 + 4.0 / 16.0).sqrt();
+        assert!(
+            (sd - want).abs() < 3.0 * want / (2.0 * n).sqrt(),
+            "{sd} vs {want}"
+        );
+        let bad = SurveyConfig {
+            time_variation_decorrelation_m: 0.0,
+            ..cfg
+        };
+        assert!(bad
+            .validate()
+            .unwrap_err()
+            .key
+            .starts_with("time_variation_"));
     }
 
     #[test]

@@ -6,7 +6,9 @@
 //! the same synthetic ones, the same shadowing keyed by the master seed), measured as a
 //! surveyor would with their own noise (stream `fm/survey` of trial 0's streams, which no
 //! trial source uses), so the database describes the city the receiver drives through, as
-//! a real survey does.
+//! a real survey does. The survey was done at another time, with another receiver: with
+//! `time_variation_sigma_db` > 0 the surveyor also sees an independent change of the field
+//! per station (drawn from the same `fm/survey` stream), which no test trial sees.
 
 use crate::core::TrialRng;
 use crate::fm::database::build_kriged;

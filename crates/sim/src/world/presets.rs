@@ -16,10 +16,26 @@ pub struct Preset {
 
 /// Every preset, in the papers' order.
 pub const PRESETS: &[Preset] = &[
+    // Seed 000's three rows come in two forms. The default presets linearise the GPS
+    // range rate exactly (its Jacobian has position terms, (v_sat − v)·(I − e eᵀ)/r, as
+    // well as the −eᵀ velocity terms); the `-eq17` presets keep eq. 17 as the paper prints
+    // it (velocity and clock-drift terms only). The paper discloses the simplification only
+    // in the Jacobian itself (§5.2.2); both forms run side by side in the seed 000 worlds so
+    // that what the printed Jacobian changes is visible. Each pair differs only in
+    // `ekf.rate_position_jacobian` (and the row name).
     Preset {
         name: "seed000-gps",
-        about: "seed 000 row 'GPS': the 11-state EKF (eqs. 4-8) on GPS pseudoranges and rates, range-rate Jacobian as eq. 17 prints it (no position terms)",
+        about: "seed 000 row 'GPS': the 11-state EKF (eqs. 4-8) on GPS pseudoranges and rates, range-rate Jacobian exact (position and velocity terms)",
         toml: r#"name = "GPS"
+sources = ["gps"]
+filter = "ekf11"
+[ekf]
+rate_position_jacobian = true"#,
+    },
+    Preset {
+        name: "seed000-gps-eq17",
+        about: "seed 000 row 'GPS' with the range-rate Jacobian as eq. 17 prints it (no position terms)",
+        toml: r#"name = "GPS (eq. 17)"
 sources = ["gps"]
 filter = "ekf11"
 [ekf]
@@ -27,8 +43,18 @@ rate_position_jacobian = false"#,
     },
     Preset {
         name: "seed000-gps-dtmb",
-        about: "seed 000 row 'GPS + DTMB': GPS and DTMB pseudoranges sharing one clock, range-rate Jacobian as eq. 17",
+        about: "seed 000 row 'GPS + DTMB': GPS and DTMB pseudoranges sharing one clock, DTMB clock corrected from good GPS fixes (sec. 3.1), range-rate Jacobian exact",
         toml: r#"name = "GPS+DTMB"
+sources = ["gps", "dtmb"]
+filter = "ekf11"
+dtmb_clock_correction = {}
+[ekf]
+rate_position_jacobian = true"#,
+    },
+    Preset {
+        name: "seed000-gps-dtmb-eq17",
+        about: "seed 000 row 'GPS + DTMB' with the range-rate Jacobian as eq. 17 prints it",
+        toml: r#"name = "GPS+DTMB (eq. 17)"
 sources = ["gps", "dtmb"]
 filter = "ekf11"
 dtmb_clock_correction = {}
@@ -37,8 +63,20 @@ rate_position_jacobian = false"#,
     },
     Preset {
         name: "seed000-adaptive",
-        about: "seed 000 row 'Proposed': GPS + DTMB + FM fixes, modes A/B/C chosen by the fuzzy system, range-rate Jacobian as eq. 17",
+        about: "seed 000 row 'Proposed': GPS + DTMB + FM fixes, modes A/B/C chosen by the fuzzy system, range-rate Jacobian exact",
         toml: r#"name = "Proposed"
+sources = ["gps", "dtmb"]
+fixes = ["fm"]
+filter = "ekf11"
+selection = "fuzzy"
+dtmb_clock_correction = {}
+[ekf]
+rate_position_jacobian = true"#,
+    },
+    Preset {
+        name: "seed000-adaptive-eq17",
+        about: "seed 000 row 'Proposed' with the range-rate Jacobian as eq. 17 prints it",
+        toml: r#"name = "Proposed (eq. 17)"
 sources = ["gps", "dtmb"]
 fixes = ["fm"]
 filter = "ekf11"
@@ -312,6 +350,34 @@ neff_threshold = 0.3"#
         assert_eq!(t["options"]["particles"].as_integer(), Some(500));
         assert_eq!(t["options"]["neff_threshold"].as_float(), Some(0.3));
         assert!(!t.contains_key("preset"));
+    }
+
+    /// Each seed 000 preset and its `-eq17` twin expand to the same estimator but for the
+    /// range-rate Jacobian key (and the row name, so that both rows fit in one world).
+    #[test]
+    fn seed000_eq17_presets_differ_only_in_the_jacobian_key() {
+        for base in ["seed000-gps", "seed000-gps-dtmb", "seed000-adaptive"] {
+            let expanded = |name: &str| {
+                let mut t = Table::new();
+                t.insert("preset".into(), Value::String(name.into()));
+                let mut t = expand(t).unwrap();
+                let row = t.remove("name").unwrap();
+                let jac = t["ekf"]["rate_position_jacobian"].as_bool().unwrap();
+                t.get_mut("ekf")
+                    .and_then(Value::as_table_mut)
+                    .unwrap()
+                    .remove("rate_position_jacobian");
+                (t, row, jac)
+            };
+            let (exact, row, jac) = expanded(base);
+            let (eq17, row17, jac17) = expanded(&format!("{base}-eq17"));
+            assert!(jac && !jac17, "{base}: {jac} / {jac17}");
+            assert_eq!(exact, eq17, "{base}");
+            assert_eq!(
+                format!("{} (eq. 17)", row.as_str().unwrap()),
+                row17.as_str().unwrap()
+            );
+        }
     }
 
     #[test]
