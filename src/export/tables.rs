@@ -177,11 +177,19 @@ fn ranges_table(_world: &World, rec: &Recording) -> Option<Table> {
 /// ranges off by 9–94 km were seen).
 const WRONG_PEAK_EXCESS_M: f64 = 6_000.0;
 
-/// For each range row: its excess range, (pseudorange − true range) minus the median of
-/// that over the same epoch's ranges of the same system (which removes the receiver's
+/// For each range row: its excess range, (pseudorange − true range) minus the consensus
+/// of that over the same epoch's ranges of the same system (which removes the receiver's
 /// clock of that system), and whether it exceeds [`WRONG_PEAK_EXCESS_M`]. `None` (and
-/// not flagged) when the epoch has fewer than 3 ranges of the system, too few for a
-/// median to say which one is off.
+/// not flagged) when the epoch has fewer than 3 ranges of the system, too few to say
+/// which one is off.
+///
+/// The consensus is the median of the largest group of residuals lying within
+/// [`WRONG_PEAK_EXCESS_M`] of one of them ([`consensus_m`]), not the median of all: with
+/// six base stations of which two locked onto wrong peaks tens of kilometres long, the
+/// plain median is the mean of a right and a wrong residual and lands kilometres from
+/// both, so a wrong peak could read as a few kilometres' excess and the right ranges as
+/// wrong. Wrong peaks scatter over 9–94 km and do not form a group; the right ranges
+/// agree to within their multipath.
 fn excess_ranges(
     batch_of: &[usize],
     system: &[String],
@@ -202,16 +210,10 @@ fn excess_ranges(
             if rows.len() < 3 {
                 continue;
             }
-            let mut res: Vec<f64> = rows.iter().map(|&j| pr_m[j] - true_m[j]).collect();
-            res.sort_by(f64::total_cmp);
-            let n = res.len();
-            let median = if n % 2 == 1 {
-                res[n / 2]
-            } else {
-                0.5 * (res[n / 2 - 1] + res[n / 2])
-            };
+            let res: Vec<f64> = rows.iter().map(|&j| pr_m[j] - true_m[j]).collect();
+            let reference = consensus_m(&res, WRONG_PEAK_EXCESS_M);
             for &j in &rows {
-                excess[j] = Some(pr_m[j] - true_m[j] - median);
+                excess[j] = Some(pr_m[j] - true_m[j] - reference);
             }
         }
         i = end;
@@ -221,6 +223,30 @@ fn excess_ranges(
         .map(|e| i64::from(e.is_some_and(|x| x.abs() > WRONG_PEAK_EXCESS_M)))
         .collect();
     (excess, wrong)
+}
+
+/// The median of the largest group of `values` that lie within `radius` of one of them
+/// (the first such group in ascending order on a tie); the median of all when every
+/// group has one member. `values` must not be empty.
+pub fn consensus_m(values: &[f64], radius: f64) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    let (mut best_lo, mut best_hi) = (0, v.len());
+    let mut best_n = 1;
+    for &c in &v {
+        let lo = v.partition_point(|&x| x < c - radius);
+        let hi = v.partition_point(|&x| x <= c + radius);
+        if hi - lo > best_n {
+            (best_lo, best_hi, best_n) = (lo, hi, hi - lo);
+        }
+    }
+    let g = &v[best_lo..best_hi];
+    let n = g.len();
+    if n % 2 == 1 {
+        g[n / 2]
+    } else {
+        0.5 * (g[n / 2 - 1] + g[n / 2])
+    }
 }
 
 /// Position fixes (FM fingerprinting, magnetic landmarks).
