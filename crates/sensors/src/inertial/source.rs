@@ -312,7 +312,10 @@ pub struct PdrSensorConfig {
     /// The unit's IMU; default a `low` (consumer MEMS) grade at 100 Hz.
     #[serde(default)]
     pub imu: ImuConfig,
-    /// The magnetometer and the local field; default 54 µT, I = 59°, D = −7°, σ 0.5 µT.
+    /// The magnetometer: noise, hard and soft iron and their per-trial calibration
+    /// residuals. In a world it reads the world's field (IGRF-14 at the origin and start
+    /// date plus the scene's magnetic anomalies); its `total_ut`, `inclination_deg` and
+    /// `declination_deg` (default 54 µT, 59°, −7°) serve only a unit built without one.
     #[serde(default)]
     pub magnetometer: MagnetometerConfig,
     /// Step detection, Weinberg K and AHRS gains (`mag_gain = 0` for a gyro-only heading).
