@@ -15,7 +15,10 @@ use crate::measurement::{
     EpochOutcome, Estimate, Estimator, Measurement, MeasurementBatch, RangeDifference,
     RangeMeasurement, SourceKind, StepEvent,
 };
-use nalgebra::{Matrix2, Matrix3, Matrix4, SMatrix, SVector, Vector2, Vector3};
+use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector2, Vector3};
+
+/// The filter's covariance: `[x, y, e, ė, β, κ]`.
+type Matrix6 = SMatrix<f64, 6, 6>;
 use serde::{Deserialize, Serialize};
 
 use super::fixes::{ecef_cov, fixes_of_batch, Fix};
@@ -85,6 +88,29 @@ pub struct PdrFilterConfig {
     /// surge (±0.13 m/s for the default gait) moves it by centimetres about that.
     #[serde(default = "d_rd_floor")]
     pub range_difference_sigma_floor_m: f64,
+    /// 1-σ (°) of the AHRS heading offset β at the start, the slowly varying part of the
+    /// step headings' error (gyro bias held by the magnetometer loop, magnetometer
+    /// calibration residual); default none: the heading error is white from step to step
+    /// and the filter has no β state (the older model). When set, β is a filter state that
+    /// the fixes and range differences observe (see [`PdrEstimator`]).
+    #[serde(default)]
+    pub heading_offset_sigma_deg: Option<f64>,
+    /// Correlation time τ (s) of the heading offset β, a first-order Gauss–Markov process
+    /// of σ `heading_offset_sigma_deg`; default 150 s, the slow pole k_m/k_i of the
+    /// default AHRS (mag gain 0.3 /s, bias gain 0.002 /s²), with which the AHRS's integral
+    /// term learns the gyro bias and the offset it causes fades.
+    #[serde(default = "d_heading_offset_tau")]
+    pub heading_offset_time_constant_s: f64,
+    /// Relative 1-σ of the step-length scale error κ (the walker's Weinberg K calibration
+    /// error: every step length is L_true (1 + κ)); default none: step-length errors are
+    /// white and κ is no state. When set, κ is a constant state the fixes and range
+    /// differences observe.
+    #[serde(default)]
+    pub step_scale_sigma: Option<f64>,
+}
+
+fn d_heading_offset_tau() -> f64 {
+    150.0
 }
 
 impl Default for PdrFilterConfig {
@@ -100,6 +126,9 @@ impl Default for PdrFilterConfig {
             range_difference_calibration_s: d_calibration_s(),
             range_difference_sigma_floor_m: d_rd_floor(),
             range_difference_multipath_m_per_sqrt_s: d_rd_multipath(),
+            heading_offset_sigma_deg: None,
+            heading_offset_time_constant_s: d_heading_offset_tau(),
+            step_scale_sigma: None,
         }
     }
 }
@@ -175,6 +204,34 @@ impl PdrFilterConfig {
             3600.0,
             true,
             "a calibration time in s",
+        )?;
+        if let Some(sig) = self.heading_offset_sigma_deg {
+            check_range(
+                "heading_offset_sigma_deg",
+                sig,
+                0.0,
+                180.0,
+                true,
+                "a heading-offset σ in degrees",
+            )?;
+        }
+        if let Some(sig) = self.step_scale_sigma {
+            check_range(
+                "step_scale_sigma",
+                sig,
+                0.0,
+                0.5,
+                true,
+                "a relative step-length σ",
+            )?;
+        }
+        check_range(
+            "heading_offset_time_constant_s",
+            self.heading_offset_time_constant_s,
+            1e-3,
+            1e7,
+            true,
+            "a correlation time in s",
         )?;
         let q = self.range_difference_multipath_m_per_sqrt_s;
         if !(q.is_finite() && (0.0..=100.0).contains(&q)) {
@@ -286,8 +343,16 @@ pub struct PdrEstimator {
     up_m: f64,
     /// `[e, ė]` of the range differences.
     rd: Vector2<f64>,
-    /// Covariance of `[x, y, e, ė]`.
-    p: Matrix4<f64>,
+    /// The heading offset β (rad) the step headings carry, when it is a state.
+    beta_rad: f64,
+    /// Its σ at the start (rad); `None` when β is not a state.
+    beta_sigma_rad: Option<f64>,
+    /// The step-length scale error κ, when it is a state.
+    kappa: f64,
+    /// Its σ at the start; `None` when κ is not a state.
+    kappa_sigma: Option<f64>,
+    /// Covariance of `[x, y, e, ė, β]`.
+    p: Matrix6,
     anchor: Option<Anchor>,
     last_t: Option<GpsTime>,
     /// Time of the last step and the walking velocity of that step (east, north m/s).
@@ -318,9 +383,12 @@ impl PdrEstimator {
             .map(|s| Vector3::new(s[0], s[1], s.get(2).copied().unwrap_or(0.0)))
             .or(known_start_enu_m.filter(|s| s.iter().all(|v| v.is_finite())));
         let start_sigma_m = cfg.start_sigma_m;
-        let mut p = Matrix4::zeros();
+        let beta_sigma_rad = cfg.heading_offset_sigma_deg.map(f64::to_radians);
+        let mut p = Matrix6::zeros();
         p.fixed_view_mut::<2, 2>(0, 0)
             .copy_from(&(Matrix2::identity() * start_sigma_m * start_sigma_m));
+        p[(4, 4)] = beta_sigma_rad.map_or(0.0, |s| s * s);
+        p[(5, 5)] = cfg.step_scale_sigma.map_or(0.0, |s| s * s);
         Ok(Self {
             name: name.to_string(),
             cfg: cfg.clone(),
@@ -330,6 +398,10 @@ impl PdrEstimator {
             pos_en_m: start.map(|s| s.xy()),
             up_m: start.map_or(0.0, |s| s.z),
             rd: Vector2::zeros(),
+            beta_rad: 0.0,
+            beta_sigma_rad,
+            kappa: 0.0,
+            kappa_sigma: cfg.step_scale_sigma,
             p,
             anchor: None,
             last_t: None,
@@ -348,6 +420,20 @@ impl PdrEstimator {
     /// The horizontal covariance (m²).
     pub fn covariance_m2(&self) -> Matrix2<f64> {
         self.p.fixed_view::<2, 2>(0, 0).into_owned()
+    }
+
+    /// The estimated heading offset β and its σ (rad), when β is a state: the step
+    /// headings are taken as ψ − β.
+    pub fn heading_offset_rad(&self) -> Option<(f64, f64)> {
+        self.beta_sigma_rad
+            .map(|_| (self.beta_rad, self.p[(4, 4)].max(0.0).sqrt()))
+    }
+
+    /// The estimated step-length scale error κ and its σ, when κ is a state: the step
+    /// lengths are taken as L/(1 + κ).
+    pub fn step_scale(&self) -> Option<(f64, f64)> {
+        self.kappa_sigma
+            .map(|_| (self.kappa, self.p[(5, 5)].max(0.0).sqrt()))
     }
 
     /// The range-difference error states `[e, ė]` (m, m/s), once anchored.
@@ -391,7 +477,7 @@ impl PdrEstimator {
             sd * dt * dt / 2.0,
             sd * dt,
         );
-        let mut phi = Matrix4::identity();
+        let mut phi = Matrix6::identity();
         phi[(2, 3)] = dt;
         let mut p = phi * self.p * phi.transpose();
         let block = p.fixed_view::<2, 2>(2, 2) + qc;
@@ -420,8 +506,10 @@ impl PdrEstimator {
         if !ok {
             return false;
         }
-        let (sn, cs) = s.heading_rad.sin_cos();
-        let l = s.length_m;
+        let (sn, cs) = (s.heading_rad - self.beta_rad).sin_cos();
+        // The length corrected for the scale error, L/(1 + κ̂) (κ̂ stays 0 when κ is no
+        // state; it is kept above −0.9 so the division cannot blow up).
+        let l = s.length_m / (1.0 + self.kappa.max(-0.9));
         let new_pos = pos + Vector2::new(sn, cs) * l;
         let j = Matrix2::new(sn, l * cs, cs, -l * sn);
         let q = Matrix2::new(
@@ -430,10 +518,31 @@ impl PdrEstimator {
             0.0,
             s.sigma_heading_rad * s.sigma_heading_rad,
         );
-        let new_pp = self.p.fixed_view::<2, 2>(0, 0) + j * q * j.transpose();
-        if new_pos.iter().chain(new_pp.iter()).all(|v| v.is_finite()) {
+        let mut new_p = self.p;
+        if self.beta_sigma_rad.is_some() || self.kappa_sigma.is_some() {
+            // The position moves along ψ − β: ∂(x, y)/∂β = −L (cos, −sin); β is a
+            // Gauss–Markov process of correlation time τ between steps.
+            let dt = self
+                .last_step
+                .map_or(0.0, |(tp, _)| t.seconds_since(tp).clamp(0.0, 60.0));
+            let phi_b = (-dt / self.cfg.heading_offset_time_constant_s).exp();
+            let mut phi = Matrix6::identity();
+            phi[(0, 4)] = -l * cs;
+            phi[(1, 4)] = l * sn;
+            phi[(4, 4)] = phi_b;
+            // ∂(x, y)/∂κ = −L/(1 + κ̂) (sin, cos).
+            let dl = -l / (1.0 + self.kappa.max(-0.9));
+            phi[(0, 5)] = dl * sn;
+            phi[(1, 5)] = dl * cs;
+            new_p = phi * self.p * phi.transpose();
+            let s0 = self.beta_sigma_rad.unwrap_or(0.0);
+            new_p[(4, 4)] += s0 * s0 * (1.0 - phi_b * phi_b);
+        }
+        let new_pp = new_p.fixed_view::<2, 2>(0, 0) + j * q * j.transpose();
+        new_p.fixed_view_mut::<2, 2>(0, 0).copy_from(&new_pp);
+        if new_pos.iter().chain(new_p.iter()).all(|v| v.is_finite()) {
             self.pos_en_m = Some(new_pos);
-            self.p.fixed_view_mut::<2, 2>(0, 0).copy_from(&new_pp);
+            self.p = 0.5 * (new_p + new_p.transpose());
             // The walking velocity of this step, for range differences between steps.
             let vel = match self.last_step {
                 Some((t_prev, _)) => {
@@ -464,8 +573,11 @@ impl PdrEstimator {
             }
             self.pos_en_m = Some(z);
             self.up_m = f.pos_enu_m.z;
-            self.p = Matrix4::zeros();
+            let (var_beta, var_kappa) = (self.p[(4, 4)], self.p[(5, 5)]);
+            self.p = Matrix6::zeros();
             self.p.fixed_view_mut::<2, 2>(0, 0).copy_from(&r);
+            self.p[(4, 4)] = var_beta;
+            self.p[(5, 5)] = var_kappa;
             self.anchor = None;
             self.rd = Vector2::zeros();
             return PdrUpdate::Anchored;
@@ -480,18 +592,20 @@ impl PdrEstimator {
             return PdrUpdate::Gated;
         }
         // K = P Hᵀ S⁻¹ = (S⁻¹ H P)ᵀ, Joseph form.
-        let hp: SMatrix<f64, 2, 4> = self.p.fixed_rows::<2>(0).into_owned();
+        let hp: SMatrix<f64, 2, 6> = self.p.fixed_rows::<2>(0).into_owned();
         let k = chol.solve(&hp).transpose();
-        let mut h = SMatrix::<f64, 2, 4>::zeros();
+        let mut h = SMatrix::<f64, 2, 6>::zeros();
         h.fixed_view_mut::<2, 2>(0, 0)
             .copy_from(&Matrix2::identity());
-        let ikh = Matrix4::identity() - k * h;
+        let ikh = Matrix6::identity() - k * h;
         let new_p = ikh * self.p * ikh.transpose() + k * r * k.transpose();
         let dx = k * innov;
         let new_pos = pos + dx.fixed_rows::<2>(0);
         if new_pos.iter().chain(new_p.iter()).all(|v| v.is_finite()) {
             self.pos_en_m = Some(new_pos);
             self.rd += dx.fixed_rows::<2>(2);
+            self.beta_rad += dx[4];
+            self.kappa += dx[5];
             self.p = 0.5 * (new_p + new_p.transpose());
             PdrUpdate::Used { nis, dof: 2 }
         } else {
@@ -544,8 +658,20 @@ impl PdrEstimator {
                 let var_rate = crate::core::C_MPS.powi(2)
                     * (h0 / (2.0 * t_cal) + 2.0 * std::f64::consts::PI.powi(2) * hm2 * t_cal / 3.0);
                 self.rd = Vector2::zeros();
-                let mut p = Matrix4::zeros();
+                // e = −uᵀ δp at the anchor, so it correlates with β as the position does.
+                let mut p = Matrix6::zeros();
                 p.fixed_view_mut::<2, 2>(0, 0).copy_from(&pp);
+                for j in 4..6 {
+                    let pb = Vector2::new(self.p[(0, j)], self.p[(1, j)]);
+                    p[(0, j)] = pb.x;
+                    p[(1, j)] = pb.y;
+                    p[(j, 0)] = pb.x;
+                    p[(j, 1)] = pb.y;
+                    p[(2, j)] = -u.dot(&pb);
+                    p[(j, 2)] = -u.dot(&pb);
+                }
+                p.fixed_view_mut::<2, 2>(4, 4)
+                    .copy_from(&self.p.fixed_view::<2, 2>(4, 4));
                 p[(0, 2)] = -pu.x;
                 p[(1, 2)] = -pu.y;
                 p[(2, 0)] = -pu.x;
@@ -570,7 +696,9 @@ impl PdrEstimator {
             sigma_m: sigma,
         };
         let x = SVector::<f64, 4>::new(pos.x, pos.y, self.rd.x, self.rd.y);
-        let h = model.jacobian(&x);
+        let mut h = SMatrix::<f64, 1, 6>::zeros();
+        h.fixed_view_mut::<1, 4>(0, 0)
+            .copy_from(&model.jacobian(&x));
         let nu = m.delta_range_m - model.h(&x)[0];
         let ph = self.p * h.transpose();
         let s = (h * ph)[(0, 0)] + sigma * sigma;
@@ -578,12 +706,14 @@ impl PdrEstimator {
             return PdrUpdate::Failed;
         }
         let k = ph / s;
-        let ikh = Matrix4::identity() - k * h;
+        let ikh = Matrix6::identity() - k * h;
         let new_p = ikh * self.p * ikh.transpose() + k * k.transpose() * (sigma * sigma);
         let dx = k * nu;
         if dx.iter().chain(new_p.iter()).all(|v| v.is_finite()) {
             self.pos_en_m = Some(pos + dx.fixed_rows::<2>(0));
             self.rd += dx.fixed_rows::<2>(2);
+            self.beta_rad += dx[4];
+            self.kappa += dx[5];
             self.p = 0.5 * (new_p + new_p.transpose());
             PdrUpdate::Used {
                 nis: nu * nu / s,
@@ -697,10 +827,14 @@ impl Estimator for PdrEstimator {
     /// Dead reckoning restarts from the next fix, with the start's uncertainty.
     fn reset(&mut self) {
         self.pos_en_m = None;
-        self.p = Matrix4::zeros();
+        self.p = Matrix6::zeros();
         self.p
             .fixed_view_mut::<2, 2>(0, 0)
             .copy_from(&(Matrix2::identity() * self.start_sigma_m * self.start_sigma_m));
+        self.p[(4, 4)] = self.beta_sigma_rad.map_or(0.0, |s| s * s);
+        self.beta_rad = 0.0;
+        self.p[(5, 5)] = self.kappa_sigma.map_or(0.0, |s| s * s);
+        self.kappa = 0.0;
         self.anchor = None;
         self.rd = Vector2::zeros();
         self.last_step = None;
