@@ -1049,4 +1049,154 @@ mod tests {
         assert!(without > 0.5, "{without}");
         assert!(with < 0.7 * without, "{with} vs {without}");
     }
+
+    /// One synthetic walk of a square loop (10 m sides, 0.5 m steps every 0.5 s) whose step
+    /// headings carry a heading offset β (a Gauss–Markov process of σ `beta_sigma`, τ
+    /// `tau_s`, or constant when `tau_s` is infinite) plus white noise, and whose lengths
+    /// carry a scale error (1 + κ) plus white noise; a position fix of σ 0.5 m every
+    /// `fix_every` steps. Returns the filter and the per-epoch 2-D NEES of its position
+    /// after each step.
+    #[allow(clippy::too_many_arguments)]
+    fn synthetic_walk(
+        seed: u64,
+        cfg: &PdrFilterConfig,
+        beta0_rad: f64,
+        beta_sigma_rad: f64,
+        tau_s: f64,
+        kappa: f64,
+        steps: usize,
+        fix_every: usize,
+    ) -> (PdrEstimator, Vec<f64>) {
+        use rand_distr::{Distribution, StandardNormal};
+        let f = frame();
+        let rng = crate::core::TrialRng::new(seed, 0);
+        let mut noise = rng.stream("walk");
+        let mut g = move || -> f64 { StandardNormal.sample(&mut noise) };
+        let start = GpsTime::from_week_tow(2300, 0.0);
+        let mut est = PdrEstimator::new("PDR", cfg, &[], &f, Some(Vector3::zeros())).unwrap();
+        let (sig_l, sig_psi, sig_fix) = (0.02, 0.02, 0.5);
+        let mut truth = Vector2::zeros();
+        let mut beta = beta0_rad;
+        let phi = (-0.5 / tau_s).exp();
+        let mut nees = Vec::with_capacity(steps);
+        for k in 0..steps {
+            let t = start.add_seconds(0.5 * (k + 1) as f64);
+            // Counter-clockwise square: east, north, west, south, 20 steps a side.
+            let psi = ((k / 20) % 4) as f64 * -std::f64::consts::FRAC_PI_2
+                + std::f64::consts::FRAC_PI_2;
+            truth += Vector2::new(psi.sin(), psi.cos()) * 0.5;
+            beta = phi * beta + (1.0 - phi * phi).sqrt() * beta_sigma_rad * g();
+            let step = MeasurementBatch {
+                t,
+                source: SourceKind::Pdr,
+                items: vec![Measurement::Step(StepEvent {
+                    length_m: 0.5 * (1.0 + kappa) + sig_l * g(),
+                    sigma_length_m: sig_l,
+                    heading_rad: psi + beta + sig_psi * g(),
+                    sigma_heading_rad: sig_psi,
+                })],
+                ..Default::default()
+            };
+            est.process(&step);
+            if (k + 1) % fix_every == 0 {
+                let z = Vector3::new(truth.x + sig_fix * g(), truth.y + sig_fix * g(), 0.0);
+                let cov = Matrix3::from_diagonal(&Vector3::new(
+                    sig_fix * sig_fix,
+                    sig_fix * sig_fix,
+                    1.0,
+                ));
+                let b = MeasurementBatch {
+                    t,
+                    source: SourceKind::Fm,
+                    items: vec![Measurement::Position(PositionFix {
+                        pos_ecef_m: f.ecef_of_enu(&z),
+                        cov_m2: ecef_cov(&f, &cov),
+                        support: 0,
+                    })],
+                    ..Default::default()
+                };
+                est.process(&b);
+            }
+            let e = est.position_en_m().unwrap() - truth;
+            let pinv = est.covariance_m2().try_inverse().unwrap();
+            nees.push(e.dot(&(pinv * e)));
+        }
+        (est, nees)
+    }
+
+    #[test]
+    fn a_constant_heading_offset_and_step_scale_are_learnt_from_fixes() {
+        // Truth: β = 6° and κ = +6 % for the whole walk (τ infinite); the filter is told
+        // σ_β = 10°, σ_κ = 8 %. After two laps with a fix every 10 steps its estimates
+        // must hold the truth within 3σ, and σ must have shrunk to under half the prior.
+        let cfg = PdrFilterConfig {
+            fix_sources: vec![SourceKind::Fm],
+            heading_offset_sigma_deg: Some(10.0),
+            heading_offset_time_constant_s: 1.0e7,
+            step_scale_sigma: Some(0.08),
+            ..Default::default()
+        };
+        let (beta, kappa) = (6f64.to_radians(), 0.06);
+        for seed in 0..10 {
+            let (est, _) = synthetic_walk(seed, &cfg, beta, 0.0, f64::INFINITY, kappa, 160, 10);
+            let (b, sb) = est.heading_offset_rad().unwrap();
+            let (kk, sk) = est.step_scale().unwrap();
+            assert!(sb < 1.5f64.to_radians(), "σ_β {}°", sb.to_degrees());
+            assert!(sk < 0.04, "σ_κ {sk}");
+            assert!(
+                (b - beta).abs() < 3.0 * sb,
+                "seed {seed}: β̂ {:.2}° ± {:.2}° vs 6°",
+                b.to_degrees(),
+                sb.to_degrees()
+            );
+            assert!((kk - kappa).abs() < 3.0 * sk, "seed {seed}: κ̂ {kk} ± {sk} vs 0.06");
+        }
+        // Without the states the same walk's last error is far outside the filter's σ.
+        let old = PdrFilterConfig {
+            fix_sources: vec![SourceKind::Fm],
+            ..Default::default()
+        };
+        let (_, nees_old) = synthetic_walk(0, &old, beta, 0.0, f64::INFINITY, kappa, 160, 10);
+        let mean_old = nees_old.iter().sum::<f64>() / nees_old.len() as f64;
+        assert!(mean_old > 10.0, "mean NEES without states {mean_old}");
+    }
+
+    #[test]
+    fn the_filter_nees_over_many_walks_is_within_its_chi_square_band() {
+        // The truth follows the filter's own model: β a Gauss–Markov process of σ 5°,
+        // τ 60 s, drawn at the start from its prior; κ ~ N(0, 0.08²); fixes every 40 steps.
+        // The 2-D position NEES after the last step (independent across walks) must
+        // average 2: over 200 walks the mean of χ²(2) has σ 2/√200 = 0.14, so the 99 %
+        // band is 2 ± 0.37.
+        let cfg = PdrFilterConfig {
+            fix_sources: vec![SourceKind::Fm],
+            heading_offset_sigma_deg: Some(5.0),
+            heading_offset_time_constant_s: 60.0,
+            step_scale_sigma: Some(0.08),
+            ..Default::default()
+        };
+        use rand_distr::{Distribution, StandardNormal};
+        let (n, mut last, mut mid) = (200u64, 0.0, 0.0);
+        for seed in 0..n {
+            let mut prior = crate::core::TrialRng::new(seed, 1).stream("prior");
+            let b0: f64 = StandardNormal.sample(&mut prior);
+            let k0: f64 = StandardNormal.sample(&mut prior);
+            let (_, nees) = synthetic_walk(
+                seed,
+                &cfg,
+                5f64.to_radians() * b0,
+                5f64.to_radians(),
+                60.0,
+                0.08 * k0,
+                235,
+                40,
+            );
+            last += nees[234];
+            mid += nees[99];
+        }
+        let (last, mid) = (last / n as f64, mid / n as f64);
+        println!("mean NEES over {n} walks: step 100 {mid:.3}, step 235 {last:.3}");
+        assert!((last - 2.0).abs() < 0.37, "{last}");
+        assert!((mid - 2.0).abs() < 0.37, "{mid}");
+    }
 }
