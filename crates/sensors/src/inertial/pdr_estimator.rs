@@ -311,9 +311,25 @@ struct Anchor {
 ///
 /// (seed 002's x_t = x_{t−1} + v Δt cos θ with θ = π/2 − ψ and v Δt = L), and, when fixes
 /// come, the Kalman update with H = I₂ and the horizontal block of the fix covariance. The
-/// up coordinate stays at the start's. The step covariance treats heading errors as
-/// independent from step to step, so it understates the drift of a biased heading; the
-/// 5-state EKF of seed 002 that estimates θ̇ and v is the fusion module's.
+/// up coordinate stays at the start's.
+///
+/// # Heading offset and step scale (`heading_offset_sigma_deg`, `step_scale_sigma`)
+///
+/// Seed 002 §4.2's EKF (state [x, y, θ̇, θ, v]) observes the AHRS heading as θ + δ₄ with
+/// white δ₄, as the plain step covariance above does. A phone's heading error is not
+/// white but a slowly varying offset (the gyro bias the AHRS's magnetometer loop holds,
+/// the hard-iron compass deviation), and the Weinberg K error is one scale for the walk.
+/// When configured, both are states (augmentation for coloured measurement noise): the
+/// state is `[x, y, e, ė, β, κ]`, a step moves the position along ψ − β̂ by L/(1 + κ̂),
+///
+/// ```text
+/// Φ[x,β] = −L' cos ψ',  Φ[y,β] = L' sin ψ',  Φ[x,κ] = −L' sin ψ'/(1+κ̂),  Φ[y,κ] = −L' cos ψ'/(1+κ̂)
+/// β ← e^{−Δt/τ} β,  Q_β = σ_β² (1 − e^{−2Δt/τ}),   κ constant
+/// ```
+///
+/// (ψ' = ψ − β̂, L' = L/(1 + κ̂), Δt the time between steps), and the fixes and range
+/// differences observe β and κ through the position. Unset, β and κ have zero variance
+/// and stay 0: the filter is the plain one.
 ///
 /// # Range differences (`range_difference_sources`)
 ///
@@ -1082,8 +1098,8 @@ mod tests {
         for k in 0..steps {
             let t = start.add_seconds(0.5 * (k + 1) as f64);
             // Counter-clockwise square: east, north, west, south, 20 steps a side.
-            let psi = ((k / 20) % 4) as f64 * -std::f64::consts::FRAC_PI_2
-                + std::f64::consts::FRAC_PI_2;
+            let psi =
+                ((k / 20) % 4) as f64 * -std::f64::consts::FRAC_PI_2 + std::f64::consts::FRAC_PI_2;
             truth += Vector2::new(psi.sin(), psi.cos()) * 0.5;
             beta = phi * beta + (1.0 - phi * phi).sqrt() * beta_sigma_rad * g();
             let step = MeasurementBatch {
@@ -1149,7 +1165,10 @@ mod tests {
                 b.to_degrees(),
                 sb.to_degrees()
             );
-            assert!((kk - kappa).abs() < 3.0 * sk, "seed {seed}: κ̂ {kk} ± {sk} vs 0.06");
+            assert!(
+                (kk - kappa).abs() < 3.0 * sk,
+                "seed {seed}: κ̂ {kk} ± {sk} vs 0.06"
+            );
         }
         // Without the states the same walk's last error is far outside the filter's σ.
         let old = PdrFilterConfig {
