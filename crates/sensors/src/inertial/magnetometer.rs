@@ -1,5 +1,6 @@
-//! A constant Earth magnetic field and a three-axis magnetometer, enough for the AHRS of
-//! the PDR (a later issue brings a proper field model, e.g. the IGRF or WMM).
+//! A three-axis magnetometer with hard and soft iron, and a constant field given by its
+//! elements (the world's PDR reads the IGRF-14 field plus the scene's anomalies instead,
+//! `crate::magnetic`).
 //!
 //! The field in ENU for total intensity F, inclination I (positive down) and declination D
 //! (positive east of true north) is
@@ -9,7 +10,9 @@
 //! ```
 //!
 //! and the magnetometer reads m̃^b = S C_n^b B^n + b_hard + w, w ~ N(0, σ²) per axis, with
-//! a constant hard-iron offset b_hard and a soft-iron matrix S (identity by default).
+//! a constant hard-iron offset b_hard and a soft-iron matrix S (identity by default). A phone
+//! calibrates both in the field (the figure-of-eight of AN4246), and what the calibration
+//! leaves is drawn per trial: b_hard += N(0, σ_h² I), S += [N(0, σ_s²)] elementwise.
 //! [`Magnetometer::measure_in_field`] reads a field that varies with position (the Earth's
 //! field plus ferromagnetic anomalies, `crate::magnetic`); [`Magnetometer::measure`] reads
 //! the constant field of the configuration.
@@ -56,6 +59,15 @@ pub struct MagnetometerConfig {
     /// phones show a few per cent of scale and cross-axis coupling.
     #[serde(default = "d_soft_iron")]
     pub soft_iron: [[f64; 3]; 3],
+    /// σ per axis of the hard-iron offset left after the phone's in-field calibration
+    /// (µT), drawn once per trial and added to `hard_iron_ut`; default 0.
+    #[serde(default)]
+    pub hard_iron_residual_ut: f64,
+    /// σ of each element of the soft-iron matrix left after the in-field calibration
+    /// (dimensionless: 0.02 = 2 % scale and cross-axis), drawn once per trial and added to
+    /// `soft_iron`; default 0.
+    #[serde(default)]
+    pub soft_iron_residual: f64,
 }
 
 fn d_soft_iron() -> [[f64; 3]; 3] {
@@ -71,6 +83,8 @@ impl Default for MagnetometerConfig {
             noise_ut: d_noise(),
             hard_iron_ut: [0.0; 3],
             soft_iron: d_soft_iron(),
+            hard_iron_residual_ut: 0.0,
+            soft_iron_residual: 0.0,
         }
     }
 }
@@ -118,6 +132,20 @@ impl MagnetometerConfig {
             0.0,
             100.0,
             "a noise σ in µT (non-negative)",
+        )?;
+        chk(
+            "hard_iron_residual_ut",
+            self.hard_iron_residual_ut,
+            0.0,
+            100.0,
+            "a residual σ in µT (non-negative)",
+        )?;
+        chk(
+            "soft_iron_residual",
+            self.soft_iron_residual,
+            0.0,
+            0.2,
+            "a residual σ (non-negative, 0.2 = 20 %)",
         )?;
         if !self
             .hard_iron_ut
@@ -186,17 +214,55 @@ pub struct Magnetometer {
 impl Magnetometer {
     /// A magnetometer drawing its noise from `rng` (e.g. the stream `"inertial/mag"`).
     ///
+    /// When the configuration has calibration residuals, this trial's phone is drawn first
+    /// from the same stream: three N(0, σ_h²) hard-iron offsets, then nine N(0, σ_s²)
+    /// soft-iron elements (row by row), added to the configured `hard_iron_ut` and
+    /// `soft_iron`. Without residuals nothing is drawn, so the noise sequence is as before.
+    /// A drawn soft-iron matrix whose determinant is not above 0.1 is refused (it would
+    /// take a residual σ far above the 0.2 the validation allows).
+    ///
     /// # Errors
     /// The first [`ConfigIssue`] of [`MagnetometerConfig::validate`].
-    pub fn new(cfg: &MagnetometerConfig, rng: StreamRng) -> Result<Self, ConfigIssue> {
+    pub fn new(cfg: &MagnetometerConfig, mut rng: StreamRng) -> Result<Self, ConfigIssue> {
         cfg.validate()?;
+        let mut hard_iron_ut = Vector3::from(cfg.hard_iron_ut);
+        let mut soft_iron = cfg.soft_iron_matrix();
+        if cfg.hard_iron_residual_ut > 0.0 {
+            for k in 0..3 {
+                hard_iron_ut[k] += cfg.hard_iron_residual_ut * rng.sample::<f64, _>(StandardNormal);
+            }
+        }
+        if cfg.soft_iron_residual > 0.0 {
+            for i in 0..3 {
+                for j in 0..3 {
+                    soft_iron[(i, j)] +=
+                        cfg.soft_iron_residual * rng.sample::<f64, _>(StandardNormal);
+                }
+            }
+            if soft_iron.determinant().is_nan() || soft_iron.determinant() <= 0.1 {
+                return Err(ConfigIssue::new(
+                    "soft_iron_residual",
+                    format!("the drawn soft-iron matrix {soft_iron:?} is degenerate"),
+                ));
+            }
+        }
         Ok(Self {
             field_enu_ut: cfg.field_enu_ut(),
-            hard_iron_ut: Vector3::from(cfg.hard_iron_ut),
-            soft_iron: cfg.soft_iron_matrix(),
+            hard_iron_ut,
+            soft_iron,
             noise_ut: cfg.noise_ut,
             rng,
         })
+    }
+
+    /// This phone's hard-iron offset (µT, body axes), configured plus drawn residual.
+    pub fn hard_iron_ut(&self) -> Vector3<f64> {
+        self.hard_iron_ut
+    }
+
+    /// This phone's soft-iron matrix, configured plus drawn residual.
+    pub fn soft_iron(&self) -> Matrix3<f64> {
+        self.soft_iron
     }
 
     /// The reading m̃^b (µT) of a body with attitude `q_nb`. Does not allocate.
@@ -226,6 +292,53 @@ impl Magnetometer {
 mod tests {
     use super::*;
     use crate::core::TrialRng;
+
+    #[test]
+    fn distorted_field_on_a_full_rotation_lies_on_the_ellipsoid() {
+        // With m = S C B + b, every reading satisfies (m − b)ᵀ (S Sᵀ)⁻¹ (m − b) = |B|², the
+        // ellipsoid of AN4246 §4, whatever the attitude. Rotate the phone through a grid of
+        // yaw, pitch and roll (a "figure of eight" covering the sphere) and check it, with
+        // residuals drawn per trial; then check the ellipsoid is not the sphere (the drawn
+        // phone really is distorted) and that the drawn offset has the configured spread.
+        use crate::inertial::attitude::attitude_from_euler;
+        let cfg = MagnetometerConfig {
+            noise_ut: 0.0,
+            hard_iron_ut: [3.0, -1.0, 2.0],
+            hard_iron_residual_ut: 2.0,
+            soft_iron_residual: 0.03,
+            ..MagnetometerConfig::default()
+        };
+        let field = cfg.field_enu_ut();
+        let f2 = field.norm_squared();
+        let mut spread = 0.0;
+        let n_phones = 400;
+        for seed in 0..n_phones {
+            let mut m = Magnetometer::new(&cfg, TrialRng::new(seed, 0).stream("t")).unwrap();
+            let (b, s) = (m.hard_iron_ut(), m.soft_iron());
+            let a = (s * s.transpose()).try_inverse().unwrap();
+            let mut off_sphere = 0.0f64;
+            for i in 0..12 {
+                for j in 0..7 {
+                    for k in 0..4 {
+                        let q = attitude_from_euler(
+                            0.5 * f64::from(k),
+                            -1.4 + 0.45 * f64::from(j),
+                            f64::from(i) * std::f64::consts::TAU / 12.0,
+                        );
+                        let r = m.measure_in_field(&q, &field) - b;
+                        let e = (r.transpose() * a * r)[(0, 0)];
+                        assert!((e - f2).abs() < 1e-9 * f2, "{e} vs {f2}");
+                        off_sphere = off_sphere.max((r.norm() - field.norm()).abs());
+                    }
+                }
+            }
+            assert!(off_sphere > 0.05, "seed {seed}: {off_sphere}");
+            spread += (b - Vector3::new(3.0, -1.0, 2.0)).norm_squared();
+        }
+        // E|Δb|² = 3σ² = 12 µT²; 400 draws: the sample mean is within ±0.85 µT² (1σ).
+        let mean = spread / n_phones as f64;
+        assert!((mean - 12.0).abs() < 3.0, "{mean}");
+    }
 
     #[test]
     fn soft_and_hard_iron_apply_in_body_axes() {

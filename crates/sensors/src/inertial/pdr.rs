@@ -80,6 +80,10 @@ pub struct PdrConfig {
     /// Weinberg constant K (m / (m/s²)^¼); default 0.364.
     #[serde(default = "d_k")]
     pub weinberg_k: f64,
+    /// Relative σ of the walker's calibration error of K: each trial's phone uses
+    /// K (1 + ε), ε ~ N(0, σ²) drawn once (stream `imu/pdr/step`); default 0 (K exact).
+    #[serde(default)]
+    pub weinberg_k_error: f64,
     /// AHRS accelerometer gain k_a (rad/s per unit error); default 0.3.
     #[serde(default = "d_ka")]
     pub accel_gain: f64,
@@ -99,6 +103,7 @@ impl Default for PdrConfig {
             rearm_threshold_mps2: d_rearm(),
             min_step_interval_s: d_min_int(),
             weinberg_k: d_k(),
+            weinberg_k_error: 0.0,
             accel_gain: d_ka(),
             mag_gain: d_km(),
             bias_gain: d_ki(),
@@ -156,6 +161,13 @@ impl PdrConfig {
             0.01,
             2.0,
             "a Weinberg constant",
+        )?;
+        chk(
+            "weinberg_k_error",
+            self.weinberg_k_error,
+            0.0,
+            0.3,
+            "a relative σ (non-negative, 0.3 = 30 %)",
         )?;
         chk(
             "accel_gain",
@@ -484,6 +496,125 @@ mod tests {
         assert!(
             (peak - std::f64::consts::FRAC_1_SQRT_2).abs() < 0.01,
             "{peak}"
+        );
+    }
+
+    /// A straight walk north of `len_m` at 1.2 m/s (seed 002's pace), handheld phone.
+    fn straight_walk(seed: u64, len_m: f64) -> crate::inertial::attitude::PlatformTruth {
+        use crate::core::TrialRng;
+        use crate::inertial::attitude::{Platform, PlatformConfig, PlatformTruth};
+        use crate::motion::TrajectoryConfig;
+        let traj = TrajectoryConfig::Waypoints {
+            points_enu_m: vec![vec![0.0, 0.0], vec![0.0, len_m]],
+            speed_mps: 1.2,
+            accel_mps2: Some(0.5),
+            lateral_accel_mps2: None,
+            dwell_s: None,
+            leg_speeds_mps: None,
+            stops: None,
+            laps: None,
+            height_m: None,
+        }
+        .build(&mut TrialRng::new(seed, 0).stream("motion/trajectory"))
+        .unwrap();
+        let cfg = PlatformConfig {
+            platform: Platform::Handheld,
+            ..Default::default()
+        };
+        PlatformTruth::new(traj, &cfg, &mut TrialRng::new(seed, 0).stream("gait")).unwrap()
+    }
+
+    /// Runs the detector with K = 1 on the ideal IMU of `walk`: each step's
+    /// (a_max − a_min)^¼, in order.
+    fn fourth_roots(walk: &crate::inertial::attitude::PlatformTruth) -> Vec<f64> {
+        use crate::inertial::attitude::ideal_imu;
+        let cfg = PdrConfig {
+            weinberg_k: 1.0,
+            ..PdrConfig::default()
+        };
+        let rate = 100.0;
+        let mut det = StepDetector::new(&cfg, rate).unwrap();
+        let earth = LocalEarth::new(0.53, 10.0);
+        let n = (walk.duration_s() * rate) as usize;
+        (0..=n)
+            .filter_map(|k| {
+                let t = k as f64 / rate;
+                let (_, f) = ideal_imu(&walk.sample(t), &earth);
+                det.update(t, &f).map(|(_, len, _)| len)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn weinberg_length_with_zero_calibration_error_matches_the_gait() {
+        // The walker calibrates K once, as Weinberg (AN-602) prescribes: walk a known
+        // distance, K = distance / Σ (a_max − a_min)^¼. With that K (zero calibration
+        // error) the Weinberg steps of a second walk (other cadence and intensity draws)
+        // must add up to its true length, and their mean must be the truth gait's mean
+        // step (the walked distance over the true step count).
+        let cal = straight_walk(1, 60.0);
+        let k_cal = 60.0 / fourth_roots(&cal).iter().sum::<f64>();
+        let walk = straight_walk(2, 90.0);
+        let roots = fourth_roots(&walk);
+        let true_steps = walk.true_step_times_s().len();
+        let weinberg_total: f64 = roots.iter().map(|r| k_cal * r).sum();
+        let true_mean = 90.0 / true_steps as f64;
+        let weinberg_mean = weinberg_total / roots.len() as f64;
+        println!(
+            "K_cal {k_cal:.4}; {} detected / {true_steps} true steps; mean step {weinberg_mean:.4} m \
+             vs truth {true_mean:.4} m; total {weinberg_total:.2} m vs 90 m",
+            roots.len()
+        );
+        assert!(
+            (weinberg_total - 90.0).abs() < 0.03 * 90.0,
+            "{weinberg_total}"
+        );
+        assert!((weinberg_mean / true_mean - 1.0).abs() < 0.03);
+        // A calibration error ε scales every step by exactly (1 + ε).
+        let eps = 0.08;
+        let off: f64 = roots.iter().map(|r| k_cal * (1.0 + eps) * r).sum();
+        assert!((off / weinberg_total - (1.0 + eps)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn ahrs_heading_drift_with_a_constant_gyro_bias_is_bias_times_time() {
+        // A phone held level and still, a constant gyro bias b about the vertical, no
+        // magnetometer (mag_gain 0) and no bias estimation (bias_gain 0): the heading
+        // drifts by exactly b·t (the accelerometer term only levels, it cannot see yaw).
+        // The gyro reads the Earth rate plus the bias, as a real gyro does; the AHRS removes
+        // the Earth rate it knows.
+        use crate::inertial::attitude::attitude_from_euler;
+        let earth = LocalEarth::new(0.53, 10.0);
+        let cfg = PdrConfig {
+            mag_gain: 0.0,
+            bias_gain: 0.0,
+            ..PdrConfig::default()
+        };
+        let q = attitude_from_euler(0.3, 0.0, 0.0);
+        let g_up = Vector3::new(0.0, 0.0, 9.79);
+        let f_b = q.inverse() * g_up;
+        let field = Vector3::new(-2.6, 33.8, -36.5);
+        let mut ahrs = Ahrs::align(&f_b, &(q.inverse() * field), &field, earth, &cfg);
+        let bias_rps = (3.0f64).to_radians(); // BMI160's typical zero-rate offset, 3 °/s
+        let w_b = q.inverse() * earth.omega_ie_enu_rps + Vector3::new(0.0, 0.0, bias_rps);
+        let rate = 100.0;
+        let t_end = 60.0;
+        let h0 = ahrs.heading_rad();
+        for k in 0..=(t_end * rate) as usize {
+            let s = ImuSample {
+                t_s: k as f64 / rate,
+                gyro_rps: w_b,
+                accel_mps2: f_b,
+            };
+            ahrs.update(&s, None);
+        }
+        // A positive rate about body z (up) turns the nose towards the west: the heading
+        // (clockwise from north) falls by b·t.
+        let drift = (h0 - ahrs.heading_rad()).rem_euclid(TAU);
+        let expect = bias_rps * t_end;
+        assert!(
+            (drift - expect).abs() < 1e-6,
+            "drift {drift} rad vs b·t {expect} rad"
         );
     }
 

@@ -15,7 +15,10 @@ use crate::measurement::{
     EpochOutcome, Estimate, Estimator, Measurement, MeasurementBatch, RangeDifference,
     RangeMeasurement, SourceKind, StepEvent,
 };
-use nalgebra::{Matrix2, Matrix3, Matrix4, SMatrix, SVector, Vector2, Vector3};
+use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector2, Vector3};
+
+/// The filter's covariance: `[x, y, e, ė, β, κ]`.
+type Matrix6 = SMatrix<f64, 6, 6>;
 use serde::{Deserialize, Serialize};
 
 use super::fixes::{ecef_cov, fixes_of_batch, Fix};
@@ -85,6 +88,29 @@ pub struct PdrFilterConfig {
     /// surge (±0.13 m/s for the default gait) moves it by centimetres about that.
     #[serde(default = "d_rd_floor")]
     pub range_difference_sigma_floor_m: f64,
+    /// 1-σ (°) of the AHRS heading offset β at the start, the slowly varying part of the
+    /// step headings' error (gyro bias held by the magnetometer loop, magnetometer
+    /// calibration residual); default none: the heading error is white from step to step
+    /// and the filter has no β state (the older model). When set, β is a filter state that
+    /// the fixes and range differences observe (see [`PdrEstimator`]).
+    #[serde(default)]
+    pub heading_offset_sigma_deg: Option<f64>,
+    /// Correlation time τ (s) of the heading offset β, a first-order Gauss–Markov process
+    /// of σ `heading_offset_sigma_deg`; default 150 s, the slow pole k_m/k_i of the
+    /// default AHRS (mag gain 0.3 /s, bias gain 0.002 /s²), with which the AHRS's integral
+    /// term learns the gyro bias and the offset it causes fades.
+    #[serde(default = "d_heading_offset_tau")]
+    pub heading_offset_time_constant_s: f64,
+    /// Relative 1-σ of the step-length scale error κ (the walker's Weinberg K calibration
+    /// error: every step length is L_true (1 + κ)); default none: step-length errors are
+    /// white and κ is no state. When set, κ is a constant state the fixes and range
+    /// differences observe.
+    #[serde(default)]
+    pub step_scale_sigma: Option<f64>,
+}
+
+fn d_heading_offset_tau() -> f64 {
+    150.0
 }
 
 impl Default for PdrFilterConfig {
@@ -100,6 +126,9 @@ impl Default for PdrFilterConfig {
             range_difference_calibration_s: d_calibration_s(),
             range_difference_sigma_floor_m: d_rd_floor(),
             range_difference_multipath_m_per_sqrt_s: d_rd_multipath(),
+            heading_offset_sigma_deg: None,
+            heading_offset_time_constant_s: d_heading_offset_tau(),
+            step_scale_sigma: None,
         }
     }
 }
@@ -175,6 +204,34 @@ impl PdrFilterConfig {
             3600.0,
             true,
             "a calibration time in s",
+        )?;
+        if let Some(sig) = self.heading_offset_sigma_deg {
+            check_range(
+                "heading_offset_sigma_deg",
+                sig,
+                0.0,
+                180.0,
+                true,
+                "a heading-offset σ in degrees",
+            )?;
+        }
+        if let Some(sig) = self.step_scale_sigma {
+            check_range(
+                "step_scale_sigma",
+                sig,
+                0.0,
+                0.5,
+                true,
+                "a relative step-length σ",
+            )?;
+        }
+        check_range(
+            "heading_offset_time_constant_s",
+            self.heading_offset_time_constant_s,
+            1e-3,
+            1e7,
+            true,
+            "a correlation time in s",
         )?;
         let q = self.range_difference_multipath_m_per_sqrt_s;
         if !(q.is_finite() && (0.0..=100.0).contains(&q)) {
@@ -254,9 +311,25 @@ struct Anchor {
 ///
 /// (seed 002's x_t = x_{t−1} + v Δt cos θ with θ = π/2 − ψ and v Δt = L), and, when fixes
 /// come, the Kalman update with H = I₂ and the horizontal block of the fix covariance. The
-/// up coordinate stays at the start's. The step covariance treats heading errors as
-/// independent from step to step, so it understates the drift of a biased heading; the
-/// 5-state EKF of seed 002 that estimates θ̇ and v is the fusion module's.
+/// up coordinate stays at the start's.
+///
+/// # Heading offset and step scale (`heading_offset_sigma_deg`, `step_scale_sigma`)
+///
+/// Seed 002 §4.2's EKF (state [x, y, θ̇, θ, v]) observes the AHRS heading as θ + δ₄ with
+/// white δ₄, as the plain step covariance above does. A phone's heading error is not
+/// white but a slowly varying offset (the gyro bias the AHRS's magnetometer loop holds,
+/// the hard-iron compass deviation), and the Weinberg K error is one scale for the walk.
+/// When configured, both are states (augmentation for coloured measurement noise): the
+/// state is `[x, y, e, ė, β, κ]`, a step moves the position along ψ − β̂ by L/(1 + κ̂),
+///
+/// ```text
+/// Φ[x,β] = −L' cos ψ',  Φ[y,β] = L' sin ψ',  Φ[x,κ] = −L' sin ψ'/(1+κ̂),  Φ[y,κ] = −L' cos ψ'/(1+κ̂)
+/// β ← e^{−Δt/τ} β,  Q_β = σ_β² (1 − e^{−2Δt/τ}),   κ constant
+/// ```
+///
+/// (ψ' = ψ − β̂, L' = L/(1 + κ̂), Δt the time between steps), and the fixes and range
+/// differences observe β and κ through the position. Unset, β and κ have zero variance
+/// and stay 0: the filter is the plain one.
 ///
 /// # Range differences (`range_difference_sources`)
 ///
@@ -286,8 +359,16 @@ pub struct PdrEstimator {
     up_m: f64,
     /// `[e, ė]` of the range differences.
     rd: Vector2<f64>,
-    /// Covariance of `[x, y, e, ė]`.
-    p: Matrix4<f64>,
+    /// The heading offset β (rad) the step headings carry, when it is a state.
+    beta_rad: f64,
+    /// Its σ at the start (rad); `None` when β is not a state.
+    beta_sigma_rad: Option<f64>,
+    /// The step-length scale error κ, when it is a state.
+    kappa: f64,
+    /// Its σ at the start; `None` when κ is not a state.
+    kappa_sigma: Option<f64>,
+    /// Covariance of `[x, y, e, ė, β]`.
+    p: Matrix6,
     anchor: Option<Anchor>,
     last_t: Option<GpsTime>,
     /// Time of the last step and the walking velocity of that step (east, north m/s).
@@ -318,9 +399,12 @@ impl PdrEstimator {
             .map(|s| Vector3::new(s[0], s[1], s.get(2).copied().unwrap_or(0.0)))
             .or(known_start_enu_m.filter(|s| s.iter().all(|v| v.is_finite())));
         let start_sigma_m = cfg.start_sigma_m;
-        let mut p = Matrix4::zeros();
+        let beta_sigma_rad = cfg.heading_offset_sigma_deg.map(f64::to_radians);
+        let mut p = Matrix6::zeros();
         p.fixed_view_mut::<2, 2>(0, 0)
             .copy_from(&(Matrix2::identity() * start_sigma_m * start_sigma_m));
+        p[(4, 4)] = beta_sigma_rad.map_or(0.0, |s| s * s);
+        p[(5, 5)] = cfg.step_scale_sigma.map_or(0.0, |s| s * s);
         Ok(Self {
             name: name.to_string(),
             cfg: cfg.clone(),
@@ -330,6 +414,10 @@ impl PdrEstimator {
             pos_en_m: start.map(|s| s.xy()),
             up_m: start.map_or(0.0, |s| s.z),
             rd: Vector2::zeros(),
+            beta_rad: 0.0,
+            beta_sigma_rad,
+            kappa: 0.0,
+            kappa_sigma: cfg.step_scale_sigma,
             p,
             anchor: None,
             last_t: None,
@@ -348,6 +436,20 @@ impl PdrEstimator {
     /// The horizontal covariance (m²).
     pub fn covariance_m2(&self) -> Matrix2<f64> {
         self.p.fixed_view::<2, 2>(0, 0).into_owned()
+    }
+
+    /// The estimated heading offset β and its σ (rad), when β is a state: the step
+    /// headings are taken as ψ − β.
+    pub fn heading_offset_rad(&self) -> Option<(f64, f64)> {
+        self.beta_sigma_rad
+            .map(|_| (self.beta_rad, self.p[(4, 4)].max(0.0).sqrt()))
+    }
+
+    /// The estimated step-length scale error κ and its σ, when κ is a state: the step
+    /// lengths are taken as L/(1 + κ).
+    pub fn step_scale(&self) -> Option<(f64, f64)> {
+        self.kappa_sigma
+            .map(|_| (self.kappa, self.p[(5, 5)].max(0.0).sqrt()))
     }
 
     /// The range-difference error states `[e, ė]` (m, m/s), once anchored.
@@ -391,7 +493,7 @@ impl PdrEstimator {
             sd * dt * dt / 2.0,
             sd * dt,
         );
-        let mut phi = Matrix4::identity();
+        let mut phi = Matrix6::identity();
         phi[(2, 3)] = dt;
         let mut p = phi * self.p * phi.transpose();
         let block = p.fixed_view::<2, 2>(2, 2) + qc;
@@ -420,8 +522,10 @@ impl PdrEstimator {
         if !ok {
             return false;
         }
-        let (sn, cs) = s.heading_rad.sin_cos();
-        let l = s.length_m;
+        let (sn, cs) = (s.heading_rad - self.beta_rad).sin_cos();
+        // The length corrected for the scale error, L/(1 + κ̂) (κ̂ stays 0 when κ is no
+        // state; it is kept above −0.9 so the division cannot blow up).
+        let l = s.length_m / (1.0 + self.kappa.max(-0.9));
         let new_pos = pos + Vector2::new(sn, cs) * l;
         let j = Matrix2::new(sn, l * cs, cs, -l * sn);
         let q = Matrix2::new(
@@ -430,10 +534,31 @@ impl PdrEstimator {
             0.0,
             s.sigma_heading_rad * s.sigma_heading_rad,
         );
-        let new_pp = self.p.fixed_view::<2, 2>(0, 0) + j * q * j.transpose();
-        if new_pos.iter().chain(new_pp.iter()).all(|v| v.is_finite()) {
+        let mut new_p = self.p;
+        if self.beta_sigma_rad.is_some() || self.kappa_sigma.is_some() {
+            // The position moves along ψ − β: ∂(x, y)/∂β = −L (cos, −sin); β is a
+            // Gauss–Markov process of correlation time τ between steps.
+            let dt = self
+                .last_step
+                .map_or(0.0, |(tp, _)| t.seconds_since(tp).clamp(0.0, 60.0));
+            let phi_b = (-dt / self.cfg.heading_offset_time_constant_s).exp();
+            let mut phi = Matrix6::identity();
+            phi[(0, 4)] = -l * cs;
+            phi[(1, 4)] = l * sn;
+            phi[(4, 4)] = phi_b;
+            // ∂(x, y)/∂κ = −L/(1 + κ̂) (sin, cos).
+            let dl = -l / (1.0 + self.kappa.max(-0.9));
+            phi[(0, 5)] = dl * sn;
+            phi[(1, 5)] = dl * cs;
+            new_p = phi * self.p * phi.transpose();
+            let s0 = self.beta_sigma_rad.unwrap_or(0.0);
+            new_p[(4, 4)] += s0 * s0 * (1.0 - phi_b * phi_b);
+        }
+        let new_pp = new_p.fixed_view::<2, 2>(0, 0) + j * q * j.transpose();
+        new_p.fixed_view_mut::<2, 2>(0, 0).copy_from(&new_pp);
+        if new_pos.iter().chain(new_p.iter()).all(|v| v.is_finite()) {
             self.pos_en_m = Some(new_pos);
-            self.p.fixed_view_mut::<2, 2>(0, 0).copy_from(&new_pp);
+            self.p = 0.5 * (new_p + new_p.transpose());
             // The walking velocity of this step, for range differences between steps.
             let vel = match self.last_step {
                 Some((t_prev, _)) => {
@@ -464,8 +589,11 @@ impl PdrEstimator {
             }
             self.pos_en_m = Some(z);
             self.up_m = f.pos_enu_m.z;
-            self.p = Matrix4::zeros();
+            let (var_beta, var_kappa) = (self.p[(4, 4)], self.p[(5, 5)]);
+            self.p = Matrix6::zeros();
             self.p.fixed_view_mut::<2, 2>(0, 0).copy_from(&r);
+            self.p[(4, 4)] = var_beta;
+            self.p[(5, 5)] = var_kappa;
             self.anchor = None;
             self.rd = Vector2::zeros();
             return PdrUpdate::Anchored;
@@ -480,18 +608,20 @@ impl PdrEstimator {
             return PdrUpdate::Gated;
         }
         // K = P Hᵀ S⁻¹ = (S⁻¹ H P)ᵀ, Joseph form.
-        let hp: SMatrix<f64, 2, 4> = self.p.fixed_rows::<2>(0).into_owned();
+        let hp: SMatrix<f64, 2, 6> = self.p.fixed_rows::<2>(0).into_owned();
         let k = chol.solve(&hp).transpose();
-        let mut h = SMatrix::<f64, 2, 4>::zeros();
+        let mut h = SMatrix::<f64, 2, 6>::zeros();
         h.fixed_view_mut::<2, 2>(0, 0)
             .copy_from(&Matrix2::identity());
-        let ikh = Matrix4::identity() - k * h;
+        let ikh = Matrix6::identity() - k * h;
         let new_p = ikh * self.p * ikh.transpose() + k * r * k.transpose();
         let dx = k * innov;
         let new_pos = pos + dx.fixed_rows::<2>(0);
         if new_pos.iter().chain(new_p.iter()).all(|v| v.is_finite()) {
             self.pos_en_m = Some(new_pos);
             self.rd += dx.fixed_rows::<2>(2);
+            self.beta_rad += dx[4];
+            self.kappa += dx[5];
             self.p = 0.5 * (new_p + new_p.transpose());
             PdrUpdate::Used { nis, dof: 2 }
         } else {
@@ -544,8 +674,20 @@ impl PdrEstimator {
                 let var_rate = crate::core::C_MPS.powi(2)
                     * (h0 / (2.0 * t_cal) + 2.0 * std::f64::consts::PI.powi(2) * hm2 * t_cal / 3.0);
                 self.rd = Vector2::zeros();
-                let mut p = Matrix4::zeros();
+                // e = −uᵀ δp at the anchor, so it correlates with β as the position does.
+                let mut p = Matrix6::zeros();
                 p.fixed_view_mut::<2, 2>(0, 0).copy_from(&pp);
+                for j in 4..6 {
+                    let pb = Vector2::new(self.p[(0, j)], self.p[(1, j)]);
+                    p[(0, j)] = pb.x;
+                    p[(1, j)] = pb.y;
+                    p[(j, 0)] = pb.x;
+                    p[(j, 1)] = pb.y;
+                    p[(2, j)] = -u.dot(&pb);
+                    p[(j, 2)] = -u.dot(&pb);
+                }
+                p.fixed_view_mut::<2, 2>(4, 4)
+                    .copy_from(&self.p.fixed_view::<2, 2>(4, 4));
                 p[(0, 2)] = -pu.x;
                 p[(1, 2)] = -pu.y;
                 p[(2, 0)] = -pu.x;
@@ -570,7 +712,9 @@ impl PdrEstimator {
             sigma_m: sigma,
         };
         let x = SVector::<f64, 4>::new(pos.x, pos.y, self.rd.x, self.rd.y);
-        let h = model.jacobian(&x);
+        let mut h = SMatrix::<f64, 1, 6>::zeros();
+        h.fixed_view_mut::<1, 4>(0, 0)
+            .copy_from(&model.jacobian(&x));
         let nu = m.delta_range_m - model.h(&x)[0];
         let ph = self.p * h.transpose();
         let s = (h * ph)[(0, 0)] + sigma * sigma;
@@ -578,12 +722,14 @@ impl PdrEstimator {
             return PdrUpdate::Failed;
         }
         let k = ph / s;
-        let ikh = Matrix4::identity() - k * h;
+        let ikh = Matrix6::identity() - k * h;
         let new_p = ikh * self.p * ikh.transpose() + k * k.transpose() * (sigma * sigma);
         let dx = k * nu;
         if dx.iter().chain(new_p.iter()).all(|v| v.is_finite()) {
             self.pos_en_m = Some(pos + dx.fixed_rows::<2>(0));
             self.rd += dx.fixed_rows::<2>(2);
+            self.beta_rad += dx[4];
+            self.kappa += dx[5];
             self.p = 0.5 * (new_p + new_p.transpose());
             PdrUpdate::Used {
                 nis: nu * nu / s,
@@ -697,10 +843,14 @@ impl Estimator for PdrEstimator {
     /// Dead reckoning restarts from the next fix, with the start's uncertainty.
     fn reset(&mut self) {
         self.pos_en_m = None;
-        self.p = Matrix4::zeros();
+        self.p = Matrix6::zeros();
         self.p
             .fixed_view_mut::<2, 2>(0, 0)
             .copy_from(&(Matrix2::identity() * self.start_sigma_m * self.start_sigma_m));
+        self.p[(4, 4)] = self.beta_sigma_rad.map_or(0.0, |s| s * s);
+        self.beta_rad = 0.0;
+        self.p[(5, 5)] = self.kappa_sigma.map_or(0.0, |s| s * s);
+        self.kappa = 0.0;
         self.anchor = None;
         self.rd = Vector2::zeros();
         self.last_step = None;
@@ -914,5 +1064,158 @@ mod tests {
         println!("RMS horizontal error over 20 walks: PDR {without:.2} m, PDR + Δr {with:.2} m");
         assert!(without > 0.5, "{without}");
         assert!(with < 0.7 * without, "{with} vs {without}");
+    }
+
+    /// One synthetic walk of a square loop (10 m sides, 0.5 m steps every 0.5 s) whose step
+    /// headings carry a heading offset β (a Gauss–Markov process of σ `beta_sigma`, τ
+    /// `tau_s`, or constant when `tau_s` is infinite) plus white noise, and whose lengths
+    /// carry a scale error (1 + κ) plus white noise; a position fix of σ 0.5 m every
+    /// `fix_every` steps. Returns the filter and the per-epoch 2-D NEES of its position
+    /// after each step.
+    #[allow(clippy::too_many_arguments)]
+    fn synthetic_walk(
+        seed: u64,
+        cfg: &PdrFilterConfig,
+        beta0_rad: f64,
+        beta_sigma_rad: f64,
+        tau_s: f64,
+        kappa: f64,
+        steps: usize,
+        fix_every: usize,
+    ) -> (PdrEstimator, Vec<f64>) {
+        use rand_distr::{Distribution, StandardNormal};
+        let f = frame();
+        let rng = crate::core::TrialRng::new(seed, 0);
+        let mut noise = rng.stream("walk");
+        let mut g = move || -> f64 { StandardNormal.sample(&mut noise) };
+        let start = GpsTime::from_week_tow(2300, 0.0);
+        let mut est = PdrEstimator::new("PDR", cfg, &[], &f, Some(Vector3::zeros())).unwrap();
+        let (sig_l, sig_psi, sig_fix) = (0.02, 0.02, 0.5);
+        let mut truth = Vector2::zeros();
+        let mut beta = beta0_rad;
+        let phi = (-0.5 / tau_s).exp();
+        let mut nees = Vec::with_capacity(steps);
+        for k in 0..steps {
+            let t = start.add_seconds(0.5 * (k + 1) as f64);
+            // Counter-clockwise square: east, north, west, south, 20 steps a side.
+            let psi =
+                ((k / 20) % 4) as f64 * -std::f64::consts::FRAC_PI_2 + std::f64::consts::FRAC_PI_2;
+            truth += Vector2::new(psi.sin(), psi.cos()) * 0.5;
+            beta = phi * beta + (1.0 - phi * phi).sqrt() * beta_sigma_rad * g();
+            let step = MeasurementBatch {
+                t,
+                source: SourceKind::Pdr,
+                items: vec![Measurement::Step(StepEvent {
+                    length_m: 0.5 * (1.0 + kappa) + sig_l * g(),
+                    sigma_length_m: sig_l,
+                    heading_rad: psi + beta + sig_psi * g(),
+                    sigma_heading_rad: sig_psi,
+                })],
+                ..Default::default()
+            };
+            est.process(&step);
+            if (k + 1) % fix_every == 0 {
+                let z = Vector3::new(truth.x + sig_fix * g(), truth.y + sig_fix * g(), 0.0);
+                let cov = Matrix3::from_diagonal(&Vector3::new(
+                    sig_fix * sig_fix,
+                    sig_fix * sig_fix,
+                    1.0,
+                ));
+                let b = MeasurementBatch {
+                    t,
+                    source: SourceKind::Fm,
+                    items: vec![Measurement::Position(PositionFix {
+                        pos_ecef_m: f.ecef_of_enu(&z),
+                        cov_m2: ecef_cov(&f, &cov),
+                        support: 0,
+                    })],
+                    ..Default::default()
+                };
+                est.process(&b);
+            }
+            let e = est.position_en_m().unwrap() - truth;
+            let pinv = est.covariance_m2().try_inverse().unwrap();
+            nees.push(e.dot(&(pinv * e)));
+        }
+        (est, nees)
+    }
+
+    #[test]
+    fn a_constant_heading_offset_and_step_scale_are_learnt_from_fixes() {
+        // Truth: β = 6° and κ = +6 % for the whole walk (τ infinite); the filter is told
+        // σ_β = 10°, σ_κ = 8 %. After two laps with a fix every 10 steps its estimates
+        // must hold the truth within 3σ, and σ must have shrunk to under half the prior.
+        let cfg = PdrFilterConfig {
+            fix_sources: vec![SourceKind::Fm],
+            heading_offset_sigma_deg: Some(10.0),
+            heading_offset_time_constant_s: 1.0e7,
+            step_scale_sigma: Some(0.08),
+            ..Default::default()
+        };
+        let (beta, kappa) = (6f64.to_radians(), 0.06);
+        for seed in 0..10 {
+            let (est, _) = synthetic_walk(seed, &cfg, beta, 0.0, f64::INFINITY, kappa, 160, 10);
+            let (b, sb) = est.heading_offset_rad().unwrap();
+            let (kk, sk) = est.step_scale().unwrap();
+            assert!(sb < 1.5f64.to_radians(), "σ_β {}°", sb.to_degrees());
+            assert!(sk < 0.04, "σ_κ {sk}");
+            assert!(
+                (b - beta).abs() < 3.0 * sb,
+                "seed {seed}: β̂ {:.2}° ± {:.2}° vs 6°",
+                b.to_degrees(),
+                sb.to_degrees()
+            );
+            assert!(
+                (kk - kappa).abs() < 3.0 * sk,
+                "seed {seed}: κ̂ {kk} ± {sk} vs 0.06"
+            );
+        }
+        // Without the states the same walk's last error is far outside the filter's σ.
+        let old = PdrFilterConfig {
+            fix_sources: vec![SourceKind::Fm],
+            ..Default::default()
+        };
+        let (_, nees_old) = synthetic_walk(0, &old, beta, 0.0, f64::INFINITY, kappa, 160, 10);
+        let mean_old = nees_old.iter().sum::<f64>() / nees_old.len() as f64;
+        assert!(mean_old > 10.0, "mean NEES without states {mean_old}");
+    }
+
+    #[test]
+    fn the_filter_nees_over_many_walks_is_within_its_chi_square_band() {
+        // The truth follows the filter's own model: β a Gauss–Markov process of σ 5°,
+        // τ 60 s, drawn at the start from its prior; κ ~ N(0, 0.08²); fixes every 40 steps.
+        // The 2-D position NEES after the last step (independent across walks) must
+        // average 2: over 200 walks the mean of χ²(2) has σ 2/√200 = 0.14, so the 99 %
+        // band is 2 ± 0.37.
+        let cfg = PdrFilterConfig {
+            fix_sources: vec![SourceKind::Fm],
+            heading_offset_sigma_deg: Some(5.0),
+            heading_offset_time_constant_s: 60.0,
+            step_scale_sigma: Some(0.08),
+            ..Default::default()
+        };
+        use rand_distr::{Distribution, StandardNormal};
+        let (n, mut last, mut mid) = (200u64, 0.0, 0.0);
+        for seed in 0..n {
+            let mut prior = crate::core::TrialRng::new(seed, 1).stream("prior");
+            let b0: f64 = StandardNormal.sample(&mut prior);
+            let k0: f64 = StandardNormal.sample(&mut prior);
+            let (_, nees) = synthetic_walk(
+                seed,
+                &cfg,
+                5f64.to_radians() * b0,
+                5f64.to_radians(),
+                60.0,
+                0.08 * k0,
+                235,
+                40,
+            );
+            last += nees[234];
+            mid += nees[99];
+        }
+        let (last, mid) = (last / n as f64, mid / n as f64);
+        println!("mean NEES over {n} walks: step 100 {mid:.3}, step 235 {last:.3}");
+        assert!((last - 2.0).abs() < 0.37, "{last}");
+        assert!((mid - 2.0).abs() < 0.37, "{mid}");
     }
 }

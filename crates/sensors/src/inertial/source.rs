@@ -24,7 +24,9 @@
 //! * `"imu/sensor"`: the IMU source's error processes (turn-on bias, Gauss–Markov, white
 //!   noise, …).
 //! * `"imu/pdr/sensor"`, `"imu/pdr/mag"`: the PDR unit's own IMU and magnetometer (a
-//!   different device from the `"imu"` source: a phone, say, next to a car's IMU).
+//!   different device from the `"imu"` source: a phone, say, next to a car's IMU); the
+//!   magnetometer's per-trial calibration residuals come first from its stream.
+//! * `"imu/pdr/step"`: the walker's Weinberg-K calibration error (one draw per trial).
 //!
 //! # What a sample is: the increments over its interval
 //!
@@ -70,11 +72,14 @@ use super::magnetometer::{Magnetometer, MagnetometerConfig};
 use super::pdr::{Ahrs, Pdr, PdrConfig};
 use super::LocalEarth;
 use crate::core::{ConfigIssue, EnuFrame, SimTime, TrialRng};
+use crate::magnetic::MagneticScene;
 use crate::measurement::{
     Measurement, MeasurementBatch, SampleContext, Source, SourceKind, StepEvent,
 };
 use crate::motion::{Trajectory, TruthState};
 use nalgebra::{UnitQuaternion, Vector3};
+use rand::Rng;
+use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
@@ -89,6 +94,8 @@ pub const IMU_STREAM: &str = "imu/sensor";
 pub const PDR_IMU_STREAM: &str = "imu/pdr/sensor";
 /// Stream of the PDR unit's magnetometer.
 pub const PDR_MAG_STREAM: &str = "imu/pdr/mag";
+/// Stream of the PDR walker's step-length calibration error.
+pub const PDR_STEP_STREAM: &str = "imu/pdr/step";
 
 /// A trajectory shared between the engine and a source (`Arc`), so both read one object.
 #[derive(Clone)]
@@ -305,7 +312,10 @@ pub struct PdrSensorConfig {
     /// The unit's IMU; default a `low` (consumer MEMS) grade at 100 Hz.
     #[serde(default)]
     pub imu: ImuConfig,
-    /// The magnetometer and the local field; default 54 µT, I = 59°, D = −7°, σ 0.5 µT.
+    /// The magnetometer: noise, hard and soft iron and their per-trial calibration
+    /// residuals. In a world it reads the world's field (IGRF-14 at the origin and start
+    /// date plus the scene's magnetic anomalies); its `total_ut`, `inclination_deg` and
+    /// `declination_deg` (default 54 µT, 59°, −7°) serve only a unit built without one.
     #[serde(default)]
     pub magnetometer: MagnetometerConfig,
     /// Step detection, Weinberg K and AHRS gains (`mag_gain = 0` for a gyro-only heading).
@@ -393,6 +403,7 @@ pub struct PdrSource {
     imu: Imu,
     mag: Magnetometer,
     field_enu_ut: Vector3<f64>,
+    scene: Option<MagneticScene>,
     detector_cfg: PdrConfig,
     pdr: Option<Pdr>,
     rate_hz: f64,
@@ -420,19 +431,55 @@ impl PdrSource {
         rng: &TrialRng,
         end: SimTime,
     ) -> Result<Self, ConfigIssue> {
+        Self::in_scene(cfg, platform, trajectory, frame, None, rng, end)
+    }
+
+    /// As [`PdrSource::new`], with the magnetometer reading the field of `scene` at the
+    /// walker's position (the Earth's field at the world's origin and date plus the scene's
+    /// anomalies, the field the landmark matcher sees) instead of the configured constant
+    /// field. The AHRS then references heading to the scene's Earth field (its declination),
+    /// as a phone does with its built-in field model; the anomalies are what it does not
+    /// know. With `None` it reads the configured field, as [`PdrSource::new`].
+    ///
+    /// When `cfg.detector.weinberg_k_error` is positive, this walker's K is
+    /// K (1 + ε), ε ~ N(0, σ²) drawn once from the stream `imu/pdr/step`.
+    ///
+    /// # Errors
+    /// As [`PdrSource::new`].
+    #[allow(clippy::too_many_arguments)]
+    pub fn in_scene(
+        cfg: &PdrSensorConfig,
+        platform: &PlatformConfig,
+        trajectory: Box<dyn Trajectory>,
+        frame: &EnuFrame,
+        scene: Option<MagneticScene>,
+        rng: &TrialRng,
+        end: SimTime,
+    ) -> Result<Self, ConfigIssue> {
         cfg.validate()?;
         let spec = cfg.imu.resolve().map_err(|i| under("imu", i))?;
         let truth =
             PlatformTruth::of_trial(trajectory, platform, rng).map_err(|i| under("gait", i))?;
         let mag = Magnetometer::new(&cfg.magnetometer, rng.stream(PDR_MAG_STREAM))
             .map_err(|i| under("magnetometer", i))?;
+        let mut detector_cfg = cfg.detector.clone();
+        if detector_cfg.weinberg_k_error > 0.0 {
+            let eps: f64 = rng.stream(PDR_STEP_STREAM).sample(StandardNormal);
+            // K stays positive: a draw beyond −1/σ (ten σ at the largest accepted σ) is
+            // clipped to 10 % of the nominal K.
+            detector_cfg.weinberg_k *= (1.0 + detector_cfg.weinberg_k_error * eps).max(0.1);
+        }
+        let field_enu_ut = scene
+            .as_ref()
+            .map_or_else(|| cfg.magnetometer.field_enu_ut(), |s| s.earth().b_enu_ut());
         let mut s = Self {
             truth,
             earth: local_earth_of(frame),
             imu: Imu::new(spec, rng.stream(PDR_IMU_STREAM)),
             mag,
-            field_enu_ut: cfg.magnetometer.field_enu_ut(),
-            detector_cfg: cfg.detector.clone(),
+            field_enu_ut,
+            scene,
+            detector_cfg,
             pdr: None,
             rate_hz: spec.rate_hz,
             ideal: IncrementImu::new(spec.rate_hz),
@@ -474,7 +521,13 @@ impl PdrSource {
             let t_s = at.seconds();
             let (w, f, q_nb) = self.ideal.sample(&self.truth, &self.earth, self.next_k);
             let m = self.imu.measure(t_s, &w, &f);
-            let b = self.mag.measure(&q_nb);
+            let b = match &self.scene {
+                Some(scene) => {
+                    let field = scene.b_enu_ut(&self.truth.sample(t_s).pos_enu_m);
+                    self.mag.measure_in_field(&q_nb, &field)
+                }
+                None => self.mag.measure(&q_nb),
+            };
             self.next_k += 1;
             let pdr = match &mut self.pdr {
                 Some(p) => p,

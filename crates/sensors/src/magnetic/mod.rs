@@ -4,8 +4,9 @@
 //! warping (the baseline) and by a spiking neural network (Tempotron neurons), with the
 //! selection of candidates by their consistency with a DTMB range.
 //!
-//! * [`earth`] — a tilted centred dipole from the IGRF-14 degree-1 Gauss coefficients with
-//!   secular variation: B in ENU, declination, inclination, total intensity.
+//! * [`earth`] — the IGRF-14 main field (degrees 1–13, [`igrf14_coeffs`]) and its tilted
+//!   centred dipole, with secular variation: B in ENU, declination, inclination, total
+//!   intensity.
 //! * [`anomaly`] — point magnetic dipoles (B = μ0/4π · (3(m·r̂)r̂ − m)/r³) with a serde
 //!   configuration, the [`anomaly::MagneticScene`] (Earth + Σ anomalies) and the sampling of
 //!   a magnetometer along a [`crate::inertial::attitude::PlatformTruth`].
@@ -21,6 +22,7 @@
 
 pub mod anomaly;
 pub mod earth;
+pub mod igrf14_coeffs;
 pub mod landmark;
 pub mod snn;
 pub mod source;

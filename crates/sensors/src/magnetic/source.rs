@@ -275,7 +275,7 @@ impl MagneticSource {
                 "expected at least one [[scene.magnetic_anomaly]] to detect",
             ));
         }
-        let earth = EarthField::igrf14_dipole(&frame.origin(), decimal_year(start))
+        let earth = EarthField::igrf14(&frame.origin(), decimal_year(start))
             .map_err(|e| ConfigIssue::new("world.start", e.to_string()))?;
         let scene = MagneticScene::new(earth, anomalies)
             .map_err(|e| ConfigIssue::new("magnetic_anomaly", e.to_string()))?;

@@ -1308,9 +1308,40 @@ impl World {
             ));
         }
         if let Some(pdr) = &sensors.pdr {
+            // The phone's magnetometer reads the world's field: IGRF-14 at the origin and
+            // start date plus the scene's anomalies, the field the landmark matcher sees.
+            let anomalies = self
+                .file
+                .scene
+                .as_ref()
+                .map_or(&[][..], |s| &s.magnetic_anomalies[..]);
+            let earth = crate::magnetic::EarthField::igrf14(
+                &self.frame.origin(),
+                crate::magnetic::source::decimal_year(self.start),
+            )
+            .map_err(|e| {
+                err(
+                    "sensors.pdr",
+                    crate::core::ConfigIssue::new("world.start", e.to_string()),
+                )
+            })?;
+            let scene = crate::magnetic::MagneticScene::new(earth, anomalies).map_err(|e| {
+                err(
+                    "sensors.pdr",
+                    crate::core::ConfigIssue::new("magnetic_anomaly", e.to_string()),
+                )
+            })?;
             sources.push(Box::new(
-                PdrSource::new(pdr, &attitude, rebuild()?, &self.frame, rng, end)
-                    .map_err(|i| err("sensors.pdr", i))?,
+                PdrSource::in_scene(
+                    pdr,
+                    &attitude,
+                    rebuild()?,
+                    &self.frame,
+                    Some(scene),
+                    rng,
+                    end,
+                )
+                .map_err(|i| err("sensors.pdr", i))?,
             ));
         }
         let ctx = BuildContext {

@@ -103,7 +103,10 @@ model = "singer_2d""#,
         about: "seed 002 row 'PDR': dead reckoning from step length and heading only",
         toml: r#"name = "PDR"
 sources = []
-filter = "pdr""#,
+filter = "pdr"
+[pdr]
+heading_offset_sigma_deg = 3.4
+step_scale_sigma = 0.08"#,
     },
     Preset {
         name: "seed002-pdr-mag-dtmb",
@@ -114,7 +117,9 @@ filter = "pdr"
 [pdr]
 fix_sources = ["magnetic"]
 nis_gate = 13.8
-range_difference_sources = ["dtmb"]"#,
+range_difference_sources = ["dtmb"]
+heading_offset_sigma_deg = 3.4
+step_scale_sigma = 0.08"#,
     },
     Preset {
         name: "seed003-ekf",
