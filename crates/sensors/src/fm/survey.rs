@@ -233,11 +233,10 @@ pub fn survey(
 mod tests {
     use super::*;
 
-    #[test]
-    fn averaging_n_scans_divides_the_noise_by_root_n() {
-        use crate::core::TrialRng;
+    /// One station 3 km away without shadowing or quantisation: the field's mean is then
+    /// what the surveyor's errors are measured against.
+    fn one_station_field() -> FmField {
         use crate::fm::field::{FmFieldConfig, FmStation};
-        use crate::propagation::ShadowingConfig;
         let fcfg = FmFieldConfig {
             quantisation_db: 0.0,
             shadowing: ShadowingConfig {
@@ -247,7 +246,13 @@ mod tests {
             ..Default::default()
         };
         let st = FmStation::new("F01", Vector3::new(3_000.0, 0.0, 100.0), 98e6, 40.0, 0.0);
-        let mut field = FmField::new(fcfg, vec![st], None, 1).unwrap();
+        FmField::new(fcfg, vec![st], None, 1).unwrap()
+    }
+
+    #[test]
+    fn averaging_n_scans_divides_the_noise_by_root_n() {
+        use crate::core::TrialRng;
+        let mut field = one_station_field();
         let pts = grid_points([0.0, 0.0], [190.0, 190.0], 10.0).unwrap();
         let cfg = SurveyConfig {
             scans_per_point: 16,
@@ -275,17 +280,7 @@ mod tests {
     #[test]
     fn the_survey_to_test_change_has_its_stated_sigma() {
         use crate::core::TrialRng;
-        use crate::fm::field::{FmFieldConfig, FmStation};
-        let fcfg = FmFieldConfig {
-            quantisation_db: 0.0,
-            shadowing: ShadowingConfig {
-                sigma_db: 0.0,
-                ..Default::default()
-            },
-            ..Default::default()
-        };
-        let st = FmStation::new("F01", Vector3::new(3_000.0, 0.0, 100.0), 98e6, 40.0, 0.0);
-        let mut field = FmField::new(fcfg, vec![st], None, 1).unwrap();
+        let mut field = one_station_field();
         let pts = grid_points([0.0, 0.0], [190.0, 190.0], 10.0).unwrap();
         let cfg = SurveyConfig {
             scans_per_point: 16,
