@@ -148,8 +148,8 @@ const BEYOND_A_SCHEMA: &[(&str, &str)] = &[
         "a calendar date that does not exist",
     ),
     (
-        "17-tight-coupling-with-ckf.toml",
-        "a constraint between two keys of one table (coupling needs kalman = builtin)",
+        "17-residual-gate-on-the-builtin-ins.toml",
+        "a constraint between two keys of one table (the gate needs a generic filter)",
     ),
     (
         "18-comparison-row-with-its-own-gate.toml",

@@ -72,7 +72,6 @@ use super::magnetometer::{Magnetometer, MagnetometerConfig};
 use super::pdr::{Ahrs, Pdr, PdrConfig};
 use super::LocalEarth;
 use crate::core::{ConfigIssue, EnuFrame, SimTime, TrialRng};
-use crate::magnetic::MagneticScene;
 use crate::measurement::{
     Measurement, MeasurementBatch, SampleContext, Source, SourceKind, StepEvent,
 };
@@ -96,6 +95,16 @@ pub const PDR_IMU_STREAM: &str = "imu/pdr/sensor";
 pub const PDR_MAG_STREAM: &str = "imu/pdr/mag";
 /// Stream of the PDR walker's step-length calibration error.
 pub const PDR_STEP_STREAM: &str = "imu/pdr/step";
+
+/// The magnetic field a PDR unit walks through: the Earth's field at the world's origin
+/// and date plus the scene's anomalies (`crate::magnetic::MagneticScene` implements it; a
+/// trait here, so that this layer does not depend on the magnetic-landmark one above it).
+pub trait AmbientField: Send + Sync {
+    /// The Earth's field alone (ENU, µT): what the phone's own field model knows.
+    fn earth_enu_ut(&self) -> Vector3<f64>;
+    /// The whole field at a point (ENU, µT).
+    fn b_enu_ut(&self, x_enu_m: &Vector3<f64>) -> Vector3<f64>;
+}
 
 /// A trajectory shared between the engine and a source (`Arc`), so both read one object.
 #[derive(Clone)]
@@ -403,7 +412,7 @@ pub struct PdrSource {
     imu: Imu,
     mag: Magnetometer,
     field_enu_ut: Vector3<f64>,
-    scene: Option<MagneticScene>,
+    scene: Option<Box<dyn AmbientField>>,
     detector_cfg: PdrConfig,
     pdr: Option<Pdr>,
     rate_hz: f64,
@@ -452,7 +461,7 @@ impl PdrSource {
         platform: &PlatformConfig,
         trajectory: Box<dyn Trajectory>,
         frame: &EnuFrame,
-        scene: Option<MagneticScene>,
+        scene: Option<Box<dyn AmbientField>>,
         rng: &TrialRng,
         end: SimTime,
     ) -> Result<Self, ConfigIssue> {
@@ -471,7 +480,7 @@ impl PdrSource {
         }
         let field_enu_ut = scene
             .as_ref()
-            .map_or_else(|| cfg.magnetometer.field_enu_ut(), |s| s.earth().b_enu_ut());
+            .map_or_else(|| cfg.magnetometer.field_enu_ut(), |s| s.earth_enu_ut());
         let mut s = Self {
             truth,
             earth: local_earth_of(frame),

@@ -152,6 +152,15 @@ pub struct MagneticScene {
     anomalies: Vec<DipoleAnomaly>,
 }
 
+impl crate::inertial::source::AmbientField for MagneticScene {
+    fn earth_enu_ut(&self) -> Vector3<f64> {
+        self.earth.b_enu_ut()
+    }
+    fn b_enu_ut(&self, x_enu_m: &Vector3<f64>) -> Vector3<f64> {
+        MagneticScene::b_enu_ut(self, x_enu_m)
+    }
+}
+
 impl MagneticScene {
     /// A scene from the Earth's field and the anomalies' configurations.
     ///

@@ -1337,7 +1337,7 @@ impl World {
                     &attitude,
                     rebuild()?,
                     &self.frame,
-                    Some(scene),
+                    Some(Box::new(scene)),
                     rng,
                     end,
                 )
