@@ -91,18 +91,27 @@ const fn fig(row: &'static str, estimator: &'static str, metric: Metric, paper_m
 
 use Metric::*;
 
+/// Seed 000's published rows (Tables 5 and 6): 1σ, 2σ, 3σ, ATE mean and RMSE, RPE mean
+/// and RMSE (m), each written once for the paper's rows and their eq.-17 variants.
+const BEIHANG_GPS: [f64; 7] = [29.49, 74.51, 87.46, 24.52, 32.45, 16.61, 21.72];
+const BEIHANG_GPS_DTMB: [f64; 7] = [14.46, 28.50, 35.31, 13.53, 15.57, 13.38, 15.80];
+const BEIHANG_PROPOSED: [f64; 7] = [10.56, 22.57, 27.80, 9.90, 11.23, 10.92, 12.29];
+const KEHUI_GPS: [f64; 7] = [6.47, 96.89, 416.60, 21.60, 53.42, 5.57, 25.93];
+const KEHUI_GPS_DTMB: [f64; 7] = [6.45, 71.31, 262.80, 11.78, 27.32, 5.68, 25.76];
+const KEHUI_PROPOSED: [f64; 7] = [6.42, 28.23, 60.23, 7.88, 11.87, 2.79, 4.84];
+
 /// Seed 000's table for one site: three rows × (1σ, 2σ, 3σ, mean ATE, RMSE ATE, mean RPE,
 /// RMSE RPE).
 macro_rules! seed000_rows {
-    ($( $row:literal => $est:literal : [$s1:expr, $s2:expr, $s3:expr, $am:expr, $ar:expr, $rm:expr, $rr:expr] ),* $(,)?) => {
+    ($( $row:literal => $est:literal : $v:expr ),* $(,)?) => {
         &[ $(
-            fig($row, $est, Sigma1, $s1),
-            fig($row, $est, Sigma2, $s2),
-            fig($row, $est, Sigma3, $s3),
-            fig($row, $est, AteMean, $am),
-            fig($row, $est, AteRmse, $ar),
-            fig($row, $est, RpeMean, $rm),
-            fig($row, $est, RpeRmse, $rr),
+            fig($row, $est, Sigma1, $v[0]),
+            fig($row, $est, Sigma2, $v[1]),
+            fig($row, $est, Sigma3, $v[2]),
+            fig($row, $est, AteMean, $v[3]),
+            fig($row, $est, AteRmse, $v[4]),
+            fig($row, $est, RpeMean, $v[5]),
+            fig($row, $est, RpeRmse, $v[6]),
         )* ]
     };
 }
@@ -132,9 +141,9 @@ pub const VARIANTS: &[Variant] = &[
         paper: "seed000-beihang",
         about: SEED000_EQ17,
         figures: seed000_rows![
-            "GPS (eq. 17)" => "GPS (eq. 17)": [29.49, 74.51, 87.46, 24.52, 32.45, 16.61, 21.72],
-            "GPS + DTMB (eq. 17)" => "GPS+DTMB (eq. 17)": [14.46, 28.50, 35.31, 13.53, 15.57, 13.38, 15.80],
-            "Proposed (eq. 17)" => "Proposed (eq. 17)": [10.56, 22.57, 27.80, 9.90, 11.23, 10.92, 12.29],
+            "GPS (eq. 17)" => "GPS (eq. 17)": BEIHANG_GPS,
+            "GPS + DTMB (eq. 17)" => "GPS+DTMB (eq. 17)": BEIHANG_GPS_DTMB,
+            "Proposed (eq. 17)" => "Proposed (eq. 17)": BEIHANG_PROPOSED,
         ],
         orderings: &[
             Ordering {
@@ -151,9 +160,9 @@ pub const VARIANTS: &[Variant] = &[
         paper: "seed000-kehui",
         about: SEED000_EQ17,
         figures: seed000_rows![
-            "GPS (eq. 17)" => "GPS (eq. 17)": [6.47, 96.89, 416.60, 21.60, 53.42, 5.57, 25.93],
-            "GPS + DTMB (eq. 17)" => "GPS+DTMB (eq. 17)": [6.45, 71.31, 262.80, 11.78, 27.32, 5.68, 25.76],
-            "Proposed (eq. 17)" => "Proposed (eq. 17)": [6.42, 28.23, 60.23, 7.88, 11.87, 2.79, 4.84],
+            "GPS (eq. 17)" => "GPS (eq. 17)": KEHUI_GPS,
+            "GPS + DTMB (eq. 17)" => "GPS+DTMB (eq. 17)": KEHUI_GPS_DTMB,
+            "Proposed (eq. 17)" => "Proposed (eq. 17)": KEHUI_PROPOSED,
         ],
         orderings: &[
             Ordering {
@@ -179,9 +188,9 @@ pub const PAPERS: &[Paper] = &[
         title: "Seed 000 site 1 — Beihang campus (Cong et al., Sensors 2018, Table 5)",
         world: "worlds/seed000-beihang.toml",
         figures: seed000_rows![
-            "GPS" => "GPS": [29.49, 74.51, 87.46, 24.52, 32.45, 16.61, 21.72],
-            "GPS + DTMB" => "GPS+DTMB": [14.46, 28.50, 35.31, 13.53, 15.57, 13.38, 15.80],
-            "Proposed" => "Proposed": [10.56, 22.57, 27.80, 9.90, 11.23, 10.92, 12.29],
+            "GPS" => "GPS": BEIHANG_GPS,
+            "GPS + DTMB" => "GPS+DTMB": BEIHANG_GPS_DTMB,
+            "Proposed" => "Proposed": BEIHANG_PROPOSED,
         ],
         orderings: &[
             Ordering {
@@ -199,9 +208,9 @@ pub const PAPERS: &[Paper] = &[
         title: "Seed 000 site 2 — Kehui Road (Cong et al., Sensors 2018, Table 6)",
         world: "worlds/seed000-kehui.toml",
         figures: seed000_rows![
-            "GPS" => "GPS": [6.47, 96.89, 416.60, 21.60, 53.42, 5.57, 25.93],
-            "GPS + DTMB" => "GPS+DTMB": [6.45, 71.31, 262.80, 11.78, 27.32, 5.68, 25.76],
-            "Proposed" => "Proposed": [6.42, 28.23, 60.23, 7.88, 11.87, 2.79, 4.84],
+            "GPS" => "GPS": KEHUI_GPS,
+            "GPS + DTMB" => "GPS+DTMB": KEHUI_GPS_DTMB,
+            "Proposed" => "Proposed": KEHUI_PROPOSED,
         ],
         orderings: &[
             Ordering {

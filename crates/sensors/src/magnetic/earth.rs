@@ -138,6 +138,18 @@ pub struct EarthField {
 }
 
 impl EarthField {
+    /// The field from its geocentric components (X north, Y east, Z down, nT, at
+    /// geocentric latitude `lat_c`), rotated by ψ = φ − φ_c into the site's geodetic ENU
+    /// frame.
+    fn from_geocentric_nt(site: &Geodetic, lat_c: f64, x: f64, y: f64, z: f64) -> Self {
+        let (spsi, cpsi) = (site.lat_rad - lat_c).sin_cos();
+        let north = x * cpsi + z * spsi;
+        let down = z * cpsi - x * spsi;
+        Self {
+            b_enu_nt: Vector3::new(y, north, -down),
+        }
+    }
+
     /// The IGRF-14 tilted-dipole field at `site` on `decimal_year` (see the module docs for
     /// the equations and the accuracy to expect).
     ///
@@ -158,13 +170,7 @@ impl EarthField {
         let x = k * (-g10 * st + q * ct);
         let y = k * (g11 * sp - h11 * cp);
         let z = -2.0 * k * (g10 * ct + q * st);
-        let psi = site.lat_rad - lat_c;
-        let (spsi, cpsi) = psi.sin_cos();
-        let north = x * cpsi + z * spsi;
-        let down = z * cpsi - x * spsi;
-        Ok(Self {
-            b_enu_nt: Vector3::new(y, north, -down),
-        })
+        Ok(Self::from_geocentric_nt(site, lat_c, x, y, z))
     }
 
     /// The full IGRF-14 main field (degrees 1–13, [`super::igrf14_coeffs`]) at `site` on
@@ -283,13 +289,7 @@ impl EarthField {
                 z -= arn * (nf + 1.0) * gc * pnm[n][m];
             }
         }
-        let psi = site.lat_rad - lat_c;
-        let (spsi, cpsi) = psi.sin_cos();
-        let north = x * cpsi + z * spsi;
-        let down = z * cpsi - x * spsi;
-        Ok(Self {
-            b_enu_nt: Vector3::new(y, north, -down),
-        })
+        Ok(Self::from_geocentric_nt(site, lat_c, x, y, z))
     }
 
     /// A field given by its elements: total intensity F (nT), inclination I (°, positive
