@@ -10,7 +10,7 @@ use hybridnav::fusion::models::{
     ConstantVelocity, MeasurementModel, PositionFixModel, Pseudoranges, RangeRow, StateLayout,
 };
 use hybridnav::fusion::particle::{
-    ParticleBuffer, ParticleFilter, PseudorangeLikelihood, Resampling,
+    KernelPlacement, ParticleBuffer, ParticleFilter, PseudorangeLikelihood, Resampling,
 };
 use hybridnav::fusion::pcrlb::bound_sequence;
 use nalgebra::{DMatrix, SMatrix, SVector, Vector3};
@@ -136,6 +136,53 @@ fn no_particle_filter_allocates_per_epoch() {
         }
         assert_eq!(allocations() - before, 0, "{:?} allocated", pf.variant());
     }
+    // The marginalised filter needs states the ranges do not see: 2-D constant velocity
+    // (x, ẋ, y, ẏ), positions sampled, velocities by the per-particle Kalman filters.
+    let layout2 = StateLayout {
+        pos: [Some(0), Some(2), None],
+        vel: [Some(1), Some(3), None],
+        clock: [None; System::COUNT],
+        isb: [None; System::COUNT],
+        drift: None,
+    };
+    let cv2 = ConstantVelocity::<4>::new(0.5).unwrap();
+    let mut pf = ParticleFilter::new(
+        ParticleBuffer::<4>::new(2000).unwrap(),
+        Resampling::Systematic,
+        0.5,
+    )
+    .unwrap()
+    .marginalised(layout2.pos, [None; System::COUNT])
+    .unwrap();
+    let mut rng = TrialRng::new(3, 1).stream("test/alloc-mpf");
+    pf.init_gaussian(
+        &V4::new(0.0, 0.0, 0.0, 0.0),
+        &M4::from_diagonal(&V4::new(400.0, 4.0, 400.0, 4.0)),
+        &mut rng,
+    )
+    .unwrap();
+    let mut lik = PseudorangeLikelihood::with_capacity(rows.len());
+    let mut epoch = |pf: &mut ParticleFilter<4>, rng: &mut StreamRng| {
+        pf.predict(&cv2, 1.0, rng).unwrap();
+        lik.clear(layout2.pos);
+        for r in &rows {
+            let d = r.emitter_pos_m - Vector3::new(10.0, 20.0, 0.0);
+            lik.push(&layout2, r, d.norm());
+        }
+        pf.update_ranges(&lik, rng);
+        pf.resample(rng);
+        std::hint::black_box((pf.mean(), pf.covariance(), pf.n_eff()));
+    };
+    epoch(&mut pf, &mut rng);
+    let before = allocations();
+    for _ in 0..20 {
+        epoch(&mut pf, &mut rng);
+    }
+    assert_eq!(
+        allocations() - before,
+        0,
+        "the marginalised filter allocated"
+    );
 }
 
 /// On a linear-Gaussian model (constant velocity, 2-D position fixes) the KF is the exact
@@ -162,7 +209,7 @@ fn particle_filters_approach_the_bound_as_n_grows() {
     let p0d = DMatrix::from_fn(4, 4, |i, j| p0[(i, j)]);
     let bounds = bound_sequence(&p0d, &f, &q, &vec![info; steps]).unwrap();
     let counts = [250usize, 1000, 4000];
-    for variant in ["sir", "regularised"] {
+    for variant in ["sir", "regularised", "musso", "marginalised"] {
         let mut excess = Vec::new();
         for &n in &counts {
             let (mut sq_diff, mut count) = (0.0, 0.0);
@@ -178,10 +225,13 @@ fn particle_filters_approach_the_bound_as_n_grows() {
                     0.5,
                 )
                 .unwrap();
-                let mut pf = if variant == "sir" {
-                    pf
-                } else {
-                    pf.regularised()
+                let mut pf = match variant {
+                    "sir" => pf,
+                    "regularised" => pf.regularised(),
+                    "musso" => pf.regularised().with_kernel(KernelPlacement::Plain),
+                    _ => pf
+                        .marginalised([Some(0), Some(2), None], [None; System::COUNT])
+                        .unwrap(),
                 };
                 pf.init_gaussian(&x0, &p0, &mut prng).unwrap();
                 let gq = hybridnav::fusion::models::ProcessModel::q(&cv, &x0, 1.0)

@@ -104,6 +104,29 @@ pub enum ProposalKind {
     Linearised,
 }
 
+/// Where a regularised particle filter places its kernel (`[estimator.options]
+/// pf_kernel`, [`crate::fusion::particle::KernelPlacement`]).
+#[derive(
+    Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum KernelKind {
+    /// Shrunk towards the mean first: the cloud's covariance is kept (Liu & West 2001).
+    LiuWest,
+    /// On the resampled particles as they are (Musso, Oudjane & Le Gland 2001).
+    Musso,
+}
+
+impl KernelKind {
+    /// The particle filter's placement of this name.
+    pub fn placement(self) -> crate::fusion::particle::KernelPlacement {
+        match self {
+            KernelKind::LiuWest => crate::fusion::particle::KernelPlacement::Shrunk,
+            KernelKind::Musso => crate::fusion::particle::KernelPlacement::Plain,
+        }
+    }
+}
+
 impl ResamplingKind {
     /// The particle filter's scheme of this name.
     pub fn scheme(self) -> Resampling {
@@ -157,6 +180,11 @@ pub struct FamilyConfig {
     /// conditioned on the epoch's ranges linearised at the predicted mean,
     /// [`crate::fusion::particle::ParticleFilter::update_linearised`]).
     pub pf_proposal: ProposalKind,
+    /// The regularised and Rao-Blackwellised PF on the paper models: the kernel after a
+    /// resampling is `"liu_west"` (shrunk towards the mean so that the cloud's covariance
+    /// is kept; default) or `"musso"` (added as it is: the cloud inflates by `h_opt²` of
+    /// its covariance at each resampling, as the regularised PF was defined).
+    pub pf_kernel: KernelKind,
     /// A position 1-σ (m, from the trace of the position covariance) beyond which the
     /// filter is declared diverged and reset. Default 100 km.
     pub divergence_pos_sigma_m: f64,
@@ -184,6 +212,7 @@ impl Default for FamilyConfig {
             neff_threshold: 0.5,
             pf_use_rates: false,
             pf_proposal: ProposalKind::Prior,
+            pf_kernel: KernelKind::LiuWest,
             divergence_pos_sigma_m: 1e5,
             divergence_residual_nis: 400.0,
         }

@@ -75,7 +75,7 @@ use crate::fusion::models::{
     PlaneTurning, ProcessModel, Pseudoranges, RangeRow, Singer5, StateLayout,
 };
 use crate::fusion::particle::{
-    ParticleBuffer, ParticleFilter, PfVariant, PseudorangeLikelihood, Resampling,
+    KernelPlacement, ParticleBuffer, ParticleFilter, PfVariant, PseudorangeLikelihood, Resampling,
 };
 use crate::fusion::preprocess::FrontEnd;
 use crate::fusion::selection::ModeSelection;
@@ -244,6 +244,8 @@ pub enum PaperFilter {
         variant: PfVariant,
         /// Draw from the linearised optimal proposal instead of the process model.
         linearised: bool,
+        /// Where the regularisation kernel goes after a resampling.
+        kernel: KernelPlacement,
     },
 }
 
@@ -307,6 +309,7 @@ impl<const N: usize> Core<N> {
     /// The filter of `filter` started at `(x0, p0)`.
     fn new(
         filter: PaperFilter,
+        pos_cols: [Option<usize>; 3],
         x0: SVector<f64, N>,
         p0: SMatrix<f64, N, N>,
         rng: &mut StreamRng,
@@ -367,17 +370,22 @@ impl<const N: usize> Core<N> {
                 resampling,
                 neff_threshold,
                 variant,
+                kernel,
                 ..
             } => {
                 let buf = ParticleBuffer::<N>::new(particles).map_err(|e| e.to_string())?;
                 let pf = ParticleFilter::new(buf, resampling, neff_threshold)
-                    .map_err(|e| e.to_string())?;
+                    .map_err(|e| e.to_string())?
+                    .with_kernel(kernel);
                 let mut pf = match variant {
                     PfVariant::Sir => pf,
                     PfVariant::Regularised => pf.regularised(),
                     // The clock states are the last N_CLOCKS, one per system.
                     PfVariant::RaoBlackwellised => pf
                         .rao_blackwellised(std::array::from_fn(|s| Some(N - N_CLOCKS + s)))
+                        .map_err(|e| e.to_string())?,
+                    PfVariant::Marginalised => pf
+                        .marginalised(pos_cols, std::array::from_fn(|s| Some(N - N_CLOCKS + s)))
                         .map_err(|e| e.to_string())?,
                 };
                 pf.init_gaussian(&x0, &p0, rng).map_err(|e| e.to_string())?;
@@ -620,7 +628,17 @@ where
             }
         }
         let mut rng = ctx.rng.stream(&format!("estimator/{name}/paper"));
-        let core = Core::new(filter, x0, p0, &mut rng)?;
+        if let PaperFilter::Pf {
+            variant: PfVariant::Marginalised,
+            linearised: true,
+            ..
+        } = filter
+        {
+            return Err(
+                "options.pf_proposal = \"linearised\" is for filter = \"pf\", \"sir\" or \"rbpf\": the marginalised filter draws its positions from their exact marginal prediction".into(),
+            );
+        }
+        let core = Core::new(filter, layout.pos, x0, p0, &mut rng)?;
         let mut est = Self {
             name: name.to_string(),
             model,
@@ -848,7 +866,7 @@ where
             };
             match &mut self.core {
                 // The Kalman filter of each particle takes the clock from a flat prior.
-                Core::Pf(pf) if pf.variant() == PfVariant::RaoBlackwellised => {}
+                Core::Pf(pf) if pf.clocks_in_closed_form() => {}
                 Core::Pf(pf) => {
                     use rand::Rng;
                     let len = pf.particles().len();

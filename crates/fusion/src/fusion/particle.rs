@@ -68,6 +68,19 @@ pub enum Resampling {
     Residual,
 }
 
+/// The regularisation kernel's placement after a resampling
+/// ([`ParticleFilter::resample_regularised`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KernelPlacement {
+    /// Each particle is first shrunk towards the cloud's mean so that the jittered cloud
+    /// keeps the weighted cloud's covariance (Liu & West 2001): no inflation.
+    Shrunk,
+    /// The jitter is added to the resampled particles as they are (Musso, Oudjane & Le
+    /// Gland 2001, the regularised PF as they define it): the cloud's covariance grows by
+    /// `h_opt²` of itself at each resampling.
+    Plain,
+}
+
 /// Which member of the particle-filter family runs (see the module documentation).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PfVariant {
@@ -80,6 +93,11 @@ pub enum PfVariant {
     /// particle (their means in the clock columns, their common variance beside), the
     /// rest is sampled and regularised as in [`PfVariant::Regularised`].
     RaoBlackwellised,
+    /// The marginalised PF of mixed linear/nonlinear models: only the positions are
+    /// sampled; the other motion states (velocity, acceleration), which enter the
+    /// dynamics linearly and the ranges not at all, are carried by a Kalman filter per
+    /// particle, as are the clocks (see [`ParticleFilter::marginalised`]).
+    Marginalised,
 }
 
 /// The storage of `n` particles of dimension `N`, allocated once.
@@ -187,6 +205,102 @@ struct RbClocks {
     var_m2: [f64; System::COUNT],
 }
 
+/// The motion states a marginalised filter carries in closed form: the components that
+/// are neither sampled nor clocks. Their Kalman covariance is common to every particle,
+/// because neither the model (linear, with state-independent noise) nor the conditioning
+/// on each particle's own sampled positions depends on the particle's values.
+#[derive(Clone, Debug, PartialEq)]
+struct MarginalMotion<const N: usize> {
+    /// The Kalman-carried motion components.
+    linear: [bool; N],
+    /// Their covariance, zero outside the `linear` block.
+    p: SMatrix<f64, N, N>,
+}
+
+/// A lower-triangular factor of a joint Gaussian over the sampled components `s` and the
+/// Kalman-carried ones `l`, in the order `[s, l]`:
+///
+/// ```text
+/// Σ = [[Σ_ss, Σ_sl], [Σ_ls, Σ_ll]] = L Lᵀ,   L = [[L_ss, 0], [L_ls, L_ll]]
+/// x_s = μ_s + L_ss ε,   E[x_l | x_s] = μ_l + L_ls ε,   Cov[x_l | x_s] = L_ll L_llᵀ
+/// ```
+///
+/// i.e. the draw of the sampled part and the conditional mean of the rest share one `ε`,
+/// and the conditional covariance needs no inverse of `Σ_ss` (which is singular where a
+/// position has no noise of its own, as in seed 001's x axis and seed 003's model). The
+/// factor tolerates zero pivots ([`psd_factor`]): a sampled direction with no variance
+/// then neither moves nor informs the rest.
+struct JointFactor<const N: usize> {
+    l: SMatrix<f64, N, N>,
+    /// `perm[i]`: the state component at position `i` of the `[s, l]` order.
+    perm: [usize; N],
+    n_s: usize,
+    n_l: usize,
+}
+
+impl<const N: usize> JointFactor<N> {
+    fn new(
+        sigma: &SMatrix<f64, N, N>,
+        sampled: &[bool; N],
+        linear: &[bool; N],
+    ) -> Result<Self, ParticleError> {
+        let mut perm = [0usize; N];
+        let mut n = 0;
+        for (k, _) in sampled.iter().enumerate().filter(|(_, s)| **s) {
+            perm[n] = k;
+            n += 1;
+        }
+        let n_s = n;
+        for (k, _) in linear.iter().enumerate().filter(|(_, l)| **l) {
+            perm[n] = k;
+            n += 1;
+        }
+        let n_l = n - n_s;
+        let sym = (sigma + sigma.transpose()) * 0.5;
+        let permuted = SMatrix::<f64, N, N>::from_fn(|i, j| {
+            if i < n && j < n {
+                sym[(perm[i], perm[j])]
+            } else {
+                0.0
+            }
+        });
+        Ok(Self {
+            l: psd_factor(&permuted)?,
+            perm,
+            n_s,
+            n_l,
+        })
+    }
+
+    /// Adds `L_ss ε` to the sampled components of `x` and `L_ls ε` to the Kalman means.
+    fn draw<R: Rng + ?Sized>(&self, x: &mut SVector<f64, N>, rng: &mut R) {
+        let mut eps = [0.0f64; N];
+        for e in eps.iter_mut().take(self.n_s) {
+            *e = rng.sample(StandardNormal);
+        }
+        for i in 0..self.n_s + self.n_l {
+            let dx: f64 = (0..self.n_s.min(i + 1))
+                .map(|j| self.l[(i, j)] * eps[j])
+                .sum();
+            x[self.perm[i]] += dx;
+        }
+    }
+
+    /// `L_ll L_llᵀ` in the state's own indexing (zero outside the Kalman block).
+    fn conditional_covariance(&self) -> SMatrix<f64, N, N> {
+        let (a, b) = (self.n_s, self.n_s + self.n_l);
+        let mut p = SMatrix::<f64, N, N>::zeros();
+        for i in a..b {
+            for j in a..=i {
+                let v: f64 = (a..=j).map(|k| self.l[(i, k)] * self.l[(j, k)]).sum();
+                p[(self.perm[i], self.perm[j])] = v;
+                p[(self.perm[j], self.perm[i])] = v;
+            }
+        }
+        p
+    }
+}
+
 /// The most ranges an epoch may have for the linearised proposal
 /// ([`ParticleFilter::predict_update_linearised`]); beyond, the bootstrap epoch runs.
 pub const MAX_PROPOSAL_ROWS: usize = 12;
@@ -201,6 +315,8 @@ pub struct ParticleFilter<const N: usize> {
     /// The components drawn by sampling (false: carried by the per-particle Kalman filter).
     sampled: [bool; N],
     rb: Option<RbClocks>,
+    mm: Option<MarginalMotion<N>>,
+    kernel: KernelPlacement,
 }
 
 impl<const N: usize> ParticleFilter<N> {
@@ -227,12 +343,20 @@ impl<const N: usize> ParticleFilter<N> {
             variant: PfVariant::Sir,
             sampled: [true; N],
             rb: None,
+            mm: None,
+            kernel: KernelPlacement::Shrunk,
         })
     }
 
     /// The regularised filter: every resampling is followed by the kernel jitter.
     pub fn regularised(mut self) -> Self {
         self.variant = PfVariant::Regularised;
+        self
+    }
+
+    /// Places the regularisation kernel as `kernel` (default [`KernelPlacement::Shrunk`]).
+    pub fn with_kernel(mut self, kernel: KernelPlacement) -> Self {
+        self.kernel = kernel;
         self
     }
 
@@ -269,6 +393,67 @@ impl<const N: usize> ParticleFilter<N> {
             var_m2: [f64::INFINITY; System::COUNT],
         });
         Ok(self)
+    }
+
+    /// The marginalised filter (Schön, Gustafsson & Nordlund, "Marginalized particle
+    /// filters for mixed linear/nonlinear state-space models", *IEEE Trans. SP* 53(7),
+    /// 2005, §III–IV): only the position components `pos_cols` are sampled; the clocks
+    /// are carried as in [`Self::rao_blackwellised`], and every other component (the
+    /// velocities and accelerations, which the ranges do not see and the model moves
+    /// linearly) by a Kalman filter per particle whose mean is the particle's column and
+    /// whose covariance `P` is common. With a linear model `F`, `Q` and the particle's
+    /// conditional Gaussian over `[s, l]` (sampled, linear), one epoch's prediction is
+    ///
+    /// ```text
+    /// μ_i = F [s_i; m_i],   Σ = F_{·l} P F_{·l}ᵀ + Q            (the predictive joint)
+    /// s_i ← μ_i,s + L_ss ε_i,   m_i ← μ_i,l + L_ls ε_i,   P ← L_ll L_llᵀ
+    /// ```
+    ///
+    /// (`Σ = L Lᵀ` over `[s, l]`, see [`JointFactor`]): the new positions are drawn from
+    /// their marginal prediction, which carries the velocity's uncertainty, and the
+    /// velocity's Kalman filter is conditioned on them — Schön et al.'s time update, with
+    /// the correlation of the position and velocity noises handled by the joint factor
+    /// instead of their decorrelation step. The draw is from the marginal transition, so
+    /// the weights are unchanged; the ranges then weight the particles as in the
+    /// Rao-Blackwellised filter and leave `P` alone. Resampling is plain (the cloud
+    /// regains its spread from `P` at the next draw); the model must be linear in the
+    /// Kalman-carried components (its Jacobian is taken at the cloud's mean).
+    ///
+    /// # Errors
+    /// A position or clock column outside the state, or a column named twice.
+    pub fn marginalised(
+        self,
+        pos_cols: [Option<usize>; 3],
+        clock_cols: [Option<usize>; System::COUNT],
+    ) -> Result<Self, ParticleError> {
+        let mut pf = self.rao_blackwellised(clock_cols)?;
+        let mut is_pos = [false; N];
+        for &k in pos_cols.iter().flatten() {
+            if k >= N || clock_cols.contains(&Some(k)) || std::mem::replace(&mut is_pos[k], true) {
+                return Err(ParticleError::InvalidParameter(format!(
+                    "position column {k}: expected a distinct non-clock column of the {N}-state"
+                )));
+            }
+        }
+        if !is_pos.iter().any(|p| *p) {
+            return Err(ParticleError::InvalidParameter(
+                "a marginalised filter samples the positions: none was given".into(),
+            ));
+        }
+        let linear = std::array::from_fn(|k| pf.sampled[k] && !is_pos[k]);
+        pf.sampled = is_pos;
+        pf.variant = PfVariant::Marginalised;
+        pf.mm = Some(MarginalMotion {
+            linear,
+            p: SMatrix::zeros(),
+        });
+        Ok(pf)
+    }
+
+    /// True when the clocks are carried by the per-particle Kalman filters (their priors
+    /// are then [`Self::set_clock_prior`]'s, not drawn).
+    pub fn clocks_in_closed_form(&self) -> bool {
+        self.rb.is_some()
     }
 
     /// Sets the Kalman prior of system `s`'s clock on every particle: mean `mean_m`,
@@ -319,6 +504,22 @@ impl<const N: usize> ParticleFilter<N> {
         if !mean.iter().all(|v| v.is_finite()) {
             return Err(ParticleError::NonFinite);
         }
+        if let Some(mm) = &self.mm {
+            // The positions from their marginal, the motion states' Kalman means from
+            // their conditional given each particle's positions.
+            let joint = JointFactor::new(cov, &self.sampled, &mm.linear)?;
+            for i in 0..self.buf.n {
+                let mut x = *mean;
+                joint.draw(&mut x, rng);
+                self.buf.set(i, &x);
+            }
+            let p = joint.conditional_covariance();
+            if let Some(mm) = &mut self.mm {
+                mm.p = p;
+            }
+            self.buf.weights.fill(1.0 / self.buf.n as f64);
+            return Ok(());
+        }
         let g = psd_factor(&self.mask(cov))?;
         for i in 0..self.buf.n {
             let w = SVector::<f64, N>::from_fn(|_, _| rng.sample(StandardNormal));
@@ -357,7 +558,11 @@ impl<const N: usize> ParticleFilter<N> {
         }
         // Q is evaluated at the weighted mean: the models here have state-independent
         // noise, and a per-particle factorisation would cost N³ per particle.
-        let q = model.q(&self.mean(), dt_s);
+        let mean = self.mean();
+        let q = model.q(&mean, dt_s);
+        if self.mm.is_some() {
+            return self.predict_marginalised(model, &mean, &q, dt_s, rng);
+        }
         let g = psd_factor(&self.mask(&q))?;
         if let Some(rb) = &mut self.rb {
             for (s, col) in rb.cols.iter().enumerate() {
@@ -377,6 +582,43 @@ impl<const N: usize> ParticleFilter<N> {
                 return Err(ParticleError::NonFinite);
             }
             self.buf.set(i, &x);
+        }
+        Ok(())
+    }
+
+    /// The marginalised filter's prediction (see [`Self::marginalised`]).
+    fn predict_marginalised<P: ProcessModel<N>, R: Rng + ?Sized>(
+        &mut self,
+        model: &P,
+        mean: &SVector<f64, N>,
+        q: &SMatrix<f64, N, N>,
+        dt_s: f64,
+        rng: &mut R,
+    ) -> Result<(), ParticleError> {
+        let Some(mm) = &self.mm else {
+            return Ok(());
+        };
+        let f = model.jacobian(mean, dt_s);
+        let sigma = f * mm.p * f.transpose() + q;
+        let joint = JointFactor::new(&sigma, &self.sampled, &mm.linear)?;
+        let p = joint.conditional_covariance();
+        if let Some(rb) = &mut self.rb {
+            for (s, col) in rb.cols.iter().enumerate() {
+                if let Some(k) = *col {
+                    rb.var_m2[s] += q[(k, k)].max(0.0);
+                }
+            }
+        }
+        for i in 0..self.buf.n {
+            let mut x = model.f(&self.buf.get(i), dt_s);
+            joint.draw(&mut x, rng);
+            if !x.iter().all(|v| v.is_finite()) {
+                return Err(ParticleError::NonFinite);
+            }
+            self.buf.set(i, &x);
+        }
+        if let Some(mm) = &mut self.mm {
+            mm.p = p;
         }
         Ok(())
     }
@@ -485,6 +727,12 @@ impl<const N: usize> ParticleFilter<N> {
             pf.add_noise(&q, rng)?;
             Ok(pf.update_ranges(lik, rng))
         };
+        if self.mm.is_some() {
+            return Err(ParticleError::InvalidParameter(
+                "the linearised proposal is for the sampled filters, not the marginalised one"
+                    .into(),
+            ));
+        }
         if self.rb.is_some() || m == 0 || m > MAX_PROPOSAL_ROWS {
             return bootstrap(self, rng);
         }
@@ -609,7 +857,7 @@ impl<const N: usize> ParticleFilter<N> {
         let resampled = n_eff < self.neff_threshold * b.n as f64;
         if resampled {
             match self.variant {
-                PfVariant::Sir => self.resample(rng),
+                PfVariant::Sir | PfVariant::Marginalised => self.resample(rng),
                 PfVariant::Regularised | PfVariant::RaoBlackwellised => {
                     self.resample_regularised(rng)
                 }
@@ -703,10 +951,15 @@ impl<const N: usize> ParticleFilter<N> {
     /// The kernel alone adds `h_opt² D Dᵀ` to the cloud's covariance at every resampling —
     /// with a dozen states `h_opt ≈ 0.6`, so +40 % each time, which compounds into a
     /// loose, inefficient cloud wherever the model has no process noise (seed 003's
-    /// constant clocks). The particles are therefore first shrunk towards the mean,
-    /// `x_i ← x̄ + a (x_i − x̄)` with `a = √(1 − h²)`, so that the jittered cloud keeps the
-    /// mean and covariance of the weighted one (Liu & West, "Combined parameter and state
-    /// estimation in simulation-based filtering", same book, ch. 10, §10.3.2).
+    /// constant clocks). With [`KernelPlacement::Shrunk`] (the default) the particles are
+    /// therefore first shrunk towards the mean, `x_i ← x̄ + a (x_i − x̄)` with
+    /// `a = √(1 − h²)`, so that the jittered cloud keeps the mean and covariance of the
+    /// weighted one (Liu & West, "Combined parameter and state estimation in
+    /// simulation-based filtering", same book, ch. 10, §10.3.2); with
+    /// [`KernelPlacement::Plain`] they are not (`a = 1`), as Musso et al. define the
+    /// filter. The inflation is what keeps a cloud of a few dozen particles from
+    /// collapsing: resampling loses about `1/N` of the cloud's spread each time, and the
+    /// shrunk kernel does not give it back (docs/reproductions.md, seed 001).
     pub fn resample_regularised<R: Rng + ?Sized>(&mut self, rng: &mut R) {
         let cov = self.mask(&self.sample_covariance());
         let mean = self.mean();
@@ -720,7 +973,10 @@ impl<const N: usize> ParticleFilter<N> {
         }
         let (nf, nd) = (self.buf.n as f64, rank as f64);
         let h = (4.0 / (nf * (nd + 2.0))).powf(1.0 / (nd + 4.0)).min(1.0);
-        let a = (1.0 - h * h).sqrt();
+        let a = match self.kernel {
+            KernelPlacement::Shrunk => (1.0 - h * h).sqrt(),
+            KernelPlacement::Plain => 1.0,
+        };
         let g = d * h;
         for i in 0..self.buf.n {
             let w = SVector::<f64, N>::from_fn(|k, _| {
@@ -776,6 +1032,9 @@ impl<const N: usize> ParticleFilter<N> {
     /// still under a flat prior contributes only its spread.
     pub fn covariance(&self) -> SMatrix<f64, N, N> {
         let mut p = self.sample_covariance();
+        if let Some(mm) = &self.mm {
+            p += mm.p;
+        }
         if let Some(rb) = &self.rb {
             for (s, col) in rb.cols.iter().enumerate() {
                 if let Some(k) = *col {
@@ -1496,5 +1755,149 @@ mod tests {
             col.len(),
             "no two particles coincide after the kernel"
         );
+    }
+
+    /// Musso's placement adds the kernel to the resampled cloud as it is: the variance
+    /// grows by the factor `1 + h_opt²` (`h_opt` of 4 sampled dimensions and N = 20 000),
+    /// which is what the shrunk kernel above avoids.
+    #[test]
+    fn musso_kernel_inflates_the_cloud_by_the_bandwidth() {
+        let mut rng = TrialRng::new(11, 1).stream("test/rpf-musso");
+        let n = 20_000;
+        let mut pf = ParticleFilter::new(
+            ParticleBuffer::<4>::new(n).unwrap(),
+            Resampling::Systematic,
+            0.5,
+        )
+        .unwrap()
+        .regularised()
+        .with_kernel(KernelPlacement::Plain);
+        let mean = SVector::<f64, 4>::new(1.0, -2.0, 3.0, 100.0);
+        let cov = SMatrix::<f64, 4, 4>::from_diagonal(&SVector::<f64, 4>::new(4.0, 9.0, 1.0, 25.0));
+        pf.init_gaussian(&mean, &cov, &mut rng).unwrap();
+        let c0 = pf.covariance();
+        pf.resample_regularised(&mut rng);
+        let c1 = pf.covariance();
+        let h2 = (4.0 / (n as f64 * 6.0)).powf(2.0 / 8.0);
+        for k in 0..4 {
+            let ratio = c1[(k, k)] / c0[(k, k)];
+            assert!(
+                (ratio - (1.0 + h2)).abs() < 0.04,
+                "variance {k}: {ratio} vs {}",
+                1.0 + h2
+            );
+        }
+    }
+
+    /// The joint factor's conditional moments equal the Schur complement computed with an
+    /// explicit inverse: `E[x_l | x_s] − μ_l = Σ_ls Σ_ss⁻¹ (x_s − μ_s)` and
+    /// `Cov[x_l | x_s] = Σ_ll − Σ_ls Σ_ss⁻¹ Σ_sl`, on a full-rank covariance with the
+    /// sampled components not first in the state.
+    #[test]
+    fn the_joint_factor_conditions_as_the_schur_complement() {
+        let a = SMatrix::<f64, 5, 5>::from_fn(|i, j| {
+            ((i * 7 + j * 3) % 5) as f64 - 1.5 + (i == j) as u8 as f64 * 4.0
+        });
+        let sigma = a * a.transpose();
+        let sampled = [false, true, false, true, false];
+        let linear = [true, false, true, false, true];
+        let joint = JointFactor::new(&sigma, &sampled, &linear).unwrap();
+        let (s, l) = ([1usize, 3], [0usize, 2, 4]);
+        let sss = SMatrix::<f64, 2, 2>::from_fn(|i, j| sigma[(s[i], s[j])]);
+        let sls = SMatrix::<f64, 3, 2>::from_fn(|i, j| sigma[(l[i], s[j])]);
+        let sll = SMatrix::<f64, 3, 3>::from_fn(|i, j| sigma[(l[i], l[j])]);
+        let gain = sls * sss.try_inverse().unwrap();
+        let schur = sll - gain * sls.transpose();
+        let p = joint.conditional_covariance();
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!((p[(l[i], l[j])] - schur[(i, j)]).abs() < 1e-9 * schur.amax());
+            }
+            for k in s {
+                assert_eq!(p[(l[i], k)], 0.0);
+            }
+        }
+        let mut rng = TrialRng::new(5, 0).stream("test/joint");
+        for _ in 0..10 {
+            let mut x = SVector::<f64, 5>::zeros();
+            joint.draw(&mut x, &mut rng);
+            let ds = SVector::<f64, 2>::new(x[1], x[3]);
+            let dl = gain * ds;
+            for i in 0..3 {
+                assert!(
+                    (x[l[i]] - dl[i]).abs() < 1e-9 * (1.0 + dl.amax()),
+                    "component {}",
+                    l[i]
+                );
+            }
+        }
+    }
+
+    /// The marginalised filter on a linear-Gaussian model (2-D constant velocity, the
+    /// positions measured directly): the positions are sampled and the velocities carried
+    /// by the Kalman filters, and with many particles the estimate and its covariance
+    /// (cloud plus Kalman part) are the Kalman filter's.
+    #[test]
+    fn marginalised_filter_follows_the_kalman_filter_on_a_linear_model() {
+        use crate::fusion::kalman::Ekf;
+        use crate::fusion::models::{ConstantVelocity, PositionFixModel};
+        let cv = ConstantVelocity::<4>::new(0.3).unwrap();
+        let fix =
+            PositionFixModel::<4, 2>::new([0, 2], SMatrix::<f64, 2, 2>::identity() * 9.0).unwrap();
+        let x0 = SVector::<f64, 4>::new(0.0, 1.0, 0.0, -0.5);
+        let p0 = SMatrix::<f64, 4, 4>::from_diagonal(&SVector::<f64, 4>::new(25.0, 4.0, 25.0, 4.0));
+        let mut rng = TrialRng::new(17, 0).stream("test/mpf");
+        let mut pf = ParticleFilter::new(
+            ParticleBuffer::<4>::new(40_000).unwrap(),
+            Resampling::Systematic,
+            0.5,
+        )
+        .unwrap()
+        .marginalised([Some(0), Some(2), None], [None; System::COUNT])
+        .unwrap();
+        assert_eq!(pf.variant(), PfVariant::Marginalised);
+        pf.init_gaussian(&x0, &p0, &mut rng).unwrap();
+        let mut kf = Ekf::new(x0, p0).unwrap();
+        let mut x = x0;
+        for k in 0..15 {
+            x = ProcessModel::<4>::f(&cv, &x, 1.0);
+            let z = SVector::<f64, 2>::new(x[0] + 3.0 * (k as f64 * 0.7).sin(), x[2] - 2.0);
+            kf.predict(&cv, 1.0).unwrap();
+            kf.update(&fix, &z);
+            pf.predict(&cv, 1.0, &mut rng).unwrap();
+            assert!(!pf.update(&fix, &z, &mut rng).degenerate);
+        }
+        let (m, c) = (pf.mean(), pf.covariance());
+        let (mk, ck) = (kf.state(), kf.covariance());
+        for i in 0..4 {
+            let sd = ck[(i, i)].sqrt();
+            assert!(
+                (m[i] - mk[i]).abs() < 0.05 * sd,
+                "mean {i}: {} vs {}",
+                m[i],
+                mk[i]
+            );
+            assert!(
+                (c[(i, i)] / ck[(i, i)] - 1.0).abs() < 0.08,
+                "variance {i}: {} vs {}",
+                c[(i, i)],
+                ck[(i, i)]
+            );
+        }
+        // The velocities are never sampled: their Kalman part carries most of their
+        // variance, not the cloud.
+        assert!(pf.mm.as_ref().unwrap().p[(1, 1)] > 0.0);
+        // A position column that is also a clock is refused.
+        let bad = ParticleFilter::new(
+            ParticleBuffer::<4>::new(4).unwrap(),
+            Resampling::Systematic,
+            0.5,
+        )
+        .unwrap()
+        .marginalised(
+            [Some(3), None, None],
+            std::array::from_fn(|s| (s == 0).then_some(3)),
+        );
+        assert!(bad.is_err());
     }
 }

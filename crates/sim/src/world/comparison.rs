@@ -167,7 +167,8 @@ fn gate_slot(e: &mut EstimatorSpec) -> GateSlot<'_> {
         | FilterKind::Pdr
         | FilterKind::Pf
         | FilterKind::Sir
-        | FilterKind::Rbpf => GateSlot::Absent,
+        | FilterKind::Rbpf
+        | FilterKind::Mpf => GateSlot::Absent,
     }
 }
 

@@ -1001,7 +1001,10 @@ fn check_estimator(
         _ => {}
     }
     // The particle filters only the paper models run take the family's options too.
-    let paper_pf = matches!(e.filter, FilterKind::Sir | FilterKind::Rbpf);
+    let paper_pf = matches!(
+        e.filter,
+        FilterKind::Sir | FilterKind::Rbpf | FilterKind::Mpf
+    );
     let kalman = e.filter == FilterKind::Ekf11 || e.filter.family().is_some() || paper_pf;
     if !kalman {
         let extra = [

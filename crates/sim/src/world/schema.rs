@@ -319,6 +319,9 @@ pub enum FilterKind {
     /// The Rao-Blackwellised particle filter, clocks by a Kalman filter per particle
     /// (paper models).
     Rbpf,
+    /// The marginalised particle filter: positions sampled, velocities, accelerations
+    /// and clocks by a Kalman filter per particle (paper models).
+    Mpf,
 }
 
 impl FilterKind {
@@ -336,7 +339,8 @@ impl FilterKind {
             | FilterKind::Ins
             | FilterKind::Pdr
             | FilterKind::Sir
-            | FilterKind::Rbpf => return None,
+            | FilterKind::Rbpf
+            | FilterKind::Mpf => return None,
         })
     }
 }
@@ -459,16 +463,18 @@ impl EstimatorSpec {
                 aleph_threshold: cfg.rekf_aleph_threshold,
                 residual_gate_c: gate.or(Some(3.0)),
             },
-            FilterKind::Pf | FilterKind::Sir | FilterKind::Rbpf => PaperFilter::Pf {
+            FilterKind::Pf | FilterKind::Sir | FilterKind::Rbpf | FilterKind::Mpf => PaperFilter::Pf {
                 particles: cfg.particles,
                 resampling: cfg.resampling.scheme(),
                 neff_threshold: cfg.neff_threshold,
                 variant: match self.filter {
                     FilterKind::Sir => crate::fusion::particle::PfVariant::Sir,
                     FilterKind::Rbpf => crate::fusion::particle::PfVariant::RaoBlackwellised,
+                    FilterKind::Mpf => crate::fusion::particle::PfVariant::Marginalised,
                     _ => crate::fusion::particle::PfVariant::Regularised,
                 },
                 linearised: cfg.pf_proposal == crate::fusion::family::ProposalKind::Linearised,
+                kernel: cfg.pf_kernel.placement(),
             },
             other @ (FilterKind::Ekf11 | FilterKind::Wls | FilterKind::Ins | FilterKind::Pdr) => {
                 return Err(format!(
@@ -547,7 +553,7 @@ impl EstimatorSpec {
                 )?,
             ),
             FilterKind::Wls => Box::new(WlsEstimator::new(&self.name, &self.sources)),
-            FilterKind::Sir | FilterKind::Rbpf => {
+            FilterKind::Sir | FilterKind::Rbpf | FilterKind::Mpf => {
                 return Err(format!(
                     "filter \"{}\" runs on a paper process model ([estimator.process] model = \"singer_2d\" or \"plane_turning\"); on seed 000's model use filter = \"pf\"",
                     format!("{:?}", self.filter).to_lowercase()
