@@ -19,8 +19,8 @@ use hybridnav::core::{System, TrialRng};
 use hybridnav::fusion::ekf11::{Ekf11, Ekf11Config, N_STATES};
 use hybridnav::fusion::kalman::Ekf;
 use hybridnav::fusion::models::{
-    MeasurementModel, ProcessModel, Pseudoranges, PseudorangesAndRates, Pva11Clock, RangeRow,
-    StateLayout,
+    ConstantVelocity, MeasurementModel, ProcessModel, Pseudoranges, PseudorangesAndRates,
+    Pva11Clock, RangeRow, StateLayout,
 };
 use hybridnav::fusion::particle::{
     ParticleBuffer, ParticleFilter, PseudorangeLikelihood, Resampling, SoaLikelihood,
@@ -129,6 +129,21 @@ fn bench_pf(c: &mut Criterion) {
     let z = model.h(&truth) + SVector::<f64, 6>::new(1.0, -2.0, 0.5, 3.0, -1.5, 2.0);
     let mut lik = PseudorangeLikelihood::with_capacity(6);
     lik.set(&model, &z);
+    // The same ranges for a 3-D constant-velocity state without a clock (the marginalised
+    // filter's bench): the clock term is taken out of the measurements.
+    let cv = ConstantVelocity::<6>::new(0.5).expect("valid PSD");
+    let cv_layout = StateLayout {
+        pos: [Some(0), Some(2), Some(4)],
+        vel: [Some(1), Some(3), Some(5)],
+        clock: [None; System::COUNT],
+        isb: [None; System::COUNT],
+        drift: None,
+    };
+    let mut cv_lik = PseudorangeLikelihood::with_capacity(6);
+    cv_lik.clear(cv_layout.pos);
+    for (j, r) in rows.iter().enumerate() {
+        cv_lik.push(&cv_layout, r, z[j] - truth[3]);
+    }
     let mut group = c.benchmark_group("pf 6 pseudoranges");
     for n in [100usize, 500, 10_000] {
         let mut rng = TrialRng::new(1, 0).stream("bench/pf");
@@ -207,6 +222,32 @@ fn bench_pf(c: &mut Criterion) {
             b.iter(|| {
                 rbpf.predict(&RandomWalk, 1.0, &mut rng).expect("valid");
                 black_box(rbpf.update_ranges(&lik, &mut rng))
+            })
+        });
+        // The marginalised PF on a 3-D constant-velocity state (no clock): the positions
+        // sampled, the velocities carried by the per-particle Kalman filters, so each
+        // epoch adds the joint factorisation and the conditional update of the means.
+        let mut mpf = ParticleFilter::new(
+            ParticleBuffer::<6>::new(n).expect("n > 0"),
+            Resampling::Systematic,
+            0.5,
+        )
+        .expect("valid threshold")
+        .marginalised([Some(0), Some(2), Some(4)], [None; System::COUNT])
+        .expect("three position columns");
+        let cv_truth = SVector::<f64, 6>::new(truth[0], 1.0, truth[1], -2.0, truth[2], 0.5);
+        mpf.init_gaussian(
+            &cv_truth,
+            &SMatrix::<f64, 6, 6>::from_diagonal(&SVector::<f64, 6>::new(
+                100.0, 4.0, 100.0, 4.0, 100.0, 4.0,
+            )),
+            &mut rng,
+        )
+        .expect("valid prior");
+        group.bench_function(format!("marginalised epoch N={n}"), |b| {
+            b.iter(|| {
+                mpf.predict(&cv, 1.0, &mut rng).expect("valid");
+                black_box(mpf.update_ranges(&cv_lik, &mut rng))
             })
         });
     }
