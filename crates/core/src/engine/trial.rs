@@ -229,6 +229,7 @@ impl Pending {
         let s = &mut self.sum;
         s.estimate = out.estimate;
         s.used += out.used;
+        s.inputs += out.inputs;
         s.rejected += out.rejected;
         s.gdop = out.gdop.or(s.gdop);
         s.numerical_failure |= out.numerical_failure;

@@ -22,6 +22,10 @@ pub struct EpochOutcome {
     pub estimate: Option<Estimate>,
     /// Measurements used.
     pub used: u32,
+    /// Of `used`, the inputs that drove the state's propagation (an INS's IMU samples)
+    /// rather than updated it: no gate ever sees them, so the divergence watch leaves them
+    /// out of the measurements offered ([`crate::engine::health`]).
+    pub inputs: u32,
     /// Measurements rejected (gate, numerical failure).
     pub rejected: u32,
     /// GDOP of the measurements used, when the estimator computed one.

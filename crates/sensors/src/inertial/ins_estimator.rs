@@ -693,6 +693,7 @@ impl InsEstimator {
             Some(kf) => {
                 kf.propagate(s);
                 out.used += 1;
+                out.inputs += 1;
             }
             None => {
                 self.f_sum_mps2 += s.accel_mps2;
