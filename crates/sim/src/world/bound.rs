@@ -24,10 +24,12 @@
 //! the receiver is), and the errors are taken as white and independent with those σ — the
 //! model every estimator here assumes. The world's actual errors are partly persistent
 //! (the URE is a 30-minute Gauss–Markov process, the iono and tropo residual factors are
-//! drawn once per trial) and carry NLOS biases the σ does not describe; persistence keeps
-//! information from accumulating over epochs, so the white model gives the estimator at
-//! least as much information as it has, which keeps the bound a floor. The
-//! DTMB range shares the clock `b` with its tower's clock offset counted as known, and
+//! drawn once per trial) and carry NLOS biases the σ does not describe. Persistence keeps
+//! information from accumulating over epochs, so the white model credits the estimator
+//! with more than it has, which keeps the bound a floor; this is an argument, not a proof
+//! (the trial-wide iono and tropo factors are correlated across satellites, and an
+//! estimator that modelled them could absorb part of them in the clock), and the Monte
+//! Carlo test in `tests/it/pcrlb000.rs` checks the result. The DTMB range shares the clock `b` with its tower's clock offset counted as known, and
 //! every range of every tower and satellite is counted at every instant (a mode selection
 //! or a DTMB clock calibration that withholds ranges, a χ² gate that rejects them, are
 //! not modelled): both only add information, so both can only lower the bound.
@@ -71,7 +73,9 @@ pub struct PositionBound {
     /// The square root of the epoch-averaged trace of the bound's position block (m): the
     /// figure `summary.json` reports as `pcrlb_pos_rmse_m`.
     pub rmse_m: f64,
-    /// `(t_s, bound_m)` at every epoch `t_s = (k + 1)·Δt` of the emitters' rate: the square
+    /// `(t_s, bound_m)` at every epoch (paper models: `t_s = (k + 1)·Δt` of the emitters'
+    /// rate; seed 000's model: every instant a GNSS or DTMB batch arrives, from the first
+    /// at which the position is determined): the square
     /// root of the trace of the position block at that epoch, the floor under an RMSE
     /// taken across trials at that instant.
     pub by_epoch: Vec<(f64, f64)>,
