@@ -595,7 +595,9 @@ mod tests {
             (Vector3::new(0.9, -0.4, 0.05), System::Dtmb, 6.0, None),
         ];
         let far_m = 1e15;
-        let emitters: Vec<(Vector3<f64>, Vector3<f64>, System, f64, Option<f64>)> = dirs
+        // (position, unit direction, system, σ, range-rate σ)
+        type Emitter = (Vector3<f64>, Vector3<f64>, System, f64, Option<f64>);
+        let emitters: Vec<Emitter> = dirs
             .iter()
             .map(|(d, s, sig, rate)| {
                 let n = d.normalize();
