@@ -27,6 +27,7 @@ mod montecarlo;
 mod motion_models;
 mod numerical_health;
 mod particle;
+mod pcrlb000;
 mod propagation;
 mod reliability;
 mod report;

@@ -63,7 +63,9 @@ pub struct EstimatorSummary {
     /// (Student t) of the mean over trials of each trial's own value.
     pub across_trials: AcrossTrials,
     /// The posterior Cramér–Rao bound on the position RMSE (m) of the estimator's model
-    /// in this world (paper models only; `fusion::pcrlb`): no estimator can do better.
+    /// in this world (`fusion::pcrlb`, `world::bound`: the paper models, and seed 000's
+    /// model where every epoch's pseudoranges fix the position): no estimator can do
+    /// better.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pcrlb_pos_rmse_m: Option<f64>,
     /// `rmse / pcrlb_pos_rmse_m`: 1 for an efficient estimator.

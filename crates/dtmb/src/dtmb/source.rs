@@ -370,6 +370,15 @@ struct TowerState {
     tps_model: TpsErrorModel,
 }
 
+/// A tower link the receiver holds ([`DtmbSource::held_link`]).
+struct HeldLink {
+    range_m: f64,
+    snr_ref_db: f64,
+    dopplers: [f64; crate::propagation::MAX_PATHS],
+    snr_peak_db: f64,
+    sigma_m: f64,
+}
+
 /// The DTMB receiver as a measurement source.
 pub struct DtmbSource {
     /// The system of the emitters (DTMB, or TC-OFDM reusing this receiver).
@@ -666,6 +675,79 @@ impl DtmbSource {
         (range_m, snr_ref_db, dopplers)
     }
 
+    /// Tower `ti`'s link at the truth as the receiver holds it, before any error is drawn:
+    /// the link budget and paths of [`DtmbSource::tower_link`], the correlation peak's SNR
+    /// and the σ the receiver reports,
+    /// `σ = max(0.01, hypot(σ_thermal(SNR_peak, K), sigma_floor_m))`. `None` when no path
+    /// reaches the receiver or the peak is more likely an outlier than not (the receiver
+    /// then reports nothing). Nothing here draws from a random stream, so a sample and
+    /// the PCRLB (`world::bound`) see the same links.
+    fn held_link(&mut self, ti: usize, truth: &crate::measurement::Truth) -> Option<HeldLink> {
+        let mode = self.towers[ti].spec.pn_mode;
+        let k_frames = self.cfg.accumulation_frames as usize;
+        let (range_m, snr_ref_db, dopplers) = self.tower_link(ti, truth);
+        if self.taps.iter().all(|t| t.gain.norm_sqr() == 0.0) {
+            return None;
+        }
+        // The correlation peak's SNR and whether the receiver can hold the signal.
+        let mp = multipath_estimate(mode, &self.taps, snr_ref_db, &FirstPathConfig::default());
+        let snr_peak_db = snr_ref_db + 10.0 * mp.peak_power.max(1e-30).log10();
+        let stats = thermal_stats(mode, snr_peak_db, k_frames);
+        if stats.outlier_prob > 0.5 {
+            return None;
+        }
+        let sigma_m = (stats.sigma_samples * METRES_PER_SAMPLE)
+            .hypot(self.cfg.sigma_floor_m)
+            .max(0.01);
+        Some(HeldLink {
+            range_m,
+            snr_ref_db,
+            dopplers,
+            snr_peak_db,
+            sigma_m,
+        })
+    }
+
+    /// The pseudoranges the receiver would report at `truth` without their errors: for
+    /// every tower it holds ([`DtmbSource::held_link`]), the tower's position, the
+    /// geometric range as the pseudorange and the σ it reports (no range rate). What the
+    /// PCRLB of a world (`world::bound`) takes as this receiver's information; `out` is
+    /// cleared first.
+    pub fn noise_free_ranges(
+        &mut self,
+        truth: &crate::measurement::Truth,
+        out: &mut Vec<RangeMeasurement>,
+    ) {
+        out.clear();
+        let rot = {
+            let g = Geodetic::from_ecef(&truth.pos_ecef_m);
+            ecef_to_enu_rotation(g.lat_rad, g.lon_rad)
+        };
+        for ti in 0..self.towers.len() {
+            let Some(link) = self.held_link(ti, truth) else {
+                continue;
+            };
+            let spec = &self.towers[ti].spec;
+            let (_, el) = azimuth_elevation_with(&rot, &truth.pos_ecef_m, &spec.pos_ecef_m);
+            out.push(RangeMeasurement {
+                emitter: spec.id,
+                emitter_pos_ecef_m: spec.pos_ecef_m,
+                emitter_vel_ecef_mps: Vector3::zeros(),
+                pseudorange_m: link.range_m,
+                sigma_m: link.sigma_m,
+                range_rate_mps: None,
+                sigma_rate_mps: 0.0,
+                cn0_dbhz: link.snr_peak_db + 10.0 * BANDWIDTH_HZ.log10(),
+                elevation_rad: el,
+            });
+        }
+    }
+
+    /// The interval between samples (ns).
+    pub fn period_ns(&self) -> i64 {
+        self.period_ns
+    }
+
     /// The paths of the last [`DtmbSource::tower_link`]: excess delay (samples) and gain.
     pub fn taps(&self) -> &[Tap] {
         &self.taps
@@ -718,17 +800,16 @@ impl Source for DtmbSource {
         for ti in 0..self.towers.len() {
             let spec = self.towers[ti].spec.clone();
             let mode = spec.pn_mode;
-            let (range_m, snr_ref_db, dopplers) = self.tower_link(ti, truth);
-            if self.taps.iter().all(|t| t.gain.norm_sqr() == 0.0) {
+            let Some(HeldLink {
+                range_m,
+                snr_ref_db,
+                dopplers,
+                snr_peak_db,
+                sigma_m,
+            }) = self.held_link(ti, truth)
+            else {
                 continue;
-            }
-            // The correlation peak's SNR and whether the receiver can hold the signal.
-            let mp = multipath_estimate(mode, &self.taps, snr_ref_db, &FirstPathConfig::default());
-            let snr_peak_db = snr_ref_db + 10.0 * mp.peak_power.max(1e-30).log10();
-            let stats = thermal_stats(mode, snr_peak_db, k_frames);
-            if stats.outlier_prob > 0.5 {
-                continue;
-            }
+            };
             // Where the aided window is centred, relative to the true arrival (samples).
             let centre_off = match aid_pos {
                 Some(p) => ((spec.pos_ecef_m - p).norm() - range_m) / METRES_PER_SAMPLE,
@@ -776,9 +857,6 @@ impl Source for DtmbSource {
             let tower_clock_s = spec.clock_offset_s + spec.clock_drift_s_per_s * t_s;
             let pseudorange_m =
                 range_m + C_MPS * (rx_bias_s - tower_clock_s) + err_samples * METRES_PER_SAMPLE;
-            let sigma_m = (stats.sigma_samples * METRES_PER_SAMPLE)
-                .hypot(self.cfg.sigma_floor_m)
-                .max(0.01);
             let (_, el) = azimuth_elevation_with(&rot, &rx_ecef, &spec.pos_ecef_m);
             out.items.push(Measurement::Range(RangeMeasurement {
                 emitter: spec.id,

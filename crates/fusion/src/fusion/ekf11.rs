@@ -219,6 +219,21 @@ impl Default for Ekf11Config {
 }
 
 impl Ekf11Config {
+    /// The configuration an estimator on `systems` runs: when they mix BeiDou with another
+    /// system and no inter-system-bias state is configured, one is switched on with its
+    /// defaults (a receiver's BDS ranges carry a hardware and time-scale bias relative to
+    /// GPS that a shared clock would turn into position error). Shared by `ekf11`, the
+    /// filter family and their PCRLB ([`crate::fusion::pcrlb::PvaClockBound`]).
+    pub fn for_systems(mut self, systems: &[System]) -> Self {
+        if systems.contains(&System::Bds)
+            && systems.iter().any(|s| *s != System::Bds)
+            && self.isb_bds.is_none()
+        {
+            self.isb_bds = Some(IsbConfig::default());
+        }
+        self
+    }
+
     /// Checks that every number is usable.
     ///
     /// # Errors

@@ -2,7 +2,7 @@
 //! and weighted least squares, each implementing [`Estimator`].
 
 use crate::core::{GpsTime, System};
-use crate::fusion::ekf11::{Ekf11, Ekf11Config, IsbConfig, RejectReason, UpdateOutcome};
+use crate::fusion::ekf11::{Ekf11, Ekf11Config, RejectReason, UpdateOutcome};
 use crate::fusion::preprocess::{ClockCorrectionConfig, FrontEnd};
 use crate::fusion::selection::ModeSelection;
 use crate::fusion::wls::{self, WlsOptions};
@@ -33,13 +33,7 @@ impl EkfEstimator {
     /// # Errors
     /// When the configuration is invalid.
     pub fn new(name: &str, systems: &[System], cfg: Option<Ekf11Config>) -> Result<Self, String> {
-        let mut cfg = cfg.unwrap_or_default();
-        if systems.contains(&System::Bds)
-            && systems.iter().any(|s| *s != System::Bds)
-            && cfg.isb_bds.is_none()
-        {
-            cfg.isb_bds = Some(IsbConfig::default());
-        }
+        let cfg = cfg.unwrap_or_default().for_systems(systems);
         let ekf = Ekf11::new(cfg).map_err(|e| e.to_string())?;
         Ok(Self {
             name: name.to_string(),

@@ -28,7 +28,7 @@
 use crate::core::rng::{StreamRng, TrialRng};
 use crate::core::stats::chi2;
 use crate::core::{GpsTime, System};
-use crate::fusion::ekf11::{idx, Ekf11Config, IsbConfig, RejectReason, UpdateOutcome};
+use crate::fusion::ekf11::{idx, Ekf11Config, RejectReason, UpdateOutcome};
 use crate::fusion::kalman::{
     Ekf, Gating, RelativeEntropyKf, ResidualGate, SigmaPointKf, UpdateReport,
     DEFAULT_ALEPH_THRESHOLD,
@@ -637,12 +637,7 @@ impl FamilyEstimator {
                     .into(),
             );
         }
-        if systems.contains(&System::Bds)
-            && systems.iter().any(|s| *s != System::Bds)
-            && ekf_cfg.isb_bds.is_none()
-        {
-            ekf_cfg.isb_bds = Some(IsbConfig::default());
-        }
+        ekf_cfg = ekf_cfg.for_systems(systems);
         let mut cfg = cfg.unwrap_or_default();
         if kind == FamilyKind::Rekf && cfg.residual_gate_c.is_none() {
             cfg.residual_gate_c = Some(3.0);

@@ -1,11 +1,70 @@
-//! The posterior Cramér–Rao lower bound of a world's paper estimators
-//! ([`crate::fusion::pcrlb`]): their process model, the world's emitters, and the truth
-//! trajectories of the run's trials.
+//! The posterior Cramér–Rao lower bound of a world's estimators
+//! ([`crate::fusion::pcrlb`]): their process model, the measurements the world gives them
+//! at the truth, and the truth trajectories of the run's trials.
+//!
+//! # Seed 000's model
+//!
+//! An estimator on seed 000's 12-state model (`ekf11`, or the filter family without a
+//! paper `[estimator.process]`) gets [`PvaClockBound`] with its own `[estimator.ekf]`
+//! tuning. Its information at each instant is taken from the world's own receivers at the
+//! true position, so that it is the information of the measurements the estimator is
+//! actually given:
+//!
+//! - GNSS: the links [`GnssGeometry::epoch`] tracks at the truth — the broadcast
+//!   ephemeris satellites of `[sensors.gnss]` systems above the mask, after the
+//!   `[[shielding]]` windows, not lost in the scene, in lock at the scene's C/N0 — each a
+//!   pseudorange with the σ the receiver reports (C/N0-dependent DLL noise, URE, the
+//!   iono and tropo model residuals) and, when the receiver outputs them, a range rate
+//!   with its C/N0-dependent FLL σ;
+//! - DTMB: the towers the receiver holds at the truth, with the σ it reports
+//!   ([`DtmbSource::noise_free_ranges`]: thermal σ at the correlation peak's SNR under
+//!   the world's path loss, shadowing and scene, with the receiver's floor).
+//!
+//! Those σ are the world's model evaluated at the truth (the C/N0 and SNR depend on where
+//! the receiver is), and the errors are taken as white and independent with those σ — the
+//! model every estimator here assumes. The world's actual errors are partly persistent
+//! (the URE is a 30-minute Gauss–Markov process, the iono and tropo residual factors are
+//! drawn once per trial) and carry NLOS biases the σ does not describe. Persistence keeps
+//! information from accumulating over epochs, so the white model credits the estimator
+//! with more than it has, which keeps the bound a floor; this is an argument, not a proof
+//! (the trial-wide iono and tropo factors are correlated across satellites, and an
+//! estimator that modelled them could absorb part of them in the clock), and the Monte
+//! Carlo test in `tests/it/pcrlb000.rs` checks the result. The DTMB range shares the clock `b` with its tower's clock offset counted as known, and
+//! every range of every tower and satellite is counted at every instant (a mode selection
+//! or a DTMB clock calibration that withholds ranges, a χ² gate that rejects them, are
+//! not modelled): both only add information, so both can only lower the bound.
+//!
+//! The PCRLB bounds the MSE averaged over the trajectories the process model draws; a
+//! world's truth is one trajectory, and seed 000's (waypoint plans) is far gentler than a
+//! white jerk of 1 m²/s⁵ on every ECEF axis. Where each epoch's own pseudoranges fix the
+//! position and the clock, the bound is carried by the measurements; where they do not
+//! (two or three satellites in a `[[shielding]]` window), it is carried by the model's
+//! spread of trajectories, and an estimator on the gentler truth does far better (on the
+//! Kehui world a GPS-only EKF has 31 m RMS during 150–180 s, the recursion 487 m). So
+//! [`World::pcrlb`] reports the bound of an estimator only when every epoch, from its
+//! first fix on, is determined by its own pseudoranges
+//! ([`PvaClockBound::measurement_determined`]); [`World::pva_clock_pcrlb`] gives it either
+//! way, flagged.
+//!
+//! What the bound cannot count it does not approximate: omitting information a
+//! measurement carries would raise the "bound" above what an estimator that uses it can
+//! reach, so it would no longer be a lower bound. An estimator that takes position fixes
+//! (`fixes = ["fm"]`: a WKNN fingerprint fix is a nonlinear, database- and
+//! aiding-dependent function of the RSSI scan, whose error is neither Gaussian nor of the
+//! covariance it reports) or ranges from a receiver other than GNSS and DTMB (TC-OFDM,
+//! `[sensors.emitters]`) therefore gets no bound (`None`).
 
 use super::World;
-use crate::core::{SimTime, TrialRng};
+use crate::core::{SimTime, System, TrialRng};
+use crate::dtmb::DtmbSource;
+use crate::engine::trial::truth_at;
+use crate::fusion::ekf11::Ekf11Config;
 use crate::fusion::paper::ProcessSpec;
-use crate::fusion::pcrlb::PaperBound;
+use crate::fusion::pcrlb::{PaperBound, PvaClockBound};
+use crate::gnss::measurement::{GnssGeometry, LinkGeometry};
+use crate::measurement::RangeMeasurement;
+use crate::world::schema::{EstimatorSpec, FilterKind};
+use std::sync::Arc;
 
 /// The PCRLB of one estimator's model over a run: its position-RMSE bound at every epoch
 /// and over the run.
@@ -14,10 +73,22 @@ pub struct PositionBound {
     /// The square root of the epoch-averaged trace of the bound's position block (m): the
     /// figure `summary.json` reports as `pcrlb_pos_rmse_m`.
     pub rmse_m: f64,
-    /// `(t_s, bound_m)` at every epoch `t_s = (k + 1)·Δt` of the emitters' rate: the square
+    /// `(t_s, bound_m)` at every epoch (paper models: `t_s = (k + 1)·Δt` of the emitters'
+    /// rate; seed 000's model: every instant a GNSS or DTMB batch arrives, from the first
+    /// at which the position is determined): the square
     /// root of the trace of the position block at that epoch, the floor under an RMSE
     /// taken across trials at that instant.
     pub by_epoch: Vec<(f64, f64)>,
+}
+
+/// The PCRLB of an estimator on seed 000's model ([`World::pva_clock_pcrlb`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PvaClockPositionBound {
+    pub bound: PositionBound,
+    /// [`PvaClockBound::measurement_determined`]: every epoch's pseudoranges fix the
+    /// position and the clock on their own, so the bound is carried by the measurements
+    /// rather than by the process model's spread of trajectories.
+    pub measurement_determined: bool,
 }
 
 impl World {
@@ -32,11 +103,28 @@ impl World {
 
     /// The PCRLB of each estimator's model, in the world's order, with the measurement
     /// information averaged over the truth trajectories of trials `0..trials` of `seed`.
-    /// `None` for an estimator whose model the bound does not cover (seed 000's 12-state
-    /// model, the INS, PDR, WLS) or a world without `[sensors.emitters]`. Every emitter of
-    /// the estimator's systems is counted at every epoch (outages excepted): a mode
-    /// selection that drops ranges is not modelled.
+    /// The paper models are bounded on the world's `[sensors.emitters]`
+    /// ([`World::paper_pcrlb`]), seed 000's 12-state model on the world's GNSS and DTMB
+    /// receivers ([`World::pva_clock_pcrlb`], see the module documentation). `None` for an
+    /// estimator whose model no bound covers (the INS, PDR, WLS) or whose measurements the
+    /// bound cannot count.
     pub fn pcrlb(&self, seed: u64, trials: u64) -> Vec<Option<PositionBound>> {
+        let mut out = self.paper_pcrlb(seed, trials);
+        for (slot, b) in out.iter_mut().zip(self.pva_clock_pcrlb(seed, trials)) {
+            if let Some(b) = b.filter(|b| b.measurement_determined) {
+                if slot.is_none() {
+                    *slot = Some(b.bound);
+                }
+            }
+        }
+        out
+    }
+
+    /// The PCRLB of each paper estimator ([`PaperBound`]), `None` for the others or a
+    /// world without `[sensors.emitters]`. Every emitter of the estimator's systems is
+    /// counted at every epoch (outages excepted): a mode selection that drops ranges is
+    /// not modelled.
+    pub fn paper_pcrlb(&self, seed: u64, trials: u64) -> Vec<Option<PositionBound>> {
         let n_est = self.file.estimators.len();
         let Some(cfg) = self.file.sensors.emitters.as_ref() else {
             return vec![None; n_est];
@@ -93,5 +181,201 @@ impl World {
                 })
             })
             .collect()
+    }
+
+    /// The PCRLB of each estimator on seed 000's 12-state model ([`PvaClockBound`], see
+    /// the module documentation), whether or not its epochs' ranges determine the
+    /// position ([`World::pcrlb`] reports it only when they do); `None` for the other
+    /// estimators and for those whose measurements it cannot count. A deterministic truth
+    /// (a waypoint plan) is the same in every trial, so its information is computed once.
+    pub fn pva_clock_pcrlb(&self, seed: u64, trials: u64) -> Vec<Option<PvaClockPositionBound>> {
+        let n_est = self.file.estimators.len();
+        let end = SimTime::from_seconds(self.duration_s);
+        let sensors = &self.file.sensors;
+        // The instants at which the GNSS and DTMB receivers sample, 0 to the end.
+        let mut instants_ns: Vec<i64> = Vec::new();
+        let mut add_grid = |step_ns: i64| {
+            let mut t = 0i64;
+            while t <= end.0 {
+                instants_ns.push(t);
+                t += step_ns.max(1);
+            }
+        };
+        if let Some(g) = &sensors.gnss {
+            add_grid(GnssGeometry::step_ns(g.rate_hz));
+        }
+        if let Some(d) = &sensors.dtmb {
+            add_grid(((1e9 / d.rate_hz).round() as i64).max(1));
+        }
+        instants_ns.sort_unstable();
+        instants_ns.dedup();
+        let instants_s: Vec<f64> = instants_ns.iter().map(|&t| SimTime(t).seconds()).collect();
+        let mut bounds: Vec<Option<PvaClockBound>> = self
+            .file
+            .estimators
+            .iter()
+            .map(|e| {
+                let cfg = self.pva_clock_config(e)?;
+                PvaClockBound::new(cfg, &e.sources, instants_s.clone()).ok()
+            })
+            .collect();
+        if instants_s.is_empty() || bounds.iter().all(Option::is_none) {
+            return vec![None; n_est];
+        }
+        let n_traj = if self.truth_is_deterministic() {
+            1
+        } else {
+            trials.max(1)
+        };
+        let mut links: Vec<LinkGeometry> = Vec::with_capacity(64);
+        let mut gnss_ranges: Vec<RangeMeasurement> = Vec::with_capacity(64);
+        let mut dtmb_ranges: Vec<RangeMeasurement> = Vec::with_capacity(8);
+        let mut mine: Vec<RangeMeasurement> = Vec::with_capacity(64);
+        let mut used = 0usize;
+        for i in 0..n_traj {
+            let rng = TrialRng::new(seed, i);
+            let Ok(trajectory) = self.build_trajectory(&rng) else {
+                continue;
+            };
+            let mut gnss = sensors.gnss.as_ref().map(|g| {
+                GnssGeometry::new(
+                    g,
+                    Arc::clone(&self.nav),
+                    self.shielding.clone(),
+                    self.gnss_scene_view(),
+                )
+            });
+            let clock = Arc::new(self.receiver_clock(&rng));
+            let Ok(mut dtmb) = self.dtmb_source(clock, None, &rng, end) else {
+                return vec![None; n_est];
+            };
+            let gnss_step = sensors
+                .gnss
+                .as_ref()
+                .map(|g| GnssGeometry::step_ns(g.rate_hz));
+            let dtmb_step = dtmb.as_ref().map(DtmbSource::period_ns);
+            for (k, &t_ns) in instants_ns.iter().enumerate() {
+                let truth = truth_at(&self.frame, self.start, trajectory.as_ref(), SimTime(t_ns));
+                gnss_ranges.clear();
+                if let (Some(geo), Some(step)) = (gnss.as_mut(), gnss_step) {
+                    if t_ns % step == 0 {
+                        links.clear();
+                        geo.epoch(&truth, &mut links);
+                        let rates = sensors.gnss.as_ref().is_some_and(|g| g.range_rates);
+                        gnss_ranges.extend(links.iter().map(|l| RangeMeasurement {
+                            emitter: geo.satellites()[l.channel as usize],
+                            emitter_pos_ecef_m: l.pos_ecef_m,
+                            emitter_vel_ecef_mps: l.vel_ecef_mps,
+                            pseudorange_m: l.range_m,
+                            sigma_m: l.sigma_m,
+                            range_rate_mps: rates.then_some(l.geometric_rate_mps),
+                            sigma_rate_mps: l.sigma_rate_mps,
+                            cn0_dbhz: l.cn0_dbhz,
+                            elevation_rad: l.el_rad,
+                        }));
+                    }
+                }
+                dtmb_ranges.clear();
+                if let (Some(d), Some(step)) = (dtmb.as_mut(), dtmb_step) {
+                    if t_ns % step == 0 {
+                        d.noise_free_ranges(&truth, &mut dtmb_ranges);
+                    }
+                }
+                let gnss_now = gnss_step.is_some_and(|s| t_ns % s == 0);
+                let dtmb_now = dtmb_step.is_some_and(|s| t_ns % s == 0);
+                for (e, bound) in self.file.estimators.iter().zip(bounds.iter_mut()) {
+                    let Some(bound) = bound.as_mut() else {
+                        continue;
+                    };
+                    // An epoch of this estimator: a batch of a source it uses arrives.
+                    let uses = |sys: System| e.sources.contains(&sys);
+                    let epoch = (gnss_now && (uses(System::Gps) || uses(System::Bds)))
+                        || (dtmb_now && uses(System::Dtmb));
+                    if !epoch {
+                        continue;
+                    }
+                    mine.clear();
+                    mine.extend(
+                        gnss_ranges
+                            .iter()
+                            .chain(&dtmb_ranges)
+                            .filter(|m| e.sources.contains(&m.system()))
+                            .copied(),
+                    );
+                    bound.add(k, &truth.pos_ecef_m, &truth.vel_ecef_mps, &mine);
+                }
+            }
+            for bound in bounds.iter_mut().flatten() {
+                bound.end_trial();
+            }
+            used += 1;
+        }
+        if used == 0 {
+            return vec![None; n_est];
+        }
+        bounds
+            .into_iter()
+            .map(|b| {
+                let b = b?;
+                let determined = b.measurement_determined();
+                let mse = b.position_mse_m2().ok()?;
+                let by_epoch: Vec<(f64, f64)> = b
+                    .instants_s()
+                    .iter()
+                    .zip(&mse)
+                    .filter_map(|(t, m)| m.map(|m| (*t, m.max(0.0).sqrt())))
+                    .collect();
+                if by_epoch.is_empty() {
+                    return None;
+                }
+                let mean = by_epoch.iter().map(|(_, b)| b * b).sum::<f64>() / by_epoch.len() as f64;
+                (mean.is_finite() && mean >= 0.0).then(|| PvaClockPositionBound {
+                    bound: PositionBound {
+                        rmse_m: mean.sqrt(),
+                        by_epoch,
+                    },
+                    measurement_determined: determined,
+                })
+            })
+            .collect()
+    }
+
+    /// The tuning of seed 000's model an estimator runs, or `None` when it does not run
+    /// that model or takes measurements the bound cannot count (see the module
+    /// documentation): position fixes, or ranges of a system that only a receiver other
+    /// than `[sensors.gnss]` and `[sensors.dtmb]` provides.
+    fn pva_clock_config(&self, e: &EstimatorSpec) -> Option<Ekf11Config> {
+        if e.process
+            .as_ref()
+            .is_some_and(|p| *p != ProcessSpec::PvaClock {})
+        {
+            return None;
+        }
+        match e.filter {
+            FilterKind::Ekf11
+            | FilterKind::Ekf
+            | FilterKind::Ukf
+            | FilterKind::Ckf
+            | FilterKind::Stf
+            | FilterKind::Rekf
+            | FilterKind::Pf => {}
+            FilterKind::Wls
+            | FilterKind::Ins
+            | FilterKind::Pdr
+            | FilterKind::Sir
+            | FilterKind::Rbpf => return None,
+        }
+        if !e.fixes.is_empty() {
+            return None;
+        }
+        let sensors = &self.file.sensors;
+        let counted = |s: System| match s {
+            System::Gps | System::Bds | System::Dtmb => sensors.emitters.is_none(),
+            System::Tcofdm => sensors.tcofdm.is_none() && sensors.emitters.is_none(),
+        };
+        e.sources
+            .iter()
+            .all(|s| counted(*s))
+            .then(|| e.ekf.unwrap_or_default())
     }
 }

@@ -1166,6 +1166,42 @@ impl World {
         )
     }
 
+    /// The trial's DTMB receiver (`[sensors.dtmb]`, the world's DTMB transmitters), aided
+    /// by estimator `aid` when the receiver is configured `aided`; `None` without
+    /// `[sensors.dtmb]`.
+    ///
+    /// # Errors
+    /// When the receiver or a tower is invalid.
+    pub fn dtmb_source(
+        &self,
+        clock: Arc<ClockTrack>,
+        aid: Option<usize>,
+        rng: &TrialRng,
+        end: SimTime,
+    ) -> Result<Option<DtmbSource>, String> {
+        let Some(d) = &self.file.sensors.dtmb else {
+            return Ok(None);
+        };
+        let towers = self
+            .transmitters
+            .iter()
+            .filter(|t| t.kind == TransmitterKind::Dtmb)
+            .map(|t| t.tower_spec(System::Dtmb))
+            .collect();
+        DtmbSource::new(
+            d.clone(),
+            towers,
+            self.scene.clone(),
+            self.frame.clone(),
+            clock,
+            aid.filter(|_| d.aided),
+            rng,
+            end,
+        )
+        .map(Some)
+        .map_err(|i| format!("sensors.dtmb.{}: {}", i.key, i.message))
+    }
+
     /// Builds the trajectory, sources and estimators of one trial.
     ///
     /// # Errors
@@ -1210,20 +1246,8 @@ impl World {
                 .map(|t| t.tower_spec(sys))
                 .collect()
         };
-        if let Some(d) = &sensors.dtmb {
-            sources.push(Box::new(
-                DtmbSource::new(
-                    d.clone(),
-                    towers_of(TransmitterKind::Dtmb, System::Dtmb),
-                    self.scene.clone(),
-                    self.frame.clone(),
-                    Arc::clone(&clock),
-                    aid(System::Dtmb).filter(|_| d.aided),
-                    rng,
-                    end,
-                )
-                .map_err(|i| err("sensors.dtmb", i))?,
-            ));
+        if let Some(d) = self.dtmb_source(Arc::clone(&clock), aid(System::Dtmb), rng, end)? {
+            sources.push(Box::new(d));
         }
         if let Some(tc) = &sensors.tcofdm {
             let stations = towers_of(TransmitterKind::Tcofdm, System::Tcofdm)
