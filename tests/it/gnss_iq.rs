@@ -24,7 +24,7 @@ const ROAD: &str = "worlds/gnss-iq-open-road.toml";
 /// never acquired in 120 s, and here it took 44 s after two false alarms. Four dwells
 /// acquire every satellite within 5 s of it being in view, with no false alarm, on both
 /// machines (docs/validation.md).
-fn gps_conf(data: &str, rate: f64, out: &str) -> String {
+pub(crate) fn gps_conf(data: &str, rate: f64, out: &str) -> String {
     format!(
         "[GNSS-SDR]
 GNSS-SDR.internal_fs_sps={rate}
@@ -139,18 +139,18 @@ impl Truth {
 
 /// What a recording through GNSS-SDR gave: its console log, the PRNs the recording's
 /// metadata annotates, and the truth.
-struct Positioned {
-    log: String,
+pub(crate) struct Positioned {
+    pub(crate) log: String,
     prns: Vec<u64>,
     truth: Truth,
     /// GNSS-SDR's output directory (RINEX, NMEA, the decoded ephemerides as XML).
-    dir: std::path::PathBuf,
+    pub(crate) dir: std::path::PathBuf,
 }
 
 /// Records `world` for `duration_s` at `rate` sps ci8 on `signal` (`gps-l1ca` or
 /// `bds-b1i`), writes GNSS-SDR's configuration `conf(data, out, prns)` and runs GNSS-SDR
 /// on it. `None` (after the skip is reported) when GNSS-SDR is not installed.
-fn record_and_position(
+pub(crate) fn record_and_position(
     tag: &str,
     world: &str,
     signal: &str,

@@ -16,6 +16,7 @@ mod fm;
 mod fusion_engine;
 mod fusion_family;
 mod fusion_filters;
+mod gnss_canyon;
 mod gnss_iq;
 mod gnss_orbits;
 mod hostile;

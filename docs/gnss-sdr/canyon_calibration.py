@@ -1,0 +1,94 @@
+"""Per-class pseudorange errors of one urban-canyon trial at two levels (docs/validation.md,
+"Per-class calibration"): GNSS-SDR's observables on `hybridnav gnss iq`'s recording and
+hybridnav's measurement level (`hybridnav export --format csv`) of the same world and trial.
+
+Usage: canyon_calibration.py RUN EXP [x]
+  RUN  a directory with cy.paths.csv (from `gnss iq ... --out RUN/cy`) and obs.dat
+       (GNSS-SDR's Observables dump: Observables.dump=true, dump_mat=false)
+  EXP  the output directory of `hybridnav export WORLD --format csv`
+  x    also print GNSS-SDR's errors every 5 s
+
+Convention (the same for both levels): a pseudorange's error is its excess over the direct
+path's true pseudorange, i.e. the scene's multipath/NLOS error plus tracking noise (the
+world has no atmosphere or orbit residuals), with the receiver clock removed at each
+1 s epoch by subtracting the mean over that epoch's line-of-sight satellites (classes los
+and los+mp of paths.csv). For GNSS-SDR the true direct-path code phase comes from
+paths.csv (interpolated at the epoch's true time) and is compared with the transmit time
+GNSS-SDR assigns (TOW_at_current_symbol) modulo 1 ms. GNSS-SDR's receiver time is tied to
+the sample count; its one offset to the recording's time is fitted (a common time-tag
+offset reads as a common error). Only (satellite, epoch) pairs present in both levels
+are tabulated.
+"""
+import sys, csv, numpy as np, collections
+run, exp = sys.argv[1], sys.argv[2]
+C_MPS = 299792458.0; WEEK = 2111 * 604800.0; CHIP = 1.023e6
+# paths.csv: direct-path code phase and class per (sat, row time)
+ph = collections.defaultdict(list); cls = {}
+for r in csv.DictReader(open(f"{run}/cy.paths.csv")):
+    if r["path"] != "0": continue
+    t = round(float(r["t_gpst_s"]) - WEEK, 3)
+    ph[int(r["prn"])].append((t, float(r["code_phase_chips"])))
+    cls[(int(r["prn"]), t)] = r["class"]
+phase = {}
+for prn, v in ph.items():
+    v = np.array(v); u = np.unwrap(v[:, 1] * 2 * np.pi / 1023) * 1023 / (2 * np.pi)
+    phase[prn] = (v[:, 0], u)
+def klass(prn, t):
+    return cls.get((prn, round(round(t * 10) / 10, 3)))
+# GNSS-SDR observables dump: epochs x 8 channels x (RX_time, TOW, Doppler, phase, PR, PRN, valid)
+d = np.fromfile(f"{run}/obs.dat", dtype="<f8").reshape(-1, 8, 7)
+# GNSS-SDR steps its receiver time once, at its first fix; keep the rows after the last step.
+d = d[d[:, 0, 0] > 0]
+steps = np.nonzero(np.abs(np.diff(d[:, 0, 0]) - 0.02) > 1e-6)[0]
+print("receiver-time steps at", [(d[i, 0, 0], d[i + 1, 0, 0]) for i in steps])
+if len(steps): d = d[steps[-1] + 1:]
+def sdr_errors(Cs):
+    out = []
+    for row in d:
+        R = row[0, 0]
+        if R == 0: continue
+        t = R - Cs
+        if abs(t - round(t)) > 0.0101: continue  # one row per second
+        for ch in row:
+            if ch[6] != 1 or ch[4] == 0: continue
+            prn = int(ch[5]); tt, u = phase[prn]
+            if t < tt[0] or t > tt[-1]: continue
+            chips = np.interp(t, tt, u) % 1023
+            dt = (ch[1] * 1e3 % 1.0) * 1e-3 - chips / CHIP
+            dt = (dt + 0.5e-3) % 1e-3 - 0.5e-3
+            out.append((round(t), prn, -C_MPS * dt))
+    return out
+Cs = d[d[:, 0, 0] > 0][0, 0, 0] - d[d[:, 0, 0] > 0][0, 0, 0]  # 0: GNSS-SDR's time ~ GPS time
+for _ in range(3):
+    e = sdr_errors(Cs)
+    los = [x[2] for x in e if klass(x[1], x[0]) in ("los", "los+mp")]
+    Cs += np.mean(los) / C_MPS  # a late time tag reads as a common positive error
+sdr = {(t, p): v for t, p, v in sdr_errors(Cs)}
+print(f"GNSS-SDR time offset {Cs*1e3:.4f} ms")
+ml = {}
+for r in csv.DictReader(open(f"{exp}/ranges.csv")):
+    if r["system"] != "gps": continue
+    ml[(round(float(r["gpst_tow_s"])), int(r["emitter"][1:]))] = float(r["pseudorange_m"]) - float(r["true_range_m"])
+def demean(m):
+    by = collections.defaultdict(list)
+    for (t, p), v in m.items():
+        if klass(p, t) in ("los", "los+mp"): by[t].append(v)
+    return {(t, p): v - np.mean(by[t]) for (t, p), v in m.items() if len(by[t]) >= 2}
+t_max = max(t for t, _ in sdr)
+common = set(sdr) & set(ml)
+print("sdr only", collections.Counter(klass(p,t) for t,p in set(sdr)-set(ml)), "ml only", collections.Counter((p,klass(p,t)) for t,p in set(ml)-set(sdr) if t <= t_max and t>=min(t for t,_ in sdr)))
+for name, m in (("GNSS-SDR", sdr), ("measurement", ml)):
+    m = demean({k: v for k, v in m.items() if k in common})
+    print(name)
+    for c in ("los", "los+mp", "nlos"):
+        v = np.array([x for (t, p), x in m.items() if klass(p, t) == c])
+        if len(v) == 0: print(f"  {c:7} 0"); continue
+        a = np.abs(v)
+        print(f"  {c:7} n={len(v):4} mean={v.mean():7.3f} std={v.std():6.3f} rms={np.sqrt((v**2).mean()):6.3f} p68={np.percentile(a,68):6.3f} p95={np.percentile(a,95):6.3f}")
+    per = collections.defaultdict(list)
+    for (t, p), x in m.items(): per[p].append(x)
+    print("  per sat:", {p: (round(np.mean(v),2), round(np.std(v),2), len(v)) for p, v in sorted(per.items())})
+if len(sys.argv) > 3:
+    m = demean({k: v for k, v in sdr.items() if k in common})
+    for t in sorted(set(t for t, _ in m))[::5]:
+        print(t, " ".join(f"G{p}:{m[(t,p)]:7.2f}" for p in (13, 15, 28, 30) if (t, p) in m))
