@@ -293,6 +293,21 @@ impl TcofdmSource {
     pub fn warnings(&self) -> &[String] {
         self.inner.warnings()
     }
+
+    /// The ranges the receiver holds at `truth`, with the σ it reports and no noise
+    /// drawn ([`DtmbSource::noise_free_ranges`]; the bound of `world::bound` reads them).
+    pub fn noise_free_ranges(
+        &mut self,
+        truth: &crate::measurement::Truth,
+        out: &mut Vec<crate::measurement::RangeMeasurement>,
+    ) {
+        self.inner.noise_free_ranges(truth, out);
+    }
+
+    /// The interval between the receiver's epochs (ns).
+    pub fn period_ns(&self) -> i64 {
+        self.inner.period_ns()
+    }
 }
 
 impl Source for TcofdmSource {

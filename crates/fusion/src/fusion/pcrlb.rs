@@ -446,11 +446,14 @@ impl PvaClockBound {
 
     /// The position MSE (m²) of a least-squares fix on one epoch's pseudoranges alone,
     /// `tr[(Ī_s)⁻¹]_pos` over the position, the clock bias and (when it is a state) the
-    /// BeiDou inter-system bias; infinite when they do not determine them.
+    /// BeiDou inter-system bias; infinite when they do not determine them. An epoch
+    /// without BeiDou ranges has no information on the bias, and none of its ranges
+    /// depends on it: the bias is then left out rather than counted as undetermined (its
+    /// row of the information is zero, so the position block is the same either way).
     fn snapshot_pos_mse_m2(info: &SMatrix<f64, N_STATES, N_STATES>, isb: bool) -> f64 {
         let mut cols: Vec<usize> = idx::POS.to_vec();
         cols.push(idx::CLOCK_BIAS);
-        if isb {
+        if isb && info[(idx::ISB_BDS, idx::ISB_BDS)] > 0.0 {
             cols.push(idx::ISB_BDS);
         }
         let n = cols.len();

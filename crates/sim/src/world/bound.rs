@@ -18,7 +18,11 @@
 //!   with its C/N0-dependent FLL σ;
 //! - DTMB: the towers the receiver holds at the truth, with the σ it reports
 //!   ([`DtmbSource::noise_free_ranges`]: thermal σ at the correlation peak's SNR under
-//!   the world's path loss, shadowing and scene, with the receiver's floor).
+//!   the world's path loss, shadowing and scene, with the receiver's floor);
+//! - TC-OFDM (seed 004): the base stations its receiver (the DTMB receiver on the
+//!   stations' navigation signal) holds at the truth, with the σ it reports, the same way.
+//!   Each station's synchronisation error (`sync_sigma_ns`) is a bias drawn once per
+//!   trial and is left out, as the other persistent errors below.
 //!
 //! Those σ are the world's model evaluated at the truth (the C/N0 and SNR depend on where
 //! the receiver is), and the errors are taken as white and independent with those σ — the
@@ -51,8 +55,8 @@
 //! reach, so it would no longer be a lower bound. An estimator that takes position fixes
 //! (`fixes = ["fm"]`: a WKNN fingerprint fix is a nonlinear, database- and
 //! aiding-dependent function of the RSSI scan, whose error is neither Gaussian nor of the
-//! covariance it reports) or ranges from a receiver other than GNSS and DTMB (TC-OFDM,
-//! `[sensors.emitters]`) therefore gets no bound (`None`).
+//! covariance it reports) or ranges from a receiver other than GNSS, DTMB and TC-OFDM
+//! (`[sensors.emitters]`) therefore gets no bound (`None`).
 
 use super::World;
 use crate::core::{SimTime, System, TrialRng};
@@ -207,6 +211,9 @@ impl World {
         if let Some(d) = &sensors.dtmb {
             add_grid(((1e9 / d.rate_hz).round() as i64).max(1));
         }
+        if let Some(tc) = &sensors.tcofdm {
+            add_grid(((1e9 / tc.rate_hz).round() as i64).max(1));
+        }
         instants_ns.sort_unstable();
         instants_ns.dedup();
         let instants_s: Vec<f64> = instants_ns.iter().map(|&t| SimTime(t).seconds()).collect();
@@ -230,6 +237,7 @@ impl World {
         let mut links: Vec<LinkGeometry> = Vec::with_capacity(64);
         let mut gnss_ranges: Vec<RangeMeasurement> = Vec::with_capacity(64);
         let mut dtmb_ranges: Vec<RangeMeasurement> = Vec::with_capacity(8);
+        let mut tcofdm_ranges: Vec<RangeMeasurement> = Vec::with_capacity(8);
         let mut mine: Vec<RangeMeasurement> = Vec::with_capacity(64);
         let mut used = 0usize;
         for i in 0..n_traj {
@@ -246,9 +254,13 @@ impl World {
                 )
             });
             let clock = Arc::new(self.receiver_clock(&rng));
-            let Ok(mut dtmb) = self.dtmb_source(clock, None, &rng, end) else {
+            let Ok(mut dtmb) = self.dtmb_source(Arc::clone(&clock), None, &rng, end) else {
                 return vec![None; n_est];
             };
+            let Ok(mut tcofdm) = self.tcofdm_source(clock, None, &rng, end) else {
+                return vec![None; n_est];
+            };
+            let tcofdm_step = tcofdm.as_ref().map(crate::tcofdm::TcofdmSource::period_ns);
             let gnss_step = sensors
                 .gnss
                 .as_ref()
@@ -281,6 +293,13 @@ impl World {
                         d.noise_free_ranges(&truth, &mut dtmb_ranges);
                     }
                 }
+                tcofdm_ranges.clear();
+                if let (Some(tc), Some(step)) = (tcofdm.as_mut(), tcofdm_step) {
+                    if t_ns % step == 0 {
+                        tc.noise_free_ranges(&truth, &mut tcofdm_ranges);
+                    }
+                }
+                let tcofdm_now = tcofdm_step.is_some_and(|s| t_ns % s == 0);
                 let gnss_now = gnss_step.is_some_and(|s| t_ns % s == 0);
                 let dtmb_now = dtmb_step.is_some_and(|s| t_ns % s == 0);
                 for (e, bound) in self.file.estimators.iter().zip(bounds.iter_mut()) {
@@ -290,7 +309,8 @@ impl World {
                     // An epoch of this estimator: a batch of a source it uses arrives.
                     let uses = |sys: System| e.sources.contains(&sys);
                     let epoch = (gnss_now && (uses(System::Gps) || uses(System::Bds)))
-                        || (dtmb_now && uses(System::Dtmb));
+                        || (dtmb_now && uses(System::Dtmb))
+                        || (tcofdm_now && uses(System::Tcofdm));
                     if !epoch {
                         continue;
                     }
@@ -299,6 +319,7 @@ impl World {
                         gnss_ranges
                             .iter()
                             .chain(&dtmb_ranges)
+                            .chain(&tcofdm_ranges)
                             .filter(|m| e.sources.contains(&m.system()))
                             .copied(),
                     );
@@ -343,7 +364,7 @@ impl World {
     /// The tuning of seed 000's model an estimator runs, or `None` when it does not run
     /// that model or takes measurements the bound cannot count (see the module
     /// documentation): position fixes, or ranges of a system that only a receiver other
-    /// than `[sensors.gnss]` and `[sensors.dtmb]` provides.
+    /// than `[sensors.gnss]`, `[sensors.dtmb]` and `[sensors.tcofdm]` provides.
     fn pva_clock_config(&self, e: &EstimatorSpec) -> Option<Ekf11Config> {
         if e.process
             .as_ref()
@@ -363,7 +384,8 @@ impl World {
             | FilterKind::Ins
             | FilterKind::Pdr
             | FilterKind::Sir
-            | FilterKind::Rbpf => return None,
+            | FilterKind::Rbpf
+            | FilterKind::Mpf => return None,
         }
         if !e.fixes.is_empty() {
             return None;
@@ -371,7 +393,7 @@ impl World {
         let sensors = &self.file.sensors;
         let counted = |s: System| match s {
             System::Gps | System::Bds | System::Dtmb => sensors.emitters.is_none(),
-            System::Tcofdm => sensors.tcofdm.is_none() && sensors.emitters.is_none(),
+            System::Tcofdm => sensors.emitters.is_none(),
         };
         e.sources
             .iter()

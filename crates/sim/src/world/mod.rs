@@ -19,7 +19,7 @@ pub mod visibility;
 
 use crate::core::receiver_clock::{ClockTrack, ReceiverClock};
 use crate::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, TrialRng};
-use crate::dtmb::{DtmbSource, TowerSpec};
+use crate::dtmb::DtmbSource;
 use crate::engine::trial::{Scoring, ScoringInstants, TrialSetup};
 use crate::gnss::measurement::{GnssSource, SceneView, Shielding, ShieldingRule};
 use crate::gnss::rinex_nav::{parse_nav, read_nav_file, NavData};
@@ -1202,6 +1202,41 @@ impl World {
         .map_err(|i| format!("sensors.dtmb.{}: {}", i.key, i.message))
     }
 
+    /// The trial's TC-OFDM receiver over the world's `kind = "tcofdm"` base stations
+    /// (`None` without `[sensors.tcofdm]`), aided by estimator `aid` when the receiver is.
+    ///
+    /// # Errors
+    /// An unusable `[sensors.tcofdm]`.
+    pub fn tcofdm_source(
+        &self,
+        clock: Arc<ClockTrack>,
+        aid: Option<usize>,
+        rng: &TrialRng,
+        end: SimTime,
+    ) -> Result<Option<TcofdmSource>, String> {
+        let Some(tc) = &self.file.sensors.tcofdm else {
+            return Ok(None);
+        };
+        let stations = self
+            .transmitters
+            .iter()
+            .filter(|t| t.kind == TransmitterKind::Tcofdm)
+            .map(|t| BaseStationSpec::from(t.tower_spec(System::Tcofdm)))
+            .collect();
+        TcofdmSource::new(
+            tc.clone(),
+            stations,
+            self.scene.clone(),
+            self.frame.clone(),
+            clock,
+            aid.filter(|_| tc.aided),
+            rng,
+            end,
+        )
+        .map(Some)
+        .map_err(|i| format!("sensors.tcofdm.{}: {}", i.key, i.message))
+    }
+
     /// Builds the trajectory, sources and estimators of one trial.
     ///
     /// # Errors
@@ -1238,35 +1273,11 @@ impl World {
                 .iter()
                 .position(|e| e.sources.contains(&sys))
         };
-        // The towers or base stations of one kind, in the form the receivers take.
-        let towers_of = |kind: TransmitterKind, sys: System| -> Vec<TowerSpec> {
-            self.transmitters
-                .iter()
-                .filter(|t| t.kind == kind)
-                .map(|t| t.tower_spec(sys))
-                .collect()
-        };
         if let Some(d) = self.dtmb_source(Arc::clone(&clock), aid(System::Dtmb), rng, end)? {
             sources.push(Box::new(d));
         }
-        if let Some(tc) = &sensors.tcofdm {
-            let stations = towers_of(TransmitterKind::Tcofdm, System::Tcofdm)
-                .into_iter()
-                .map(BaseStationSpec::from)
-                .collect();
-            sources.push(Box::new(
-                TcofdmSource::new(
-                    tc.clone(),
-                    stations,
-                    self.scene.clone(),
-                    self.frame.clone(),
-                    Arc::clone(&clock),
-                    aid(System::Tcofdm).filter(|_| tc.aided),
-                    rng,
-                    end,
-                )
-                .map_err(|i| err("sensors.tcofdm", i))?,
-            ));
+        if let Some(tc) = self.tcofdm_source(Arc::clone(&clock), aid(System::Tcofdm), rng, end)? {
+            sources.push(Box::new(tc));
         }
         if let Some(e) = &sensors.emitters {
             sources.push(Box::new(
