@@ -21,6 +21,23 @@ fn seed000_with_family_rows(site: &str) -> hybridnav::world::World {
     hybridnav::world::parse_world(&text, &path).expect("world with family rows")
 }
 
+/// Runs `opts`'s trials of `world` and reduces them as `hybridnav run` does.
+fn run_and_reduce(
+    world: &hybridnav::world::World,
+    opts: &RunOptions,
+) -> hybridnav::montecarlo::reduce::Reduced {
+    let trials = run_trials(world, opts).expect("trials");
+    let spill = crate::common::tmp_dir("pcrlb-mc");
+    std::fs::create_dir_all(&spill).unwrap();
+    let mut reducer = RunReducer::new(world, &spill);
+    for t in &trials {
+        reducer.push(t).unwrap();
+    }
+    let reduced = reducer.finish(world, opts).unwrap();
+    let _ = std::fs::remove_dir_all(&spill);
+    reduced
+}
+
 /// The root mean square of a curve's values over `[lo, hi)` seconds.
 fn rms_over(curve: &[(f64, f64)], lo: f64, hi: f64) -> f64 {
     let v: Vec<f64> = curve
@@ -68,15 +85,7 @@ fn pcrlb_of_seed000_kehui_against_the_family_ekf() {
         .iter()
         .map(|e| e.name.as_str())
         .collect();
-    let trials = run_trials(&world, &opts).expect("trials");
-    let spill = crate::common::tmp_dir("pcrlb000-mc");
-    std::fs::create_dir_all(&spill).unwrap();
-    let mut reducer = RunReducer::new(&world, &spill);
-    for t in &trials {
-        reducer.push(t).unwrap();
-    }
-    let reduced = reducer.finish(&world, &opts).unwrap();
-    let _ = std::fs::remove_dir_all(&spill);
+    let reduced = run_and_reduce(&world, &opts);
     let mut checked = 0;
     for (k, est) in reduced.summary.estimators.iter().enumerate() {
         let name = names[k];
@@ -163,15 +172,7 @@ fn pcrlb_of_seed004_range_rows() {
         ["GPS+TC-OFDM", "RE-KF (ranges)", "EKF (ranges)"],
         "rows with a bound"
     );
-    let trials = run_trials(&world, &opts).expect("trials");
-    let spill = crate::common::tmp_dir("pcrlb004-mc");
-    std::fs::create_dir_all(&spill).unwrap();
-    let mut reducer = RunReducer::new(&world, &spill);
-    for t in &trials {
-        reducer.push(t).unwrap();
-    }
-    let reduced = reducer.finish(&world, &opts).unwrap();
-    let _ = std::fs::remove_dir_all(&spill);
+    let reduced = run_and_reduce(&world, &opts);
     for (k, est) in reduced.summary.estimators.iter().enumerate() {
         let Some(b) = &bounds[k] else {
             continue;
