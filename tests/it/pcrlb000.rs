@@ -21,6 +21,27 @@ fn seed000_with_family_rows(site: &str) -> hybridnav::world::World {
     hybridnav::world::parse_world(&text, &path).expect("world with family rows")
 }
 
+/// `trials` trials of seed 1 on two threads, unsharded, without a progress bar.
+fn options(trials: u64) -> RunOptions {
+    RunOptions {
+        trials,
+        seed: 1,
+        threads: 2,
+        progress: false,
+        shard: Shard::WHOLE,
+    }
+}
+
+/// The estimators' names, in the world's order.
+fn row_names(world: &hybridnav::world::World) -> Vec<&str> {
+    world
+        .file
+        .estimators
+        .iter()
+        .map(|e| e.name.as_str())
+        .collect()
+}
+
 /// Runs `opts`'s trials of `world` and reduces them as `hybridnav run` does.
 fn run_and_reduce(
     world: &hybridnav::world::World,
@@ -71,20 +92,9 @@ fn rms_over(curve: &[(f64, f64)], lo: f64, hi: f64) -> f64 {
 #[test]
 fn pcrlb_of_seed000_kehui_against_the_family_ekf() {
     let world = seed000_with_family_rows("kehui");
-    let opts = RunOptions {
-        trials: 4,
-        seed: 1,
-        threads: 2,
-        progress: false,
-        shard: Shard::WHOLE,
-    };
+    let opts = options(4);
     let flagged = world.pva_clock_pcrlb(opts.seed, opts.trials);
-    let names: Vec<&str> = world
-        .file
-        .estimators
-        .iter()
-        .map(|e| e.name.as_str())
-        .collect();
+    let names = row_names(&world);
     let reduced = run_and_reduce(&world, &opts);
     let mut checked = 0;
     for (k, est) in reduced.summary.estimators.iter().enumerate() {
@@ -147,20 +157,9 @@ fn pcrlb_of_seed000_kehui_against_the_family_ekf() {
 fn pcrlb_of_seed004_range_rows() {
     let path = repo().join("worlds/seed004-bupt.toml");
     let world = hybridnav::world::load_world(&path).expect("seed 004 world");
-    let opts = RunOptions {
-        trials: 2,
-        seed: 1,
-        threads: 2,
-        progress: false,
-        shard: Shard::WHOLE,
-    };
+    let opts = options(2);
     let bounds = world.pcrlb(opts.seed, opts.trials);
-    let names: Vec<&str> = world
-        .file
-        .estimators
-        .iter()
-        .map(|e| e.name.as_str())
-        .collect();
+    let names = row_names(&world);
     let bounded: Vec<&str> = names
         .iter()
         .zip(&bounds)

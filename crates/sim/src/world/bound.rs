@@ -67,7 +67,7 @@ use crate::fusion::paper::ProcessSpec;
 use crate::fusion::pcrlb::{PaperBound, PvaClockBound};
 use crate::gnss::measurement::{GnssGeometry, LinkGeometry};
 use crate::measurement::RangeMeasurement;
-use crate::world::schema::{EstimatorSpec, FilterKind};
+use crate::world::schema::EstimatorSpec;
 use std::sync::Arc;
 
 /// The PCRLB of one estimator's model over a run: its position-RMSE bound at every epoch
@@ -366,28 +366,7 @@ impl World {
     /// documentation): position fixes, or ranges of a system that only a receiver other
     /// than `[sensors.gnss]`, `[sensors.dtmb]` and `[sensors.tcofdm]` provides.
     fn pva_clock_config(&self, e: &EstimatorSpec) -> Option<Ekf11Config> {
-        if e.process
-            .as_ref()
-            .is_some_and(|p| *p != ProcessSpec::PvaClock {})
-        {
-            return None;
-        }
-        match e.filter {
-            FilterKind::Ekf11
-            | FilterKind::Ekf
-            | FilterKind::Ukf
-            | FilterKind::Ckf
-            | FilterKind::Stf
-            | FilterKind::Rekf
-            | FilterKind::Pf => {}
-            FilterKind::Wls
-            | FilterKind::Ins
-            | FilterKind::Pdr
-            | FilterKind::Sir
-            | FilterKind::Rbpf
-            | FilterKind::Mpf => return None,
-        }
-        if !e.fixes.is_empty() {
+        if !e.runs_pva_clock() || !e.fixes.is_empty() {
             return None;
         }
         let sensors = &self.file.sensors;

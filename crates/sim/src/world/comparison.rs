@@ -184,19 +184,10 @@ fn gate_of(e: &EstimatorSpec) -> Option<f64> {
 /// The innovation χ²(1) gate of the filters that have one (seed 000's model and the
 /// filter family), as the estimator will run it.
 fn chi2_gate_of(e: &EstimatorSpec) -> Option<f64> {
-    match e.filter {
-        FilterKind::Ekf11
-        | FilterKind::Ekf
-        | FilterKind::Ukf
-        | FilterKind::Ckf
-        | FilterKind::Stf
-        | FilterKind::Rekf
-            if e.process.is_none() =>
-        {
-            e.ekf.unwrap_or_default().gate_chi2
-        }
-        _ => None,
-    }
+    // The family's particle filter weighs every range: it has no innovation gate.
+    (e.runs_pva_clock() && e.filter != FilterKind::Pf)
+        .then(|| e.ekf.unwrap_or_default().gate_chi2)
+        .flatten()
 }
 
 /// Validates `[comparison]` against the estimators and applies it to their configuration.

@@ -428,6 +428,17 @@ impl Default for MonteCarloSection {
 }
 
 impl EstimatorSpec {
+    /// Whether the estimator runs seed 000's 12-state model: `ekf11`, or a filter of the
+    /// family without a paper `[estimator.process]` (absent or `model = "pva_clock"`), as
+    /// [`EstimatorSpec::build`] decides.
+    pub fn runs_pva_clock(&self) -> bool {
+        let family_model = self
+            .process
+            .as_ref()
+            .is_none_or(|p| *p == ProcessSpec::PvaClock {});
+        family_model && (self.filter == FilterKind::Ekf11 || self.filter.family().is_some())
+    }
+
     /// Builds a paper model's estimator ([`crate::fusion::paper`]).
     fn build_paper(
         &self,
