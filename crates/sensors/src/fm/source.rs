@@ -4,12 +4,18 @@
 //!
 //! 1. scans the RSSI of every station at the true position ([`FmField::scan`]: noise,
 //!    quantisation, sensitivity floor), stream `fm/scan`;
-//! 2. takes the constraint centre from the aiding estimator's latest estimate (closed
-//!    loop). The time of the last reliable fix is the last epoch at which that estimate's
-//!    horizontal σ = √((σ_e² + σ_n²)/2) was at most `constraint.reliable_sigma_m`; the
-//!    radius is r(t) = min(r0 + growth (t − t_reliable), r_max) (seed 000 §3.2, Fig. 3).
-//!    Before the first reliable fix, without an aiding estimator or with the constraint
-//!    disabled, every RP is searched;
+//! 2. centres the constraint circle on the aiding estimator's last *reliable* estimate
+//!    (closed loop): an estimate is reliable when its horizontal σ = √((σ_e² + σ_n²)/2)
+//!    is at most `constraint.reliable_sigma_m`. While the estimates are reliable the
+//!    centre is the latest one; once they are not, the centre stays at the last reliable
+//!    position and the radius r(t) = min(r0 + growth (t − t_reliable), r_max) grows
+//!    with the time since (seed 000 §3.2, Fig. 3: "when GPS positioning result is not
+//!    reliable, we can deduce user's position with previous reliable GPS positioning
+//!    results and increase the radius of the circle"). The circle is the region a walker
+//!    can have reached since the last reliable fix; centring it on the latest unreliable
+//!    estimate instead would let a drifting filter drag the FM search after itself, so
+//!    that its FM fixes confirm the drift. Before the first reliable fix, without an
+//!    aiding estimator or with the constraint disabled, every RP is searched;
 //! 3. runs WKNN ([`super::wknn::locate`]) and emits a
 //!    `Measurement::Position(PositionFix)` in ECEF with R_f rotated from ENU and
 //!    `support` = the RPs inside the circle (seed 000 eqs. 18–19).
@@ -319,6 +325,8 @@ pub struct FmSource {
     meas_buf: Vec<f64>,
     scratch: WknnScratch,
     last_reliable_s: Option<f64>,
+    /// The aiding estimate's horizontal position (ENU, m) at `last_reliable_s`.
+    last_reliable_en_m: [f64; 2],
     period_ns: i64,
     end: SimTime,
     failures: u64,
@@ -379,6 +387,7 @@ impl FmSource {
             scan_buf: vec![0.0; n_st],
             meas_buf: vec![f64::NAN; n_ch],
             last_reliable_s: None,
+            last_reliable_en_m: [0.0; 2],
             end,
             failures: 0,
             last_failure: None,
@@ -423,12 +432,13 @@ impl FmSource {
         let cov_enu = r * est.cov_pos_m2 * r.transpose();
         let sigma_h = (0.5 * (cov_enu[(0, 0)] + cov_enu[(1, 1)])).max(0.0).sqrt();
         if sigma_h <= self.cfg.constraint.reliable_sigma_m {
+            let c = self.frame.enu_of_ecef(&est.pos_ecef_m);
             self.last_reliable_s = Some(t_s);
+            self.last_reliable_en_m = [c.x, c.y];
         }
         let since = t_s - self.last_reliable_s?;
-        let c = self.frame.enu_of_ecef(&est.pos_ecef_m);
         Some(Constraint {
-            centre_en_m: [c.x, c.y],
+            centre_en_m: self.last_reliable_en_m,
             radius_m: self.cfg.constraint.radius_m(since),
         })
     }
