@@ -822,6 +822,72 @@ fn fm_source_emits_constrained_fixes_in_ecef() {
     assert!(matches!(out.items[0], Measurement::Position(p) if p.support == 0));
 }
 
+/// Seed 000 §3.2: while the aiding estimate is unreliable, the circle is centred on the
+/// position of the last reliable one and only its radius grows. An unreliable estimate
+/// that has drifted 250 m away (outside the surveyed area) must not drag the search with
+/// it: the fix stays inside the grown circle around the last reliable position, with the
+/// support of that circle. (Centred on the drifted estimate, the circle would hold no RP.)
+#[test]
+fn fm_source_holds_the_circle_at_the_last_reliable_position() {
+    let fr = frame();
+    let grid = grid_points([-60.0, -60.0], [60.0, 60.0], 3.0).unwrap();
+    let db = Arc::new(db_from_survey(&grid, "test/fm/survey/source"));
+    let cfg = FmSensorConfig::default();
+    let mut src = FmSource::new(
+        cfg.clone(),
+        stations(&fr),
+        None,
+        fr.clone(),
+        db,
+        &TrialRng::new(MASTER_SEED, 3),
+        Some(0),
+        SimTime::from_seconds(100.0),
+    )
+    .unwrap();
+    let reliable_en = [2.0, -3.0];
+    let mut out = MeasurementBatch::default();
+    let mut fixes = vec![];
+    for (t_s, at_en, sigma_m) in [
+        (0.0, reliable_en, 5.0),
+        (10.0, [180.0, 175.0], 60.0),
+        (20.0, [250.0, 0.0], 90.0),
+    ] {
+        let est = [Some(Estimate {
+            t: GpsTime::from_ns(0).add_seconds(t_s),
+            pos_ecef_m: fr.ecef_of_enu(&Vector3::new(at_en[0], at_en[1], UP_M)),
+            vel_ecef_mps: None,
+            cov_pos_m2: Matrix3::identity() * sigma_m * sigma_m,
+        })];
+        let truth = truth_at(&fr, t_s, 0.0, 0.0);
+        out.items.clear();
+        src.sample(
+            &SampleContext {
+                truth: &truth,
+                estimates: &est,
+            },
+            &mut out,
+        );
+        let Some(Measurement::Position(fix)) = out.items.first() else {
+            panic!("no fix at {t_s} s: {:?}", src.warnings())
+        };
+        fixes.push((fr.enu_of_ecef(&fix.pos_ecef_m), fix.support));
+    }
+    println!("fixes (ENU, support): {fixes:?}");
+    for ((enu, support), (t_s, r_m)) in fixes.iter().zip([(0.0, 30.0), (10.0, 50.0), (20.0, 70.0)])
+    {
+        let d = ((enu.x - reliable_en[0]).powi(2) + (enu.y - reliable_en[1]).powi(2)).sqrt();
+        assert!(
+            d <= r_m,
+            "t = {t_s} s: fix {d:.1} m from the last reliable position, r = {r_m}"
+        );
+        assert!(*support > 0, "t = {t_s} s: the circle must hold RPs");
+    }
+    assert!(
+        fixes[0].1 < fixes[1].1 && fixes[1].1 < fixes[2].1,
+        "{fixes:?}"
+    );
+}
+
 #[test]
 fn fm_source_is_deterministic_per_trial() {
     let fr = frame();
