@@ -189,7 +189,8 @@ fn yes() -> bool {
     true
 }
 
-/// Seed 000's constraint circle.
+/// Seed 000's constraint circle (§3.2, Fig. 3): centred on the aiding estimate while it is
+/// reliable, then held at its last reliable position while the radius grows.
 #[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ConstraintConfig {
