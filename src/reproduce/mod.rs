@@ -13,7 +13,7 @@ pub mod papers;
 use crate::montecarlo::store::Shard;
 use crate::montecarlo::{run_trials, summarise, EstimatorSummary, RunOptions, Summary};
 use crate::world::load_world;
-use papers::{Figure, Metric, Ordering, Paper, Variant, PAPERS, VARIANTS};
+use papers::{Figure, GainSplit, Metric, Ordering, Paper, Variant, GAIN_SPLITS, PAPERS, VARIANTS};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -132,6 +132,68 @@ impl OrderingResult {
     }
 }
 
+/// A [`GainSplit`] on a run's figures.
+#[derive(Clone, Debug)]
+pub struct SplitResult {
+    pub split: &'static GainSplit,
+    /// The metric of `method`, `without` and `baseline` (m).
+    pub method_m: Option<f64>,
+    pub without_m: Option<f64>,
+    pub baseline_m: Option<f64>,
+}
+
+impl SplitResult {
+    /// `baseline − method`: the method's gain (m).
+    pub fn gain_m(&self) -> Option<f64> {
+        Some(self.baseline_m? - self.method_m?)
+    }
+
+    /// `without − method`: the term's part of the gain (m).
+    pub fn term_part_m(&self) -> Option<f64> {
+        Some(self.without_m? - self.method_m?)
+    }
+
+    /// The term's share of the gain, when there is a gain larger than a tie
+    /// ([`TIE_RELATIVE`] of the baseline) to split.
+    pub fn share(&self) -> Option<f64> {
+        let gain = self.gain_m()?;
+        (gain > TIE_RELATIVE * self.baseline_m?.abs())
+            .then(|| self.term_part_m().map(|p| p / gain))?
+    }
+
+    fn line(&self) -> String {
+        let sp = self.split;
+        let head = format!(
+            "Share of {} in {}'s {} gain over {}: {} {}, {} {}, {} {} m",
+            sp.term,
+            sp.method,
+            sp.metric.label(),
+            sp.baseline,
+            sp.method,
+            fmt_opt(self.method_m, 3),
+            sp.without,
+            fmt_opt(self.without_m, 3),
+            sp.baseline,
+            fmt_opt(self.baseline_m, 3),
+        );
+        match (self.share(), self.gain_m(), self.term_part_m()) {
+            (Some(share), Some(g), Some(p)) => format!(
+                "{head}; gain {} m, of which the term {} m: share {:.0} %.",
+                mm(g),
+                mm(p),
+                100.0 * share
+            ),
+            (None, Some(g), Some(p)) => format!(
+                "{head}; no gain to split (gain {} m); the term itself moves {} by {} m.",
+                mm(g),
+                sp.method,
+                mm(-p)
+            ),
+            _ => format!("{head}; a row has no value."),
+        }
+    }
+}
+
 /// One paper's reproduction.
 #[derive(Clone, Debug)]
 pub struct PaperResult {
@@ -149,6 +211,8 @@ pub struct PaperResult {
     /// The paper's [`Variant`] rows, scored the same way and printed apart; they count in
     /// no total.
     pub variants: Vec<VariantResult>,
+    /// The paper's [`GainSplit`]s on this run.
+    pub splits: Vec<SplitResult>,
 }
 
 /// One variant's rows and orderings.
@@ -205,6 +269,25 @@ pub fn score(paper: &'static Paper, s: &Summary) -> Result<PaperResult, String> 
         })
         .collect::<Result<Vec<_>, String>>()?;
     let (protocol, resets) = protocol_and_resets(s);
+    let value = |name: &str, metric: Metric| {
+        s.estimators
+            .iter()
+            .find(|e| e.name == name)
+            .map(|e| metric_of(e, metric))
+            .ok_or_else(|| format!("{} has no estimator named {name:?}", paper.world))
+    };
+    let splits = GAIN_SPLITS
+        .iter()
+        .filter(|g| g.paper == paper.id)
+        .map(|g| {
+            Ok(SplitResult {
+                split: g,
+                method_m: value(g.method, g.metric)?,
+                without_m: value(g.without, g.metric)?,
+                baseline_m: value(g.baseline, g.metric)?,
+            })
+        })
+        .collect::<Result<Vec<_>, String>>()?;
     Ok(PaperResult {
         paper,
         trials: s.trials,
@@ -214,6 +297,7 @@ pub fn score(paper: &'static Paper, s: &Summary) -> Result<PaperResult, String> 
         protocol,
         resets,
         variants,
+        splits,
     })
 }
 
@@ -354,6 +438,11 @@ pub fn run_paper(
     score(paper, &summary)
 }
 
+/// Metres to the millimetre; a difference that rounds to zero prints as 0.000, not −0.000.
+fn mm(x: f64) -> String {
+    format!("{:.3}", (x * 1e3).round() / 1e3 + 0.0)
+}
+
 fn fmt_opt(v: Option<f64>, digits: usize) -> String {
     v.map_or_else(|| "-".to_string(), |x| format!("{x:.digits$}"))
 }
@@ -404,6 +493,9 @@ pub fn text(results: &[PaperResult]) -> String {
         }
         for o in &r.orderings {
             let _ = writeln!(s, "  {} {}", tick(o.holds()), ordering_text(o));
+        }
+        for g in &r.splits {
+            let _ = writeln!(s, "  {}", g.line());
         }
         for v in &r.variants {
             let _ = writeln!(
@@ -485,6 +577,9 @@ pub fn markdown(results: &[PaperResult]) -> String {
         for o in &r.orderings {
             let _ = writeln!(s, "- {} {}", tick(o.holds()), ordering_text(o));
         }
+        for g in &r.splits {
+            let _ = writeln!(s, "- {}", g.line());
+        }
         for v in &r.variants {
             let _ = writeln!(
                 s,
@@ -512,6 +607,41 @@ pub fn markdown(results: &[PaperResult]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The split's arithmetic by hand: EKF 3.0, CKF 2.5, RE-KF 2.0 m → gain 1.0 m, the
+    /// term's part 0.5 m, share ½; no gain (RE-KF = EKF) → no share, whatever the term does.
+    #[test]
+    fn a_gain_split_is_the_terms_part_over_the_gain() {
+        let split = &GAIN_SPLITS[0];
+        let r = SplitResult {
+            split,
+            method_m: Some(2.0),
+            without_m: Some(2.5),
+            baseline_m: Some(3.0),
+        };
+        assert_eq!(r.gain_m(), Some(1.0));
+        assert_eq!(r.term_part_m(), Some(0.5));
+        assert_eq!(r.share(), Some(0.5));
+        assert!(r.line().ends_with("share 50 %."), "{}", r.line());
+        let tie = SplitResult {
+            split,
+            method_m: Some(2.584225),
+            without_m: Some(2.584225),
+            baseline_m: Some(2.584225),
+        };
+        assert_eq!(tie.share(), None);
+        assert!(tie.line().contains("no gain to split"), "{}", tie.line());
+        let missing = SplitResult {
+            without_m: None,
+            ..tie
+        };
+        assert_eq!(missing.share(), None);
+        // Every split names rows of its paper's world (checked when the world runs) and
+        // belongs to a paper `reproduce` knows.
+        for g in GAIN_SPLITS {
+            assert!(PAPERS.iter().any(|p| p.id == g.paper), "{}", g.paper);
+        }
+    }
 
     #[test]
     fn the_tables_hold_the_papers_56_figures() {
