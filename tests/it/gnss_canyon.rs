@@ -476,7 +476,8 @@ fn gnss_canyon_per_class_errors_agree_with_gnss_sdr() {
 /// with 20 or more common samples within 2×, and the LOS + multipath class has them
 /// (GNSS-SDR tracked C09 and C11 together for 10 s or more). 110 s at 4.2 Msps, the
 /// BeiDou tests' rate: C11's D1 time of week is decoded ≈ 68 s in after GNSS-SDR's
-/// tracking lost its NH-code synchronisation twice.
+/// tracking lost its NH-code synchronisation twice (in one run by hand; the next run tracked it
+/// from the start).
 #[test]
 fn gnss_canyon_bds_per_class_errors_agree_with_gnss_sdr() {
     let Some(cal) = calibrate("canyon-bds", CANYON_1500, BDS_B1I, 110, 4.2e6, bds_conf) else {
