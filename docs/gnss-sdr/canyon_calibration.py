@@ -2,10 +2,13 @@
 "Per-class calibration"): GNSS-SDR's observables on `hybridnav gnss iq`'s recording and
 hybridnav's measurement level (`hybridnav export --format csv`) of the same world and trial.
 
-Usage: canyon_calibration.py RUN EXP [x]
-  RUN  a directory with cy.paths.csv (from `gnss iq ... --out RUN/cy`) and obs.dat
-       (GNSS-SDR's Observables dump: Observables.dump=true, dump_mat=false)
+Usage: canyon_calibration.py RUN EXP [gps|bds] [x]
+  RUN  a directory with cy.paths.csv (from `gnss iq ... --out RUN/cy`), obs.dat
+       (GNSS-SDR's Observables dump: Observables.dump=true, dump_mat=false) and cy.conf
+       (GNSS-SDR's configuration, for its channel count; 8 if absent)
   EXP  the output directory of `hybridnav export WORLD --format csv`
+  gps  the recording is GPS L1 C/A (`--signal gps-l1ca`, the default); bds: BeiDou B1I
+       (`--signal bds-b1i`)
   x    also print GNSS-SDR's errors every 5 s
 
 Convention (the same for both levels): a pseudorange's error is its excess over the direct
@@ -18,10 +21,35 @@ GNSS-SDR assigns (TOW_at_current_symbol) modulo 1 ms. GNSS-SDR's receiver time i
 the sample count; its one offset to the recording's time is fitted (a common time-tag
 offset reads as a common error). Only (satellite, epoch) pairs present in both levels
 are tabulated.
+
+BeiDou B1I: the code is 2046 chips at 2.046 Mchip/s (the same 1 ms period as C/A, so the
+transmit time is compared modulo 1 ms as for GPS). GNSS-SDR 0.0.17's B1I telemetry decoder reports TOW_at_current_symbol as GPS time
+(the decoded SOW + BEIDOU_DNAV_BDT2GPST_LEAP_SEC_OFFSET = 14 s), so its receiver time is GPS
+time too.
+
+GNSS-SDR's receiver time is only set to GPS time at its first fix (GPS: ≈ 48 s in); without
+a fix (two BeiDou satellites in the canyon) it stays where the observables started it, tens
+of ms from the true time. The modulo-1 ms comparison sees a time-tag offset δ only modulo
+1 ms, but each satellite's range rate × δ is not common, so δ's whole milliseconds are first
+taken from GNSS-SDR's own pseudoranges: δ ≈ RX − TOW − ρ/c + Δt_sv over the LOS
+satellites (ρ the export's true range, Δt_sv = af0 + af1 (t − toc) from the world's RINEX
+navigation file, up to 0.86 ms for BeiDou here), after which the fraction is fitted as
+before. A residual of 0.01 ms moves a satellite by its range rate × 10 µs, < 1 cm.
 """
 import sys, csv, numpy as np, collections
 run, exp = sys.argv[1], sys.argv[2]
-C_MPS = 299792458.0; WEEK = 2111 * 604800.0; CHIP = 1.023e6
+args = sys.argv[3:]
+system = args.pop(0) if args and args[0] in ("gps", "bds") else "gps"
+C_MPS = 299792458.0; WEEK = 2111 * 604800.0
+CHIP, CODE, LETTER = (1.023e6, 1023.0, "G") if system == "gps" else (2.046e6, 2046.0, "C")
+channels = 8
+NAV = __file__.rsplit("/", 3)[0] + "/ephemeris/ESBC00DNK_R_20201770000_01D_MN.rnx"
+try:
+    for line in open(f"{run}/cy.conf"):
+        if line.startswith(("Channels_1C.count=", "Channels_B1.count=")):
+            channels = int(line.split("=")[1])
+except FileNotFoundError:
+    pass
 # paths.csv: direct-path code phase and class per (sat, row time)
 ph = collections.defaultdict(list); cls = {}
 for r in csv.DictReader(open(f"{run}/cy.paths.csv")):
@@ -29,14 +57,25 @@ for r in csv.DictReader(open(f"{run}/cy.paths.csv")):
     t = round(float(r["t_gpst_s"]) - WEEK, 3)
     ph[int(r["prn"])].append((t, float(r["code_phase_chips"])))
     cls[(int(r["prn"]), t)] = r["class"]
+# Satellite clock polynomial (af0, af1) per PRN at the nearest toc (RINEX 3 navigation).
+clock = collections.defaultdict(list)
+for line in open(NAV):
+    if line[:1] == LETTER and line[1:3].strip().isdigit() and len(line) > 60 and line[3] == " ":
+        y, mo, dd, hh, mi, ss = (int(x) for x in line[4:23].split())
+        dow = (np.datetime64(f"{y:04d}-{mo:02d}-{dd:02d}") - np.datetime64("1980-01-06")).astype(int) % 7
+        toc = dow * 86400 + hh * 3600 + mi * 60 + ss
+        clock[int(line[1:3])].append((toc, float(line[23:42].replace("D", "E")), float(line[42:61].replace("D", "E"))))
+def sat_clock_s(prn, tow):
+    toc, a0, a1 = min(clock[prn], key=lambda c: abs(c[0] - tow))
+    return a0 + a1 * (tow - toc)
 phase = {}
 for prn, v in ph.items():
-    v = np.array(v); u = np.unwrap(v[:, 1] * 2 * np.pi / 1023) * 1023 / (2 * np.pi)
+    v = np.array(v); u = np.unwrap(v[:, 1] * 2 * np.pi / CODE) * CODE / (2 * np.pi)
     phase[prn] = (v[:, 0], u)
 def klass(prn, t):
     return cls.get((prn, round(round(t * 10) / 10, 3)))
 # GNSS-SDR observables dump: epochs x 8 channels x (RX_time, TOW, Doppler, phase, PR, PRN, valid)
-d = np.fromfile(f"{run}/obs.dat", dtype="<f8").reshape(-1, 8, 7)
+d = np.fromfile(f"{run}/obs.dat", dtype="<f8").reshape(-1, channels, 7)
 # GNSS-SDR steps its receiver time once, at its first fix; keep the rows after the last step.
 d = d[d[:, 0, 0] > 0]
 steps = np.nonzero(np.abs(np.diff(d[:, 0, 0]) - 0.02) > 1e-6)[0]
@@ -53,12 +92,25 @@ def sdr_errors(Cs):
             if ch[6] != 1 or ch[4] == 0: continue
             prn = int(ch[5]); tt, u = phase[prn]
             if t < tt[0] or t > tt[-1]: continue
-            chips = np.interp(t, tt, u) % 1023
+            chips = np.interp(t, tt, u) % CODE
             dt = (ch[1] * 1e3 % 1.0) * 1e-3 - chips / CHIP
             dt = (dt + 0.5e-3) % 1e-3 - 0.5e-3
             out.append((round(t), prn, -C_MPS * dt))
     return out
-Cs = d[d[:, 0, 0] > 0][0, 0, 0] - d[d[:, 0, 0] > 0][0, 0, 0]  # 0: GNSS-SDR's time ~ GPS time
+# Whole milliseconds of GNSS-SDR's time-tag offset from its pseudoranges (see above).
+rho = {}
+for r in csv.DictReader(open(f"{exp}/ranges.csv")):
+    if r["system"] == system:
+        rho[(round(float(r["gpst_tow_s"])), int(r["emitter"][1:]))] = float(r["true_range_m"])
+coarse = []
+for row in d:
+    for ch in row:
+        if ch[6] != 1: continue
+        prn = int(ch[5]); t = round(row[0, 0])
+        if klass(prn, t) in ("los", "los+mp") and (t, prn) in rho:
+            coarse.append(row[0, 0] - ch[1] - rho[(t, prn)] / C_MPS + sat_clock_s(prn, t))
+Cs = float(np.median(coarse))
+print(f"GNSS-SDR time-tag offset from its pseudoranges {Cs*1e3:.3f} ms")
 for _ in range(3):
     e = sdr_errors(Cs)
     los = [x[2] for x in e if klass(x[1], x[0]) in ("los", "los+mp")]
@@ -67,7 +119,7 @@ sdr = {(t, p): v for t, p, v in sdr_errors(Cs)}
 print(f"GNSS-SDR time offset {Cs*1e3:.4f} ms")
 ml = {}
 for r in csv.DictReader(open(f"{exp}/ranges.csv")):
-    if r["system"] != "gps": continue
+    if r["system"] != system: continue
     ml[(round(float(r["gpst_tow_s"])), int(r["emitter"][1:]))] = float(r["pseudorange_m"]) - float(r["true_range_m"])
 def demean(m):
     by = collections.defaultdict(list)
@@ -88,7 +140,7 @@ for name, m in (("GNSS-SDR", sdr), ("measurement", ml)):
     per = collections.defaultdict(list)
     for (t, p), x in m.items(): per[p].append(x)
     print("  per sat:", {p: (round(np.mean(v),2), round(np.std(v),2), len(v)) for p, v in sorted(per.items())})
-if len(sys.argv) > 3:
+if args:
     m = demean({k: v for k, v in sdr.items() if k in common})
     for t in sorted(set(t for t, _ in m))[::5]:
-        print(t, " ".join(f"G{p}:{m[(t,p)]:7.2f}" for p in (13, 15, 28, 30) if (t, p) in m))
+        print(t, " ".join(f"{LETTER}{p:02d}:{m[(t,p)]:7.2f}" for p in sorted(set(p for _, p in m)) if (t, p) in m))

@@ -1,6 +1,7 @@
 //! The measurement level's per-class pseudorange errors against the signal level's, in a
-//! street canyon (`worlds/gnss-iq-urban-canyon.toml`): `hybridnav gnss iq` records the
-//! world's GPS L1 C/A, GNSS-SDR tracks the recording and dumps its observables, and
+//! street canyon (`worlds/gnss-iq-urban-canyon.toml`, and the same world at another hour,
+//! `worlds/gnss-iq-urban-canyon-1500.toml`): `hybridnav gnss iq` records the world's GPS
+//! L1 C/A or BeiDou B1I, GNSS-SDR tracks the recording and dumps its observables, and
 //! `hybridnav export --format csv` writes the measurement level's pseudoranges of the same
 //! world and trial. Each satellite at each epoch is classed from the recording's
 //! paths.csv (LOS, LOS + multipath, NLOS) and the two levels' error statistics are
@@ -11,17 +12,50 @@
 //! is the scene's multipath or NLOS error plus tracking noise), with the receiver clock
 //! removed at each 1 s epoch by subtracting the mean error of that epoch's line-of-sight
 //! satellites. Only the (satellite, epoch) pairs both levels have are compared.
+//! docs/gnss-sdr/canyon_calibration.py is the same reduction by hand.
 
 use crate::common::{hybridnav, stderr};
-use crate::gnss_iq::{gps_conf, record_and_position};
+use crate::gnss_iq::{bds_conf, gps_conf, record_and_position};
+use hybridnav::core::System;
+use std::cell::Cell;
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
 const CANYON: &str = "worlds/gnss-iq-urban-canyon.toml";
+const CANYON_1500: &str = "worlds/gnss-iq-urban-canyon-1500.toml";
+const NAV: &str = "ephemeris/ESBC00DNK_R_20201770000_01D_MN.rnx";
 const C_MPS: f64 = 299_792_458.0;
-const CHIP_RATE_HZ: f64 = 1.023e6;
-const CODE_CHIPS: f64 = 1023.0;
 const WEEK_S: f64 = 604_800.0;
+
+/// What the reduction needs to know of a signal.
+#[derive(Clone, Copy)]
+struct Signal {
+    /// `hybridnav gnss iq --signal`.
+    name: &'static str,
+    system: System,
+    /// The export's `system` column.
+    export_system: &'static str,
+    chip_rate_hz: f64,
+    /// Chips per code period; both codes last 1 ms (IS-GPS-200 §3.2.1.3; BDS-SIS-ICD-B1I
+    /// 3.0 §4.2: 2046 chips at 2.046 Mchip/s).
+    code_chips: f64,
+}
+
+const GPS_L1CA: Signal = Signal {
+    name: "gps-l1ca",
+    system: System::Gps,
+    export_system: "gps",
+    chip_rate_hz: 1.023e6,
+    code_chips: 1023.0,
+};
+
+const BDS_B1I: Signal = Signal {
+    name: "bds-b1i",
+    system: System::Bds,
+    export_system: "bds",
+    chip_rate_hz: 2.046e6,
+    code_chips: 2046.0,
+};
 
 /// A satellite's class at one instant, from paths.csv.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -40,12 +74,13 @@ impl Class {
 /// The recording's truth per satellite: the direct path's code phase (chips, unwrapped)
 /// against GPS time of week on the 0.1 s grid, and the class at each grid point.
 struct Paths {
+    signal: Signal,
     phase: BTreeMap<u32, (Vec<f64>, Vec<f64>)>,
     class: HashMap<(u32, i64), Class>,
 }
 
 impl Paths {
-    fn read(path: &Path) -> Self {
+    fn read(path: &Path, signal: Signal) -> Self {
         let text = std::fs::read_to_string(path).expect("paths.csv");
         let mut rows = text.lines();
         let header: Vec<&str> = rows.next().expect("header").split(',').collect();
@@ -58,6 +93,7 @@ impl Paths {
             col("path"),
             col("excess_delay_m"),
         );
+        let code = signal.code_chips;
         let mut phase: BTreeMap<u32, (Vec<f64>, Vec<f64>)> = BTreeMap::new();
         let mut class = HashMap::new();
         for r in rows {
@@ -78,20 +114,21 @@ impl Paths {
             class.insert((prn, (tow * 10.0).round() as i64), k);
             // The row's code phase is its path's; the direct path's is that plus the
             // path's excess delay in chips.
-            let direct = num(phase_c) + num(excess_c) / C_MPS * CHIP_RATE_HZ;
+            let direct = num(phase_c) + num(excess_c) / C_MPS * signal.chip_rate_hz;
             let (ts, ps) = phase.entry(prn).or_default();
             // Unwrapped across the code period, so it can be interpolated.
             let unwrapped = match ps.last() {
-                Some(&last) => {
-                    last + (direct - last + CODE_CHIPS / 2.0).rem_euclid(CODE_CHIPS)
-                        - CODE_CHIPS / 2.0
-                }
+                Some(&last) => last + (direct - last + code / 2.0).rem_euclid(code) - code / 2.0,
                 None => direct,
             };
             ts.push(tow);
             ps.push(unwrapped);
         }
-        Self { phase, class }
+        Self {
+            signal,
+            phase,
+            class,
+        }
     }
 
     fn class(&self, prn: u32, tow_s: f64) -> Option<Class> {
@@ -109,14 +146,16 @@ impl Paths {
         }
         let k = ts.partition_point(|&t| t <= tow_s).clamp(1, ts.len() - 1);
         let w = (tow_s - ts[k - 1]) / (ts[k] - ts[k - 1]);
-        Some((ps[k - 1] + w * (ps[k] - ps[k - 1])).rem_euclid(CODE_CHIPS))
+        Some((ps[k - 1] + w * (ps[k] - ps[k - 1])).rem_euclid(self.signal.code_chips))
     }
 }
 
 /// GNSS-SDR 0.0.17's Observables dump (`Observables.dump=true`, `dump_mat=false`): per
 /// output epoch and per channel, seven little-endian f64: RX time (s of week),
 /// TOW_at_current_symbol (the transmit time, s), Doppler (Hz), carrier phase (cycles),
-/// pseudorange (m), PRN, valid flag.
+/// pseudorange (m), PRN, valid flag. Both times are GPS time for BeiDou too: its B1I
+/// telemetry decoder adds BDT's 14 s to the decoded SOW
+/// (`BEIDOU_DNAV_BDT2GPST_LEAP_SEC_OFFSET`).
 fn observables(path: &Path, channels: usize) -> Vec<Vec<[f64; 7]>> {
     let bytes = std::fs::read(path).expect("observables dump");
     let values: Vec<f64> = bytes
@@ -135,7 +174,7 @@ fn observables(path: &Path, channels: usize) -> Vec<Vec<[f64; 7]>> {
         .collect()
 }
 
-/// (epoch's whole second of week, PRN) → error (m).
+/// (epoch's whole second of week, PRN) → error (m), or true range (m).
 type Errors = HashMap<(i64, u32), f64>;
 
 /// GNSS-SDR's errors at each whole second: the transmit time it assigns against the
@@ -143,6 +182,7 @@ type Errors = HashMap<(i64, u32), f64>;
 /// pseudorange). Its receiver time counts samples, so the recording's time is the RX time
 /// minus one offset `offset_s`.
 fn sdr_errors(obs: &[Vec<[f64; 7]>], paths: &Paths, offset_s: f64) -> Errors {
+    let chip_rate = paths.signal.chip_rate_hz;
     let mut out = Errors::new();
     for epoch in obs {
         let tow = epoch[0][0] - offset_s;
@@ -158,16 +198,58 @@ fn sdr_errors(obs: &[Vec<[f64; 7]>], paths: &Paths, offset_s: f64) -> Errors {
                 continue;
             };
             let sdr_s = (ch[1] * 1e3).rem_euclid(1.0) * 1e-3;
-            let dt_s = (sdr_s - chips / CHIP_RATE_HZ + 0.5e-3).rem_euclid(1e-3) - 0.5e-3;
+            let dt_s = (sdr_s - chips / chip_rate + 0.5e-3).rem_euclid(1e-3) - 0.5e-3;
             out.insert((tow.round() as i64, prn), -C_MPS * dt_s);
         }
     }
     out
 }
 
-/// The measurement level's errors from the export's ranges.csv: pseudorange − true range
-/// (the receiver clock is removed later, per epoch).
-fn measurement_errors(path: &Path) -> Errors {
+/// GNSS-SDR's time-tag offset to within a fraction of a millisecond, from its own
+/// pseudoranges: RX − TOW = δ + ρ/c − Δt_sv, so δ = RX − TOW − ρ/c + af0 (the median over
+/// the line-of-sight observables; af1 and the relativistic term move it by < 1 µs). The
+/// modulo-1 ms comparison sees δ only modulo 1 ms, but a wrong whole millisecond moves
+/// each satellite by its own range rate × 1 ms; until its first fix GNSS-SDR's receiver
+/// time is tens of ms from the true time (120 ms in one BeiDou run), which read as a
+/// 1.6 m bias between two satellites.
+fn coarse_offset_s(
+    obs: &[Vec<[f64; 7]>],
+    paths: &Paths,
+    true_range_m: &Errors,
+    af0_s: &HashMap<u32, f64>,
+) -> Option<f64> {
+    let mut deltas: Vec<f64> = obs
+        .iter()
+        .flat_map(|epoch| {
+            let rx = epoch[0][0];
+            epoch.iter().filter_map(move |ch| {
+                let prn = ch[5] as u32;
+                if ch[6] != 1.0 || !paths.class(prn, rx.round()).is_some_and(Class::is_los) {
+                    return None;
+                }
+                let rho = true_range_m.get(&(rx.round() as i64, prn))?;
+                Some(rx - ch[1] - rho / C_MPS + af0_s.get(&prn)?)
+            })
+        })
+        .collect();
+    deltas.sort_by(f64::total_cmp);
+    deltas.get(deltas.len() / 2).copied()
+}
+
+/// Every satellite's clock bias af0 of `system` from the world's navigation file (the first
+/// record; af0 drifts by < 1 µs over the day, far below the millisecond needed).
+fn af0_by_prn(system: System) -> HashMap<u32, f64> {
+    let nav = hybridnav::gnss::rinex_nav::read_nav_file(Path::new(NAV)).expect("nav file");
+    let mut out = HashMap::new();
+    for e in nav.ephemerides.iter().filter(|e| e.sat.system == system) {
+        out.entry(u32::from(e.sat.number)).or_insert(e.af0);
+    }
+    out
+}
+
+/// The measurement level's errors from the export's ranges.csv, pseudorange − true range
+/// (the receiver clock is removed later, per epoch), and the true ranges.
+fn measurement_errors(path: &Path, system: &str) -> (Errors, Errors) {
     let text = std::fs::read_to_string(path).expect("ranges.csv");
     let mut rows = text.lines();
     let header: Vec<&str> = rows.next().expect("header").split(',').collect();
@@ -179,14 +261,18 @@ fn measurement_errors(path: &Path) -> Errors {
         col("pseudorange_m"),
         col("true_range_m"),
     );
-    rows.map(|r| r.split(',').collect::<Vec<_>>())
-        .filter(|f| f[sys_c] == "gps")
-        .map(|f| {
-            let num = |c: usize| -> f64 { f[c].parse().expect("number") };
-            let prn: u32 = f[em_c][1..].parse().expect("PRN");
-            ((num(tow_c).round() as i64, prn), num(pr_c) - num(geo_c))
-        })
-        .collect()
+    let (mut errors, mut ranges) = (Errors::new(), Errors::new());
+    for f in rows.map(|r| r.split(',').collect::<Vec<_>>()) {
+        if f[sys_c] != system {
+            continue;
+        }
+        let num = |c: usize| -> f64 { f[c].parse().expect("number") };
+        let prn: u32 = f[em_c][1..].parse().expect("PRN");
+        let key = (num(tow_c).round() as i64, prn);
+        errors.insert(key, num(pr_c) - num(geo_c));
+        ranges.insert(key, num(geo_c));
+    }
+    (errors, ranges)
 }
 
 /// Removes each epoch's mean over its line-of-sight satellites (the receiver clock);
@@ -216,60 +302,83 @@ fn stats(v: &[f64]) -> (usize, f64, f64, f64) {
     (v.len(), mean, std, rms)
 }
 
-/// The issue's goal: per class, GNSS-SDR's RMS pseudorange error on the recording and the
-/// measurement level's on the same satellites and epochs agree within 2×. 2026-12-03 (by
-/// hand and by this test): LOS + multipath 1.35–1.41 m (GNSS-SDR) against 0.96–1.01 m, a
-/// ratio of 1.37–1.42, the same ratio as in open sky (GNSS-SDR's code noise, not the
-/// multipath model); the NLOS satellite G24 (a 3.3 m wall reflection at 36 dB-Hz) 5.4–5.6 m
-/// against 4.8–4.9 m (ratio 1.1–1.2) when GNSS-SDR acquired it, which it did in one of
-/// three 120 s runs, so that comparison is asserted only when GNSS-SDR tracked it for
-/// 20 s or more.
-#[test]
-fn gnss_canyon_per_class_errors_agree_with_gnss_sdr() {
-    const RATE: f64 = 2.6e6;
-    let with_dump = |data: &str, out: &str, _: &[u64]| {
+/// One trial's errors per class at both levels, on the same (satellite, epoch) pairs.
+struct Calibration {
+    /// Class → (GNSS-SDR's errors, the measurement level's errors), clock removed.
+    per_class: BTreeMap<Class, (Vec<f64>, Vec<f64>)>,
+    /// Class → the satellites GNSS-SDR contributed.
+    satellites: BTreeMap<Class, Vec<u32>>,
+    log: String,
+}
+
+impl Calibration {
+    /// GNSS-SDR's RMS over the measurement level's in `class`, with the sample count.
+    fn ratio(&self, class: Class) -> (usize, f64) {
+        match self.per_class.get(&class) {
+            Some((a, b)) if !a.is_empty() => (a.len(), stats(a).3 / stats(b).3),
+            _ => (0, f64::NAN),
+        }
+    }
+}
+
+/// Records `world` on `signal` for `duration_s` at `rate` sps, runs GNSS-SDR with the
+/// Observables dump (`conf` is the integration tests' configuration for the signal),
+/// exports the measurement level and reduces both per class. `None` when GNSS-SDR is not
+/// installed.
+fn calibrate(
+    tag: &str,
+    world: &str,
+    signal: Signal,
+    duration_s: u32,
+    rate: f64,
+    conf: impl Fn(&str, f64, &str, &[u64]) -> String,
+) -> Option<Calibration> {
+    let channels = Cell::new(0);
+    let with_dump = |data: &str, out: &str, prns: &[u64]| {
+        let c = conf(data, rate, out, prns);
+        // The channel count is the configuration's `Channels_*.count`.
+        channels.set(
+            c.lines()
+                .find_map(|l| {
+                    l.strip_prefix("Channels_")
+                        .and_then(|l| l.split_once(".count="))
+                })
+                .and_then(|(_, n)| n.trim().parse().ok())
+                .expect("a channel count"),
+        );
         format!(
-            "{}Observables.dump=true\nObservables.dump_filename={out}/obs.dat\n\
-             Observables.dump_mat=false\n",
-            gps_conf(data, RATE, out)
+            "{c}Observables.dump=true\nObservables.dump_filename={out}/obs.dat\n\
+             Observables.dump_mat=false\n"
         )
     };
-    // 120 s: GNSS-SDR's first fix (≈ 48 s in, after subframes 1–3) sets its receiver time,
-    // and the epochs after it are compared.
-    let Some(r) = record_and_position("canyon", CANYON, "gps-l1ca", 120, RATE, with_dump) else {
-        return;
-    };
-    let paths = Paths::read(&r.dir.join("canyon.paths.csv"));
+    let r = record_and_position(tag, world, signal.name, duration_s, rate, with_dump)?;
+    let paths = Paths::read(&r.dir.join(format!("{tag}.paths.csv")), signal);
     let export = r.dir.join("export");
     let o = hybridnav(&[
         "export",
-        CANYON,
+        world,
         "--format",
         "csv",
         "--out",
         export.to_str().expect("utf-8"),
     ]);
     assert!(o.status.success(), "export failed: {}", stderr(&o));
-    let ml = measurement_errors(&export.join("ranges.csv"));
+    let (ml, true_range) = measurement_errors(&export.join("ranges.csv"), signal.export_system);
 
     // GNSS-SDR steps its receiver time once, at its first fix; the rows after the last
     // step (consecutive RX times 20 ms apart) keep one offset to the recording's time.
-    let mut obs = observables(&r.dir.join("obs.dat"), 8);
+    let mut obs = observables(&r.dir.join("obs.dat"), channels.get());
     if let Some(k) = obs
         .windows(2)
         .rposition(|w| ((w[1][0][0] - w[0][0][0]) - 0.02).abs() > 1e-6)
     {
         obs.drain(..=k);
     }
-    assert!(
-        obs.len() >= 1000,
-        "{} observable epochs after GNSS-SDR's last time step:\n{}",
-        obs.len(),
-        r.log
-    );
-    // The offset from the mean line-of-sight error: a common time-tag error of δ reads as
-    // a common pseudorange error of c·δ (plus range rate × δ, which the iteration removes).
-    let mut offset_s = 0.0;
+    // The offset's whole milliseconds from GNSS-SDR's pseudoranges, its fraction from the
+    // mean line-of-sight error: a common time-tag error of δ reads as a common pseudorange
+    // error of c·δ (plus range rate × δ, which the iteration removes).
+    let af0 = af0_by_prn(signal.system);
+    let mut offset_s = coarse_offset_s(&obs, &paths, &true_range, &af0).unwrap_or(0.0);
     for _ in 0..3 {
         let e = sdr_errors(&obs, &paths, offset_s);
         let los: Vec<f64> = e
@@ -277,7 +386,9 @@ fn gnss_canyon_per_class_errors_agree_with_gnss_sdr() {
             .filter(|((t, p), _)| paths.class(*p, *t as f64).is_some_and(Class::is_los))
             .map(|(_, v)| *v)
             .collect();
-        assert!(!los.is_empty(), "no line-of-sight observables:\n{}", r.log);
+        if los.is_empty() {
+            break;
+        }
         offset_s += los.iter().sum::<f64>() / los.len() as f64 / C_MPS;
     }
     let sdr = sdr_errors(&obs, &paths, offset_s);
@@ -291,46 +402,98 @@ fn gnss_canyon_per_class_errors_agree_with_gnss_sdr() {
         remove_clock(&both(&sdr), &paths),
         remove_clock(&both(&ml), &paths),
     );
-    let per_class = |m: &Errors, c: Class| -> Vec<f64> {
-        m.iter()
-            .filter(|((t, p), _)| paths.class(*p, *t as f64) == Some(c))
-            .map(|(_, v)| *v)
-            .collect()
-    };
+    let mut per_class = BTreeMap::new();
+    let mut satellites = BTreeMap::new();
     for c in [Class::Los, Class::LosMultipath, Class::Nlos] {
-        let (a, b) = (per_class(&sdr, c), per_class(&ml, c));
-        if a.is_empty() {
-            eprintln!("canyon: {c:?}: no common samples");
-            continue;
+        let keys: Vec<(i64, u32)> = sdr
+            .keys()
+            .filter(|(t, p)| paths.class(*p, *t as f64) == Some(c))
+            .copied()
+            .collect();
+        let mut sats: Vec<u32> = keys.iter().map(|k| k.1).collect();
+        sats.sort_unstable();
+        sats.dedup();
+        let (a, b): (Vec<f64>, Vec<f64>) = keys.iter().map(|k| (sdr[k], ml[k])).unzip();
+        if !a.is_empty() {
+            let ((n, am, asd, arms), (_, bm, bsd, brms)) = (stats(&a), stats(&b));
+            eprintln!(
+                "{tag}: {c:?} {sats:?}: n {n}; GNSS-SDR mean {am:.2} std {asd:.2} RMS {arms:.2} \
+                 m; measurement level mean {bm:.2} std {bsd:.2} RMS {brms:.2} m; ratio {:.2}",
+                arms / brms
+            );
+        } else {
+            eprintln!("{tag}: {c:?}: no common samples");
         }
-        let ((n, am, asd, arms), (_, bm, bsd, brms)) = (stats(&a), stats(&b));
-        eprintln!(
-            "canyon: {c:?}: n {n}; GNSS-SDR mean {am:.2} std {asd:.2} RMS {arms:.2} m; \
-             measurement level mean {bm:.2} std {bsd:.2} RMS {brms:.2} m; ratio {:.2}",
-            arms / brms
-        );
+        per_class.insert(c, (a, b));
+        satellites.insert(c, sats);
     }
-    let (los_sdr, los_ml) = (
-        per_class(&sdr, Class::LosMultipath),
-        per_class(&ml, Class::LosMultipath),
-    );
-    assert!(
-        los_sdr.len() >= 150,
-        "{} LOS + multipath samples",
-        los_sdr.len()
-    );
-    let ratio = stats(&los_sdr).3 / stats(&los_ml).3;
+    let _ = std::fs::remove_dir_all(&r.dir);
+    Some(Calibration {
+        per_class,
+        satellites,
+        log: r.log,
+    })
+}
+
+/// The issue's goal: per class, GNSS-SDR's RMS pseudorange error on the recording and the
+/// measurement level's on the same satellites and epochs agree within 2×. 2026-12-03 (by
+/// hand and by this test): LOS + multipath 1.35–1.41 m (GNSS-SDR) against 0.96–1.01 m, a
+/// ratio of 1.37–1.42, the same ratio as in open sky (GNSS-SDR's code noise, not the
+/// multipath model); the NLOS satellite G24 (a 3.3 m wall reflection at 36 dB-Hz) 5.4–5.6 m
+/// against 4.8–4.9 m (ratio 1.1–1.2) when GNSS-SDR acquired it, which it did in one of
+/// three 120 s runs, so that comparison is asserted only when GNSS-SDR tracked it for
+/// 20 s or more.
+#[test]
+fn gnss_canyon_per_class_errors_agree_with_gnss_sdr() {
+    // 120 s: GNSS-SDR's first fix (≈ 48 s in, after subframes 1–3) sets its receiver time,
+    // and the epochs after it are compared.
+    let conf = |data: &str, rate: f64, out: &str, _: &[u64]| gps_conf(data, rate, out);
+    let Some(cal) = calibrate("canyon", CANYON, GPS_L1CA, 120, 2.6e6, conf) else {
+        return;
+    };
+    let (n, ratio) = cal.ratio(Class::LosMultipath);
+    assert!(n >= 150, "{n} LOS + multipath samples:\n{}", cal.log);
     assert!(
         (0.5..=2.0).contains(&ratio),
         "LOS + multipath: GNSS-SDR RMS / measurement RMS = {ratio:.2}"
     );
-    let (nlos_sdr, nlos_ml) = (per_class(&sdr, Class::Nlos), per_class(&ml, Class::Nlos));
-    if nlos_sdr.len() >= 20 {
-        let ratio = stats(&nlos_sdr).3 / stats(&nlos_ml).3;
+    let (n, ratio) = cal.ratio(Class::Nlos);
+    if n >= 20 {
         assert!(
             (0.5..=2.0).contains(&ratio),
             "NLOS: GNSS-SDR RMS / measurement RMS = {ratio:.2}"
         );
     }
-    let _ = std::fs::remove_dir_all(&r.dir);
+}
+
+/// The same for BeiDou B1I, at another hour (`worlds/gnss-iq-urban-canyon-1500.toml`: at
+/// 02:00 GNSS-SDR tracks one BeiDou satellite in the canyon, C19, too few to remove the
+/// receiver clock). At 15:00 C09 and C11 are in line of sight (42 and 46 dB-Hz, each with a
+/// ground reflection), C34 too (47 dB-Hz) but GNSS-SDR 0.0.17 does not acquire it (as C36
+/// and C37 in open sky), and the NLOS C12, C21, C22 (their wall reflections at 28–34 dB-Hz)
+/// were not acquired in 120 s or 240 s. 2026-12-04 (by hand, docs/validation.md): LOS +
+/// multipath 0.52 m (GNSS-SDR) against 0.48 m over 51 epochs (120 s), a ratio of 1.08, and
+/// 0.50 m against 0.49 m over 195 epochs (240 s), 1.02; by this test 1.04 and 1.05.
+/// Asserted: every class with 20 or more common samples within 2×, and the LOS + multipath
+/// class has them (GNSS-SDR tracked C09 and C11 together for 10 s or more). 110 s at
+/// 4.2 Msps, the BeiDou tests' rate: in one run by hand GNSS-SDR's tracking of C11 lost its
+/// NH-code synchronisation twice and its time of week was decoded only ≈ 68 s in (the
+/// test's runs tracked it from the start).
+#[test]
+fn gnss_canyon_bds_per_class_errors_agree_with_gnss_sdr() {
+    let Some(cal) = calibrate("canyon-bds", CANYON_1500, BDS_B1I, 110, 4.2e6, bds_conf) else {
+        return;
+    };
+    eprintln!("canyon-bds: satellites per class {:?}", cal.satellites);
+    let (n, _) = cal.ratio(Class::LosMultipath);
+    assert!(n >= 20, "{n} LOS + multipath samples:\n{}", cal.log);
+    for c in [Class::Los, Class::LosMultipath, Class::Nlos] {
+        let (n, ratio) = cal.ratio(c);
+        if n >= 20 {
+            assert!(
+                (0.5..=2.0).contains(&ratio),
+                "{c:?}: GNSS-SDR RMS / measurement RMS = {ratio:.2}"
+            );
+        }
+    }
 }

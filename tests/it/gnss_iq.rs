@@ -391,7 +391,7 @@ fn gnss_iq_refuses_bad_requests_before_writing() {
 /// otherwise searches all 63 PRNs one channel at a time). The PVT's elevation mask is the
 /// worlds' 10° (`[sensors.gnss] elevation_mask_deg`) instead of GNSS-SDR's default 15°,
 /// which would leave out the GEO C05, 11.5° above Esbjerg.
-fn bds_conf(data: &str, rate: f64, out: &str, prns: &[u64]) -> String {
+pub(crate) fn bds_conf(data: &str, rate: f64, out: &str, prns: &[u64]) -> String {
     let mut c = format!(
         "[GNSS-SDR]
 GNSS-SDR.internal_fs_sps={rate}
