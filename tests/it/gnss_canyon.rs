@@ -469,8 +469,8 @@ fn gnss_canyon_per_class_errors_agree_with_gnss_sdr() {
 /// The same for BeiDou B1I, at another hour (`worlds/gnss-iq-urban-canyon-1500.toml`: at
 /// 02:00 GNSS-SDR tracks one BeiDou satellite in the canyon, C19, too few to remove the
 /// receiver clock). At 15:00 C09 and C11 are in line of sight (42 and 46 dB-Hz, each with a
-/// ground reflection), C34 too (47 dB-Hz) but GNSS-SDR 0.0.17 does not acquire it (as C36
-/// and C37 in open sky), and the NLOS C12, C21, C22 (their wall reflections at 28–34 dB-Hz)
+/// ground reflection), C34 too (47 dB-Hz) but GNSS-SDR 0.0.17 has no B1I code above PRN 33
+/// (docs/validation.md), so it cannot acquire it, and the NLOS C12, C21, C22 (their wall reflections at 28–34 dB-Hz)
 /// were not acquired in 120 s or 240 s. 2026-12-04 (by hand, docs/validation.md): LOS +
 /// multipath 0.52 m (GNSS-SDR) against 0.48 m over 51 epochs (120 s), a ratio of 1.08, and
 /// 0.50 m against 0.49 m over 195 epochs (240 s), 1.02; by this test 1.04 and 1.05.

@@ -554,7 +554,7 @@ fn assert_geo_decoded_and_used(tag: &str, r: &Positioned) {
 }
 
 /// BeiDou B1I through GNSS-SDR: MEO/IGSO (D1) and the GEO C05 (D2). Not every satellite is
-/// acquired (see docs/validation.md: C36 and C37 never are), so this asserts the fix, from
+/// acquired (docs/validation.md: GNSS-SDR 0.0.17 has no code for C34–C63), so this asserts the fix, from
 /// the four or more whose ephemerides GNSS-SDR decodes, and the GEO's D2.
 #[test]
 fn gnss_iq_bds_b1i_is_positioned_by_gnss_sdr_in_open_sky() {
