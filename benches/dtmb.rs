@@ -387,13 +387,16 @@ fn bench_channel_receiver(c: &mut Criterion) {
         hybridnav::dtmb::noise::add_awgn(&mut y1, var.sqrt(), &mut rng);
         let mut eq = vec![Complex32::default(); BODY_LEN];
         let mut w = vec![0f32; BODY_LEN];
-        g.bench_function(format!("estimate_equalise_frame_pn945_{}", csi.name()), |b| {
-            b.iter(|| {
-                rx.receive_frame(&y0, &y1[..hl], p0, p1, &mut eq, &mut w)
-                    .unwrap();
-                black_box(&eq);
-            })
-        });
+        g.bench_function(
+            format!("estimate_equalise_frame_pn945_{}", csi.name()),
+            |b| {
+                b.iter(|| {
+                    rx.receive_frame(&y0, &y1[..hl], p0, p1, &mut eq, &mut w)
+                        .unwrap();
+                    black_box(&eq);
+                })
+            },
+        );
     }
     g.finish();
 }

@@ -39,8 +39,13 @@ fn dtmb_ber_kehui_tower_at_its_link_budget_snr_loses_no_packet() {
     let rec = hybridnav::world::dtmb_iq::world_iq(&world, &req).unwrap();
     assert_eq!(rec.meta.snr_db, ch.snr_db);
     let h = impulse_response(&ch.paths).unwrap();
-    let profile = Profile::new(Constellation::Qam16, CodeRate::R06, 240, CarrierMode::Multi3780)
-        .unwrap();
+    let profile = Profile::new(
+        Constellation::Qam16,
+        CodeRate::R06,
+        240,
+        CarrierMode::Multi3780,
+    )
+    .unwrap();
     let cfg = ChannelBer {
         profile,
         mode: ch.mode,
@@ -52,7 +57,11 @@ fn dtmb_ber_kehui_tower_at_its_link_budget_snr_loses_no_packet() {
     let p = measure_channel_point(&cfg, ch.snr_db).unwrap();
     println!("Kehui D01 at {:.2} dB: {p:?}", ch.snr_db);
     assert!(p.packets >= 20 * 6, "{p:?}");
-    assert_eq!((p.packet_errors, p.bit_errors, p.ldpc_failures), (0, 0, 0), "{p:?}");
+    assert_eq!(
+        (p.packet_errors, p.bit_errors, p.ldpc_failures),
+        (0, 0, 0),
+        "{p:?}"
+    );
     let low = measure_channel_point(&cfg, 5.0).unwrap();
     assert_eq!(low.packet_errors, low.packets, "{low:?}");
 }
@@ -95,7 +104,10 @@ fn dtmb_ber_world_command_prints_the_margin_and_writes_both_curves() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(text.contains("tower D01 (PN945"), "{text}");
     assert!(text.contains("link-budget SNR"), "{text}");
-    assert!(text.contains("# CSI estimated") && text.contains("# CSI ideal"), "{text}");
+    assert!(
+        text.contains("# CSI estimated") && text.contains("# CSI ideal"),
+        "{text}"
+    );
     let body = std::fs::read_to_string(&csv).unwrap();
     let lines: Vec<&str> = body.lines().collect();
     assert!(lines[0].starts_with("csi,snr_db,frames,") && lines[0].ends_with(",link_snr_db"));

@@ -161,7 +161,11 @@ pub fn impulse_response(paths: &[(f64, Complex64)]) -> Result<Vec<Complex32>, Dt
     while h.len() > 1 && h.last().is_some_and(|x| x.norm_sqr() == 0.0) {
         h.pop();
     }
-    let lead = h.iter().take_while(|x| x.norm_sqr() == 0.0).count().min(h.len() - 1);
+    let lead = h
+        .iter()
+        .take_while(|x| x.norm_sqr() == 0.0)
+        .count()
+        .min(h.len() - 1);
     h.drain(..lead);
     let s = 1.0 / e.sqrt();
     Ok(h.iter()
@@ -177,8 +181,8 @@ pub fn frequency_response(h: &[Complex32]) -> Vec<Complex64> {
             h.iter()
                 .enumerate()
                 .map(|(n, &x)| {
-                    let a = -2.0 * std::f64::consts::PI * (k * n % BODY_LEN) as f64
-                        / BODY_LEN as f64;
+                    let a =
+                        -2.0 * std::f64::consts::PI * (k * n % BODY_LEN) as f64 / BODY_LEN as f64;
                     Complex64::new(f64::from(x.re), f64::from(x.im)) * Complex64::from_polar(1.0, a)
                 })
                 .sum()
@@ -233,12 +237,7 @@ impl TdsReceiver {
     /// [`DtmbError::InvalidParameter`] when `h` is empty or longer than the header plus
     /// one (its tails must fit in a header), or when estimation is asked of PN595 (no
     /// cyclic core) or of a response longer than the preamble plus one.
-    pub fn new(
-        mode: PnMode,
-        csi: Csi,
-        h: &[Complex32],
-        noise_var: f32,
-    ) -> Result<Self, DtmbError> {
+    pub fn new(mode: PnMode, csi: Csi, h: &[Complex32], noise_var: f32) -> Result<Self, DtmbError> {
         let bad = |reason: String| DtmbError::InvalidParameter {
             name: "channel",
             reason,
@@ -484,7 +483,11 @@ impl ChannelStream {
     pub fn new(mode: PnMode, h: &[Complex32]) -> Self {
         let l = h.len().max(1);
         Self {
-            h: if h.is_empty() { vec![Complex32::new(1.0, 0.0)] } else { h.to_vec() },
+            h: if h.is_empty() {
+                vec![Complex32::new(1.0, 0.0)]
+            } else {
+                h.to_vec()
+            },
             hl: mode.header_len(),
             x: vec![Complex32::default(); l - 1 + mode.frame_len()],
             modem: BodyModulator::new(),
@@ -513,8 +516,11 @@ impl ChannelStream {
         }
         self.x.copy_within(fl.., 0);
         self.x[l - 1..l - 1 + self.hl].copy_from_slice(header);
-        self.modem
-            .modulate_logical(CarrierMode::Multi3780, logical, &mut self.x[l - 1 + self.hl..])?;
+        self.modem.modulate_logical(
+            CarrierMode::Multi3780,
+            logical,
+            &mut self.x[l - 1 + self.hl..],
+        )?;
         for (n, o) in y.iter_mut().enumerate() {
             // x[L − 1 + n − m] is this frame's sample n − m.
             let mut acc = Complex32::default();
@@ -702,8 +708,8 @@ pub fn measure_per_carrier_point(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::dtmb::mapping::Constellation;
     use crate::dtmb::ldpc::CodeRate;
+    use crate::dtmb::mapping::Constellation;
 
     /// Equalised-symbol statistics over `frames` frames of random 16QAM bodies through
     /// `h` at `snr_db`: the mean of `|X̂ − X|² |H_k|²/σ²` (the noise gain of the receiver
@@ -719,7 +725,10 @@ mod tests {
         let hk = frequency_response(h);
         let fl = mode.frame_len();
         let hl = mode.header_len();
-        let (mut y_prev, mut y) = (vec![Complex32::default(); fl], vec![Complex32::default(); fl]);
+        let (mut y_prev, mut y) = (
+            vec![Complex32::default(); fl],
+            vec![Complex32::default(); fl],
+        );
         let mut sent_prev = vec![Complex32::default(); BODY_LEN];
         let mut sent = vec![Complex32::default(); BODY_LEN];
         let mut eq = vec![Complex32::default(); BODY_LEN];
@@ -733,8 +742,15 @@ mod tests {
             stream.next_frame(rx.header(ph), &sent, &mut y).unwrap();
             crate::dtmb::noise::add_awgn(&mut y, var.sqrt(), &mut rng);
             if k > 0 {
-                rx.receive_frame(&y_prev, &y[..hl], mode.phase_of_frame(k - 1), ph, &mut eq, &mut w)
-                    .unwrap();
+                rx.receive_frame(
+                    &y_prev,
+                    &y[..hl],
+                    mode.phase_of_frame(k - 1),
+                    ph,
+                    &mut eq,
+                    &mut w,
+                )
+                .unwrap();
                 for l in 0..BODY_LEN {
                     let e = f64::from((eq[l] - sent_prev[l]).norm_sqr());
                     gain += e * hk[interleave_index(l)].norm_sqr() / f64::from(var);
@@ -773,7 +789,10 @@ mod tests {
         // The two taps, and at most a few false ones (0.1 expected a frame).
         assert!((2..=4).contains(&kept), "{kept}");
         let want_e = want + kept as f64 / (511.0 * 2.0);
-        assert!((g / want_e - 1.0).abs() < 0.02, "estimated gain {g} vs {want_e}");
+        assert!(
+            (g / want_e - 1.0).abs() < 0.02,
+            "estimated gain {g} vs {want_e}"
+        );
         assert!((c - 1.0).abs() < 0.02, "estimated calibration {c}");
     }
 
@@ -918,8 +937,13 @@ mod tests {
         assert!(e.to_string().contains("no energy"), "{e}");
         assert!("genie".parse::<Csi>().is_err());
         assert_eq!("Ideal".parse::<Csi>().unwrap(), Csi::Ideal);
-        let single = Profile::new(Constellation::Qam16, CodeRate::R08, 240, CarrierMode::Single)
-            .unwrap();
+        let single = Profile::new(
+            Constellation::Qam16,
+            CodeRate::R08,
+            240,
+            CarrierMode::Single,
+        )
+        .unwrap();
         let cfg = ChannelBer {
             profile: single,
             mode: PnMode::Pn945,
@@ -934,8 +958,11 @@ mod tests {
     /// Same seed, same counts.
     #[test]
     fn channel_points_are_deterministic() {
-        let h = impulse_response(&[(0.0, Complex64::new(1.0, 0.0)), (7.5, Complex64::new(0.3, 0.2))])
-            .unwrap();
+        let h = impulse_response(&[
+            (0.0, Complex64::new(1.0, 0.0)),
+            (7.5, Complex64::new(0.3, 0.2)),
+        ])
+        .unwrap();
         let cfg = ChannelBer {
             profile: profile(Constellation::Qam16, CodeRate::R08),
             mode: PnMode::Pn420,

@@ -382,7 +382,12 @@ impl DataReceiver {
     /// its own variance. A receiver is fed either by this or by `push_frame`, not both
     /// (the weights' de-interleaver starts with the first weighted frame). Allocates only
     /// on the first call.
-    pub fn push_frame_weighted(&mut self, logical: &[Complex32], inv_var: &[f32], out: &mut Vec<u8>) {
+    pub fn push_frame_weighted(
+        &mut self,
+        logical: &[Complex32],
+        inv_var: &[f32],
+        out: &mut Vec<u8>,
+    ) {
         debug_assert_eq!(logical.len(), BODY_LEN);
         debug_assert_eq!(inv_var.len(), BODY_LEN);
         if self.weights.len() != DATA_SYMBOLS {
@@ -590,6 +595,41 @@ mod tests {
                     assert!(out.chunks(188).all(|k| k == null), "{}", p.name());
                 }
             }
+        }
+    }
+
+    /// With every weight `1/σ²`, the per-symbol path is the uniform one: the same bytes
+    /// and counts, for a square QAM (weights through their own de-interleaver) and for
+    /// 4QAM-NR (demapped before the bit de-interleaver), near the threshold where the
+    /// LLRs' exact values decide the decoding.
+    #[test]
+    fn uniform_weights_equal_the_uniform_variance() {
+        for (c, rate, var) in [
+            (Constellation::Qam64, CodeRate::R06, 0.045f32),
+            (Constellation::Qam4Nr, CodeRate::R08, 0.6),
+        ] {
+            let p = Profile::new(c, rate, 240, CarrierMode::Multi3780).unwrap();
+            let mut tx = DataLayer::new(p, PacketSource::pseudo_random(3));
+            let mut a = DataReceiver::new(p);
+            let mut b = DataReceiver::new(p);
+            let mut rng = TrialRng::new(8, 0).stream("dtmb/test");
+            let s = (var / 2.0).sqrt();
+            let w = vec![1.0 / var; BODY_LEN];
+            let mut body = vec![Complex32::default(); BODY_LEN];
+            let (mut out_a, mut out_b) = (Vec::new(), Vec::new());
+            for _ in 0..p.interleaver_delay_frames() + 4 {
+                tx.next_frame(p.si_index(), &mut body).unwrap();
+                for x in body.iter_mut() {
+                    let n: f32 = StandardNormal.sample(&mut rng);
+                    let m: f32 = StandardNormal.sample(&mut rng);
+                    *x += Complex32::new(n * s, m * s);
+                }
+                a.push_frame(&body, var, &mut out_a);
+                b.push_frame_weighted(&body, &w, &mut out_b);
+            }
+            assert!(!out_a.is_empty(), "{}", p.name());
+            assert_eq!(out_a, out_b, "{}", p.name());
+            assert_eq!(a.stats(), b.stats(), "{}", p.name());
         }
     }
 
