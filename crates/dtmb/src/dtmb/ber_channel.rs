@@ -715,8 +715,13 @@ mod tests {
     /// `h` at `snr_db`: the mean of `|X̂ − X|² |H_k|²/σ²` (the noise gain of the receiver
     /// over an ideal one, whose value is 1), the mean of `|X̂ − X|² w` (1 when the weights
     /// are the true inverse variances), and the last estimate's kept taps.
-    fn equalised_stats(h: &[Complex32], csi: Csi, snr_db: f64, frames: usize) -> (f64, f64, usize) {
-        let mode = PnMode::Pn945;
+    fn equalised_stats(
+        mode: PnMode,
+        h: &[Complex32],
+        csi: Csi,
+        snr_db: f64,
+        frames: usize,
+    ) -> (f64, f64, usize) {
         let var = (mode.nominal_frame_power() / 10f64.powf(snr_db / 10.0)) as f32;
         let mut rx = TdsReceiver::new(mode, csi, h, var).unwrap();
         let mut stream = ChannelStream::new(mode, h);
@@ -768,7 +773,8 @@ mod tests {
     /// path, −3 dB), so the response is two taps and the analytic values are exact. With
     /// the genie the equalised noise on carrier k is `σ²(1 + (L − 1)/N)/|H_k|²` (the
     /// reconstruction's doubled noise on the first L − 1 samples); with the estimate it
-    /// is that plus `n_taps σ²/(Pρ)` (module documentation). Measured over 20 frames
+    /// is that plus `n_taps σ²/(Pρ)` (module documentation; Pρ = 1022 for PN945, 510 for
+    /// PN420, whose 82-chip preamble still covers the echo). Measured over 20 frames
     /// (75 600 symbols: the mean of an exponential has a relative standard error of
     /// 0.4 %, so 2 % is five of them); the weights handed to the data receiver are the
     /// inverse variances (their product with the squared errors averages 1).
@@ -781,19 +787,25 @@ mod tests {
         .unwrap();
         assert_eq!(h.len(), 41);
         assert_eq!(h.iter().filter(|x| x.norm_sqr() > 0.0).count(), 2);
-        let (g, c, _) = equalised_stats(&h, Csi::Ideal, 20.0, 20);
-        let want = 1.0 + 40.0 / BODY_LEN as f64;
-        assert!((g / want - 1.0).abs() < 0.02, "ideal gain {g} vs {want}");
-        assert!((c - 1.0).abs() < 0.02, "ideal calibration {c}");
-        let (g, c, kept) = equalised_stats(&h, Csi::Estimated, 20.0, 20);
-        // The two taps, and at most a few false ones (0.1 expected a frame).
-        assert!((2..=4).contains(&kept), "{kept}");
-        let want_e = want + kept as f64 / (511.0 * 2.0);
-        assert!(
-            (g / want_e - 1.0).abs() < 0.02,
-            "estimated gain {g} vs {want_e}"
-        );
-        assert!((c - 1.0).abs() < 0.02, "estimated calibration {c}");
+        for mode in [PnMode::Pn945, PnMode::Pn420] {
+            let (g, c, _) = equalised_stats(mode, &h, Csi::Ideal, 20.0, 20);
+            let want = 1.0 + 40.0 / BODY_LEN as f64;
+            assert!(
+                (g / want - 1.0).abs() < 0.02,
+                "{mode}: ideal gain {g} vs {want}"
+            );
+            assert!((c - 1.0).abs() < 0.02, "{mode}: ideal calibration {c}");
+            let (g, c, kept) = equalised_stats(mode, &h, Csi::Estimated, 20.0, 20);
+            // The two taps, and at most a few false ones (0.1 expected a frame).
+            assert!((2..=4).contains(&kept), "{mode}: {kept}");
+            let p_rho = mode.period() as f64 * mode.header_power_ratio();
+            let want_e = want + kept as f64 / p_rho;
+            assert!(
+                (g / want_e - 1.0).abs() < 0.02,
+                "{mode}: estimated gain {g} vs {want_e}"
+            );
+            assert!((c - 1.0).abs() < 0.02, "{mode}: estimated calibration {c}");
+        }
     }
 
     /// An echo 40.3 samples late spreads over the kernel's taps; the threshold drops the
@@ -807,8 +819,8 @@ mod tests {
             (40.3, Complex64::from_polar(0.5f64.sqrt(), 1.0)),
         ])
         .unwrap();
-        let (gi, ci, _) = equalised_stats(&h, Csi::Ideal, 20.0, 20);
-        let (ge, ce, kept) = equalised_stats(&h, Csi::Estimated, 20.0, 20);
+        let (gi, ci, _) = equalised_stats(PnMode::Pn945, &h, Csi::Ideal, 20.0, 20);
+        let (ge, ce, kept) = equalised_stats(PnMode::Pn945, &h, Csi::Estimated, 20.0, 20);
         println!("fractional echo: ideal gain {gi:.4} cal {ci:.4}; estimated gain {ge:.4} cal {ce:.4}, {kept} taps of {}", h.len());
         assert!((ci - 1.0).abs() < 0.02, "{ci}");
         assert!((ce - 1.0).abs() < 0.05, "{ce}");

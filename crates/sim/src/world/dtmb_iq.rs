@@ -38,6 +38,9 @@
 //! own. Each tower's frame starts are annotated (`hybridnav:tower`), so a recording of an
 //! SFN carries one annotation per tower and frame, sorted by sample.
 //!
+//! [`tower_channel_at`] gives the requested tower's paths and link SNR for one such block
+//! without recording (`dtmb ber --world`, which holds them static).
+//!
 //! Random streams of `TrialRng::new(seed, trial)`: `motion/trajectory`,
 //! `receiver/clock/init`, `receiver/clock`, the shadowing of the master seed (as a run),
 //! the payloads `dtmb/Dnn/tx` (the signal-level source's) and the noise
