@@ -42,60 +42,64 @@ impl ProfileArgs {
 
 /// The options of `dtmb ber`.
 pub struct BerArgs {
-    pub qam: String,
-    pub fec: String,
-    pub interleaver: usize,
-    pub carriers: usize,
-    pub mode: String,
+    pub qam: Option<String>,
+    pub fec: Option<String>,
+    pub interleaver: Option<usize>,
+    pub carriers: Option<usize>,
+    pub mode: Option<String>,
     pub snr_db: String,
     pub frames: usize,
-    pub seed: u64,
+    pub seed: Option<u64>,
     pub out: Option<PathBuf>,
+    pub world: Option<PathBuf>,
+    pub tower: Option<String>,
+    pub trial: u64,
+    pub at_s: f64,
+    pub csi: String,
 }
 
-/// `hybridnav dtmb ber`: one measured point per SNR, printed as a table and written as
-/// CSV; then the SNRs where the curves cross BER 10⁻⁴ and PER 10⁻² when the grid holds
-/// the crossing.
-pub fn ber(a: &BerArgs) -> Result<()> {
-    use crate::dtmb::ber::{crossing_snr_db, measure_point, parse_snr_range};
+/// The data-layer profile of `dtmb ber` from its options (each `None` takes the default:
+/// 64QAM, rate 0.6, M = 240, C = 3780).
+fn ber_profile(
+    qam: Option<&str>,
+    fec: Option<&str>,
+    interleaver: Option<usize>,
+    carriers: Option<usize>,
+) -> Result<crate::dtmb::data_layer::Profile> {
     use crate::dtmb::data_layer::Profile;
     use crate::dtmb::frame::CarrierMode;
     use crate::dtmb::ldpc::CodeRate;
     use crate::dtmb::mapping::Constellation;
-    use crate::dtmb::pn::PnMode;
-    let c: Constellation = a
-        .qam
+    let c: Constellation = qam
+        .unwrap_or("64qam")
         .parse()
         .map_err(|e: String| anyhow::anyhow!("--qam: {e}"))?;
-    let rate: CodeRate = a
-        .fec
+    let rate: CodeRate = fec
+        .unwrap_or("0.6")
         .parse()
         .map_err(|e: String| anyhow::anyhow!("--fec: {e}"))?;
-    let carrier = match a.carriers {
+    let carrier = match carriers.unwrap_or(3780) {
         3780 => CarrierMode::Multi3780,
         1 => CarrierMode::Single,
         n => anyhow::bail!("--carriers must be 3780 or 1, got {n}"),
     };
-    let profile = Profile::new(c, rate, a.interleaver, carrier)?;
-    let mode: PnMode = a.mode.parse()?;
-    let grid = parse_snr_range(&a.snr_db)?;
-    println!(
-        "# {} {} frames per point after a {}-frame interleaver delay, seed {}",
-        profile.name(),
-        a.frames,
-        profile.interleaver_delay_frames(),
-        a.seed
-    );
+    Ok(Profile::new(c, rate, interleaver.unwrap_or(240), carrier)?)
+}
+
+/// One measured curve: its points, printed as a table as they come, then the SNRs where
+/// BER crosses 10⁻⁴ and PER 10⁻² (when the grid holds them), returned.
+fn run_curve(
+    grid: &[f64],
+    mut measure: impl FnMut(f64) -> Result<crate::dtmb::ber::BerPoint>,
+) -> Result<(Vec<crate::dtmb::ber::BerPoint>, Option<f64>, Option<f64>)> {
+    use crate::dtmb::ber::crossing_snr_db;
     println!(
         "{:>8} {:>10} {:>10} {:>12} {:>10} {:>12} {:>10}",
         "snr_db", "packets", "pkt_err", "per", "bit_err", "ber", "cw_fail"
     );
-    let mut csv = String::from(
-        "snr_db,frames,packets,packet_errors,per,bits,bit_errors,ber,codewords,ldpc_failures,cwer\n",
-    );
     let mut points = Vec::with_capacity(grid.len());
-    for &snr in &grid {
-        let p = measure_point(profile, mode, snr, a.frames, a.seed)?;
+    for &snr in grid {
+        let p = measure(snr)?;
         println!(
             "{:>8.2} {:>10} {:>10} {:>12.3e} {:>10} {:>12.3e} {:>10}",
             p.snr_db,
@@ -106,20 +110,6 @@ pub fn ber(a: &BerArgs) -> Result<()> {
             p.ber(),
             p.ldpc_failures
         );
-        csv.push_str(&format!(
-            "{},{},{},{},{:e},{},{},{:e},{},{},{:e}\n",
-            p.snr_db,
-            p.frames,
-            p.packets,
-            p.packet_errors,
-            p.per(),
-            p.bits,
-            p.bit_errors,
-            p.ber(),
-            p.codewords,
-            p.ldpc_failures,
-            p.cwer()
-        ));
         points.push(p);
     }
     let ber_pts: Vec<_> = points.iter().map(|p| (p.snr_db, p.ber(), p.bits)).collect();
@@ -127,16 +117,231 @@ pub fn ber(a: &BerArgs) -> Result<()> {
         .iter()
         .map(|p| (p.snr_db, p.per(), p.packets))
         .collect();
-    for (what, pts, target) in [("BER", &ber_pts, 1e-4), ("PER", &per_pts, 1e-2)] {
-        match crossing_snr_db(pts, target) {
+    let mut cross = [None, None];
+    for (i, (what, pts, target)) in [("BER", &ber_pts, 1e-4), ("PER", &per_pts, 1e-2)]
+        .into_iter()
+        .enumerate()
+    {
+        cross[i] = crossing_snr_db(pts, target);
+        match cross[i] {
             Some(s) => println!("# {what} crosses {target:e} at {s:.2} dB"),
             None => println!("# {what} does not cross {target:e} inside the grid"),
         }
     }
-    if let Some(out) = &a.out {
+    Ok((points, cross[0], cross[1]))
+}
+
+/// A CSV row's measured columns.
+fn csv_columns(p: &crate::dtmb::ber::BerPoint) -> String {
+    format!(
+        "{},{},{},{},{:e},{},{},{:e},{},{},{:e}",
+        p.snr_db,
+        p.frames,
+        p.packets,
+        p.packet_errors,
+        p.per(),
+        p.bits,
+        p.bit_errors,
+        p.ber(),
+        p.codewords,
+        p.ldpc_failures,
+        p.cwer()
+    )
+}
+
+const CSV_HEADER: &str =
+    "snr_db,frames,packets,packet_errors,per,bits,bit_errors,ber,codewords,ldpc_failures,cwer";
+
+fn write_csv(out: &Option<PathBuf>, csv: &str, n: usize) -> Result<()> {
+    if let Some(out) = out {
         crate::io::atomic::write_atomic(out, csv.as_bytes())
             .with_context(|| format!("cannot write {}", out.display()))?;
-        eprintln!("wrote {} points to {}", points.len(), out.display());
+        eprintln!("wrote {n} points to {}", out.display());
     }
     Ok(())
+}
+
+/// `hybridnav dtmb ber`: one measured point per SNR, printed as a table and written as
+/// CSV; then the SNRs where the curves cross BER 10⁻⁴ and PER 10⁻² when the grid holds
+/// the crossing. With `--world`, through the tower's channel (see [`ber_world`]).
+pub fn ber(a: &BerArgs) -> Result<()> {
+    use crate::dtmb::ber::{measure_point, parse_snr_range};
+    use crate::dtmb::pn::PnMode;
+    if a.world.is_some() {
+        return ber_world(a);
+    }
+    for (given, what) in [
+        (a.tower.is_some(), "--tower"),
+        (a.trial != 0, "--trial"),
+        (a.at_s != 0.0, "--at-s"),
+        (a.csi != "estimated", "--csi"),
+    ] {
+        if given {
+            anyhow::bail!("{what} needs --world (without it the channel is white noise)");
+        }
+    }
+    let profile = ber_profile(
+        a.qam.as_deref(),
+        a.fec.as_deref(),
+        a.interleaver,
+        a.carriers,
+    )?;
+    let mode: PnMode = a.mode.as_deref().unwrap_or("pn945").parse()?;
+    let grid = parse_snr_range(&a.snr_db)?;
+    let seed = a.seed.unwrap_or(1);
+    println!(
+        "# {} {} frames per point after a {}-frame interleaver delay, seed {}",
+        profile.name(),
+        a.frames,
+        profile.interleaver_delay_frames(),
+        seed
+    );
+    let (points, _, _) = run_curve(&grid, |snr| {
+        Ok(measure_point(profile, mode, snr, a.frames, seed)?)
+    })?;
+    let mut csv = format!("{CSV_HEADER}\n");
+    for p in &points {
+        csv.push_str(&csv_columns(p));
+        csv.push('\n');
+    }
+    write_csv(&a.out, &csv, points.len())
+}
+
+/// `dtmb ber --world`: the tower's paths at `--at-s` (as `dtmb iq --world` computes them
+/// for that frame), as a static impulse response at 7.56 Msps, and one curve per
+/// receiver (`--csi`). The SNR axis is the received frame power over the noise; the link
+/// budget's SNR at that instant is printed beside each threshold as the margin.
+fn ber_world(a: &BerArgs) -> Result<()> {
+    use crate::dtmb::ber::parse_snr_range;
+    use crate::dtmb::ber_channel::{
+        frequency_response, impulse_response, measure_channel_point, ChannelBer, Csi,
+    };
+    use crate::dtmb::pn::PnMode;
+    use crate::world::dtmb_iq::{tower_channel_at, DataLayerOverride, WorldIqRequest};
+    let path = a.world.as_deref().unwrap_or(std::path::Path::new(""));
+    let csis: Vec<Csi> = match a.csi.to_ascii_lowercase().as_str() {
+        "both" => vec![Csi::Estimated, Csi::Ideal],
+        s => vec![s.parse()?],
+    };
+    let grid = parse_snr_range(&a.snr_db)?;
+    let w = super::load_world(path).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let seed = a.seed.unwrap_or(w.file.montecarlo.seed);
+    let req = WorldIqRequest {
+        tower: a.tower.clone(),
+        from_s: a.at_s,
+        frames: 1,
+        seed,
+        trial: a.trial,
+        data_layer: DataLayerOverride {
+            payload: None,
+            qam: a.qam.clone(),
+            fec: a.fec.clone(),
+            interleaver: a.interleaver,
+            carriers: a.carriers,
+        },
+    };
+    let ch = tower_channel_at(&w, &req)?;
+    if let Some(m) = &a.mode {
+        let m: PnMode = m.parse()?;
+        if m != ch.mode {
+            anyhow::bail!(
+                "--mode {} contradicts tower {}'s {} (with --world the tower sets the mode)",
+                m.name(),
+                ch.tower,
+                ch.mode.name()
+            );
+        }
+    }
+    if ch.paths.is_empty() {
+        anyhow::bail!(
+            "tower {} is blocked at {:.3} s (no path reaches the receiver): nothing to measure",
+            ch.tower,
+            a.at_s
+        );
+    }
+    let profile = ber_profile(
+        ch.qam.as_deref(),
+        ch.fec.as_deref(),
+        ch.interleaver,
+        ch.carriers,
+    )
+    .with_context(|| format!("tower {}'s data layer", ch.tower))?;
+    let h = impulse_response(&ch.paths)?;
+    let hk = frequency_response(&h);
+    let (lo, hi) = hk.iter().fold((f64::MAX, f64::MIN), |(a, b), x| {
+        (a.min(x.norm_sqr()), b.max(x.norm_sqr()))
+    });
+    println!(
+        "# world {} tower {} ({}, {:.0} MHz) at {:.4} s, trial {}, seed {}: range {:.0} m, \
+         {} path(s), link-budget SNR {:.2} dB",
+        w.file.world.name,
+        ch.tower,
+        ch.mode.name(),
+        ch.freq_hz * 1e-6,
+        ch.at_s,
+        a.trial,
+        seed,
+        ch.range_m,
+        ch.paths.len(),
+        ch.snr_db
+    );
+    for (d, g) in &ch.paths {
+        println!(
+            "#   path: excess delay {:8.3} samples, power {:7.2} dB, phase {:6.3} rad",
+            d,
+            10.0 * g.norm_sqr().log10(),
+            g.arg()
+        );
+    }
+    println!(
+        "# channel: {} taps at 7.56 Msps (static, Doppler not applied), |H_k|² from {:.2} \
+         to {:.2} dB on the 3780 carriers; receiver timing: the true frame start",
+        h.len(),
+        10.0 * lo.max(1e-30).log10(),
+        10.0 * hi.log10()
+    );
+    println!(
+        "# {} {} frames per point after a {}-frame interleaver delay",
+        profile.name(),
+        a.frames,
+        profile.interleaver_delay_frames()
+    );
+    let mut csv = format!("csi,{CSV_HEADER},link_snr_db\n");
+    let mut n = 0;
+    let mut per_cross = Vec::new();
+    for csi in csis {
+        println!("# CSI {}", csi.name());
+        let cfg = ChannelBer {
+            profile,
+            mode: ch.mode,
+            h: &h,
+            csi,
+            frames: a.frames,
+            seed,
+        };
+        let (points, _, per) = run_curve(&grid, |snr| Ok(measure_channel_point(&cfg, snr)?))?;
+        if let Some(t) = per {
+            println!(
+                "# CSI {}: PER 1e-2 at {t:.2} dB; the link budget gives {:.2} dB, a margin of \
+                 {:.2} dB",
+                csi.name(),
+                ch.snr_db,
+                ch.snr_db - t
+            );
+        }
+        per_cross.push((csi, per));
+        for p in &points {
+            csv.push_str(&format!(
+                "{},{},{}\n",
+                csi.name(),
+                csv_columns(p),
+                ch.snr_db
+            ));
+        }
+        n += points.len();
+    }
+    if let [(_, Some(e)), (_, Some(i))] = per_cross.as_slice() {
+        println!("# estimation loss at PER 1e-2: {:.2} dB", e - i);
+    }
+    write_csv(&a.out, &csv, n)
 }

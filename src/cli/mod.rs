@@ -163,42 +163,68 @@ pub enum FmCommand {
 
 #[derive(Debug, Subcommand)]
 pub enum DtmbCommand {
-    /// Write DTMB baseband frames through white noise as a SigMF recording
-    /// (BASE.sigmf-data and BASE.sigmf-meta, with an annotation per frame); with --world,
-    /// one tower of a world as the platform's receiver hears it along its trajectory
-    /// (scene multipath, link budget, Doppler, receiver and tower clocks).
-    /// Bit and packet error rates of the GB 20600 data layer in white Gaussian noise
-    /// against SNR (hybridnav's own data receiver, ideal synchronisation): a table on
-    /// standard output and, with --out, a CSV file.
+    /// Bit and packet error rates of the GB 20600 data layer against SNR (hybridnav's own
+    /// data receiver): in white Gaussian noise with ideal synchronisation, or with
+    /// --world through the multipath between a world's tower and its receiver at one
+    /// instant, received by a TDS-OFDM receiver that estimates the channel from the PN
+    /// headers (or, --csi ideal, knows it). A table on standard output and, with --out, a
+    /// CSV file.
     Ber {
-        /// Data constellation: 4qam-nr, 4qam, 16qam, 32qam or 64qam.
-        #[arg(long, default_value = "64qam")]
-        qam: String,
-        /// LDPC code rate: 0.4, 0.6 or 0.8.
-        #[arg(long, default_value = "0.6")]
-        fec: String,
-        /// Time-interleaver depth M: 240 or 720 (no effect in white noise but its delay).
-        #[arg(long, default_value_t = 240)]
-        interleaver: usize,
-        /// Carriers: 3780 or 1.
-        #[arg(long, default_value_t = 3780)]
-        carriers: usize,
-        /// Frame header (sets the frame power the SNR is defined on): pn420, pn595, pn945.
-        #[arg(long, default_value = "pn945")]
-        mode: String,
-        /// SNR grid over the 7.56 MHz band, FROM:TO:STEP in dB (or one value).
+        /// Data constellation: 4qam-nr, 4qam, 16qam, 32qam or 64qam (default 64qam; with
+        /// --world the tower's [[transmitter]] qam, else 64qam).
+        #[arg(long)]
+        qam: Option<String>,
+        /// LDPC code rate: 0.4, 0.6 or 0.8 (default 0.6; with --world the tower's).
+        #[arg(long)]
+        fec: Option<String>,
+        /// Time-interleaver depth M: 240 or 720 (default 240; with --world the tower's).
+        /// No effect in a static channel but its delay.
+        #[arg(long)]
+        interleaver: Option<usize>,
+        /// Carriers: 3780 or 1 (default 3780; with --world 3780 only).
+        #[arg(long)]
+        carriers: Option<usize>,
+        /// Frame header (sets the frame power the SNR is defined on): pn420, pn595, pn945
+        /// (default pn945; with --world the tower's).
+        #[arg(long)]
+        mode: Option<String>,
+        /// SNR grid over the 7.56 MHz band, FROM:TO:STEP in dB (or one value): the
+        /// received frame power over the noise.
         #[arg(long, allow_hyphen_values = true, value_name = "FROM:TO:STEP")]
         snr_db: String,
         /// Frames measured per SNR point (after the interleaver's delay).
         #[arg(long, default_value_t = 100)]
         frames: usize,
-        /// Seed of the payload and noise streams.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
+        /// Seed of the payload and noise streams (default 1; with --world the master
+        /// seed of the trial's trajectory and shadowing too, default the world's
+        /// [montecarlo] seed).
+        #[arg(long)]
+        seed: Option<u64>,
         /// CSV output (written atomically).
         #[arg(long, value_name = "FILE.csv")]
         out: Option<PathBuf>,
+        /// Measure through a world's tower's channel: its scene multipath to the
+        /// receiver at --at-s, held static (as `dtmb iq --world` computes it).
+        #[arg(long, value_name = "WORLD.toml")]
+        world: Option<PathBuf>,
+        /// With --world: the tower id (default: the world's first DTMB tower).
+        #[arg(long)]
+        tower: Option<String>,
+        /// With --world: the trial whose trajectory, clock and shadowing are used.
+        #[arg(long, default_value_t = 0)]
+        trial: u64,
+        /// With --world: the instant of the channel, seconds from the world's start.
+        #[arg(long, default_value_t = 0.0, value_name = "T")]
+        at_s: f64,
+        /// With --world: the receiver's channel knowledge: estimated (from the PN
+        /// headers), ideal (the true response), or both (two curves).
+        #[arg(long, default_value = "estimated")]
+        csi: String,
     },
+    /// Write DTMB baseband frames through white noise as a SigMF recording
+    /// (BASE.sigmf-data and BASE.sigmf-meta, with an annotation per frame); with --world,
+    /// one tower of a world as the platform's receiver hears it along its trajectory
+    /// (scene multipath, link budget, Doppler, receiver and tower clocks).
     Iq {
         /// Frame header: pn420, pn595 or pn945 (with --world: the tower's).
         #[arg(long)]
@@ -410,6 +436,11 @@ pub fn run(cli: Cli) -> Result<()> {
             frames,
             seed,
             out,
+            world,
+            tower,
+            trial,
+            at_s,
+            csi,
         }) => dtmb::ber(&dtmb::BerArgs {
             qam,
             fec,
@@ -420,6 +451,11 @@ pub fn run(cli: Cli) -> Result<()> {
             frames,
             seed,
             out,
+            world,
+            tower,
+            trial,
+            at_s,
+            csi,
         }),
         Command::Dtmb(DtmbCommand::Iq {
             mode,

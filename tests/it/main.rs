@@ -6,6 +6,7 @@ mod cli;
 mod cluster;
 mod common;
 mod covariance_psd;
+mod dtmb_ber;
 mod dtmb_signal;
 mod dtmb_stream;
 mod dtmb_ts;

@@ -256,6 +256,10 @@ pub struct DataReceiver {
     frame_llr: Vec<f32>,
     full: Vec<u8>,
     stats: DecodeStats,
+    /// Per-symbol weights `1/σ_k²` of [`DataReceiver::push_frame_weighted`]: the frame's
+    /// data symbols' and their de-interleaver (built on the first weighted frame).
+    weights: Vec<f32>,
+    weight_deinterleaver: Option<TimeInterleaver<f32>>,
 }
 
 impl DataReceiver {
@@ -276,6 +280,8 @@ impl DataReceiver {
             frame_llr: vec![0.0; DATA_SYMBOLS * 6],
             full: vec![0; FULL_BITS],
             stats: DecodeStats::default(),
+            weights: Vec::new(),
+            weight_deinterleaver: None,
         }
     }
 
@@ -361,6 +367,97 @@ impl DataReceiver {
                     bps,
                     y,
                     inv_var,
+                    &mut self.frame_llr[k * bps..(k + 1) * bps],
+                );
+            }
+            (DATA_SYMBOLS - skip) * bps
+        };
+        self.feed(n, out);
+    }
+
+    /// [`DataReceiver::push_frame`] with a noise variance per symbol: `inv_var[l]` is
+    /// `1/σ_l²` of logical symbol `l` (3780), e.g. `|Ĥ_k|²/σ²` for a symbol equalised by
+    /// a one-tap equaliser on a carrier of response `Ĥ_k`. The weights go through a
+    /// de-interleaver of their own alongside the symbols, so each symbol is demapped with
+    /// its own variance. A receiver is fed either by this or by `push_frame`, not both
+    /// (the weights' de-interleaver starts with the first weighted frame). Allocates only
+    /// on the first call.
+    pub fn push_frame_weighted(
+        &mut self,
+        logical: &[Complex32],
+        inv_var: &[f32],
+        out: &mut Vec<u8>,
+    ) {
+        debug_assert_eq!(logical.len(), BODY_LEN);
+        debug_assert_eq!(inv_var.len(), BODY_LEN);
+        if self.weights.len() != DATA_SYMBOLS {
+            self.weights = vec![0.0; DATA_SYMBOLS];
+        }
+        match self.profile.carrier {
+            CarrierMode::Multi3780 => {
+                let mut d = 0;
+                let mut next_si = 0;
+                for (l, (&x, &w)) in logical.iter().zip(inv_var).enumerate() {
+                    if next_si < SI_LEN && system_info::C3780_POSITIONS[next_si] == l {
+                        next_si += 1;
+                    } else {
+                        self.data[d] = x;
+                        self.weights[d] = w;
+                        d += 1;
+                    }
+                }
+            }
+            CarrierMode::Single => {
+                self.data.copy_from_slice(&logical[SI_LEN..]);
+                self.weights.copy_from_slice(&inv_var[SI_LEN..]);
+            }
+        }
+        let n = if self.bit_deinterleaver.is_some() {
+            // 4QAM-NR: demapped (with each symbol's own weight) before the bit
+            // de-interleaver, as in `push_frame`.
+            let mut code_llr = [0f32; 16];
+            for ((syms, ws), info) in self
+                .data
+                .chunks_exact(8)
+                .zip(self.weights.chunks_exact(8))
+                .zip(self.frame_llr.chunks_exact_mut(8))
+            {
+                for (t, (&y, &w)) in syms.iter().zip(ws).enumerate() {
+                    let mut l = [0f32; 2];
+                    Self::demap(&self.points, 2, y, w, &mut l);
+                    code_llr[2 * t] = l[0];
+                    code_llr[2 * t + 1] = l[1];
+                }
+                nr_soft_decode(&code_llr, info);
+            }
+            if let Some(d) = &mut self.bit_deinterleaver {
+                d.process(&mut self.frame_llr[..DATA_SYMBOLS]);
+            }
+            let skip = self.to_skip.min(DATA_SYMBOLS);
+            self.to_skip -= skip;
+            self.frame_llr.copy_within(skip..DATA_SYMBOLS, 0);
+            DATA_SYMBOLS - skip
+        } else {
+            if let Some(d) = &mut self.deinterleaver {
+                d.process(&mut self.data);
+            }
+            let m = self.profile.interleaver_m;
+            self.weight_deinterleaver
+                .get_or_insert_with(|| TimeInterleaver::new(m, true, |_| 0.0f32))
+                .process(&mut self.weights);
+            let skip = self.to_skip.min(DATA_SYMBOLS);
+            self.to_skip -= skip;
+            let bps = self.profile.constellation.bits_per_symbol();
+            for (k, (&y, &w)) in self.data[skip..]
+                .iter()
+                .zip(&self.weights[skip..])
+                .enumerate()
+            {
+                Self::demap(
+                    &self.points,
+                    bps,
+                    y,
+                    w,
                     &mut self.frame_llr[k * bps..(k + 1) * bps],
                 );
             }
@@ -498,6 +595,41 @@ mod tests {
                     assert!(out.chunks(188).all(|k| k == null), "{}", p.name());
                 }
             }
+        }
+    }
+
+    /// With every weight `1/σ²`, the per-symbol path is the uniform one: the same bytes
+    /// and counts, for a square QAM (weights through their own de-interleaver) and for
+    /// 4QAM-NR (demapped before the bit de-interleaver), near the threshold where the
+    /// LLRs' exact values decide the decoding.
+    #[test]
+    fn uniform_weights_equal_the_uniform_variance() {
+        for (c, rate, var) in [
+            (Constellation::Qam64, CodeRate::R06, 0.045f32),
+            (Constellation::Qam4Nr, CodeRate::R08, 0.6),
+        ] {
+            let p = Profile::new(c, rate, 240, CarrierMode::Multi3780).unwrap();
+            let mut tx = DataLayer::new(p, PacketSource::pseudo_random(3));
+            let mut a = DataReceiver::new(p);
+            let mut b = DataReceiver::new(p);
+            let mut rng = TrialRng::new(8, 0).stream("dtmb/test");
+            let s = (var / 2.0).sqrt();
+            let w = vec![1.0 / var; BODY_LEN];
+            let mut body = vec![Complex32::default(); BODY_LEN];
+            let (mut out_a, mut out_b) = (Vec::new(), Vec::new());
+            for _ in 0..p.interleaver_delay_frames() + 4 {
+                tx.next_frame(p.si_index(), &mut body).unwrap();
+                for x in body.iter_mut() {
+                    let n: f32 = StandardNormal.sample(&mut rng);
+                    let m: f32 = StandardNormal.sample(&mut rng);
+                    *x += Complex32::new(n * s, m * s);
+                }
+                a.push_frame(&body, var, &mut out_a);
+                b.push_frame_weighted(&body, &w, &mut out_b);
+            }
+            assert!(!out_a.is_empty(), "{}", p.name());
+            assert_eq!(out_a, out_b, "{}", p.name());
+            assert_eq!(a.stats(), b.stats(), "{}", p.name());
         }
     }
 

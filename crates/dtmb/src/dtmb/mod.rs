@@ -25,6 +25,7 @@
 
 pub mod bch;
 pub mod ber;
+pub mod ber_channel;
 pub mod channel;
 pub mod data_layer;
 pub mod data_receiver;

@@ -38,6 +38,9 @@
 //! own. Each tower's frame starts are annotated (`hybridnav:tower`), so a recording of an
 //! SFN carries one annotation per tower and frame, sorted by sample.
 //!
+//! [`tower_channel_at`] gives the requested tower's paths and link SNR for one such block
+//! without recording (`dtmb ber --world`, which holds them static).
+//!
 //! Random streams of `TrialRng::new(seed, trial)`: `motion/trajectory`,
 //! `receiver/clock/init`, `receiver/clock`, the shadowing of the master seed (as a run),
 //! the payloads `dtmb/Dnn/tx` (the signal-level source's) and the noise
@@ -188,32 +191,16 @@ pub fn world_iq_stream(
     let mode = t.pn_mode();
     let n = mode.frame_len();
     let t_frame = mode.frame_duration_s();
-    let dur = world.duration_s;
-    let rng = TrialRng::new(req.seed, req.trial);
-    let trajectory = world
-        .build_trajectory(&rng)
-        .map_err(|e| bad("trajectory", e))?;
-    // The receiver clock and the towers exactly as `World::build_trial` makes them (the
-    // group shares one PN mode, checked above).
-    let clock = Arc::new(world.receiver_clock(&rng));
-    let specs: Vec<TowerSpec> = group.iter().map(|o| o.tower_spec(System::Dtmb)).collect();
-    let me = group.iter().position(|o| o.id == t.id).unwrap_or(0);
-    let mut cfg = world.file.sensors.dtmb.clone().unwrap_or_default();
-    // The link needs no signal-level state of its own.
-    cfg.level = DtmbLevel::Measurement;
-    let rx_ppm = cfg.rx_oscillator_ppm;
+    let LinkSetup {
+        rng,
+        trajectory,
+        clock,
+        specs,
+        me,
+        mut link,
+        rx_ppm,
+    } = link_setup(world, req, t, &group)?;
     let eps = rx_ppm * 1e-6;
-    let mut link = DtmbSource::new(
-        cfg,
-        specs.clone(),
-        world.scene.clone(),
-        world.frame.clone(),
-        Arc::clone(&clock),
-        None,
-        &rng,
-        SimTime::from_seconds(dur),
-    )
-    .map_err(|i| bad("sensors.dtmb", format!("{}: {}", i.key, i.message)))?;
     let tx_cfg = TxConfig {
         schedule: FrameSchedule {
             mode,
@@ -400,6 +387,138 @@ pub fn write_world_sigmf(
 pub fn requested_tower(world: &World, req: &WorldIqRequest) -> Result<(String, PnMode), DtmbError> {
     let (t, _) = select_towers(world, req)?;
     Ok((t.id.clone(), t.pn_mode()))
+}
+
+/// The link of a recording's towers as `World::build_trial` makes it: the trial's
+/// random streams, trajectory and receiver clock, the towers' specs (`me` the requested
+/// one) and the measurement-level source that computes each tower's paths and budget.
+struct LinkSetup {
+    rng: TrialRng,
+    trajectory: Box<dyn crate::motion::Trajectory>,
+    clock: Arc<crate::core::receiver_clock::ClockTrack>,
+    specs: Vec<TowerSpec>,
+    me: usize,
+    link: DtmbSource,
+    rx_ppm: f64,
+}
+
+fn link_setup(
+    world: &World,
+    req: &WorldIqRequest,
+    t: &crate::world::scene::Transmitter,
+    group: &[&crate::world::scene::Transmitter],
+) -> Result<LinkSetup, DtmbError> {
+    let rng = TrialRng::new(req.seed, req.trial);
+    let trajectory = world
+        .build_trajectory(&rng)
+        .map_err(|e| bad("trajectory", e))?;
+    // The receiver clock and the towers exactly as `World::build_trial` makes them (the
+    // group shares one PN mode, checked by `select_towers`).
+    let clock = Arc::new(world.receiver_clock(&rng));
+    let specs: Vec<TowerSpec> = group.iter().map(|o| o.tower_spec(System::Dtmb)).collect();
+    let me = group.iter().position(|o| o.id == t.id).unwrap_or(0);
+    let mut cfg = world.file.sensors.dtmb.clone().unwrap_or_default();
+    // The link needs no signal-level state of its own.
+    cfg.level = DtmbLevel::Measurement;
+    let rx_ppm = cfg.rx_oscillator_ppm;
+    let link = DtmbSource::new(
+        cfg,
+        specs.clone(),
+        world.scene.clone(),
+        world.frame.clone(),
+        Arc::clone(&clock),
+        None,
+        &rng,
+        SimTime::from_seconds(world.duration_s),
+    )
+    .map_err(|i| bad("sensors.dtmb", format!("{}: {}", i.key, i.message)))?;
+    Ok(LinkSetup {
+        rng,
+        trajectory,
+        clock,
+        specs,
+        me,
+        link,
+        rx_ppm,
+    })
+}
+
+/// One tower's multipath towards the receiver at one instant (`dtmb ber --world`).
+#[derive(Clone, Debug)]
+pub struct TowerChannel {
+    /// The tower's id.
+    pub tower: String,
+    /// Its header mode.
+    pub mode: PnMode,
+    /// Its carrier (Hz).
+    pub freq_hz: f64,
+    /// The instant (seconds from the world's start, receiver clock).
+    pub at_s: f64,
+    /// Geometric range (m).
+    pub range_m: f64,
+    /// The link budget's SNR over 7.56 MHz of a free-space LoS path (dB).
+    pub snr_ref_db: f64,
+    /// The received SNR of the paths combined coherently (dB), as a recording annotates
+    /// it (`hybridnav:snr_db`); `−∞` when the link is blocked.
+    pub snr_db: f64,
+    /// Per path: excess delay over the range (samples at 7.56 Msps) and complex gain
+    /// relative to the link budget's reference.
+    pub paths: Vec<(f64, Complex64)>,
+    /// The data layer's options of the tower's `[[transmitter]]`, each replaced by the
+    /// request's (`qam`, `fec`, `interleaver`, `carriers`).
+    pub qam: Option<String>,
+    pub fec: Option<String>,
+    pub interleaver: Option<usize>,
+    pub carriers: Option<usize>,
+}
+
+/// The requested tower's paths and link budget at `req.from_s` (the block of one frame
+/// there), computed as [`world_iq`] computes them for that block: the same trajectory,
+/// clocks, scene paths and shadowing. Co-channel towers are not included.
+///
+/// # Errors
+/// As [`world_iq`]'s checks of the request (frames = 1 suffices).
+pub fn tower_channel_at(world: &World, req: &WorldIqRequest) -> Result<TowerChannel, DtmbError> {
+    let (t, group) = select_towers(world, req)?;
+    let mode = t.pn_mode();
+    let LinkSetup {
+        trajectory,
+        clock,
+        specs,
+        me,
+        mut link,
+        ..
+    } = link_setup(world, req, t, &group)?;
+    let t_s = req.from_s + 0.5 * mode.frame_duration_s();
+    let truth = crate::engine::trial::truth_at(
+        &world.frame,
+        world.start,
+        trajectory.as_ref(),
+        SimTime::from_seconds(t_s),
+    );
+    let rx_bias_s = clock.bias_s(t_s) + clock.isb_s(System::Dtmb, t_s);
+    let l = tower_block(
+        world, &mut link, me, &specs[me], &truth, t_s, rx_bias_s, req.from_s,
+    );
+    let o = &req.data_layer;
+    Ok(TowerChannel {
+        tower: t.id.clone(),
+        mode,
+        freq_hz: t.freq_hz,
+        at_s: t_s,
+        range_m: l.range_m,
+        snr_ref_db: l.snr_ref_db,
+        snr_db: if l.taps.is_empty() {
+            f64::NEG_INFINITY
+        } else {
+            l.snr_db
+        },
+        paths: l.taps.iter().map(|&(d, g, _)| (d, g)).collect(),
+        qam: o.qam.clone().or_else(|| t.spec.qam.clone()),
+        fec: o.fec.clone().or_else(|| t.spec.fec.clone()),
+        interleaver: o.interleaver.or(t.spec.interleaver),
+        carriers: o.carriers.or(t.spec.carriers),
+    })
 }
 
 /// Tower `i`'s link during the block whose middle is at `t_s` (receiver clock): its
