@@ -731,23 +731,33 @@ fn truth_at(frame: &EnuFrame, t_s: f64, e: f64, n: f64) -> Truth {
     }
 }
 
-#[test]
-fn fm_source_emits_constrained_fixes_in_ecef() {
-    let fr = frame();
+/// The source tests' database: a survey of a 120 m square on a 3 m grid.
+fn source_db() -> Arc<FingerprintDb> {
     let grid = grid_points([-60.0, -60.0], [60.0, 60.0], 3.0).unwrap();
-    let db = Arc::new(db_from_survey(&grid, "test/fm/survey/source"));
-    let cfg = FmSensorConfig::default();
-    let mut src = FmSource::new(
+    Arc::new(db_from_survey(&grid, "test/fm/survey/source"))
+}
+
+/// A source aided by estimator 0 (its estimates centre the constraint circle), for 100 s.
+fn aided_source(fr: &EnuFrame, db: Arc<FingerprintDb>, cfg: &FmSensorConfig) -> FmSource {
+    FmSource::new(
         cfg.clone(),
-        stations(&fr),
+        stations(fr),
         None,
         fr.clone(),
-        db.clone(),
+        db,
         &TrialRng::new(MASTER_SEED, 3),
         Some(0),
         SimTime::from_seconds(100.0),
     )
-    .unwrap();
+    .unwrap()
+}
+
+#[test]
+fn fm_source_emits_constrained_fixes_in_ecef() {
+    let fr = frame();
+    let db = source_db();
+    let cfg = FmSensorConfig::default();
+    let mut src = aided_source(&fr, db.clone(), &cfg);
     assert_eq!(src.kind(), hybridnav::measurement::SourceKind::Fm);
     let estimate = |t_s: f64, sigma_m: f64| Estimate {
         t: GpsTime::from_ns(0).add_seconds(t_s),
@@ -830,20 +840,7 @@ fn fm_source_emits_constrained_fixes_in_ecef() {
 #[test]
 fn fm_source_holds_the_circle_at_the_last_reliable_position() {
     let fr = frame();
-    let grid = grid_points([-60.0, -60.0], [60.0, 60.0], 3.0).unwrap();
-    let db = Arc::new(db_from_survey(&grid, "test/fm/survey/source"));
-    let cfg = FmSensorConfig::default();
-    let mut src = FmSource::new(
-        cfg.clone(),
-        stations(&fr),
-        None,
-        fr.clone(),
-        db,
-        &TrialRng::new(MASTER_SEED, 3),
-        Some(0),
-        SimTime::from_seconds(100.0),
-    )
-    .unwrap();
+    let mut src = aided_source(&fr, source_db(), &FmSensorConfig::default());
     let reliable_en = [2.0, -3.0];
     let mut out = MeasurementBatch::default();
     let mut fixes = vec![];

@@ -74,6 +74,39 @@ impl BerPoint {
     pub fn cwer(&self) -> f64 {
         self.ldpc_failures as f64 / (self.codewords.max(1)) as f64
     }
+
+    /// A point at `snr_db` with nothing counted yet.
+    pub(crate) fn empty(snr_db: f64, frames: usize) -> Self {
+        Self {
+            snr_db,
+            frames,
+            packets: 0,
+            packet_errors: 0,
+            bits: 0,
+            bit_errors: 0,
+            codewords: 0,
+            ldpc_failures: 0,
+        }
+    }
+}
+
+/// Compares the receiver's packets with the pseudo-random stream of `key` that was sent,
+/// counting into `p` (the receiver gives whole packets: a FEC group holds a whole number
+/// of them).
+pub(crate) fn count_packets(out: &[u8], key: u64, p: &mut BerPoint) {
+    let mut expected = [0u8; PACKET_LEN];
+    for got in out.chunks_exact(PACKET_LEN) {
+        pseudo_random_packet(key, p.packets, &mut expected);
+        let wrong: u32 = got
+            .iter()
+            .zip(&expected)
+            .map(|(a, b)| (a ^ b).count_ones())
+            .sum();
+        p.packets += 1;
+        p.bits += (PACKET_LEN * 8) as u64;
+        p.bit_errors += u64::from(wrong);
+        p.packet_errors += u64::from(wrong > 0);
+    }
 }
 
 /// Most frames one point may measure.
@@ -112,17 +145,7 @@ pub fn measure_point(
     let sigma = (var / 2.0).sqrt();
     let mut body = vec![Complex32::default(); BODY_LEN];
     let mut out = Vec::new();
-    let mut expected = [0u8; PACKET_LEN];
-    let mut p = BerPoint {
-        snr_db,
-        frames,
-        packets: 0,
-        packet_errors: 0,
-        bits: 0,
-        bit_errors: 0,
-        codewords: 0,
-        ldpc_failures: 0,
-    };
+    let mut p = BerPoint::empty(snr_db, frames);
     let total = profile.interleaver_delay_frames() + frames;
     for _ in 0..total {
         tx.next_frame(profile.si_index(), &mut body)?;
@@ -133,19 +156,7 @@ pub fn measure_point(
         }
         out.clear();
         rx.push_frame(&body, var, &mut out);
-        // The receiver gives whole packets (a FEC group holds a whole number of them).
-        for got in out.chunks_exact(PACKET_LEN) {
-            pseudo_random_packet(key, p.packets, &mut expected);
-            let wrong: u32 = got
-                .iter()
-                .zip(&expected)
-                .map(|(a, b)| (a ^ b).count_ones())
-                .sum();
-            p.packets += 1;
-            p.bits += (PACKET_LEN * 8) as u64;
-            p.bit_errors += u64::from(wrong);
-            p.packet_errors += u64::from(wrong > 0);
-        }
+        count_packets(&out, key, &mut p);
     }
     let st = rx.stats();
     p.codewords = st.codewords;

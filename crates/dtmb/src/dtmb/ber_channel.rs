@@ -59,13 +59,13 @@
 //! [`super::ber::measure_point`], so the same packets) and `dtmb/ber/noise`; every SNR
 //! point starts both afresh (common random numbers).
 
-use super::ber::{BerPoint, MAX_BER_FRAMES};
+use super::ber::{count_packets, BerPoint, MAX_BER_FRAMES};
 use super::data_layer::{DataLayer, Profile};
 use super::data_receiver::DataReceiver;
 use super::frame::{interleave_index, BodyModulator, CarrierMode};
 use super::kernel::{kernel, KERNEL_HALF_WIDTH};
 use super::pn::{PnMode, BODY_LEN};
-use super::ts::{pseudo_random_packet, PacketSource, PACKET_LEN};
+use super::ts::PacketSource;
 use super::DtmbError;
 use crate::core::TrialRng;
 use num_complex::{Complex32, Complex64};
@@ -567,36 +567,6 @@ fn check_frames(frames: usize, snr_db: f64) -> Result<(), DtmbError> {
     Ok(())
 }
 
-/// Compares the receiver's packets with the stream sent, counting into `p`.
-fn count_packets(out: &[u8], key: u64, p: &mut BerPoint) {
-    let mut expected = [0u8; PACKET_LEN];
-    for got in out.chunks_exact(PACKET_LEN) {
-        pseudo_random_packet(key, p.packets, &mut expected);
-        let wrong: u32 = got
-            .iter()
-            .zip(&expected)
-            .map(|(a, b)| (a ^ b).count_ones())
-            .sum();
-        p.packets += 1;
-        p.bits += (PACKET_LEN * 8) as u64;
-        p.bit_errors += u64::from(wrong);
-        p.packet_errors += u64::from(wrong > 0);
-    }
-}
-
-fn empty_point(snr_db: f64, frames: usize) -> BerPoint {
-    BerPoint {
-        snr_db,
-        frames,
-        packets: 0,
-        packet_errors: 0,
-        bits: 0,
-        bit_errors: 0,
-        codewords: 0,
-        ldpc_failures: 0,
-    }
-}
-
 /// Measures one SNR point through the channel (see the module documentation).
 ///
 /// # Errors
@@ -629,7 +599,7 @@ pub fn measure_channel_point(cfg: &ChannelBer<'_>, snr_db: f64) -> Result<BerPoi
     let mut eq = vec![Complex32::default(); BODY_LEN];
     let mut w = vec![0f32; BODY_LEN];
     let mut out = Vec::new();
-    let mut p = empty_point(snr_db, cfg.frames);
+    let mut p = BerPoint::empty(snr_db, cfg.frames);
     let sigma = var.sqrt();
     let total = cfg.profile.interleaver_delay_frames() + cfg.frames;
     // Frame k is received once frame k + 1's header is in: one frame more is sent.
@@ -687,7 +657,7 @@ pub fn measure_per_carrier_point(
     let mut body = vec![Complex32::default(); BODY_LEN];
     let mut unit = vec![Complex32::default(); BODY_LEN];
     let mut out = Vec::new();
-    let mut p = empty_point(f64::NAN, frames);
+    let mut p = BerPoint::empty(f64::NAN, frames);
     for _ in 0..profile.interleaver_delay_frames() + frames {
         tx.next_frame(profile.si_index(), &mut body)?;
         unit.fill(Complex32::default());
