@@ -197,7 +197,9 @@ pub fn fll_sigma_hz(
 pub struct TrackingConfig {
     /// DLL noise bandwidth B_L (Hz); default 1.
     pub dll_bandwidth_hz: f64,
-    /// Early-minus-late correlator spacing d (chips), within (0, 1]; default 1.
+    /// Early-minus-late correlator spacing d (chips), within (0, 1]; default 1. This is
+    /// the distance between E and L: a receiver that sets each correlator's offset from
+    /// the prompt (GNSS-SDR's `early_late_space_chips`) has d = twice that offset.
     pub correlator_spacing_chips: f64,
     /// Predetection integration time T (s); default 0.02.
     pub integration_time_s: f64,
