@@ -438,12 +438,12 @@ fn calibrate(
 /// The goal: per class, GNSS-SDR's RMS pseudorange error on the recording and the
 /// measurement level's on the same satellites and epochs agree within 2×. With GNSS-SDR's
 /// E−L spacing equal to the world's (±0.25 chips, 2026-12-04, by hand): LOS + multipath
-/// 1.04 m against 0.98 m, a ratio of 1.06. (2026-12-03, with the positioning tests'
-/// ±0.5 chips, a 1-chip spacing: 1.35–1.41 m against 0.96–1.01 m, 1.37–1.42, which was
-/// that √2.) the NLOS satellite G24 (a 3.3 m wall reflection at 36 dB-Hz) 5.4–5.6 m
-/// against 4.8–4.9 m (ratio 1.1–1.2) when GNSS-SDR acquired it, which it did in one of
-/// three 120 s runs, so that comparison is asserted only when GNSS-SDR tracked it for
-/// 20 s or more.
+/// 1.04 m against 0.98 m over 120 s, a ratio of 1.06, and 1.03 m against 0.96 m over 240 s
+/// (1.08). With the positioning tests' ±0.5 chips, a 1-chip spacing, it was 1.37–1.42
+/// (2026-12-03), that spacing's √2. The NLOS satellite G24 (a 3.3 m wall reflection at
+/// 36 dB-Hz) gave 4.7 m against 4.6 m (1.02, 240 s) when GNSS-SDR acquired it, which it
+/// did in one of three 120 s runs, so that comparison is asserted only when GNSS-SDR
+/// tracked it for 20 s or more.
 #[test]
 fn gnss_canyon_per_class_errors_agree_with_gnss_sdr() {
     // 120 s: GNSS-SDR's first fix (≈ 48 s in, after subframes 1–3) sets its receiver time,
