@@ -136,8 +136,9 @@ material = "glass"
 /// above the horizon (gps-sdr-sim's mask is 0°, so is this world's).
 const SIDE_BY_SIDE_NAV: &str = "../shared/data/gnss/brdc1820.10n";
 
-fn side_by_side_world_text() -> String {
-    format!(
+fn side_by_side_world_text(three_paths: bool) -> String {
+    let height_m = if three_paths { 1.5 } else { 0.0 };
+    let mut text = format!(
         r#"
 [world]
 name = "gnss iq bench, side by side with gps-sdr-sim"
@@ -147,7 +148,7 @@ ephemeris = "{SIDE_BY_SIDE_NAV}"
 
 [platform]
 kind = "car"
-trajectory = {{ kind = "static", position_enu_m = [0, 0, 0], duration_s = 60 }}
+trajectory = {{ kind = "static", position_enu_m = [0, 0, {height_m}], duration_s = 60 }}
 
 [sensors.gnss]
 systems = ["gps"]
@@ -158,8 +159,66 @@ name = "WLS"
 sources = ["gps"]
 filter = "wls"
 "#
-    )
+    );
+    if three_paths {
+        text.push_str(THREE_PATH_SCENE);
+    }
+    text
 }
+
+/// The side-by-side sky with three paths a satellite: the direct path, the ground's and one
+/// wall's. Each wall is a 1 m thick concrete slab 40 m from the antenna (1.5 m up), facing
+/// it, on the side opposite its satellite's azimuth and tall enough for the specular point
+/// (`h ≥ 1.5 + 40·tan el`); narrow (4 m; 6 m for the three satellites at azimuth 59.5–63.9°,
+/// which share one) so that it blocks no other satellite's line of sight. Azimuths and
+/// elevations are the 10 satellites' at 2010-07-01 00:00:00 GPST from brdc1820.10n. The
+/// ground is very dry soil because on paved ground G21's co-polar ground reflection (at
+/// 46°, past the Brewster angle) vanishes. The bench checks that every satellite has
+/// exactly three paths at every epoch of the recording.
+const THREE_PATH_SCENE: &str = r#"
+[scene]
+ground = { material = "very_dry" }
+# For G26, G15, G27 (az 59.5-63.9, el up to 61.5)
+[[scene.buildings]]
+footprint_enu_m = [[-33.80, -21.60], [-36.64, -16.32], [-37.52, -16.80], [-34.68, -22.08]]
+height_m = 90
+material = "concrete"
+# For G09 (96.5, 72.6)
+[[scene.buildings]]
+footprint_enu_m = [[-39.97, 2.54], [-39.52, 6.52], [-40.51, 6.63], [-40.96, 2.65]]
+height_m = 145
+material = "concrete"
+# For G12 (143.9, 9.3)
+[[scene.buildings]]
+footprint_enu_m = [[-25.18, 31.14], [-21.95, 33.50], [-22.54, 34.31], [-25.77, 31.95]]
+height_m = 15
+material = "concrete"
+# For G14 (260.9, 16.1)
+[[scene.buildings]]
+footprint_enu_m = [[39.18, 8.30], [39.81, 4.35], [40.80, 4.51], [40.17, 8.46]]
+height_m = 20
+material = "concrete"
+# For G18 (330.4, 76.7)
+[[scene.buildings]]
+footprint_enu_m = [[21.50, -33.79], [18.02, -35.77], [18.51, -36.64], [21.99, -34.66]]
+height_m = 190
+material = "concrete"
+# For G21 (216.2, 46.1)
+[[scene.buildings]]
+footprint_enu_m = [[22.01, 33.46], [25.24, 31.10], [25.83, 31.90], [22.60, 34.27]]
+height_m = 55
+material = "concrete"
+# For G22 (308.0, 40.7)
+[[scene.buildings]]
+footprint_enu_m = [[32.75, -23.05], [30.29, -26.20], [31.08, -26.82], [33.54, -23.67]]
+height_m = 45
+material = "concrete"
+# For G24 (293.8, 40.5)
+[[scene.buildings]]
+footprint_enu_m = [[37.41, -14.31], [35.79, -17.97], [36.71, -18.38], [38.32, -14.72]]
+height_m = 45
+material = "concrete"
+"#;
 
 /// Samples per second of `gnss iq` at 2.6 Msps ci8 (0.5 s recordings into a sink), open sky
 /// and in a street canyon (every path of the scene its own replica), and on the real
@@ -180,9 +239,10 @@ fn iq_benches(c: &mut Criterion) {
         ("canyon", iq_world_text(true)),
     ];
     if Path::new(SIDE_BY_SIDE_NAV).exists() {
-        cases.push(("open_sky_10_brdc1820", side_by_side_world_text()));
+        cases.push(("open_sky_10_brdc1820", side_by_side_world_text(false)));
+        cases.push(("three_paths_10_brdc1820", side_by_side_world_text(true)));
     } else {
-        eprintln!("gnss_iq/open_sky_10_brdc1820: skipped, {SIDE_BY_SIDE_NAV} not found");
+        eprintln!("gnss_iq/*_10_brdc1820: skipped, {SIDE_BY_SIDE_NAV} not found");
     }
     for (name, text) in cases {
         let w = hybridnav::world::parse_world(&text, Path::new("bench.toml")).expect("bench world");
@@ -226,6 +286,9 @@ fn iq_benches(c: &mut Criterion) {
         };
         let s = run();
         let paths: usize = s.satellites.iter().map(|a| a.max_paths).sum();
+        if name.starts_with("three_paths") {
+            assert_three_paths_everywhere(&iw, &req, &sats);
+        }
         eprintln!(
             "gnss_iq/{name}: {} satellites, {paths} replicas",
             s.satellites.len()
@@ -234,6 +297,49 @@ fn iq_benches(c: &mut Criterion) {
     }
     g.finish();
     gps_sdr_sim_side_by_side(rate);
+}
+
+/// Checks the three-path case measures what it claims: in paths.csv, every satellite has
+/// exactly three paths (direct, ground, wall) at every epoch of the recording.
+fn assert_three_paths_everywhere(
+    iw: &hybridnav::gnss::signal::scenario::IqWorld<'_>,
+    req: &hybridnav::gnss::signal::scenario::IqRequest,
+    sats: &[EmitterId],
+) {
+    use hybridnav::gnss::signal::scenario::{record, IqSinks};
+    let mut paths_csv = Vec::new();
+    let (mut a, mut b) = (std::io::sink(), std::io::sink());
+    record(
+        iw,
+        req,
+        sats,
+        &mut IqSinks {
+            data: &mut a,
+            truth: &mut b,
+            paths: &mut paths_csv,
+        },
+    )
+    .expect("records");
+    let text = String::from_utf8(paths_csv).expect("paths.csv is UTF-8");
+    let mut per_epoch = std::collections::BTreeMap::<(&str, &str), (usize, Vec<&str>)>::new();
+    for row in text.lines().skip(1) {
+        let f: Vec<&str> = row.split(',').collect();
+        let e = per_epoch.entry((f[0], f[1])).or_default();
+        e.0 += 1;
+        e.1.push(f[9]);
+    }
+    assert_eq!(
+        per_epoch
+            .keys()
+            .map(|k| k.1)
+            .collect::<std::collections::BTreeSet<_>>()
+            .len(),
+        10,
+        "three-path case: 10 satellites"
+    );
+    for ((t, sat), (n, kinds)) in &per_epoch {
+        assert_eq!(*n, 3, "three-path case: {sat} at {t} s has paths {kinds:?}");
+    }
 }
 
 /// Times gps-sdr-sim (its binary named by `GPS_SDR_SIM`) on the side-by-side scenario:

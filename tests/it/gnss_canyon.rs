@@ -1,6 +1,7 @@
 //! The measurement level's per-class pseudorange errors against the signal level's, in a
 //! street canyon (`worlds/gnss-iq-urban-canyon.toml`, and the same world at another hour,
-//! `worlds/gnss-iq-urban-canyon-1500.toml`): `hybridnav gnss iq` records the world's GPS
+//! `worlds/gnss-iq-urban-canyon-1500.toml`, and with the antenna on a roof,
+//! `worlds/gnss-iq-urban-canyon-roof.toml`): `hybridnav gnss iq` records the world's GPS
 //! L1 C/A or BeiDou B1I, GNSS-SDR tracks the recording and dumps its observables, and
 //! `hybridnav export --format csv` writes the measurement level's pseudoranges of the same
 //! world and trial. Each satellite at each epoch is classed from the recording's
@@ -23,6 +24,7 @@ use std::path::Path;
 
 const CANYON: &str = "worlds/gnss-iq-urban-canyon.toml";
 const CANYON_1500: &str = "worlds/gnss-iq-urban-canyon-1500.toml";
+const CANYON_ROOF: &str = "worlds/gnss-iq-urban-canyon-roof.toml";
 const NAV: &str = "ephemeris/ESBC00DNK_R_20201770000_01D_MN.rnx";
 const C_MPS: f64 = 299_792_458.0;
 const WEEK_S: f64 = 604_800.0;
@@ -435,6 +437,18 @@ fn calibrate(
     })
 }
 
+/// The positioning tests' GPS configuration with the canyon worlds' correlator spacing.
+/// GNSS-SDR's `early_late_space_chips` is each of E and L's offset from P, so its E−L
+/// spacing is twice it; ±0.25 chips is the world's `correlator_spacing_chips = 0.5` (and
+/// GNSS-SDR's own default, which the B1I configuration keeps). The positioning tests'
+/// ±0.5 chips would be a 1-chip spacing, √2 more code noise than the world's.
+fn gps_conf_matched(data: &str, rate: f64, out: &str, _: &[u64]) -> String {
+    gps_conf(data, rate, out).replace(
+        "Tracking_1C.early_late_space_chips=0.5",
+        "Tracking_1C.early_late_space_chips=0.25",
+    )
+}
+
 /// The goal: per class, GNSS-SDR's RMS pseudorange error on the recording and the
 /// measurement level's on the same satellites and epochs agree within 2×. With GNSS-SDR's
 /// E−L spacing equal to the world's (±0.25 chips, 2026-12-04, by hand): LOS + multipath
@@ -448,17 +462,7 @@ fn calibrate(
 fn gnss_canyon_per_class_errors_agree_with_gnss_sdr() {
     // 120 s: GNSS-SDR's first fix (≈ 48 s in, after subframes 1–3) sets its receiver time,
     // and the epochs after it are compared.
-    // GNSS-SDR's `early_late_space_chips` is each of E and L's offset from P, so its E−L
-    // spacing is twice it; ±0.25 chips is the world's `correlator_spacing_chips = 0.5`
-    // (and GNSS-SDR's own default, which the B1I configuration keeps). The positioning
-    // tests' ±0.5 chips would be a 1-chip spacing, √2 more code noise than the world's.
-    let conf = |data: &str, rate: f64, out: &str, _: &[u64]| {
-        gps_conf(data, rate, out).replace(
-            "Tracking_1C.early_late_space_chips=0.5",
-            "Tracking_1C.early_late_space_chips=0.25",
-        )
-    };
-    let Some(cal) = calibrate("canyon", CANYON, GPS_L1CA, 120, 2.6e6, conf) else {
+    let Some(cal) = calibrate("canyon", CANYON, GPS_L1CA, 120, 2.6e6, gps_conf_matched) else {
         return;
     };
     let (n, ratio) = cal.ratio(Class::LosMultipath);
@@ -505,5 +509,31 @@ fn gnss_canyon_bds_per_class_errors_agree_with_gnss_sdr() {
                 "{c:?}: GNSS-SDR RMS / measurement RMS = {ratio:.2}"
             );
         }
+    }
+}
+
+/// The line-of-sight class without a ground reflection, which the street never has: the
+/// same canyon with the antenna on the south block's roof
+/// (`worlds/gnss-iq-urban-canyon-roof.toml`), where every satellite above the mask is
+/// `los` (the roof hides the ground's specular points). GPS at 02:00, 120 s at 2.6 Msps,
+/// GNSS-SDR at the world's spacing. By hand over 240 s (2026-12-04, docs/validation.md):
+/// eight satellites, 1578 samples, 1.63 m against 1.44 m, a ratio of 1.13. Asserted: ≥ 300
+/// common LOS samples (GNSS-SDR tracks the six or more satellites above 20° from its first
+/// fix on), the ratio within 2×, and no multipath or NLOS sample at either level. Its run
+/// (2026-12-04): n = 646, 1.62 m against 1.40 m, 1.15.
+#[test]
+fn gnss_roof_line_of_sight_errors_agree_with_gnss_sdr() {
+    let Some(cal) = calibrate("roof", CANYON_ROOF, GPS_L1CA, 120, 2.6e6, gps_conf_matched) else {
+        return;
+    };
+    eprintln!("roof: satellites per class {:?}", cal.satellites);
+    let (n, ratio) = cal.ratio(Class::Los);
+    assert!(n >= 300, "{n} LOS samples:\n{}", cal.log);
+    assert!(
+        (0.5..=2.0).contains(&ratio),
+        "LOS: GNSS-SDR RMS / measurement RMS = {ratio:.2}"
+    );
+    for c in [Class::LosMultipath, Class::Nlos] {
+        assert_eq!(cal.ratio(c).0, 0, "{c:?} samples on the roof:\n{}", cal.log);
     }
 }
