@@ -24,6 +24,7 @@ use std::path::Path;
 
 const CANYON: &str = "worlds/gnss-iq-urban-canyon.toml";
 const CANYON_1500: &str = "worlds/gnss-iq-urban-canyon-1500.toml";
+const CANYON_1300: &str = "worlds/gnss-iq-urban-canyon-1300.toml";
 const CANYON_ROOF: &str = "worlds/gnss-iq-urban-canyon-roof.toml";
 const NAV: &str = "ephemeris/ESBC00DNK_R_20201770000_01D_MN.rnx";
 const C_MPS: f64 = 299_792_458.0;
@@ -535,5 +536,41 @@ fn gnss_roof_line_of_sight_errors_agree_with_gnss_sdr() {
     );
     for c in [Class::LosMultipath, Class::Nlos] {
         assert_eq!(cal.ratio(c).0, 0, "{c:?} samples on the roof:\n{}", cal.log);
+    }
+}
+
+/// BeiDou's NLOS class: at 13:00 (`worlds/gnss-iq-urban-canyon-1300.toml`) C11 is received
+/// only by a wall reflection (2.9 m excess, 36 dB-Hz; its direct path through the block at
+/// 18 dB-Hz), with C09, C12 and C25 in line of sight. GNSS-SDR's default acquisition (4
+/// non-coherent 1 ms dwells at P_fa 10⁻³) never acquired it in 240 s; with 20 dwells, a
+/// receiver set for weak signals, it does. The acquisition setting changes only which
+/// satellites are tracked, not how, so the tracking errors stay comparable. By hand over
+/// 240 s (2026-12-04, docs/validation.md): NLOS C11 n = 93, mean 2.89 m and RMS 3.46 m
+/// against 2.84 m and 3.37 m (1.03); LOS + multipath 0.91 m against 0.78 m (1.17).
+/// Asserted: ≥ 20 common NLOS samples, and every class with 20 or more within 2×. Its two
+/// runs (150 s, 2026-12-04): NLOS n = 92 and 77, ratios 0.99 and 0.97; LOS + multipath
+/// (C09, C12, C25) n = 303, 1.10.
+#[test]
+fn gnss_canyon_bds_nlos_errors_agree_with_gnss_sdr() {
+    let conf = |data: &str, rate: f64, out: &str, prns: &[u64]| {
+        bds_conf(data, rate, out, prns).replace(
+            "Acquisition_B1.max_dwells=4",
+            "Acquisition_B1.max_dwells=20",
+        )
+    };
+    let Some(cal) = calibrate("canyon-bds-nlos", CANYON_1300, BDS_B1I, 150, 4.2e6, conf) else {
+        return;
+    };
+    eprintln!("canyon-bds-nlos: satellites per class {:?}", cal.satellites);
+    let (n, _) = cal.ratio(Class::Nlos);
+    assert!(n >= 20, "{n} NLOS samples:\n{}", cal.log);
+    for c in [Class::Los, Class::LosMultipath, Class::Nlos] {
+        let (n, ratio) = cal.ratio(c);
+        if n >= 20 {
+            assert!(
+                (0.5..=2.0).contains(&ratio),
+                "{c:?}: GNSS-SDR RMS / measurement RMS = {ratio:.2}"
+            );
+        }
     }
 }
