@@ -224,6 +224,24 @@ fn bench_pf(c: &mut Criterion) {
                 black_box(rbpf.update_ranges(&lik, &mut rng))
             })
         });
+        // The Gaussian PF on the same state and ranges: its prediction factors the
+        // cloud's weighted covariance and redraws every particle from the predicted
+        // Gaussian; the update weights them (no resampling).
+        let mut gpf = ParticleFilter::new(
+            ParticleBuffer::<4>::new(n).expect("n > 0"),
+            Resampling::Systematic,
+            0.5,
+        )
+        .expect("valid threshold")
+        .gaussian();
+        gpf.init_gaussian(&truth, &prior, &mut rng)
+            .expect("valid prior");
+        group.bench_function(format!("gaussian epoch N={n}"), |b| {
+            b.iter(|| {
+                gpf.predict(&RandomWalk, 1.0, &mut rng).expect("valid");
+                black_box(gpf.update_ranges(&lik, &mut rng))
+            })
+        });
         // The marginalised PF on a 3-D constant-velocity state (no clock): the positions
         // sampled, the velocities carried by the per-particle Kalman filters, so each
         // epoch adds the joint factorisation and the conditional update of the means.

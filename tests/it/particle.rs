@@ -60,8 +60,8 @@ fn normal4(rng: &mut StreamRng) -> V4 {
     V4::from_fn(|_, _| rng.sample(StandardNormal))
 }
 
-/// The three members of the family on the same buffers.
-fn family(n: usize) -> [ParticleFilter<4>; 3] {
+/// The members of the family that run on a position-and-clock state, on the same buffers.
+fn family(n: usize) -> [ParticleFilter<4>; 4] {
     let make =
         |scheme| ParticleFilter::new(ParticleBuffer::<4>::new(n).unwrap(), scheme, 0.5).unwrap();
     [
@@ -72,11 +72,14 @@ fn family(n: usize) -> [ParticleFilter<4>; 3] {
                 (s == System::Dtmb.index()).then_some(3)
             }))
             .unwrap(),
+        make(Resampling::Systematic).gaussian(),
     ]
 }
 
 /// No member of the family allocates in an epoch (predict, weight by ranges, resample
-/// with or without the kernel, moments) once built.
+/// with or without the kernel, moments) once built: SIR, regularised, Rao-Blackwellised,
+/// Gaussian (its prediction factors the cloud's covariance and redraws it) and
+/// marginalised.
 #[test]
 fn no_particle_filter_allocates_per_epoch() {
     let layout = StateLayout {
@@ -189,7 +192,8 @@ fn no_particle_filter_allocates_per_epoch() {
 /// posterior mean and its covariance is the PCRLB, so each filter's mean-square error is
 /// the bound plus its distance to the KF. That excess must fall as the particle count
 /// grows, roughly as 1/N: the log–log slope over N = 250 … 4000 is at most −0.5 for the
-/// regularised PF and for SIR (the kernel's bias also vanishes, as h_opt → 0).
+/// regularised PF and for SIR (the kernel's bias also vanishes, as h_opt → 0), the
+/// marginalised PF and the Gaussian PF (exact on this model but for its sampling error).
 #[test]
 fn particle_filters_approach_the_bound_as_n_grows() {
     let cv = ConstantVelocity::<4>::new(0.2).unwrap();
@@ -209,7 +213,7 @@ fn particle_filters_approach_the_bound_as_n_grows() {
     let p0d = DMatrix::from_fn(4, 4, |i, j| p0[(i, j)]);
     let bounds = bound_sequence(&p0d, &f, &q, &vec![info; steps]).unwrap();
     let counts = [250usize, 1000, 4000];
-    for variant in ["sir", "regularised", "musso", "marginalised"] {
+    for variant in ["sir", "regularised", "musso", "marginalised", "gaussian"] {
         let mut excess = Vec::new();
         for &n in &counts {
             let (mut sq_diff, mut count) = (0.0, 0.0);
@@ -229,6 +233,7 @@ fn particle_filters_approach_the_bound_as_n_grows() {
                     "sir" => pf,
                     "regularised" => pf.regularised(),
                     "musso" => pf.regularised().with_kernel(KernelPlacement::Plain),
+                    "gaussian" => pf.gaussian(),
                     _ => pf
                         .marginalised([Some(0), Some(2), None], [None; System::COUNT])
                         .unwrap(),
@@ -294,8 +299,8 @@ fn cv_f() -> M4 {
     )
 }
 
-/// A world whose particle filter has zero particles, an N_eff threshold outside [0, 1], or
-/// a filter its model cannot run is refused with exit code 2, file:line:column and the
+/// A world whose particle filter has zero particles, an N_eff threshold outside [0, 1], a
+/// proposal it cannot draw from, or a filter its model cannot run is refused with exit code 2, file:line:column and the
 /// allowed range.
 #[test]
 fn bad_particle_filter_input_is_refused_with_its_place_and_range() {
@@ -325,6 +330,26 @@ fn bad_particle_filter_input_is_refused_with_its_place_and_range() {
             "filter = \"rbpf\"\noptions = { particles = 500",
             "filter = \"rbpf\"\nprocess = { model = \"pva_clock\" }\noptions = { particles = 500",
             "filter",
+            "runs on a paper process model",
+        ),
+        // The Gaussian PF takes the family's checks: its particle count, its model, and
+        // no linearised proposal (it draws from its exact prediction).
+        (
+            "name = \"GPF-100\"\nfilter = \"gpf\"\noptions = { particles = 100 }",
+            "name = \"GPF-100\"\nfilter = \"gpf\"\noptions = { particles = 0 }",
+            ":166:25:",
+            "expected 2 to 1 000 000",
+        ),
+        (
+            "filter = \"gpf\"\noptions = { particles = 500 }",
+            "filter = \"gpf\"\noptions = { particles = 500, pf_proposal = \"linearised\" }",
+            ":171:10:",
+            "the marginalised and Gaussian filters draw from their exact predictions",
+        ),
+        (
+            "filter = \"gpf\"\noptions = { particles = 500",
+            "filter = \"gpf\"\nprocess = { model = \"pva_clock\" }\noptions = { particles = 500",
+            ":171:10:",
             "runs on a paper process model",
         ),
     ];

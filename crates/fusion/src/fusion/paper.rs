@@ -2,7 +2,8 @@
 //! and seed 003's EKF and particle filter on the 3-D plane variable-speed turning model,
 //! each with one pseudorange clock state per system — and, since the models are kept
 //! apart from the algorithms, every other filter of the family on the same models
-//! ([`PaperFilter`]: EKF, UKF, CKF, strong tracking, relative-entropy KF, SIR PF), chosen
+//! ([`PaperFilter`]: EKF, UKF, CKF, strong tracking, relative-entropy KF, and the particle
+//! filters: SIR, regularised, Rao-Blackwellised, marginalised, Gaussian), chosen
 //! by `filter` beside `[estimator.process]`.
 //!
 //! # Filters
@@ -235,8 +236,8 @@ pub enum PaperFilter {
     },
     /// A particle filter ([`crate::fusion::particle`]): `particles`, the resampling
     /// scheme, the fraction θ of N below which N_eff triggers resampling, and the member
-    /// of the family — SIR as in seed 001 §4 / seed 003 §2.3, regularised, or
-    /// Rao-Blackwellised over the clock states.
+    /// of the family — SIR as in seed 001 §4 / seed 003 §2.3, regularised,
+    /// Rao-Blackwellised over the clock states, marginalised, or the Gaussian PF.
     Pf {
         particles: usize,
         resampling: Resampling,
@@ -387,6 +388,8 @@ impl<const N: usize> Core<N> {
                     PfVariant::Marginalised => pf
                         .marginalised(pos_cols, std::array::from_fn(|s| Some(N - N_CLOCKS + s)))
                         .map_err(|e| e.to_string())?,
+                    // All-Gaussian: the clocks are sampled with the rest (no Kalman part).
+                    PfVariant::Gaussian => pf.gaussian(),
                 };
                 pf.init_gaussian(&x0, &p0, rng).map_err(|e| e.to_string())?;
                 Core::Pf(Box::new(pf))
@@ -629,13 +632,13 @@ where
         }
         let mut rng = ctx.rng.stream(&format!("estimator/{name}/paper"));
         if let PaperFilter::Pf {
-            variant: PfVariant::Marginalised,
+            variant: PfVariant::Marginalised | PfVariant::Gaussian,
             linearised: true,
             ..
         } = filter
         {
             return Err(
-                "options.pf_proposal = \"linearised\" is for filter = \"pf\", \"sir\" or \"rbpf\": the marginalised filter draws its positions from their exact marginal prediction".into(),
+                "options.pf_proposal = \"linearised\" is for filter = \"pf\", \"sir\" or \"rbpf\": the marginalised and Gaussian filters draw from their exact predictions".into(),
             );
         }
         let core = Core::new(filter, layout.pos, x0, p0, &mut rng)?;

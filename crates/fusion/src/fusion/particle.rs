@@ -11,6 +11,11 @@
 //! estimate:   x̂ = Σ w_i x_i                                          (seed 001 eq. 10)
 //! ```
 //!
+//! The other members ([`PfVariant`]) share these buffers and the column-wise likelihood:
+//! the regularised, Rao-Blackwellised and marginalised filters, and the Gaussian particle
+//! filter of Kotecha & Djurić (2003), which never resamples and carries the posterior as
+//! the Gaussian of the weighted cloud's moments ([`ParticleFilter::gaussian`]).
+//!
 //! # Layout and speed
 //!
 //! The particles live in a [`ParticleBuffer`] the caller builds once (and can take back
@@ -98,6 +103,10 @@ pub enum PfVariant {
     /// dynamics linearly and the ranges not at all, are carried by a Kalman filter per
     /// particle, as are the clocks (see [`ParticleFilter::marginalised`]).
     Marginalised,
+    /// The Gaussian particle filter (Kotecha & Djurić 2003, see [`Self::gaussian`]): no
+    /// resampling; the posterior is the Gaussian of the weighted cloud's moments, and
+    /// each prediction redraws the cloud from the predicted Gaussian.
+    Gaussian,
 }
 
 /// The storage of `n` particles of dimension `N`, allocated once.
@@ -354,6 +363,39 @@ impl<const N: usize> ParticleFilter<N> {
         self
     }
 
+    /// The Gaussian particle filter of Kotecha & Djurić, "Gaussian particle filtering",
+    /// *IEEE Trans. SP* 51(10), 2003 (§III, Algorithms 1–2). The posterior at each
+    /// epoch is represented by the Gaussian `N(μ, Σ)` of the weighted cloud's moments,
+    /// and nothing is ever resampled:
+    ///
+    /// ```text
+    /// time update:         μ̄ = F μ,   Σ̄ = F Σ Fᵀ + Q                      (exact, see below)
+    /// measurement update:  x_i ~ N(μ̄, Σ̄),   w_i ∝ p(z | x_i),   Σ w_i = 1
+    ///                      μ = Σ w_i x_i,   Σ = Σ w_i (x_i − μ)(x_i − μ)ᵀ
+    /// ```
+    ///
+    /// Kotecha & Djurić's time update draws `x_i ~ N(μ, Σ)`, moves each through the
+    /// process model with its noise and takes the sample moments; for a process model
+    /// that is linear in the state with additive, state-independent Gaussian noise (every
+    /// model of [`crate::fusion::models`] the paper worlds run: Singer, the plane turning
+    /// model, the clock random walks) those moments converge to `f(μ)` and `F Σ Fᵀ + Q`,
+    /// so they are computed exactly here and the Monte Carlo error of that step is
+    /// removed at no cost (with a nonlinear `f` this member would be the EKF-linearised
+    /// time update followed by the GPF's measurement update). The draw from `N(μ̄, Σ̄)`
+    /// (importance function = the predicted Gaussian) happens at the end of
+    /// [`Self::predict`], so [`Self::update_ranges`] and [`Self::update`] only weight the
+    /// cloud: several updates in one epoch multiply the weights, which is the joint
+    /// update. `Σ̄` is factored by the zero-pivot-tolerant Cholesky ([`psd_factor`]), as
+    /// the singular covariances of these models need (seed 001's noise-free x axis,
+    /// seed 003's noise-free positions, known clocks).
+    ///
+    /// All components are sampled: the model is all-Gaussian, so there is nothing for a
+    /// per-particle Kalman part to carry that the Gaussian does not carry already.
+    pub fn gaussian(mut self) -> Self {
+        self.variant = PfVariant::Gaussian;
+        self
+    }
+
     /// Places the regularisation kernel as `kernel` (default [`KernelPlacement::Shrunk`]).
     pub fn with_kernel(mut self, kernel: KernelPlacement) -> Self {
         self.kernel = kernel;
@@ -542,7 +584,8 @@ impl<const N: usize> ParticleFilter<N> {
 
     /// Moves every particle through `model` over `dt_s` seconds and adds process noise
     /// (to the sampled components; the Kalman-carried clocks' variances grow by their
-    /// `Q` instead).
+    /// `Q` instead). The Gaussian filter instead redraws the whole cloud from its
+    /// predicted Gaussian ([`Self::gaussian`]).
     ///
     /// # Errors
     /// An invalid interval, a `Q` with a negative eigenvalue or a non-finite particle;
@@ -562,6 +605,9 @@ impl<const N: usize> ParticleFilter<N> {
         let q = model.q(&mean, dt_s);
         if self.mm.is_some() {
             return self.predict_marginalised(model, &mean, &q, dt_s, rng);
+        }
+        if self.variant == PfVariant::Gaussian {
+            return self.predict_gaussian(model, &mean, &q, dt_s, rng);
         }
         let g = psd_factor(&self.mask(&q))?;
         if let Some(rb) = &mut self.rb {
@@ -583,6 +629,32 @@ impl<const N: usize> ParticleFilter<N> {
             }
             self.buf.set(i, &x);
         }
+        Ok(())
+    }
+
+    /// The Gaussian particle filter's time update and draw (see [`Self::gaussian`]):
+    /// `μ̄ = f(μ)`, `Σ̄ = F Σ Fᵀ + Q` from the weighted cloud's moments, then every
+    /// particle `x_i = μ̄ + G ε_i` with `G Gᵀ = Σ̄`, `ε_i ~ N(0, I)`, and uniform weights.
+    fn predict_gaussian<P: ProcessModel<N>, R: Rng + ?Sized>(
+        &mut self,
+        model: &P,
+        mean: &SVector<f64, N>,
+        q: &SMatrix<f64, N, N>,
+        dt_s: f64,
+        rng: &mut R,
+    ) -> Result<(), ParticleError> {
+        let f = model.jacobian(mean, dt_s);
+        let mu = model.f(mean, dt_s);
+        let sigma = f * self.sample_covariance() * f.transpose() + q;
+        let g = psd_factor(&((sigma + sigma.transpose()) * 0.5))?;
+        if !mu.iter().all(|v| v.is_finite()) {
+            return Err(ParticleError::NonFinite);
+        }
+        for i in 0..self.buf.n {
+            let w = SVector::<f64, N>::from_fn(|_, _| rng.sample(StandardNormal));
+            self.buf.set(i, &(mu + g * w));
+        }
+        self.buf.weights.fill(1.0 / self.buf.n as f64);
         Ok(())
     }
 
@@ -727,9 +799,9 @@ impl<const N: usize> ParticleFilter<N> {
             pf.add_noise(&q, rng)?;
             Ok(pf.update_ranges(lik, rng))
         };
-        if self.mm.is_some() {
+        if self.mm.is_some() || self.variant == PfVariant::Gaussian {
             return Err(ParticleError::InvalidParameter(
-                "the linearised proposal is for the sampled filters, not the marginalised one"
+                "the linearised proposal is for the resampling filters, not the marginalised or Gaussian one"
                     .into(),
             ));
         }
@@ -854,10 +926,14 @@ impl<const N: usize> ParticleFilter<N> {
             sq += *w * *w;
         }
         let n_eff = 1.0 / sq;
-        let resampled = n_eff < self.neff_threshold * b.n as f64;
+        // The Gaussian filter never resamples: its next prediction redraws the cloud.
+        let resampled =
+            self.variant != PfVariant::Gaussian && n_eff < self.neff_threshold * b.n as f64;
         if resampled {
             match self.variant {
-                PfVariant::Sir | PfVariant::Marginalised => self.resample(rng),
+                PfVariant::Sir | PfVariant::Marginalised | PfVariant::Gaussian => {
+                    self.resample(rng)
+                }
                 PfVariant::Regularised | PfVariant::RaoBlackwellised => {
                     self.resample_regularised(rng)
                 }
@@ -1899,5 +1975,159 @@ mod tests {
             std::array::from_fn(|s| (s == 0).then_some(3)),
         );
         assert!(bad.is_err());
+    }
+
+    /// The Gaussian particle filter on a linear-Gaussian model (2-D constant velocity, the
+    /// positions measured directly) is exact up to Monte Carlo error: every epoch its mean
+    /// and covariance are the Kalman filter's. The tolerance is derived from N: one
+    /// epoch's importance-sampling error in the mean of component i has variance about
+    /// `P_ii / N_eff` (Kish's effective sample size of that epoch's weights), and without
+    /// credit for the filter forgetting earlier errors the k-th epoch carries at most k
+    /// of them: `|μ_i − μ_KF,i| < 4 √(k P_ii / N_eff,min)`. A sample variance has relative
+    /// standard error `√(2 / N_eff)` per epoch, accumulated the same way.
+    #[test]
+    fn gaussian_filter_equals_the_kalman_filter_on_a_linear_model() {
+        use crate::fusion::kalman::Ekf;
+        use crate::fusion::models::{ConstantVelocity, PositionFixModel};
+        let cv = ConstantVelocity::<4>::new(0.3).unwrap();
+        let fix =
+            PositionFixModel::<4, 2>::new([0, 2], SMatrix::<f64, 2, 2>::identity() * 9.0).unwrap();
+        let x0 = SVector::<f64, 4>::new(0.0, 1.0, 0.0, -0.5);
+        let p0 = SMatrix::<f64, 4, 4>::from_diagonal(&SVector::<f64, 4>::new(25.0, 4.0, 25.0, 4.0));
+        let mut rng = TrialRng::new(19, 0).stream("test/gpf");
+        let n = 40_000;
+        let mut pf = ParticleFilter::new(
+            ParticleBuffer::<4>::new(n).unwrap(),
+            Resampling::Systematic,
+            // The threshold is ignored: the Gaussian filter never resamples.
+            1.0,
+        )
+        .unwrap()
+        .gaussian();
+        assert_eq!(pf.variant(), PfVariant::Gaussian);
+        pf.init_gaussian(&x0, &p0, &mut rng).unwrap();
+        let mut kf = Ekf::new(x0, p0).unwrap();
+        let mut x = x0;
+        let mut n_eff_min = f64::INFINITY;
+        for k in 1..=15 {
+            x = ProcessModel::<4>::f(&cv, &x, 1.0);
+            let z = SVector::<f64, 2>::new(x[0] + 3.0 * (k as f64 * 0.7).sin(), x[2] - 2.0);
+            kf.predict(&cv, 1.0).unwrap();
+            kf.update(&fix, &z);
+            pf.predict(&cv, 1.0, &mut rng).unwrap();
+            let up = pf.update(&fix, &z, &mut rng);
+            assert!(!up.degenerate && !up.resampled);
+            n_eff_min = n_eff_min.min(up.n_eff);
+            let (m, c) = (pf.mean(), pf.covariance());
+            let (mk, ck) = (kf.state(), kf.covariance());
+            let kf64 = k as f64;
+            for i in 0..4 {
+                let tol_mean = 4.0 * (kf64 * ck[(i, i)] / n_eff_min).sqrt();
+                assert!(
+                    (m[i] - mk[i]).abs() < tol_mean,
+                    "epoch {k}, mean {i}: {} vs {} (tolerance {tol_mean})",
+                    m[i],
+                    mk[i]
+                );
+                let tol_var = 4.0 * (2.0 * kf64 / n_eff_min).sqrt();
+                assert!(
+                    (c[(i, i)] / ck[(i, i)] - 1.0).abs() < tol_var,
+                    "epoch {k}, variance {i}: {} vs {} (tolerance {tol_var})",
+                    c[(i, i)],
+                    ck[(i, i)]
+                );
+            }
+            // The cross-covariance of position and velocity too (correlation error).
+            let rho = |p: &SMatrix<f64, 4, 4>| p[(0, 1)] / (p[(0, 0)] * p[(1, 1)]).sqrt();
+            let tol_rho = 4.0 * (kf64 / n_eff_min).sqrt();
+            assert!(
+                (rho(&c) - rho(ck)).abs() < tol_rho,
+                "epoch {k}: correlation {} vs {}",
+                rho(&c),
+                rho(ck)
+            );
+        }
+        // The weights of a prior draw against a 3 m fix: far from degenerate.
+        assert!(n_eff_min > 0.2 * n as f64, "N_eff {n_eff_min}");
+    }
+
+    /// With the position known (a singular covariance: three of four components have no
+    /// variance) the Gaussian filter's clock follows the textbook Kalman filter through
+    /// the column-wise pseudorange likelihood, with the tolerance of the test above.
+    #[test]
+    fn gaussian_filter_follows_the_kalman_filter_with_a_singular_covariance() {
+        use crate::fusion::linear_kf::LinearKf;
+        use nalgebra::{DMatrix, DVector};
+        let m = model();
+        let pos = Vector3::new(10.0, -20.0, 5.0);
+        let model_q = StaticClock { clock_q_m2ps: 4.0 };
+        let n = 20_000;
+        let mut pf = ParticleFilter::new(
+            ParticleBuffer::<4>::new(n).unwrap(),
+            Resampling::Systematic,
+            0.5,
+        )
+        .unwrap()
+        .gaussian();
+        let mut rng = TrialRng::new(6, 2).stream("test/gpf-clock");
+        let x0 = SVector::<f64, 4>::new(pos.x, pos.y, pos.z, 100.0);
+        let mut p0 = SMatrix::<f64, 4, 4>::zeros();
+        p0[(3, 3)] = 400.0;
+        pf.init_gaussian(&x0, &p0, &mut rng).unwrap();
+        let mut kf = LinearKf::new(
+            DVector::from_vec(vec![100.0]),
+            DMatrix::from_element(1, 1, 400.0),
+        )
+        .unwrap();
+        let mut lik = PseudorangeLikelihood::with_capacity(3);
+        let mut nrng = TrialRng::new(6, 3).stream("test/gpf-clock/noise");
+        let mut n_eff_min = f64::INFINITY;
+        for epoch in 1..=10 {
+            let b_true = 130.0 + epoch as f64;
+            let mut z = SVector::<f64, 3>::zeros();
+            for (j, row) in m.rows().iter().enumerate() {
+                let e: f64 = nrng.sample(StandardNormal);
+                z[j] = (row.emitter_pos_m - pos).norm() + b_true + row.sigma_m * e;
+            }
+            pf.predict(&model_q, 1.0, &mut rng).unwrap();
+            lik.set(&m, &z);
+            let up = pf.update_ranges(&lik, &mut rng);
+            assert!(!up.degenerate && !up.resampled);
+            n_eff_min = n_eff_min.min(up.n_eff);
+            kf.predict(&DMatrix::identity(1, 1), &DMatrix::from_element(1, 1, 4.0))
+                .unwrap();
+            let zk = DVector::from_iterator(
+                3,
+                m.rows()
+                    .iter()
+                    .zip(z.iter())
+                    .map(|(r, zj)| zj - (r.emitter_pos_m - pos).norm()),
+            );
+            let r = DMatrix::from_diagonal(&DVector::from_iterator(
+                3,
+                m.rows().iter().map(|r| r.sigma_m * r.sigma_m),
+            ));
+            kf.update(&zk, &DMatrix::from_element(3, 1, 1.0), &r)
+                .unwrap();
+            let (km, kv) = (kf.state()[0], kf.covariance()[(0, 0)]);
+            let (mean, var) = (pf.mean()[3], pf.covariance()[(3, 3)]);
+            let k = epoch as f64;
+            let tol_mean = 4.0 * (k * kv / n_eff_min).sqrt();
+            let tol_var = 4.0 * (2.0 * k / n_eff_min).sqrt();
+            assert!(
+                (mean - km).abs() < tol_mean,
+                "{epoch}: {mean} vs {km} ({tol_mean})"
+            );
+            assert!(
+                (var / kv - 1.0).abs() < tol_var,
+                "{epoch}: {var} vs {kv} ({tol_var})"
+            );
+            // The known position stays known: no particle moved off it.
+            assert!(pf
+                .particles()
+                .column(0)
+                .iter()
+                .all(|p| (p - pos.x).abs() < 1e-9));
+        }
     }
 }

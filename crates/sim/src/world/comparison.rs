@@ -168,7 +168,8 @@ fn gate_slot(e: &mut EstimatorSpec) -> GateSlot<'_> {
         | FilterKind::Pf
         | FilterKind::Sir
         | FilterKind::Rbpf
-        | FilterKind::Mpf => GateSlot::Absent,
+        | FilterKind::Mpf
+        | FilterKind::Gpf => GateSlot::Absent,
     }
 }
 

@@ -1003,7 +1003,7 @@ fn check_estimator(
     // The particle filters only the paper models run take the family's options too.
     let paper_pf = matches!(
         e.filter,
-        FilterKind::Sir | FilterKind::Rbpf | FilterKind::Mpf
+        FilterKind::Sir | FilterKind::Rbpf | FilterKind::Mpf | FilterKind::Gpf
     );
     let kalman = e.filter == FilterKind::Ekf11 || e.filter.family().is_some() || paper_pf;
     if !kalman {

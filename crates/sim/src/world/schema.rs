@@ -322,6 +322,9 @@ pub enum FilterKind {
     /// The marginalised particle filter: positions sampled, velocities, accelerations
     /// and clocks by a Kalman filter per particle (paper models).
     Mpf,
+    /// The Gaussian particle filter (Kotecha & Djurić 2003): no resampling, the posterior
+    /// carried as the Gaussian of the weighted cloud's moments (paper models).
+    Gpf,
 }
 
 impl FilterKind {
@@ -340,7 +343,8 @@ impl FilterKind {
             | FilterKind::Pdr
             | FilterKind::Sir
             | FilterKind::Rbpf
-            | FilterKind::Mpf => return None,
+            | FilterKind::Mpf
+            | FilterKind::Gpf => return None,
         })
     }
 }
@@ -474,7 +478,11 @@ impl EstimatorSpec {
                 aleph_threshold: cfg.rekf_aleph_threshold,
                 residual_gate_c: gate.or(Some(3.0)),
             },
-            FilterKind::Pf | FilterKind::Sir | FilterKind::Rbpf | FilterKind::Mpf => PaperFilter::Pf {
+            FilterKind::Pf
+            | FilterKind::Sir
+            | FilterKind::Rbpf
+            | FilterKind::Mpf
+            | FilterKind::Gpf => PaperFilter::Pf {
                 particles: cfg.particles,
                 resampling: cfg.resampling.scheme(),
                 neff_threshold: cfg.neff_threshold,
@@ -482,6 +490,7 @@ impl EstimatorSpec {
                     FilterKind::Sir => crate::fusion::particle::PfVariant::Sir,
                     FilterKind::Rbpf => crate::fusion::particle::PfVariant::RaoBlackwellised,
                     FilterKind::Mpf => crate::fusion::particle::PfVariant::Marginalised,
+                    FilterKind::Gpf => crate::fusion::particle::PfVariant::Gaussian,
                     _ => crate::fusion::particle::PfVariant::Regularised,
                 },
                 linearised: cfg.pf_proposal == crate::fusion::family::ProposalKind::Linearised,
@@ -564,7 +573,7 @@ impl EstimatorSpec {
                 )?,
             ),
             FilterKind::Wls => Box::new(WlsEstimator::new(&self.name, &self.sources)),
-            FilterKind::Sir | FilterKind::Rbpf | FilterKind::Mpf => {
+            FilterKind::Sir | FilterKind::Rbpf | FilterKind::Mpf | FilterKind::Gpf => {
                 return Err(format!(
                     "filter \"{}\" runs on a paper process model ([estimator.process] model = \"singer_2d\" or \"plane_turning\"); on seed 000's model use filter = \"pf\"",
                     format!("{:?}", self.filter).to_lowercase()
