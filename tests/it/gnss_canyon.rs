@@ -324,6 +324,23 @@ impl Calibration {
             _ => (0, f64::NAN),
         }
     }
+
+    /// The criterion: `required` has at least `min_n` common samples, and it and
+    /// every other class with 20 or more have RMS ratios (GNSS-SDR over the measurement
+    /// level) within [0.5, 2].
+    fn assert_agrees(&self, required: Class, min_n: usize) {
+        let (n, _) = self.ratio(required);
+        assert!(n >= min_n, "{n} {required:?} samples:\n{}", self.log);
+        for c in [Class::Los, Class::LosMultipath, Class::Nlos] {
+            let (n, ratio) = self.ratio(c);
+            if n >= 20 {
+                assert!(
+                    (0.5..=2.0).contains(&ratio),
+                    "{c:?}: GNSS-SDR RMS / measurement RMS = {ratio:.2}"
+                );
+            }
+        }
+    }
 }
 
 /// Records `world` on `signal` for `duration_s` at `rate` sps, runs GNSS-SDR with the
@@ -468,19 +485,7 @@ fn gnss_canyon_per_class_errors_agree_with_gnss_sdr() {
     let Some(cal) = calibrate("canyon", CANYON, GPS_L1CA, 120, 2.6e6, gps_conf_matched) else {
         return;
     };
-    let (n, ratio) = cal.ratio(Class::LosMultipath);
-    assert!(n >= 150, "{n} LOS + multipath samples:\n{}", cal.log);
-    assert!(
-        (0.5..=2.0).contains(&ratio),
-        "LOS + multipath: GNSS-SDR RMS / measurement RMS = {ratio:.2}"
-    );
-    let (n, ratio) = cal.ratio(Class::Nlos);
-    if n >= 20 {
-        assert!(
-            (0.5..=2.0).contains(&ratio),
-            "NLOS: GNSS-SDR RMS / measurement RMS = {ratio:.2}"
-        );
-    }
+    cal.assert_agrees(Class::LosMultipath, 150);
 }
 
 /// The same for BeiDou B1I, at another hour (`worlds/gnss-iq-urban-canyon-1500.toml`: at
@@ -502,17 +507,7 @@ fn gnss_canyon_bds_per_class_errors_agree_with_gnss_sdr() {
         return;
     };
     eprintln!("canyon-bds: satellites per class {:?}", cal.satellites);
-    let (n, _) = cal.ratio(Class::LosMultipath);
-    assert!(n >= 20, "{n} LOS + multipath samples:\n{}", cal.log);
-    for c in [Class::Los, Class::LosMultipath, Class::Nlos] {
-        let (n, ratio) = cal.ratio(c);
-        if n >= 20 {
-            assert!(
-                (0.5..=2.0).contains(&ratio),
-                "{c:?}: GNSS-SDR RMS / measurement RMS = {ratio:.2}"
-            );
-        }
-    }
+    cal.assert_agrees(Class::LosMultipath, 20);
 }
 
 /// The line-of-sight class without a ground reflection, which the street never has: the
@@ -530,12 +525,7 @@ fn gnss_roof_line_of_sight_errors_agree_with_gnss_sdr() {
         return;
     };
     eprintln!("roof: satellites per class {:?}", cal.satellites);
-    let (n, ratio) = cal.ratio(Class::Los);
-    assert!(n >= 300, "{n} LOS samples:\n{}", cal.log);
-    assert!(
-        (0.5..=2.0).contains(&ratio),
-        "LOS: GNSS-SDR RMS / measurement RMS = {ratio:.2}"
-    );
+    cal.assert_agrees(Class::Los, 300);
     for c in [Class::LosMultipath, Class::Nlos] {
         assert_eq!(cal.ratio(c).0, 0, "{c:?} samples on the roof:\n{}", cal.log);
     }
@@ -564,17 +554,7 @@ fn gnss_canyon_bds_nlos_errors_agree_with_gnss_sdr() {
         return;
     };
     eprintln!("canyon-bds-nlos: satellites per class {:?}", cal.satellites);
-    let (n, _) = cal.ratio(Class::Nlos);
-    assert!(n >= 20, "{n} NLOS samples:\n{}", cal.log);
-    for c in [Class::Los, Class::LosMultipath, Class::Nlos] {
-        let (n, ratio) = cal.ratio(c);
-        if n >= 20 {
-            assert!(
-                (0.5..=2.0).contains(&ratio),
-                "{c:?}: GNSS-SDR RMS / measurement RMS = {ratio:.2}"
-            );
-        }
-    }
+    cal.assert_agrees(Class::Nlos, 20);
 }
 
 /// A moving receiver in the canyon (`worlds/gnss-iq-urban-canyon-walk.toml`: a pedestrian
@@ -594,17 +574,5 @@ fn gnss_canyon_walking_receiver_errors_agree_with_gnss_sdr() {
         return;
     };
     eprintln!("walk: satellites per class {:?}", cal.satellites);
-    let (n, ratio) = cal.ratio(Class::LosMultipath);
-    assert!(n >= 150, "{n} LOS + multipath samples:\n{}", cal.log);
-    assert!(
-        (0.5..=2.0).contains(&ratio),
-        "LOS + multipath: GNSS-SDR RMS / measurement RMS = {ratio:.2}"
-    );
-    let (n, ratio) = cal.ratio(Class::Nlos);
-    if n >= 20 {
-        assert!(
-            (0.5..=2.0).contains(&ratio),
-            "NLOS: GNSS-SDR RMS / measurement RMS = {ratio:.2}"
-        );
-    }
+    cal.assert_agrees(Class::LosMultipath, 150);
 }

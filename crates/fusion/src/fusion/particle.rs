@@ -1689,17 +1689,87 @@ mod tests {
         }
     }
 
+    /// The known-position clock both clock tests run: three pseudoranges (σ 2 m, the
+    /// module's test geometry) from a receiver whose position is known, a clock random
+    /// walk of 4 m²/s from a 400 m² prior at 100 m, the true clock 130 m + 1 m per epoch,
+    /// and the textbook Kalman filter of that clock alone as the truth a particle filter
+    /// must follow.
+    struct KnownPositionClock {
+        ranges: Pseudoranges<4, 3>,
+        pos: Vector3<f64>,
+        process: StaticClock,
+        kf: crate::fusion::linear_kf::LinearKf,
+        noise: crate::core::StreamRng,
+    }
+
+    impl KnownPositionClock {
+        fn new(noise: crate::core::StreamRng) -> Self {
+            use nalgebra::{DMatrix, DVector};
+            let kf = crate::fusion::linear_kf::LinearKf::new(
+                DVector::from_vec(vec![100.0]),
+                DMatrix::from_element(1, 1, 400.0),
+            )
+            .unwrap();
+            KnownPositionClock {
+                ranges: model(),
+                pos: Vector3::new(10.0, -20.0, 5.0),
+                process: StaticClock { clock_q_m2ps: 4.0 },
+                kf,
+                noise,
+            }
+        }
+
+        /// The particle filters' prior: the position exact, the clock N(100, 400).
+        fn prior(&self) -> (SVector<f64, 4>, SMatrix<f64, 4, 4>) {
+            let x0 = SVector::<f64, 4>::new(self.pos.x, self.pos.y, self.pos.z, 100.0);
+            let mut p0 = SMatrix::<f64, 4, 4>::zeros();
+            p0[(3, 3)] = 400.0;
+            (x0, p0)
+        }
+
+        /// Draws epoch `k`'s pseudoranges, runs the Kalman filter's epoch on them and
+        /// returns them.
+        fn epoch(&mut self, k: usize) -> SVector<f64, 3> {
+            use nalgebra::{DMatrix, DVector};
+            let b_true = 130.0 + k as f64;
+            let mut z = SVector::<f64, 3>::zeros();
+            for (j, row) in self.ranges.rows().iter().enumerate() {
+                let e: f64 = self.noise.sample(StandardNormal);
+                z[j] = (row.emitter_pos_m - self.pos).norm() + b_true + row.sigma_m * e;
+            }
+            let q = DMatrix::from_element(1, 1, self.process.clock_q_m2ps);
+            self.kf.predict(&DMatrix::identity(1, 1), &q).unwrap();
+            let rows = self.ranges.rows();
+            let zk = DVector::from_iterator(
+                3,
+                rows.iter()
+                    .zip(z.iter())
+                    .map(|(r, zj)| zj - (r.emitter_pos_m - self.pos).norm()),
+            );
+            let r = DMatrix::from_diagonal(&DVector::from_iterator(
+                3,
+                rows.iter().map(|r| r.sigma_m * r.sigma_m),
+            ));
+            self.kf
+                .update(&zk, &DMatrix::from_element(3, 1, 1.0), &r)
+                .unwrap();
+            z
+        }
+
+        /// The Kalman filter's clock mean and variance.
+        fn kalman(&self) -> (f64, f64) {
+            (self.kf.state()[0], self.kf.covariance()[(0, 0)])
+        }
+    }
+
     /// With the position known, the clock is linear-Gaussian and the linearised proposal
     /// is the exact optimal one: the weighted cloud's clock mean and variance follow the
     /// textbook Kalman filter up to Monte Carlo error (4 standard errors of the prior
     /// sample's mean).
     #[test]
     fn linearised_proposal_follows_the_kalman_filter_on_a_linear_clock() {
-        use crate::fusion::linear_kf::LinearKf;
-        use nalgebra::{DMatrix, DVector};
-        let m = model();
-        let pos = Vector3::new(10.0, -20.0, 5.0);
-        let model_q = StaticClock { clock_q_m2ps: 4.0 };
+        let mut truth =
+            KnownPositionClock::new(TrialRng::new(6, 1).stream("test/linearised/noise"));
         let n = 20_000;
         let mut pf = ParticleFilter::new(
             ParticleBuffer::<4>::new(n).unwrap(),
@@ -1709,44 +1779,16 @@ mod tests {
         .unwrap()
         .regularised();
         let mut rng = TrialRng::new(6, 0).stream("test/linearised");
-        let x0 = SVector::<f64, 4>::new(pos.x, pos.y, pos.z, 100.0);
-        let mut p0 = SMatrix::<f64, 4, 4>::zeros();
-        p0[(3, 3)] = 400.0;
+        let (x0, p0) = truth.prior();
         pf.init_gaussian(&x0, &p0, &mut rng).unwrap();
-        let mut kf = LinearKf::new(
-            DVector::from_vec(vec![100.0]),
-            DMatrix::from_element(1, 1, 400.0),
-        )
-        .unwrap();
         let mut lik = PseudorangeLikelihood::with_capacity(3);
-        let mut nrng = TrialRng::new(6, 1).stream("test/linearised/noise");
         for epoch in 0..10 {
-            let b_true = 130.0 + epoch as f64;
-            let mut z = SVector::<f64, 3>::zeros();
-            for (j, row) in m.rows().iter().enumerate() {
-                let e: f64 = nrng.sample(StandardNormal);
-                z[j] = (row.emitter_pos_m - pos).norm() + b_true + row.sigma_m * e;
-            }
-            pf.propagate(&model_q, 1.0).unwrap();
-            lik.set(&m, &z);
-            let q = ProcessModel::<4>::q(&model_q, &x0, 1.0);
+            let z = truth.epoch(epoch);
+            pf.propagate(&truth.process, 1.0).unwrap();
+            lik.set(&truth.ranges, &z);
+            let q = ProcessModel::<4>::q(&truth.process, &x0, 1.0);
             pf.update_linearised(&q, &lik, &mut rng).unwrap();
-            kf.predict(&DMatrix::identity(1, 1), &DMatrix::from_element(1, 1, 4.0))
-                .unwrap();
-            let zk = DVector::from_iterator(
-                3,
-                m.rows()
-                    .iter()
-                    .zip(z.iter())
-                    .map(|(r, zj)| zj - (r.emitter_pos_m - pos).norm()),
-            );
-            let r = DMatrix::from_diagonal(&DVector::from_iterator(
-                3,
-                m.rows().iter().map(|r| r.sigma_m * r.sigma_m),
-            ));
-            kf.update(&zk, &DMatrix::from_element(3, 1, 1.0), &r)
-                .unwrap();
-            let (km, kv) = (kf.state()[0], kf.covariance()[(0, 0)]);
+            let (km, kv) = truth.kalman();
             let (mean, var) = (pf.mean()[3], pf.covariance()[(3, 3)]);
             // The Monte Carlo error is set by the initial draw from the prior (404 m²).
             let se = (404.0 / n as f64).sqrt();
@@ -2056,11 +2098,8 @@ mod tests {
     /// the column-wise pseudorange likelihood, with the tolerance of the test above.
     #[test]
     fn gaussian_filter_follows_the_kalman_filter_with_a_singular_covariance() {
-        use crate::fusion::linear_kf::LinearKf;
-        use nalgebra::{DMatrix, DVector};
-        let m = model();
-        let pos = Vector3::new(10.0, -20.0, 5.0);
-        let model_q = StaticClock { clock_q_m2ps: 4.0 };
+        let mut truth = KnownPositionClock::new(TrialRng::new(6, 3).stream("test/gpf-clock/noise"));
+        let pos = truth.pos;
         let n = 20_000;
         let mut pf = ParticleFilter::new(
             ParticleBuffer::<4>::new(n).unwrap(),
@@ -2070,46 +2109,18 @@ mod tests {
         .unwrap()
         .gaussian();
         let mut rng = TrialRng::new(6, 2).stream("test/gpf-clock");
-        let x0 = SVector::<f64, 4>::new(pos.x, pos.y, pos.z, 100.0);
-        let mut p0 = SMatrix::<f64, 4, 4>::zeros();
-        p0[(3, 3)] = 400.0;
+        let (x0, p0) = truth.prior();
         pf.init_gaussian(&x0, &p0, &mut rng).unwrap();
-        let mut kf = LinearKf::new(
-            DVector::from_vec(vec![100.0]),
-            DMatrix::from_element(1, 1, 400.0),
-        )
-        .unwrap();
         let mut lik = PseudorangeLikelihood::with_capacity(3);
-        let mut nrng = TrialRng::new(6, 3).stream("test/gpf-clock/noise");
         let mut n_eff_min = f64::INFINITY;
         for epoch in 1..=10 {
-            let b_true = 130.0 + epoch as f64;
-            let mut z = SVector::<f64, 3>::zeros();
-            for (j, row) in m.rows().iter().enumerate() {
-                let e: f64 = nrng.sample(StandardNormal);
-                z[j] = (row.emitter_pos_m - pos).norm() + b_true + row.sigma_m * e;
-            }
-            pf.predict(&model_q, 1.0, &mut rng).unwrap();
-            lik.set(&m, &z);
+            let z = truth.epoch(epoch);
+            pf.predict(&truth.process, 1.0, &mut rng).unwrap();
+            lik.set(&truth.ranges, &z);
             let up = pf.update_ranges(&lik, &mut rng);
             assert!(!up.degenerate && !up.resampled);
             n_eff_min = n_eff_min.min(up.n_eff);
-            kf.predict(&DMatrix::identity(1, 1), &DMatrix::from_element(1, 1, 4.0))
-                .unwrap();
-            let zk = DVector::from_iterator(
-                3,
-                m.rows()
-                    .iter()
-                    .zip(z.iter())
-                    .map(|(r, zj)| zj - (r.emitter_pos_m - pos).norm()),
-            );
-            let r = DMatrix::from_diagonal(&DVector::from_iterator(
-                3,
-                m.rows().iter().map(|r| r.sigma_m * r.sigma_m),
-            ));
-            kf.update(&zk, &DMatrix::from_element(3, 1, 1.0), &r)
-                .unwrap();
-            let (km, kv) = (kf.state()[0], kf.covariance()[(0, 0)]);
+            let (km, kv) = truth.kalman();
             let (mean, var) = (pf.mean()[3], pf.covariance()[(3, 3)]);
             let k = epoch as f64;
             let tol_mean = 4.0 * (k * kv / n_eff_min).sqrt();
