@@ -11,6 +11,10 @@ Usage: canyon_calibration.py RUN EXP [gps|bds] [x]
        (`--signal bds-b1i`)
   x    also print GNSS-SDR's errors every 5 s
 
+With CAL_DUMP=FILE in the environment, every common (epoch, satellite) sample is also
+written to FILE as CSV: tow_s,prn,class,gnss_sdr_m,measurement_m (both clock-removed), for
+statistics over a window or a satellite of one's choice.
+
 Convention (the same for both levels): a pseudorange's error is its excess over the direct
 path's true pseudorange, i.e. the scene's multipath/NLOS error plus tracking noise (the
 world has no atmosphere or orbit residuals), with the receiver clock removed at each
@@ -140,6 +144,14 @@ for name, m in (("GNSS-SDR", sdr), ("measurement", ml)):
     per = collections.defaultdict(list)
     for (t, p), x in m.items(): per[p].append(x)
     print("  per sat:", {p: (round(np.mean(v),2), round(np.std(v),2), len(v)) for p, v in sorted(per.items())})
+import os
+if os.environ.get("CAL_DUMP"):
+    a = demean({k: v for k, v in sdr.items() if k in common})
+    b = demean({k: v for k, v in ml.items() if k in common})
+    with open(os.environ["CAL_DUMP"], "w") as f:
+        f.write("tow_s,prn,class,gnss_sdr_m,measurement_m\n")
+        for (t, p) in sorted(set(a) & set(b)):
+            f.write(f"{t},{p},{klass(p, t)},{a[(t, p)]:.4f},{b[(t, p)]:.4f}\n")
 if args:
     m = demean({k: v for k, v in sdr.items() if k in common})
     for t in sorted(set(t for t, _ in m))[::5]:
