@@ -135,5 +135,38 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench);
+/// The DLL's lock point on a four-path channel (direct, ground, two walls): with one
+/// Doppler (the static discriminator |C|²) and with the walls' Dopplers differing, where
+/// every cross term is weighed by the loop's response (O(N²) per evaluation).
+fn dll(c: &mut Criterion) {
+    use hybridnav::gnss::multipath::dll_lock;
+    use hybridnav::propagation::{Path, PathKind};
+    const CHIP_M: f64 = 293.052_256;
+    let path = |kind, delay_m: f64, amplitude, phase_rad, doppler_hz| Path {
+        kind,
+        excess_delay_s: delay_m / hybridnav::core::C_MPS,
+        amplitude,
+        phase_rad,
+        doppler_hz,
+        arrival_enu: Vector3::z(),
+    };
+    let mut group = c.benchmark_group("dll_lock");
+    for (name, f_wall_hz) in [
+        ("four_paths_one_doppler", 0.0),
+        ("four_paths_rotating", 9.0),
+    ] {
+        let paths = [
+            path(PathKind::Direct, 0.0, 1.0, 0.0, 0.0),
+            path(PathKind::Ground, 2.9, 0.3, 1.1, 0.0),
+            path(PathKind::Wall { building: 0 }, 60.0, 0.2, -0.7, f_wall_hz),
+            path(PathKind::Wall { building: 1 }, 120.0, 0.1, 2.5, -f_wall_hz),
+        ];
+        group.bench_function(name, |b| {
+            b.iter(|| dll_lock(black_box(&paths), CHIP_M, 0.5, 2.0))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench, dll);
 criterion_main!(benches);

@@ -195,7 +195,9 @@ pub fn fll_sigma_hz(
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrackingConfig {
-    /// DLL noise bandwidth B_L (Hz); default 1.
+    /// DLL noise bandwidth B_L (Hz); default 1. It sets the code's thermal noise and how
+    /// much of a reflection whose Doppler differs from the direct path's reaches the code
+    /// estimate (the loop's response |H(Δf)|, `gnss::multipath`).
     pub dll_bandwidth_hz: f64,
     /// Early-minus-late correlator spacing d (chips), within (0, 1]; default 1. This is
     /// the distance between E and L: a receiver that sets each correlator's offset from

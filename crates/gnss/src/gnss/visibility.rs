@@ -120,6 +120,7 @@ pub fn scene_effect(
         &weighted[..n],
         signal.chip_length_m(),
         tracking.correlator_spacing_chips,
+        tracking.dll_bandwidth_hz,
     ) else {
         return Some(lost);
     };
