@@ -270,8 +270,8 @@ fn iq_benches(c: &mut Criterion) {
             format: SampleFormat::Ci8,
         };
         let sats = validate(&iw, &req).expect("valid request");
-        let run = || {
-            let (mut a, mut b, mut c) = (std::io::sink(), std::io::sink(), std::io::sink());
+        let record_into = |paths: &mut dyn std::io::Write| {
+            let (mut a, mut b) = (std::io::sink(), std::io::sink());
             record(
                 &iw,
                 &req,
@@ -279,66 +279,46 @@ fn iq_benches(c: &mut Criterion) {
                 &mut IqSinks {
                     data: &mut a,
                     truth: &mut b,
-                    paths: &mut c,
+                    paths,
                 },
             )
             .expect("records")
         };
-        let s = run();
+        let mut paths_csv = Vec::new();
+        let s = record_into(&mut paths_csv);
         let paths: usize = s.satellites.iter().map(|a| a.max_paths).sum();
         if name.starts_with("three_paths") {
-            assert_three_paths_everywhere(&iw, &req, &sats);
+            assert_three_paths_everywhere(&paths_csv);
         }
         eprintln!(
             "gnss_iq/{name}: {} satellites, {paths} replicas",
             s.satellites.len()
         );
-        g.bench_function(name, |b| b.iter(|| black_box(run())));
+        g.bench_function(name, |b| {
+            b.iter(|| black_box(record_into(&mut std::io::sink())))
+        });
     }
     g.finish();
     gps_sdr_sim_side_by_side(rate);
 }
 
-/// Checks the three-path case measures what it claims: in paths.csv, every satellite has
-/// exactly three paths (direct, ground, wall) at every epoch of the recording.
-fn assert_three_paths_everywhere(
-    iw: &hybridnav::gnss::signal::scenario::IqWorld<'_>,
-    req: &hybridnav::gnss::signal::scenario::IqRequest,
-    sats: &[EmitterId],
-) {
-    use hybridnav::gnss::signal::scenario::{record, IqSinks};
-    let mut paths_csv = Vec::new();
-    let (mut a, mut b) = (std::io::sink(), std::io::sink());
-    record(
-        iw,
-        req,
-        sats,
-        &mut IqSinks {
-            data: &mut a,
-            truth: &mut b,
-            paths: &mut paths_csv,
-        },
-    )
-    .expect("records");
-    let text = String::from_utf8(paths_csv).expect("paths.csv is UTF-8");
-    let mut per_epoch = std::collections::BTreeMap::<(&str, &str), (usize, Vec<&str>)>::new();
+/// Checks the three-path case measures what it claims: in its paths.csv, every satellite
+/// has exactly three paths (direct, ground, wall) at every epoch of the recording.
+fn assert_three_paths_everywhere(paths_csv: &[u8]) {
+    let text = std::str::from_utf8(paths_csv).expect("paths.csv is UTF-8");
+    let mut kinds = std::collections::BTreeMap::<(&str, &str), Vec<&str>>::new();
     for row in text.lines().skip(1) {
         let f: Vec<&str> = row.split(',').collect();
-        let e = per_epoch.entry((f[0], f[1])).or_default();
-        e.0 += 1;
-        e.1.push(f[9]);
+        kinds.entry((f[0], f[1])).or_default().push(f[9]);
     }
-    assert_eq!(
-        per_epoch
-            .keys()
-            .map(|k| k.1)
-            .collect::<std::collections::BTreeSet<_>>()
-            .len(),
-        10,
-        "three-path case: 10 satellites"
-    );
-    for ((t, sat), (n, kinds)) in &per_epoch {
-        assert_eq!(*n, 3, "three-path case: {sat} at {t} s has paths {kinds:?}");
+    let satellites: std::collections::BTreeSet<_> = kinds.keys().map(|k| k.1).collect();
+    assert_eq!(satellites.len(), 10, "three-path case: 10 satellites");
+    for ((t, sat), k) in &kinds {
+        assert_eq!(
+            k.len(),
+            3,
+            "three-path case: {sat} at {t} s has paths {k:?}"
+        );
     }
 }
 

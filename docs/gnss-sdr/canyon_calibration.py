@@ -40,7 +40,7 @@ satellites (ρ the export's true range, Δt_sv = af0 + af1 (t − toc) from the 
 navigation file, up to 0.86 ms for BeiDou here), after which the fraction is fitted as
 before. A residual of 0.01 ms moves a satellite by its range rate × 10 µs, < 1 cm.
 """
-import sys, csv, numpy as np, collections
+import os, sys, csv, numpy as np, collections
 run, exp = sys.argv[1], sys.argv[2]
 args = sys.argv[3:]
 system = args.pop(0) if args and args[0] in ("gps", "bds") else "gps"
@@ -144,7 +144,6 @@ for name, m in (("GNSS-SDR", sdr), ("measurement", ml)):
     per = collections.defaultdict(list)
     for (t, p), x in m.items(): per[p].append(x)
     print("  per sat:", {p: (round(np.mean(v),2), round(np.std(v),2), len(v)) for p, v in sorted(per.items())})
-import os
 if os.environ.get("CAL_DUMP"):
     a = demean({k: v for k, v in sdr.items() if k in common})
     b = demean({k: v for k, v in ml.items() if k in common})

@@ -183,7 +183,7 @@ pub fn dll_lock(
     });
     let ch = Channel { taps, weights };
     // The receiver acquires the strongest peak: start from the path whose delay carries
-    // the largest correlation magnitude.
+    // the largest (loop-averaged) correlation power.
     let (start, peak) =
         taps.iter()
             .map(|(d, _)| (*d, ch.power(*d)))
