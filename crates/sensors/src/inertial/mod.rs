@@ -40,6 +40,8 @@
 //! * [`strapdown`]: the mechanisation above.
 //! * [`ins_ekf`]: the psi-angle 15-state error-state Kalman filter (seed 004, eqs. 1–8,
 //!   14–19), closed loop.
+//! * [`ins_bound`]: the posterior Cramér–Rao bound of the INS rows (the error model along
+//!   the true trajectory, with the ranges' information).
 //! * [`ins_family`]: the same error model as a process and measurement model of the
 //!   generic Kalman family, so that seed 004's EKF, CKF, STF and RE-KF run on it.
 //! * [`magnetometer`]: a constant Earth field and a noisy three-axis magnetometer.
@@ -52,6 +54,7 @@ pub mod allan;
 pub mod attitude;
 pub mod fixes;
 pub mod imu;
+pub mod ins_bound;
 pub mod ins_ekf;
 pub mod ins_estimator;
 pub mod ins_family;
