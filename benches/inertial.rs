@@ -5,7 +5,8 @@
 //! the INS estimator on a one-sample IMU batch, and the INS estimator on a GNSS batch of
 //! eight pseudoranges and rates (least-squares position and velocity, 6-D update); the
 //! tightly coupled filter's step (18-state prediction) and its eight-satellite epoch (eight
-//! pseudorange and eight range-rate scalar updates).
+//! pseudorange and eight range-rate scalar updates); the INS rows' PCRLB (`ins_bound`): one
+//! IMU step of the 18-state bound and one eight-satellite epoch's information and update.
 //!
 //! Run: `cargo bench --bench inertial -- --warm-up-time 1 --measurement-time 3`.
 
@@ -14,6 +15,7 @@ use hybridnav::core::{EmitterId, EnuFrame, Geodetic, GpsTime, SimTime, System, T
 use hybridnav::engine::trial::truth_at;
 use hybridnav::inertial::attitude::{ideal_imu, Platform, PlatformConfig, PlatformTruth};
 use hybridnav::inertial::imu::{Imu, ImuConfig, ImuGrade};
+use hybridnav::inertial::ins_bound::{add_epoch_information, BoundCoupling, EpochInfo, InsBound};
 use hybridnav::inertial::ins_ekf::{InsEkf, InsEkfConfig};
 use hybridnav::inertial::ins_estimator::{InsEstimator, InsFilterConfig};
 use hybridnav::inertial::ins_tight::{InsTightEkf, TightClockConfig};
@@ -156,6 +158,39 @@ fn tight(
                 let _ = black_box(kf.update_range(black_box(m), &frame, 0.0));
                 let _ = black_box(kf.update_range_rate(black_box(m), &frame, 0.0));
             }
+        })
+    });
+    // The INS rows' PCRLB (ins_bound): one IMU step of the 18-state bound along the truth
+    // (block-wise F), beside the filter's step above, and one epoch's information and update.
+    let bound = InsBound::new(
+        cfg,
+        0.03,
+        BoundCoupling::Tight(TightClockConfig::default()),
+        earth,
+        *frame.rotation(),
+    );
+    let mut st = bound.start(0.0);
+    let c = init.q_nb.to_rotation_matrix().into_inner();
+    let f_n = Vector3::new(0.2, -0.1, earth.gravity_mps2(0.0));
+    let mut n = 0u64;
+    g.bench_function("ins_bound_tight_imu_step", |b| {
+        b.iter(|| {
+            n += 1;
+            bound.predict(
+                &mut st,
+                n as f64 * 0.01,
+                black_box(&c),
+                black_box(&f_n),
+                1.2,
+            );
+        })
+    });
+    g.bench_function("ins_bound_tight_epoch_8_sats", |b| {
+        b.iter(|| {
+            let mut info = EpochInfo::zeros();
+            add_epoch_information(&mut info, &rx, &Vector3::zeros(), black_box(&ranges), true);
+            let mut s = st;
+            black_box(bound.update(&mut s, &bound.information(&info)))
         })
     });
 }

@@ -177,7 +177,8 @@ impl InsBound {
             .copy_from(&initial_covariance(&c));
         if let BoundCoupling::Tight(clock) = coupling {
             prior[(tidx::CLOCK_BIAS, tidx::CLOCK_BIAS)] = FLAT_PRIOR_VAR_M2;
-            prior[(tidx::CLOCK_DRIFT, tidx::CLOCK_DRIFT)] = clock.init_clock_drift_sigma_mps.powi(2);
+            prior[(tidx::CLOCK_DRIFT, tidx::CLOCK_DRIFT)] =
+                clock.init_clock_drift_sigma_mps.powi(2);
             prior[(tidx::ISB_BDS, tidx::ISB_BDS)] = clock.isb_bds_init_sigma_m.powi(2);
         }
         let (q_nav_rate, inv_tau) = process_noise_rate(cfg);
@@ -193,10 +194,7 @@ impl InsBound {
 
     /// The prior at `t_s`.
     pub fn start(&self, t_s: f64) -> BoundState {
-        BoundState {
-            t_s,
-            b: self.prior,
-        }
+        BoundState { t_s, b: self.prior }
     }
 
     /// `F X` for the error dynamics at attitude `c` (C_b^n), specific force `f_n` (ENU)
@@ -425,7 +423,10 @@ mod tests {
             .to_rotation_matrix()
             .into_inner();
         let f_n = Vector3::new(0.4, -0.3, 9.81);
-        for coupling in [BoundCoupling::Loose, BoundCoupling::Tight(TightClockConfig::default())] {
+        for coupling in [
+            BoundCoupling::Loose,
+            BoundCoupling::Tight(TightClockConfig::default()),
+        ] {
             let bound = InsBound::new(&cfg(), 0.03, coupling, earth, Matrix3::identity());
             let mut g = Cov18::from_fn(|i, j| ((i * 7 + j * 3) % 11) as f64 * 0.1);
             g += Cov18::identity() * 2.0;
@@ -439,7 +440,8 @@ mod tests {
             }
             if let BoundCoupling::Tight(clk) = coupling {
                 let (cb, cd, dt) = (tidx::CLOCK_BIAS, tidx::CLOCK_DRIFT, 0.01f64);
-                want[(cb, cb)] += clk.clock_bias_psd_m2ps * dt + clk.clock_drift_psd_m2ps3 * dt.powi(3) / 3.0;
+                want[(cb, cb)] +=
+                    clk.clock_bias_psd_m2ps * dt + clk.clock_drift_psd_m2ps3 * dt.powi(3) / 3.0;
                 want[(cb, cd)] += clk.clock_drift_psd_m2ps3 * dt * dt / 2.0;
                 want[(cd, cb)] += clk.clock_drift_psd_m2ps3 * dt * dt / 2.0;
                 want[(cd, cd)] += clk.clock_drift_psd_m2ps3 * dt;
@@ -472,7 +474,13 @@ mod tests {
         ranges.push(range(System::Tcofdm, Vector3::new(-90.0, 10.0, 30.0), &at));
         let mut info = EpochInfo::zeros();
         add_epoch_information(&mut info, &at, &Vector3::zeros(), &ranges, false);
-        let bound = InsBound::new(&cfg(), 0.03, BoundCoupling::Loose, LocalEarth::new(0.7, 50.0), *frame.rotation());
+        let bound = InsBound::new(
+            &cfg(),
+            0.03,
+            BoundCoupling::Loose,
+            LocalEarth::new(0.7, 50.0),
+            *frame.rotation(),
+        );
         let got = bound.information(&info);
         // Dense route over [r, b_gps, b_tcofdm].
         let idx = [0usize, 1, 2, 6, 8];
@@ -482,7 +490,10 @@ mod tests {
         let r = frame.rotation();
         let want = (r * pos_cov_ecef * r.transpose()).try_inverse().unwrap();
         let got_pos = got.fixed_view::<3, 3>(0, 0).into_owned();
-        assert!((got_pos - want).abs().max() < 1e-9 * want.abs().max(), "{got_pos} vs {want}");
+        assert!(
+            (got_pos - want).abs().max() < 1e-9 * want.abs().max(),
+            "{got_pos} vs {want}"
+        );
         // Nothing outside the position block without range rates.
         assert_eq!(got.fixed_view::<12, 18>(6, 0).abs().max(), 0.0);
     }
@@ -536,17 +547,28 @@ mod tests {
         c0.init_tilt_sigma_rad = 0.03;
         c0.init_heading_sigma_rad = 1f64.to_radians();
         let mut bound = InsBound::new(&c, 0.03, BoundCoupling::Loose, earth, *frame.rotation());
-        bound.prior.fixed_view_mut::<15, 15>(0, 0).copy_from(&initial_covariance(&c0));
+        bound
+            .prior
+            .fixed_view_mut::<15, 15>(0, 0)
+            .copy_from(&initial_covariance(&c0));
         let mut ekf = InsEkf::new(init, earth, &c0);
         let mut st = bound.start(0.0);
         let mut info = EpochInfo::zeros();
         add_epoch_information(&mut info, &at, &Vector3::zeros(), &ranges, false);
         let info18 = bound.information(&info);
-        let pos_cov = info18.fixed_view::<3, 3>(0, 0).into_owned().try_inverse().unwrap();
+        let pos_cov = info18
+            .fixed_view::<3, 3>(0, 0)
+            .into_owned()
+            .try_inverse()
+            .unwrap();
         let (cn, fn_) = (q_nb.to_rotation_matrix().into_inner(), -g);
         for k in 1..=300 {
             let t = k as f64 / rate;
-            ekf.propagate(&ImuSample { t_s: t, gyro_rps: w_b, accel_mps2: f_b });
+            ekf.propagate(&ImuSample {
+                t_s: t,
+                gyro_rps: w_b,
+                accel_mps2: f_b,
+            });
             bound.predict(&mut st, t, &cn, &fn_, 1.2);
             if k % 100 == 0 {
                 ekf.update_position(&init.pos_enu_m, &pos_cov).unwrap();
@@ -561,8 +583,17 @@ mod tests {
         assert!((st.position_mse_m2() - pos).abs() < 1e-6 * pos);
 
         // Tight: the tight EKF with every pseudorange and range rate at the truth.
-        let clk = TightClockConfig { gate_chi2: None, ..TightClockConfig::default() };
-        let mut bound = InsBound::new(&c, 0.03, BoundCoupling::Tight(clk), earth, *frame.rotation());
+        let clk = TightClockConfig {
+            gate_chi2: None,
+            ..TightClockConfig::default()
+        };
+        let mut bound = InsBound::new(
+            &c,
+            0.03,
+            BoundCoupling::Tight(clk),
+            earth,
+            *frame.rotation(),
+        );
         let mut c1 = c0;
         c1.nis_gate = None;
         let mut tight = InsTightEkf::new(init, earth, &c1, &clk);
@@ -573,7 +604,11 @@ mod tests {
         let info18 = bound.information(&info);
         for k in 1..=300 {
             let t = k as f64 / rate;
-            tight.propagate(&ImuSample { t_s: t, gyro_rps: w_b, accel_mps2: f_b });
+            tight.propagate(&ImuSample {
+                t_s: t,
+                gyro_rps: w_b,
+                accel_mps2: f_b,
+            });
             bound.predict(&mut st, t, &cn, &fn_, 1.2);
             if k % 100 == 0 {
                 for m in &ranges {
@@ -594,7 +629,12 @@ mod tests {
             &st.b.fixed_view::<15, 15>(0, 0).into_owned(),
         );
         assert!(rel < 1e-6, "tight: normalised difference {rel:e}");
-        let clocks = (15..18).map(|i| (p[(i, i)] - st.b[(i, i)]).abs() / p[(i, i)]).fold(0.0, f64::max);
-        assert!(clocks < 1e-6, "tight clocks: relative difference {clocks:e}");
+        let clocks = (15..18)
+            .map(|i| (p[(i, i)] - st.b[(i, i)]).abs() / p[(i, i)])
+            .fold(0.0, f64::max);
+        assert!(
+            clocks < 1e-6,
+            "tight clocks: relative difference {clocks:e}"
+        );
     }
 }

@@ -636,6 +636,18 @@ impl InsEstimator {
         self.kf.as_ref().map(InsCore::state)
     }
 
+    /// The error model the filter runs: the IMU's noise densities and bias σ scaled by
+    /// `process_noise_scale`, and the fix gate (the initial σ are set at initialisation
+    /// from the fixes, see the type's documentation).
+    pub fn error_model(&self) -> &InsEkfConfig {
+        &self.ekf_cfg
+    }
+
+    /// The `[estimator.ins]` settings.
+    pub fn config(&self) -> &InsFilterConfig {
+        &self.cfg
+    }
+
     /// How many times a numerical failure reset the filter.
     pub fn resets(&self) -> u32 {
         self.resets

@@ -57,6 +57,20 @@
 //! aiding-dependent function of the RSSI scan, whose error is neither Gaussian nor of the
 //! covariance it reports) or ranges from a receiver other than GNSS, DTMB and TC-OFDM
 //! (`[sensors.emitters]`) therefore gets no bound (`None`).
+//!
+//! # The INS rows
+//!
+//! An INS estimator (`filter = "ins"`, seed 004's loosely and tightly coupled rows) gets
+//! the bound of its own error model ([`crate::inertial::ins_bound`]: the 15- or 18-state
+//! error dynamics evaluated along each trial's true attitude and specific force, driven by
+//! the IMU noise the estimator assumes) with the information of the ranges its fixes take
+//! from the same receivers held at the truth, the range rates when it uses them. Unlike
+//! seed 000's model, whose white jerk stands for every trajectory and lets a gentle truth
+//! beat the recursion, this model's randomness is the IMU's own noise along the given
+//! trajectory, so the bound is computed trial by trial and needs no "determined" flag
+//! beyond the first fix. The range rates describe the walker's path, while the IMU also
+//! moves with the gait (a quarter of a metre per second vertically); the bound counts them
+//! as measuring the INS velocity, which can only lower it.
 
 use super::World;
 use crate::core::{SimTime, System, TrialRng};
@@ -64,10 +78,23 @@ use crate::dtmb::DtmbSource;
 use crate::engine::trial::truth_at;
 use crate::fusion::ekf11::Ekf11Config;
 use crate::fusion::paper::ProcessSpec;
-use crate::fusion::pcrlb::{PaperBound, PvaClockBound};
+use crate::fusion::pcrlb::{PaperBound, PvaClockBound, DETERMINED_POS_MSE_M2};
 use crate::gnss::measurement::{GnssGeometry, LinkGeometry};
-use crate::measurement::RangeMeasurement;
+use crate::inertial::attitude::PlatformTruth;
+use crate::inertial::imu::ImuConfig;
+use crate::inertial::ins_bound::{
+    add_epoch_information, truth_dynamics, BoundCoupling, EpochInfo, InsBound,
+};
+use crate::inertial::ins_ekf::InsEkfConfig;
+use crate::inertial::ins_estimator::{InsCoupling, InsEstimator};
+use crate::inertial::ins_tight::TightClockConfig;
+use crate::inertial::source::local_earth_of;
+use crate::inertial::LocalEarth;
+use crate::measurement::SourceKind;
+use crate::measurement::{RangeMeasurement, Truth};
+use crate::tcofdm::TcofdmSource;
 use crate::world::schema::EstimatorSpec;
+use crate::world::schema::FilterKind;
 use std::sync::Arc;
 
 /// The PCRLB of one estimator's model over a run: its position-RMSE bound at every epoch
@@ -83,6 +110,21 @@ pub struct PositionBound {
     /// root of the trace of the position block at that epoch, the floor under an RMSE
     /// taken across trials at that instant.
     pub by_epoch: Vec<(f64, f64)>,
+}
+
+impl PositionBound {
+    /// The bound of `(t_s, bound_m)` epochs, its RMSE the root of their mean square;
+    /// `None` for no epoch or a mean that is not finite.
+    fn from_epochs(by_epoch: Vec<(f64, f64)>) -> Option<Self> {
+        if by_epoch.is_empty() {
+            return None;
+        }
+        let mean = by_epoch.iter().map(|(_, b)| b * b).sum::<f64>() / by_epoch.len() as f64;
+        (mean.is_finite() && mean >= 0.0).then(|| PositionBound {
+            rmse_m: mean.sqrt(),
+            by_epoch,
+        })
+    }
 }
 
 /// The PCRLB of an estimator on seed 000's model ([`World::pva_clock_pcrlb`]).
@@ -109,9 +151,10 @@ impl World {
     /// information averaged over the truth trajectories of trials `0..trials` of `seed`.
     /// The paper models are bounded on the world's `[sensors.emitters]`
     /// ([`World::paper_pcrlb`]), seed 000's 12-state model on the world's GNSS and DTMB
-    /// receivers ([`World::pva_clock_pcrlb`], see the module documentation). `None` for an
-    /// estimator whose model no bound covers (the INS, PDR, WLS) or whose measurements the
-    /// bound cannot count.
+    /// receivers ([`World::pva_clock_pcrlb`], see the module documentation), the INS error
+    /// models along the truth on the same receivers ([`World::ins_pcrlb`]). `None` for an
+    /// estimator whose model no bound covers (PDR, WLS) or whose measurements the bound
+    /// cannot count.
     pub fn pcrlb(&self, seed: u64, trials: u64) -> Vec<Option<PositionBound>> {
         let mut out = self.paper_pcrlb(seed, trials);
         for (slot, b) in out.iter_mut().zip(self.pva_clock_pcrlb(seed, trials)) {
@@ -119,6 +162,11 @@ impl World {
                 if slot.is_none() {
                     *slot = Some(b.bound);
                 }
+            }
+        }
+        for (slot, b) in out.iter_mut().zip(self.ins_pcrlb(seed, trials)) {
+            if slot.is_none() {
+                *slot = b;
             }
         }
         out
@@ -195,27 +243,7 @@ impl World {
     pub fn pva_clock_pcrlb(&self, seed: u64, trials: u64) -> Vec<Option<PvaClockPositionBound>> {
         let n_est = self.file.estimators.len();
         let end = SimTime::from_seconds(self.duration_s);
-        let sensors = &self.file.sensors;
-        // The instants at which the GNSS and DTMB receivers sample, 0 to the end.
-        let mut instants_ns: Vec<i64> = Vec::new();
-        let mut add_grid = |step_ns: i64| {
-            let mut t = 0i64;
-            while t <= end.0 {
-                instants_ns.push(t);
-                t += step_ns.max(1);
-            }
-        };
-        if let Some(g) = &sensors.gnss {
-            add_grid(GnssGeometry::step_ns(g.rate_hz));
-        }
-        if let Some(d) = &sensors.dtmb {
-            add_grid(((1e9 / d.rate_hz).round() as i64).max(1));
-        }
-        if let Some(tc) = &sensors.tcofdm {
-            add_grid(((1e9 / tc.rate_hz).round() as i64).max(1));
-        }
-        instants_ns.sort_unstable();
-        instants_ns.dedup();
+        let instants_ns = self.measurement_instants_ns(end);
         let instants_s: Vec<f64> = instants_ns.iter().map(|&t| SimTime(t).seconds()).collect();
         let mut bounds: Vec<Option<PvaClockBound>> = self
             .file
@@ -234,10 +262,6 @@ impl World {
         } else {
             trials.max(1)
         };
-        let mut links: Vec<LinkGeometry> = Vec::with_capacity(64);
-        let mut gnss_ranges: Vec<RangeMeasurement> = Vec::with_capacity(64);
-        let mut dtmb_ranges: Vec<RangeMeasurement> = Vec::with_capacity(8);
-        let mut tcofdm_ranges: Vec<RangeMeasurement> = Vec::with_capacity(8);
         let mut mine: Vec<RangeMeasurement> = Vec::with_capacity(64);
         let mut used = 0usize;
         for i in 0..n_traj {
@@ -245,85 +269,19 @@ impl World {
             let Ok(trajectory) = self.build_trajectory(&rng) else {
                 continue;
             };
-            let mut gnss = sensors.gnss.as_ref().map(|g| {
-                GnssGeometry::new(
-                    g,
-                    Arc::clone(&self.nav),
-                    self.shielding.clone(),
-                    self.gnss_scene_view(),
-                )
-            });
-            let clock = Arc::new(self.receiver_clock(&rng));
-            let Ok(mut dtmb) = self.dtmb_source(Arc::clone(&clock), None, &rng, end) else {
+            let Ok(mut rx) = self.truth_receivers(&rng, end) else {
                 return vec![None; n_est];
             };
-            let Ok(mut tcofdm) = self.tcofdm_source(clock, None, &rng, end) else {
-                return vec![None; n_est];
-            };
-            let tcofdm_step = tcofdm.as_ref().map(crate::tcofdm::TcofdmSource::period_ns);
-            let gnss_step = sensors
-                .gnss
-                .as_ref()
-                .map(|g| GnssGeometry::step_ns(g.rate_hz));
-            let dtmb_step = dtmb.as_ref().map(DtmbSource::period_ns);
             for (k, &t_ns) in instants_ns.iter().enumerate() {
                 let truth = truth_at(&self.frame, self.start, trajectory.as_ref(), SimTime(t_ns));
-                gnss_ranges.clear();
-                if let (Some(geo), Some(step)) = (gnss.as_mut(), gnss_step) {
-                    if t_ns % step == 0 {
-                        links.clear();
-                        geo.epoch(&truth, &mut links);
-                        let rates = sensors.gnss.as_ref().is_some_and(|g| g.range_rates);
-                        gnss_ranges.extend(links.iter().map(|l| RangeMeasurement {
-                            emitter: geo.satellites()[l.channel as usize],
-                            emitter_pos_ecef_m: l.pos_ecef_m,
-                            emitter_vel_ecef_mps: l.vel_ecef_mps,
-                            pseudorange_m: l.range_m,
-                            sigma_m: l.sigma_m,
-                            range_rate_mps: rates.then_some(l.geometric_rate_mps),
-                            sigma_rate_mps: l.sigma_rate_mps,
-                            cn0_dbhz: l.cn0_dbhz,
-                            elevation_rad: l.el_rad,
-                        }));
-                    }
-                }
-                dtmb_ranges.clear();
-                if let (Some(d), Some(step)) = (dtmb.as_mut(), dtmb_step) {
-                    if t_ns % step == 0 {
-                        d.noise_free_ranges(&truth, &mut dtmb_ranges);
-                    }
-                }
-                tcofdm_ranges.clear();
-                if let (Some(tc), Some(step)) = (tcofdm.as_mut(), tcofdm_step) {
-                    if t_ns % step == 0 {
-                        tc.noise_free_ranges(&truth, &mut tcofdm_ranges);
-                    }
-                }
-                let tcofdm_now = tcofdm_step.is_some_and(|s| t_ns % s == 0);
-                let gnss_now = gnss_step.is_some_and(|s| t_ns % s == 0);
-                let dtmb_now = dtmb_step.is_some_and(|s| t_ns % s == 0);
+                rx.sample(t_ns, &truth);
                 for (e, bound) in self.file.estimators.iter().zip(bounds.iter_mut()) {
                     let Some(bound) = bound.as_mut() else {
                         continue;
                     };
-                    // An epoch of this estimator: a batch of a source it uses arrives.
-                    let uses = |sys: System| e.sources.contains(&sys);
-                    let epoch = (gnss_now && (uses(System::Gps) || uses(System::Bds)))
-                        || (dtmb_now && uses(System::Dtmb))
-                        || (tcofdm_now && uses(System::Tcofdm));
-                    if !epoch {
-                        continue;
+                    if rx.epoch_of(|s| e.sources.contains(&s), &mut mine) {
+                        bound.add(k, &truth.pos_ecef_m, &truth.vel_ecef_mps, &mine);
                     }
-                    mine.clear();
-                    mine.extend(
-                        gnss_ranges
-                            .iter()
-                            .chain(&dtmb_ranges)
-                            .chain(&tcofdm_ranges)
-                            .filter(|m| e.sources.contains(&m.system()))
-                            .copied(),
-                    );
-                    bound.add(k, &truth.pos_ecef_m, &truth.vel_ecef_mps, &mine);
                 }
             }
             for bound in bounds.iter_mut().flatten() {
@@ -346,19 +304,241 @@ impl World {
                     .zip(&mse)
                     .filter_map(|(t, m)| m.map(|m| (*t, m.max(0.0).sqrt())))
                     .collect();
-                if by_epoch.is_empty() {
-                    return None;
-                }
-                let mean = by_epoch.iter().map(|(_, b)| b * b).sum::<f64>() / by_epoch.len() as f64;
-                (mean.is_finite() && mean >= 0.0).then(|| PvaClockPositionBound {
-                    bound: PositionBound {
-                        rmse_m: mean.sqrt(),
-                        by_epoch,
-                    },
+                PositionBound::from_epochs(by_epoch).map(|bound| PvaClockPositionBound {
+                    bound,
                     measurement_determined: determined,
                 })
             })
             .collect()
+    }
+
+    /// The instants (ns of simulation time) at which the GNSS, DTMB and TC-OFDM receivers
+    /// sample, from 0 to `end`.
+    fn measurement_instants_ns(&self, end: SimTime) -> Vec<i64> {
+        let sensors = &self.file.sensors;
+        let mut instants_ns: Vec<i64> = Vec::new();
+        let mut add_grid = |step_ns: i64| {
+            let mut t = 0i64;
+            while t <= end.0 {
+                instants_ns.push(t);
+                t += step_ns.max(1);
+            }
+        };
+        if let Some(g) = &sensors.gnss {
+            add_grid(GnssGeometry::step_ns(g.rate_hz));
+        }
+        if let Some(d) = &sensors.dtmb {
+            add_grid(((1e9 / d.rate_hz).round() as i64).max(1));
+        }
+        if let Some(tc) = &sensors.tcofdm {
+            add_grid(((1e9 / tc.rate_hz).round() as i64).max(1));
+        }
+        instants_ns.sort_unstable();
+        instants_ns.dedup();
+        instants_ns
+    }
+
+    /// The world's GNSS, DTMB and TC-OFDM receivers of trial `rng`, to be held at the
+    /// truth ([`TruthReceivers`]).
+    fn truth_receivers(&self, rng: &TrialRng, end: SimTime) -> Result<TruthReceivers, String> {
+        let sensors = &self.file.sensors;
+        let gnss = sensors.gnss.as_ref().map(|g| {
+            GnssGeometry::new(
+                g,
+                Arc::clone(&self.nav),
+                self.shielding.clone(),
+                self.gnss_scene_view(),
+            )
+        });
+        let clock = Arc::new(self.receiver_clock(rng));
+        let dtmb = self.dtmb_source(Arc::clone(&clock), None, rng, end)?;
+        let tcofdm = self.tcofdm_source(clock, None, rng, end)?;
+        Ok(TruthReceivers {
+            gnss_step: sensors
+                .gnss
+                .as_ref()
+                .map(|g| GnssGeometry::step_ns(g.rate_hz)),
+            range_rates: sensors.gnss.as_ref().is_some_and(|g| g.range_rates),
+            dtmb_step: dtmb.as_ref().map(DtmbSource::period_ns),
+            tcofdm_step: tcofdm.as_ref().map(TcofdmSource::period_ns),
+            gnss,
+            dtmb,
+            tcofdm,
+            links: Vec::with_capacity(64),
+            gnss_ranges: Vec::with_capacity(64),
+            dtmb_ranges: Vec::with_capacity(8),
+            tcofdm_ranges: Vec::with_capacity(8),
+            now: [false; 3],
+        })
+    }
+
+    /// The PCRLB of each INS estimator ([`InsBound`], see its module documentation), in
+    /// the world's order; `None` for the other estimators, for an INS that takes fixes the
+    /// bound cannot count (FM, magnetic landmarks) and for a world without an IMU. The
+    /// bound is computed along each trial's truth (the walker's gait differs from trial to
+    /// trial) and its mean square averaged over trials `0..trials` of `seed`; it is
+    /// reported from the first instant at which the position is determined
+    /// ([`DETERMINED_POS_MSE_M2`]). Estimators with one error model, coupling and set of
+    /// ranges (seed 004's four Kalman filters) share one computation.
+    pub fn ins_pcrlb(&self, seed: u64, trials: u64) -> Vec<Option<PositionBound>> {
+        let n_est = self.file.estimators.len();
+        let Some(imu) = self.file.sensors.imu.as_ref() else {
+            return vec![None; n_est];
+        };
+        let Ok(spec) = imu.resolve() else {
+            return vec![None; n_est];
+        };
+        let earth = local_earth_of(&self.frame);
+        // One model per distinct bound; each estimator points at its model.
+        let mut models: Vec<InsModel> = Vec::new();
+        let slots: Vec<Option<usize>> = self
+            .file
+            .estimators
+            .iter()
+            .map(|e| {
+                let model = self.ins_model(e, imu, earth)?;
+                let at = models.iter().position(|m| m.same_bound(&model));
+                Some(at.unwrap_or_else(|| {
+                    models.push(model);
+                    models.len() - 1
+                }))
+            })
+            .collect();
+        if models.is_empty() {
+            return vec![None; n_est];
+        }
+        let end = SimTime::from_seconds(self.duration_s);
+        let instants_ns = self.measurement_instants_ns(end);
+        let mut mse_sum = vec![vec![0.0f64; instants_ns.len()]; models.len()];
+        let mut used = 0usize;
+        let mut mine: Vec<RangeMeasurement> = Vec::with_capacity(64);
+        let imu_step_s = 1.0 / spec.rate_hz;
+        for i in 0..trials.max(1) {
+            let rng = TrialRng::new(seed, i);
+            let (Ok(trajectory), Ok(body_path)) =
+                (self.build_trajectory(&rng), self.build_trajectory(&rng))
+            else {
+                continue;
+            };
+            let Ok(body) = PlatformTruth::of_trial(body_path, &self.file.platform.attitude(), &rng)
+            else {
+                continue;
+            };
+            let Ok(mut rx) = self.truth_receivers(&rng, end) else {
+                return vec![None; n_est];
+            };
+            let mut states: Vec<_> = models.iter().map(|m| m.bound.start(0.0)).collect();
+            let mut k_imu = 1u64;
+            for (k, &t_ns) in instants_ns.iter().enumerate() {
+                let t_s = SimTime(t_ns).seconds();
+                // The IMU samples up to this instant, then the rest of the way to it.
+                loop {
+                    let t_imu = (k_imu as f64 * imu_step_s).min(t_s);
+                    if t_imu <= states[0].t_s {
+                        break;
+                    }
+                    let b = body.sample(t_imu);
+                    let (c, f_n) = truth_dynamics(
+                        &earth,
+                        &b.q_nb,
+                        &b.pos_enu_m,
+                        &b.vel_enu_mps,
+                        &b.acc_enu_mps2,
+                    );
+                    for (m, st) in models.iter().zip(states.iter_mut()) {
+                        m.bound.predict(st, t_imu, &c, &f_n, b.pos_enu_m.z);
+                    }
+                    if k_imu as f64 * imu_step_s <= t_s {
+                        k_imu += 1;
+                    }
+                }
+                let truth = truth_at(&self.frame, self.start, trajectory.as_ref(), SimTime(t_ns));
+                rx.sample(t_ns, &truth);
+                for ((m, st), sum) in models.iter().zip(states.iter_mut()).zip(mse_sum.iter_mut()) {
+                    if rx.epoch_of(|s| m.ranges.contains(&s), &mut mine) {
+                        let mut info = EpochInfo::zeros();
+                        add_epoch_information(
+                            &mut info,
+                            &truth.pos_ecef_m,
+                            &truth.vel_ecef_mps,
+                            &mine,
+                            m.rates,
+                        );
+                        m.bound.update(st, &m.bound.information(&info));
+                    }
+                    sum[k] += st.position_mse_m2();
+                }
+            }
+            used += 1;
+        }
+        if used == 0 {
+            return vec![None; n_est];
+        }
+        let bounds: Vec<Option<PositionBound>> = mse_sum
+            .iter()
+            .map(|sum| {
+                let mut determined = false;
+                let by_epoch = instants_ns
+                    .iter()
+                    .zip(sum)
+                    .filter_map(|(&t, &s)| {
+                        let mse = s / used as f64;
+                        determined |= mse < DETERMINED_POS_MSE_M2;
+                        determined.then(|| (SimTime(t).seconds(), mse.max(0.0).sqrt()))
+                    })
+                    .collect();
+                PositionBound::from_epochs(by_epoch)
+            })
+            .collect();
+        slots
+            .iter()
+            .map(|s| s.and_then(|i| bounds[i].clone()))
+            .collect()
+    }
+
+    /// The bound model of an INS estimator, or `None` for another estimator or an INS
+    /// whose fixes the bound cannot count.
+    fn ins_model(&self, e: &EstimatorSpec, imu: &ImuConfig, earth: LocalEarth) -> Option<InsModel> {
+        if e.filter != FilterKind::Ins {
+            return None;
+        }
+        let est = InsEstimator::new(
+            &e.name,
+            &e.ins.clone().unwrap_or_default(),
+            imu,
+            &e.sources,
+            &self.frame,
+            self.start,
+        )
+        .ok()?;
+        let cfg = est.config();
+        let mut ranges = Vec::new();
+        for kind in &cfg.fix_sources {
+            let systems: &[System] = match kind {
+                SourceKind::Gnss => &[System::Gps, System::Bds],
+                SourceKind::Dtmb => &[System::Dtmb],
+                SourceKind::Tcofdm => &[System::Tcofdm],
+                _ => return None,
+            };
+            ranges.extend(systems.iter().filter(|s| e.sources.contains(s)));
+        }
+        let coupling = match cfg.coupling {
+            InsCoupling::Loose => BoundCoupling::Loose,
+            InsCoupling::Tight => BoundCoupling::Tight(TightClockConfig::default()),
+        };
+        let tilt_rad = cfg.init_tilt_sigma_deg.to_radians();
+        Some(InsModel {
+            bound: InsBound::new(
+                est.error_model(),
+                tilt_rad,
+                coupling,
+                earth,
+                *self.frame.rotation(),
+            ),
+            key: (*est.error_model(), tilt_rad, coupling),
+            ranges,
+            rates: cfg.use_gnss_velocity,
+        })
     }
 
     /// The tuning of seed 000's model an estimator runs, or `None` when it does not run
@@ -378,5 +558,100 @@ impl World {
             .iter()
             .all(|s| counted(*s))
             .then(|| e.ekf.unwrap_or_default())
+    }
+}
+
+/// The world's GNSS, DTMB and TC-OFDM receivers of one trial held at the truth: at each
+/// instant, the ranges each gives there with the σ it reports (see the module
+/// documentation), and whether each had a batch. Reuses its buffers.
+struct TruthReceivers {
+    gnss: Option<GnssGeometry>,
+    gnss_step: Option<i64>,
+    range_rates: bool,
+    dtmb: Option<DtmbSource>,
+    dtmb_step: Option<i64>,
+    tcofdm: Option<TcofdmSource>,
+    tcofdm_step: Option<i64>,
+    links: Vec<LinkGeometry>,
+    gnss_ranges: Vec<RangeMeasurement>,
+    dtmb_ranges: Vec<RangeMeasurement>,
+    tcofdm_ranges: Vec<RangeMeasurement>,
+    /// Whether the GNSS, DTMB and TC-OFDM receivers had a batch at the last instant.
+    now: [bool; 3],
+}
+
+impl TruthReceivers {
+    /// The receivers at simulation time `t_ns` and the truth there.
+    fn sample(&mut self, t_ns: i64, truth: &Truth) {
+        let due = |step: Option<i64>| step.is_some_and(|s| t_ns % s == 0);
+        self.now = [
+            due(self.gnss_step),
+            due(self.dtmb_step),
+            due(self.tcofdm_step),
+        ];
+        self.gnss_ranges.clear();
+        if let (Some(geo), true) = (self.gnss.as_mut(), self.now[0]) {
+            self.links.clear();
+            geo.epoch(truth, &mut self.links);
+            let rates = self.range_rates;
+            self.gnss_ranges
+                .extend(self.links.iter().map(|l| RangeMeasurement {
+                    emitter: geo.satellites()[l.channel as usize],
+                    emitter_pos_ecef_m: l.pos_ecef_m,
+                    emitter_vel_ecef_mps: l.vel_ecef_mps,
+                    pseudorange_m: l.range_m,
+                    sigma_m: l.sigma_m,
+                    range_rate_mps: rates.then_some(l.geometric_rate_mps),
+                    sigma_rate_mps: l.sigma_rate_mps,
+                    cn0_dbhz: l.cn0_dbhz,
+                    elevation_rad: l.el_rad,
+                }));
+        }
+        self.dtmb_ranges.clear();
+        if let (Some(d), true) = (self.dtmb.as_mut(), self.now[1]) {
+            d.noise_free_ranges(truth, &mut self.dtmb_ranges);
+        }
+        self.tcofdm_ranges.clear();
+        if let (Some(tc), true) = (self.tcofdm.as_mut(), self.now[2]) {
+            tc.noise_free_ranges(truth, &mut self.tcofdm_ranges);
+        }
+    }
+
+    /// Whether the last instant is an epoch of an estimator that uses the systems `uses`
+    /// accepts (a batch of one of its sources arrived, even an empty one); its ranges of
+    /// those systems into `out`.
+    fn epoch_of(&self, uses: impl Fn(System) -> bool, out: &mut Vec<RangeMeasurement>) -> bool {
+        let epoch = (self.now[0] && (uses(System::Gps) || uses(System::Bds)))
+            || (self.now[1] && uses(System::Dtmb))
+            || (self.now[2] && uses(System::Tcofdm));
+        out.clear();
+        if epoch {
+            out.extend(
+                self.gnss_ranges
+                    .iter()
+                    .chain(&self.dtmb_ranges)
+                    .chain(&self.tcofdm_ranges)
+                    .filter(|m| uses(m.system()))
+                    .copied(),
+            );
+        }
+        epoch
+    }
+}
+
+/// An INS estimator's bound ([`World::ins_pcrlb`]): the model, what distinguishes it from
+/// another, and the ranges it counts.
+struct InsModel {
+    bound: InsBound,
+    key: (InsEkfConfig, f64, BoundCoupling),
+    /// The systems whose ranges the estimator's fixes (or tight updates) take.
+    ranges: Vec<System>,
+    /// Whether it takes the GNSS range rates.
+    rates: bool,
+}
+
+impl InsModel {
+    fn same_bound(&self, other: &InsModel) -> bool {
+        self.key == other.key && self.ranges == other.ranges && self.rates == other.rates
     }
 }
