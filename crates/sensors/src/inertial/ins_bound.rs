@@ -562,14 +562,15 @@ mod tests {
             .try_inverse()
             .unwrap();
         let (cn, fn_) = (q_nb.to_rotation_matrix().into_inner(), -g);
+        let imu_at = |k: u32| ImuSample {
+            t_s: f64::from(k) / rate,
+            gyro_rps: w_b,
+            accel_mps2: f_b,
+        };
         for k in 1..=300 {
-            let t = k as f64 / rate;
-            ekf.propagate(&ImuSample {
-                t_s: t,
-                gyro_rps: w_b,
-                accel_mps2: f_b,
-            });
-            bound.predict(&mut st, t, &cn, &fn_, 1.2);
+            let s = imu_at(k);
+            ekf.propagate(&s);
+            bound.predict(&mut st, s.t_s, &cn, &fn_, 1.2);
             if k % 100 == 0 {
                 ekf.update_position(&init.pos_enu_m, &pos_cov).unwrap();
                 assert!(bound.update(&mut st, &info18));
@@ -603,13 +604,9 @@ mod tests {
         add_epoch_information(&mut info, &at, &Vector3::zeros(), &ranges, true);
         let info18 = bound.information(&info);
         for k in 1..=300 {
-            let t = k as f64 / rate;
-            tight.propagate(&ImuSample {
-                t_s: t,
-                gyro_rps: w_b,
-                accel_mps2: f_b,
-            });
-            bound.predict(&mut st, t, &cn, &fn_, 1.2);
+            let s = imu_at(k);
+            tight.propagate(&s);
+            bound.predict(&mut st, s.t_s, &cn, &fn_, 1.2);
             if k % 100 == 0 {
                 for m in &ranges {
                     // The true range and rate as measured: the innovation is zero.
