@@ -213,6 +213,9 @@ pub struct PaperResult {
     pub variants: Vec<VariantResult>,
     /// The paper's [`GainSplit`]s on this run.
     pub splits: Vec<SplitResult>,
+    /// `(estimator, PCRLB on its RMSE m, RMSE / PCRLB)` of every estimator of the world
+    /// the run bounded, in the world's order.
+    pub bounds: Vec<(String, f64, f64)>,
 }
 
 /// One variant's rows and orderings.
@@ -288,6 +291,11 @@ pub fn score(paper: &'static Paper, s: &Summary) -> Result<PaperResult, String> 
             })
         })
         .collect::<Result<Vec<_>, String>>()?;
+    let bounds = s
+        .estimators
+        .iter()
+        .filter_map(|e| Some((e.name.clone(), e.pcrlb_pos_rmse_m?, e.efficiency?)))
+        .collect();
     Ok(PaperResult {
         paper,
         trials: s.trials,
@@ -298,6 +306,7 @@ pub fn score(paper: &'static Paper, s: &Summary) -> Result<PaperResult, String> 
         resets,
         variants,
         splits,
+        bounds,
     })
 }
 
@@ -516,7 +525,12 @@ pub fn text(results: &[PaperResult]) -> String {
                 let _ = writeln!(s, "  {} {}", tick(o.holds()), ordering_text(o));
             }
         }
-        for line in r.protocol.iter().chain(&resets_lines(r)) {
+        for line in r
+            .protocol
+            .iter()
+            .chain(&resets_lines(r))
+            .chain(&bounds_line(r))
+        {
             let _ = writeln!(s, "  {line}");
         }
         s.push('\n');
@@ -539,6 +553,23 @@ fn resets_lines(r: &PaperResult) -> Vec<String> {
             )
         })
         .collect()
+}
+
+/// One line with every bounded estimator's PCRLB and its RMSE over it (none without a
+/// bounded estimator).
+fn bounds_line(r: &PaperResult) -> Vec<String> {
+    if r.bounds.is_empty() {
+        return Vec::new();
+    }
+    let parts: Vec<String> = r
+        .bounds
+        .iter()
+        .map(|(name, b, eff)| format!("{name} {b:.2} m ({eff:.2}×)"))
+        .collect();
+    vec![format!(
+        "PCRLB on the RMSE (RMSE / PCRLB): {}.",
+        parts.join(", ")
+    )]
 }
 
 fn totals(results: &[PaperResult]) -> String {
@@ -595,7 +626,12 @@ pub fn markdown(results: &[PaperResult]) -> String {
                 let _ = writeln!(s, "- {} {}", tick(o.holds()), ordering_text(o));
             }
         }
-        for line in r.protocol.iter().chain(&resets_lines(r)) {
+        for line in r
+            .protocol
+            .iter()
+            .chain(&resets_lines(r))
+            .chain(&bounds_line(r))
+        {
             let _ = writeln!(s, "- {line}");
         }
         s.push('\n');
