@@ -181,7 +181,8 @@ pub enum DtmbCommand {
         /// No effect in a static channel but its delay.
         #[arg(long)]
         interleaver: Option<usize>,
-        /// Carriers: 3780 or 1 (default 3780; with --world 3780 only).
+        /// Carriers: 3780 or 1 (default 3780; with --world the tower's). With --world, C = 1
+        /// bodies are equalised in the frequency domain (MMSE).
         #[arg(long)]
         carriers: Option<usize>,
         /// Frame header (sets the frame power the SNR is defined on): pn420, pn595, pn945

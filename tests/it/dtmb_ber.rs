@@ -153,8 +153,8 @@ fn dtmb_ber_world_refuses_bad_input() {
         &["contradicts tower D01's PN945"],
     );
     run(
-        &["--world", "worlds/seed000-kehui.toml", "--carriers", "1"],
-        &["C = 3780"],
+        &["--world", "worlds/seed000-kehui.toml", "--carriers", "2"],
+        &["--carriers must be 3780 or 1"],
     );
     run(
         &["--world", "worlds/seed000-kehui.toml", "--at-s", "1e9"],
