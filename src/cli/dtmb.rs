@@ -315,6 +315,7 @@ fn ber_world(a: &BerArgs) -> Result<()> {
             profile,
             mode: ch.mode,
             h: &h,
+            doppler: &[],
             csi,
             frames: a.frames,
             seed,

@@ -50,6 +50,7 @@ fn dtmb_ber_kehui_tower_at_its_link_budget_snr_loses_no_packet() {
         profile,
         mode: ch.mode,
         h: &h,
+        doppler: &[],
         csi: Csi::Estimated,
         frames: 20,
         seed: 1,
