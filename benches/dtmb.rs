@@ -398,6 +398,63 @@ fn bench_channel_receiver(c: &mut Criterion) {
             },
         );
     }
+    // PN595 (least-squares estimate) with C = 3780 and C = 1 (MMSE frequency-domain
+    // equalisation) bodies, same channel and SNR.
+    use hybridnav::dtmb::frame::CarrierMode;
+    let m595 = hybridnav::dtmb::pn::PnMode::Pn595;
+    for (carrier, name) in [
+        (CarrierMode::Multi3780, "c3780"),
+        (CarrierMode::Single, "c1"),
+    ] {
+        let var = (m595.nominal_frame_power() / 100.0) as f32;
+        let mut rx = TdsReceiver::with_carrier(m595, carrier, Csi::Estimated, &h, var).unwrap();
+        let mut st = ChannelStream::with_carrier(m595, carrier, &h);
+        let (n, hl) = (m595.frame_len(), m595.header_len());
+        let mut y0 = vec![Complex32::default(); n];
+        let mut y1 = vec![Complex32::default(); n];
+        st.next_frame(rx.header(0), &logical, &mut y0).unwrap();
+        st.next_frame(rx.header(0), &logical, &mut y1).unwrap();
+        hybridnav::dtmb::noise::add_awgn(&mut y0, var.sqrt(), &mut rng);
+        hybridnav::dtmb::noise::add_awgn(&mut y1, var.sqrt(), &mut rng);
+        let mut eq = vec![Complex32::default(); BODY_LEN];
+        let mut w = vec![0f32; BODY_LEN];
+        g.bench_function(
+            format!("estimate_equalise_frame_pn595_{name}_estimated"),
+            |b| {
+                b.iter(|| {
+                    rx.receive_frame(&y0, &y1[..hl], 0, 0, &mut eq, &mut w)
+                        .unwrap();
+                    black_box(&eq);
+                })
+            },
+        );
+    }
+    g.finish();
+
+    // The channel itself, one PN945 frame: static (one convolution with the 57 taps) and
+    // time-varying (the direct path and the echo at different Dopplers: two groups, each
+    // convolved and turned by its phasor sample by sample).
+    use hybridnav::dtmb::ber_channel::doppler_responses;
+    let mut g = c.benchmark_group("dtmb_channel_stream");
+    g.throughput(Throughput::Elements(1));
+    let p0 = MODE.phase_of_frame(0);
+    let rx = TdsReceiver::new(MODE, Csi::Ideal, &h, var).unwrap();
+    for (name, f1) in [("static", 0.0), ("doppler", 40.0)] {
+        let (hd, groups) = doppler_responses(&[
+            (0.0, Complex64::new(1.0, 0.0), -f1),
+            (40.3, Complex64::from_polar(0.5f64.sqrt(), 1.0), f1),
+        ])
+        .unwrap();
+        let mut st =
+            ChannelStream::with_doppler(MODE, CarrierMode::Multi3780, &hd, &groups).unwrap();
+        let mut y = vec![Complex32::default(); n];
+        g.bench_function(format!("frame_pn945_57_taps_{name}"), |b| {
+            b.iter(|| {
+                st.next_frame(rx.header(p0), &logical, &mut y).unwrap();
+                black_box(&y);
+            })
+        });
+    }
     g.finish();
 }
 

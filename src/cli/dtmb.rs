@@ -56,6 +56,7 @@ pub struct BerArgs {
     pub trial: u64,
     pub at_s: f64,
     pub csi: String,
+    pub no_doppler: bool,
 }
 
 /// The data-layer profile of `dtmb ber` from its options (each `None` takes the default:
@@ -175,6 +176,7 @@ pub fn ber(a: &BerArgs) -> Result<()> {
         (a.trial != 0, "--trial"),
         (a.at_s != 0.0, "--at-s"),
         (a.csi != "estimated", "--csi"),
+        (a.no_doppler, "--no-doppler"),
     ] {
         if given {
             anyhow::bail!("{what} needs --world (without it the channel is white noise)");
@@ -208,13 +210,14 @@ pub fn ber(a: &BerArgs) -> Result<()> {
 }
 
 /// `dtmb ber --world`: the tower's paths at `--at-s` (as `dtmb iq --world` computes them
-/// for that frame), as a static impulse response at 7.56 Msps, and one curve per
+/// for that frame), as an impulse response at 7.56 Msps whose paths turn at their
+/// Dopplers (unless `--no-doppler`), and one curve per
 /// receiver (`--csi`). The SNR axis is the received frame power over the noise; the link
 /// budget's SNR at that instant is printed beside each threshold as the margin.
 fn ber_world(a: &BerArgs) -> Result<()> {
     use crate::dtmb::ber::parse_snr_range;
     use crate::dtmb::ber_channel::{
-        frequency_response, impulse_response, measure_channel_point, ChannelBer, Csi,
+        doppler_responses, frequency_response, measure_channel_point, ChannelBer, Csi,
     };
     use crate::dtmb::pn::PnMode;
     use crate::world::dtmb_iq::{tower_channel_at, DataLayerOverride, WorldIqRequest};
@@ -266,7 +269,13 @@ fn ber_world(a: &BerArgs) -> Result<()> {
         ch.carriers,
     )
     .with_context(|| format!("tower {}'s data layer", ch.tower))?;
-    let h = impulse_response(&ch.paths)?;
+    let with_doppler: Vec<(f64, num_complex::Complex64, f64)> = ch
+        .paths
+        .iter()
+        .zip(&ch.dopplers_hz)
+        .map(|(&(d, g), &f)| (d, g, if a.no_doppler { 0.0 } else { f }))
+        .collect();
+    let (h, groups) = doppler_responses(&with_doppler)?;
     let hk = frequency_response(&h);
     let (lo, hi) = hk.iter().fold((f64::MAX, f64::MIN), |(a, b), x| {
         (a.min(x.norm_sqr()), b.max(x.norm_sqr()))
@@ -285,18 +294,29 @@ fn ber_world(a: &BerArgs) -> Result<()> {
         ch.paths.len(),
         ch.snr_db
     );
-    for (d, g) in &ch.paths {
+    for ((d, g), f) in ch.paths.iter().zip(&ch.dopplers_hz) {
         println!(
-            "#   path: excess delay {:8.3} samples, power {:7.2} dB, phase {:6.3} rad",
+            "#   path: excess delay {:8.3} samples, power {:7.2} dB, phase {:6.3} rad, \
+             Doppler {:8.3} Hz",
             d,
             10.0 * g.norm_sqr().log10(),
-            g.arg()
+            g.arg(),
+            f
         );
     }
     println!(
-        "# channel: {} taps at 7.56 Msps (static, Doppler not applied), |H_k|² from {:.2} \
-         to {:.2} dB on the 3780 carriers; receiver timing: the true frame start",
+        "# channel: {} taps at 7.56 Msps ({}), |H_k|² at {:.4} s from {:.2} to {:.2} dB on \
+         the 3780 carriers; receiver timing: the true frame start",
         h.len(),
+        if a.no_doppler {
+            "static: --no-doppler".to_string()
+        } else {
+            format!(
+                "each path turning at its Doppler, {} group(s)",
+                groups.len()
+            )
+        },
+        ch.at_s,
         10.0 * lo.max(1e-30).log10(),
         10.0 * hi.log10()
     );
@@ -315,6 +335,7 @@ fn ber_world(a: &BerArgs) -> Result<()> {
             profile,
             mode: ch.mode,
             h: &h,
+            doppler: &groups,
             csi,
             frames: a.frames,
             seed,

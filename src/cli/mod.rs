@@ -181,7 +181,8 @@ pub enum DtmbCommand {
         /// No effect in a static channel but its delay.
         #[arg(long)]
         interleaver: Option<usize>,
-        /// Carriers: 3780 or 1 (default 3780; with --world 3780 only).
+        /// Carriers: 3780 or 1 (default 3780; with --world the tower's). With --world, C = 1
+        /// bodies are equalised in the frequency domain (MMSE).
         #[arg(long)]
         carriers: Option<usize>,
         /// Frame header (sets the frame power the SNR is defined on): pn420, pn595, pn945
@@ -204,7 +205,9 @@ pub enum DtmbCommand {
         #[arg(long, value_name = "FILE.csv")]
         out: Option<PathBuf>,
         /// Measure through a world's tower's channel: its scene multipath to the
-        /// receiver at --at-s, held static (as `dtmb iq --world` computes it).
+        /// receiver at --at-s (as `dtmb iq --world` computes it), each path's delay and
+        /// gain held and its phase turning at its Doppler for the trial's receiver motion
+        /// at --at-s.
         #[arg(long, value_name = "WORLD.toml")]
         world: Option<PathBuf>,
         /// With --world: the tower id (default: the world's first DTMB tower).
@@ -217,9 +220,14 @@ pub enum DtmbCommand {
         #[arg(long, default_value_t = 0.0, value_name = "T")]
         at_s: f64,
         /// With --world: the receiver's channel knowledge: estimated (from the PN
-        /// headers), ideal (the true response), or both (two curves).
+        /// headers), ideal (the true response; with Doppler, at each body's centre), or
+        /// both (two curves).
         #[arg(long, default_value = "estimated")]
         csi: String,
+        /// With --world: hold the channel static (no Doppler), to measure what the
+        /// receiver's motion costs against the same paths standing still.
+        #[arg(long)]
+        no_doppler: bool,
     },
     /// Write DTMB baseband frames through white noise as a SigMF recording
     /// (BASE.sigmf-data and BASE.sigmf-meta, with an annotation per frame); with --world,
@@ -441,6 +449,7 @@ pub fn run(cli: Cli) -> Result<()> {
             trial,
             at_s,
             csi,
+            no_doppler,
         }) => dtmb::ber(&dtmb::BerArgs {
             qam,
             fec,
@@ -456,6 +465,7 @@ pub fn run(cli: Cli) -> Result<()> {
             trial,
             at_s,
             csi,
+            no_doppler,
         }),
         Command::Dtmb(DtmbCommand::Iq {
             mode,

@@ -2,7 +2,9 @@
 //! multipath, received with an estimated (or the true) channel.
 
 use crate::common::{hybridnav, refused, repo, tmp_dir};
-use hybridnav::dtmb::ber_channel::{impulse_response, measure_channel_point, ChannelBer, Csi};
+use hybridnav::dtmb::ber_channel::{
+    doppler_responses, impulse_response, measure_channel_point, ChannelBer, Csi,
+};
 use hybridnav::dtmb::data_layer::Profile;
 use hybridnav::dtmb::frame::CarrierMode;
 use hybridnav::dtmb::ldpc::CodeRate;
@@ -50,6 +52,7 @@ fn dtmb_ber_kehui_tower_at_its_link_budget_snr_loses_no_packet() {
         profile,
         mode: ch.mode,
         h: &h,
+        doppler: &[],
         csi: Csi::Estimated,
         frames: 20,
         seed: 1,
@@ -64,6 +67,59 @@ fn dtmb_ber_kehui_tower_at_its_link_budget_snr_loses_no_packet() {
     );
     let low = measure_channel_point(&cfg, 5.0).unwrap();
     assert_eq!(low.packet_errors, low.packets, "{low:?}");
+    // The same with the receiver's motion: each path turning at its Doppler.
+    let paths: Vec<_> = ch
+        .paths
+        .iter()
+        .zip(&ch.dopplers_hz)
+        .map(|(&(d, g), &f)| (d, g, f))
+        .collect();
+    let (hd, groups) = doppler_responses(&paths).unwrap();
+    assert_eq!(hd, h);
+    let moving = ChannelBer {
+        doppler: &groups,
+        ..cfg.clone()
+    };
+    let p = measure_channel_point(&moving, ch.snr_db).unwrap();
+    println!("Kehui D01 moving at {:.2} dB: {p:?}", ch.snr_db);
+    assert_eq!((p.packet_errors, p.ldpc_failures), (0, 0), "{p:?}");
+}
+
+/// The Dopplers `dtmb ber --world` applies are the trial's receiver motion at `--at-s`:
+/// the direct path's equals `−(dρ/dt)/λ`, the range rate differentiated numerically from
+/// the ranges `tower_channel_at` gives 50 ms before and after (central difference: the
+/// error is the range's third derivative times (50 ms)²/6, far below 0.05 Hz for a car),
+/// within 0.05 Hz. The receiver moves (|f| > 1 Hz at Kehui Road at 5 s).
+#[test]
+fn dtmb_ber_world_dopplers_are_the_range_rate_of_the_trial() {
+    let world = hybridnav::world::load_world(&repo().join("worlds/seed000-kehui.toml")).unwrap();
+    let at = |t: f64| {
+        let req = WorldIqRequest {
+            tower: None,
+            from_s: t,
+            frames: 1,
+            seed: world.file.montecarlo.seed,
+            trial: 0,
+            data_layer: DataLayerOverride::default(),
+        };
+        tower_channel_at(&world, &req).unwrap()
+    };
+    let (dt, t0) = (0.05, 5.0);
+    let (before, now, after) = (at(t0 - dt), at(t0), at(t0 + dt));
+    assert_eq!(now.dopplers_hz.len(), now.paths.len());
+    let lambda = hybridnav::core::C_MPS / now.freq_hz;
+    let rate = (after.range_m - before.range_m) / (after.at_s - before.at_s);
+    let want = -rate / lambda;
+    let direct = now
+        .paths
+        .iter()
+        .zip(&now.dopplers_hz)
+        .min_by(|a, b| a.0 .0.total_cmp(&b.0 .0))
+        .map(|(_, &f)| f)
+        .unwrap();
+    println!("D01 at 5 s: direct-path Doppler {direct:.4} Hz, −ρ̇/λ {want:.4} Hz");
+    assert!(direct.abs() > 1.0, "{direct}");
+    assert!((direct - want).abs() < 0.05, "{direct} vs {want}");
 }
 
 /// The command line: the link-budget SNR and the paths are printed, both receivers'
@@ -103,6 +159,10 @@ fn dtmb_ber_world_command_prints_the_margin_and_writes_both_curves() {
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(text.contains("tower D01 (PN945"), "{text}");
+    assert!(
+        text.contains("Doppler") && text.contains("turning at its Doppler"),
+        "{text}"
+    );
     assert!(text.contains("link-budget SNR"), "{text}");
     assert!(
         text.contains("# CSI estimated") && text.contains("# CSI ideal"),
@@ -153,14 +213,55 @@ fn dtmb_ber_world_refuses_bad_input() {
         &["contradicts tower D01's PN945"],
     );
     run(
-        &["--world", "worlds/seed000-kehui.toml", "--carriers", "1"],
-        &["C = 3780"],
+        &["--world", "worlds/seed000-kehui.toml", "--carriers", "2"],
+        &["--carriers must be 3780 or 1"],
     );
     run(
         &["--world", "worlds/seed000-kehui.toml", "--at-s", "1e9"],
         &["outside the world's duration"],
     );
     run(&["--tower", "D01"], &["--tower needs --world"]);
+    run(&["--no-doppler"], &["--no-doppler needs --world"]);
     run(&["--csi", "ideal"], &["--csi needs --world"]);
     run(&["--world", "no/such/world.toml"], &["no/such/world.toml"]);
+}
+
+/// `--carriers 1` through the world's channel (the C = 1 receiver) and `--no-doppler`
+/// (the static channel): far above 16QAM 0.8's AWGN threshold (12.4 dB) nothing is
+/// wrong, and the header says which channel was used.
+#[test]
+fn dtmb_ber_world_single_carrier_and_static_channel() {
+    let run = |extra: &[&str]| -> String {
+        let mut a = vec![
+            "dtmb",
+            "ber",
+            "--world",
+            "worlds/seed000-kehui.toml",
+            "--at-s",
+            "5",
+            "--qam",
+            "16qam",
+            "--fec",
+            "0.8",
+            "--snr-db",
+            "20",
+            "--frames",
+            "2",
+        ];
+        a.extend_from_slice(extra);
+        let o = hybridnav(&a);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let c1 = run(&["--carriers", "1"]);
+    assert!(c1.contains("C1"), "{c1}");
+    let row = c1
+        .lines()
+        .find(|l| l.trim_start().starts_with("20.00"))
+        .unwrap();
+    let cols: Vec<&str> = row.split_whitespace().collect();
+    assert_eq!(cols[2], "0", "{row}");
+    assert!(cols[1].parse::<u64>().unwrap() > 0, "{row}");
+    let still = run(&["--no-doppler"]);
+    assert!(still.contains("static: --no-doppler"), "{still}");
 }

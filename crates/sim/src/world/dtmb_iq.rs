@@ -38,8 +38,9 @@
 //! own. Each tower's frame starts are annotated (`hybridnav:tower`), so a recording of an
 //! SFN carries one annotation per tower and frame, sorted by sample.
 //!
-//! [`tower_channel_at`] gives the requested tower's paths and link SNR for one such block
-//! without recording (`dtmb ber --world`, which holds them static).
+//! [`tower_channel_at`] gives the requested tower's paths, their Dopplers and the link
+//! SNR for one such block without recording (`dtmb ber --world`, which holds the paths'
+//! delays and gains and rotates each with its Doppler).
 //!
 //! Random streams of `TrialRng::new(seed, trial)`: `motion/trajectory`,
 //! `receiver/clock/init`, `receiver/clock`, the shadowing of the master seed (as a run),
@@ -464,6 +465,10 @@ pub struct TowerChannel {
     /// Per path: excess delay over the range (samples at 7.56 Msps) and complex gain
     /// relative to the link budget's reference.
     pub paths: Vec<(f64, Complex64)>,
+    /// Per path (as `paths`): its Doppler shift (Hz) for the receiver's motion at that
+    /// instant, as a recording applies it (the scene's per-path Dopplers, or without a
+    /// scene the direct path's for every path).
+    pub dopplers_hz: Vec<f64>,
     /// The data layer's options of the tower's `[[transmitter]]`, each replaced by the
     /// request's (`qam`, `fec`, `interleaver`, `carriers`).
     pub qam: Option<String>,
@@ -514,6 +519,7 @@ pub fn tower_channel_at(world: &World, req: &WorldIqRequest) -> Result<TowerChan
             l.snr_db
         },
         paths: l.taps.iter().map(|&(d, g, _)| (d, g)).collect(),
+        dopplers_hz: l.taps.iter().map(|&(_, _, f)| f).collect(),
         qam: o.qam.clone().or_else(|| t.spec.qam.clone()),
         fec: o.fec.clone().or_else(|| t.spec.fec.clone()),
         interleaver: o.interleaver.or(t.spec.interleaver),
