@@ -58,6 +58,7 @@ use crate::core::{EmitterId, GpsTime};
 use crate::gnss::atmosphere::Klobuchar;
 use crate::gnss::ephemeris::Ephemeris;
 use crate::gnss::rinex_nav::NavData;
+use crate::gnss::signal::almanac::{self, Almanac};
 use crate::gnss::signal::baseband::NavSymbols;
 use std::sync::Arc;
 
@@ -211,11 +212,15 @@ impl Fields {
 }
 
 /// What a D1 subframe carries besides its satellite's ephemeris: the BeiDou Klobuchar set
-/// (subframe 1) and the time parameters (subframe 5 pages 9 and 10).
+/// (subframe 1), the almanac and health (subframe 4 pages 1–24, subframe 5 pages 1–8) and
+/// the time parameters (subframe 5 pages 9 and 10).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct D1Common {
+pub struct D1Common<'a> {
     pub iono: Option<Klobuchar>,
     pub time: BdsTimeParams,
+    /// The almanacs of C01–C30 (index PRN − 1) for subframes 4 and 5; an empty slice or a
+    /// `None` sends that page's almanac as zeros and its health as "no almanac".
+    pub almanac: &'a [Option<Almanac>],
 }
 
 /// The time parameters of D1 subframe 5 pages 9 and 10 (BDS-SIS-ICD-B1I-3.0 §5.2.4.18–19),
@@ -388,12 +393,84 @@ fn d1_fields(e: &Ephemeris, c: &D1Common, week: i64, sow: i64, fra_id: u32) -> F
         _ => {
             let page = d1_page(sow);
             f.put(44, 7, page as u64);
-            if fra_id == 5 {
-                d1_time_page(&mut f, &c.time, page);
+            let alm = |prn: i64| c.almanac.get(prn as usize - 1).copied().flatten();
+            match (fra_id, page) {
+                (4, p) => d1_almanac_page(&mut f, alm(p).as_ref()),
+                (5, p @ 1..=6) => d1_almanac_page(&mut f, alm(p + 24).as_ref()),
+                (5, 7 | 8) => d1_health_page(&mut f, c.almanac, page, week, sow),
+                (5, p) => d1_time_page(&mut f, &c.time, p),
+                _ => {}
             }
         }
     }
     f
+}
+
+/// An almanac page (subframe 4 pages 1–24: C01–C24; subframe 5 pages 1–6: C25–C30), ICD
+/// Figure 5-11-1 and Table 5-12; zeros without an almanac.
+fn d1_almanac_page(f: &mut Fields, a: Option<&Almanac>) {
+    let Some(a) = a else { return };
+    let sc = BDS_PI;
+    f.unsigned(&[(51, 2), (61, 22)], a.sqrt_a, p2(-11));
+    f.signed(&[(91, 11)], a.af1, p2(-38));
+    f.signed(&[(102, 11)], a.af0, p2(-20));
+    f.signed(&[(121, 22), (151, 2)], a.omega0 / sc, p2(-23));
+    f.unsigned(&[(153, 17)], a.e, p2(-21));
+    f.signed(&[(170, 3), (181, 13)], a.delta_i / sc, p2(-19));
+    f.unsigned(&[(194, 8)], a.toa_sow_s, 4096.0);
+    f.signed(&[(202, 1), (211, 16)], a.omega_dot / sc, p2(-38));
+    f.signed(&[(227, 6), (241, 18)], a.omega / sc, p2(-23));
+    f.signed(&[(259, 4), (271, 20)], a.m0 / sc, p2(-23));
+}
+
+/// Where the 9-bit health words Hea1–Hea19 (page 7) and Hea20–Hea30 (page 8) go, ICD
+/// Figures 5-11-2/3 (as GNSS-SDR's `Beidou_DNAV.h` and GNSSTk's `BDSD1Bits.hpp` read them).
+const HEA_SLOTS: [&[(usize, usize)]; 19] = [
+    &[(51, 2), (61, 7)],
+    &[(68, 9)],
+    &[(77, 6), (91, 3)],
+    &[(94, 9)],
+    &[(103, 9)],
+    &[(112, 1), (121, 8)],
+    &[(129, 9)],
+    &[(138, 5), (151, 4)],
+    &[(155, 9)],
+    &[(164, 9)],
+    &[(181, 9)],
+    &[(190, 9)],
+    &[(199, 4), (211, 5)],
+    &[(216, 9)],
+    &[(225, 8), (241, 1)],
+    &[(242, 9)],
+    &[(251, 9)],
+    &[(260, 3), (271, 6)],
+    &[(277, 9)],
+];
+
+/// The health word of a satellite: 0 (all information normal) when its almanac comes from
+/// an ephemeris flagged healthy; all ones otherwise — hybridnav's placeholder for "no
+/// usable almanac", not one of the ICD's per-bit meanings, which it does not model.
+pub fn bds_health_word(a: Option<&Almanac>) -> u64 {
+    match a {
+        Some(a) if a.healthy => 0,
+        _ => 0x1ff,
+    }
+}
+
+/// Subframe 5 page 7 (health of C01–C19) or 8 (C20–C30, WNa, toa).
+fn d1_health_page(f: &mut Fields, almanac: &[Option<Almanac>], page: i64, week: i64, sow: i64) {
+    let first = if page == 7 { 1 } else { 20 };
+    let count = if page == 7 { 19 } else { 11 };
+    for (k, slot) in HEA_SLOTS.iter().take(count).enumerate() {
+        let a = almanac.get(first + k - 1).copied().flatten();
+        f.put_slices(slot, bds_health_word(a.as_ref()));
+    }
+    if page == 8 {
+        let t = GpsTime::from_bdt_week_sow(week, sow as f64);
+        let (wna, toa) = crate::gnss::signal::almanac::toa_for(crate::core::System::Bds, t);
+        f.put(190, 8, wna.rem_euclid(256) as u64);
+        f.put_slices(&[(198, 5), (211, 3)], (toa / 4096.0) as u64);
+    }
 }
 
 /// Subframe 5 pages 9 (time offsets to GPS, Galileo, GLONASS) and 10 (UTC), ICD Figures
@@ -545,6 +622,10 @@ pub struct BdsNavStream {
     sat: EmitterId,
     /// GPST − UTC (s), for the D1 UTC parameters.
     gpst_minus_utc_s: i32,
+    /// The almanacs of C01–C30 and the toa they are referred to (rebuilt when a subframe's
+    /// toa changes, every 4096 s).
+    almanac: Vec<Option<Almanac>>,
+    almanac_toa: Option<(i64, f64)>,
     geo: bool,
     subframe: i64,
     bits: [u8; 300],
@@ -557,6 +638,8 @@ impl BdsNavStream {
         Self {
             nav,
             gpst_minus_utc_s,
+            almanac: Vec::new(),
+            almanac_toa: None,
             geo: sat.is_bds_geo(),
             sat,
             subframe: i64::MIN,
@@ -586,9 +669,15 @@ impl BdsNavStream {
             let week = start_ms.div_euclid(WEEK_MS);
             let sow = start_ms.rem_euclid(WEEK_MS) / 1000;
             let t = bdt(start_ms);
+            let toa = almanac::toa_for(crate::core::System::Bds, t);
+            if self.almanac_toa != Some(toa) {
+                self.almanac = almanac::constellation(&self.nav, crate::core::System::Bds, 30, t);
+                self.almanac_toa = Some(toa);
+            }
             let common = D1Common {
                 iono,
                 time: BdsTimeParams::from_nav(&self.nav, self.gpst_minus_utc_s, t),
+                almanac: &self.almanac,
             };
             match self.nav.select(self.sat, t) {
                 Some(e) => d1_subframe(e, &common, week, sow, &mut self.bits),
@@ -865,6 +954,7 @@ GLUT -1.8626451492E-09 0.000000000E+00      0    0          TIME SYSTEM CORR
             let c = D1Common {
                 iono: None,
                 time: BdsTimeParams::from_nav(&nav, 18, t),
+                almanac: &[],
             };
             let mut tx = [0u8; 300];
             d1_subframe(&e, &c, week, sow, &mut tx);
@@ -925,14 +1015,15 @@ GLUT -1.8626451492E-09 0.000000000E+00      0    0          TIME SYSTEM CORR
             corr_bd10,
             2f64.powi(-30),
         );
-        // Other pages of subframe 5 leave those bits alone, and without the lines the
+        // A reserved page of subframe 5 leaves those bits alone, and without the lines the
         // offsets are zeros, the leap seconds still GPST − UTC − 14 s.
         let bare = NavData::new(Vec::new(), None, Some(18));
         let tp = BdsTimeParams::from_nav(&bare, 18, t9);
         assert_eq!((tp.a0_gps_s, tp.a0_utc_s, tp.a1_utc), (0.0, 0.0, 0.0));
         assert_eq!((tp.dt_ls_s, tp.dt_lsf_s, tp.wn_lsf, tp.dn), (4, 4, 755, 6));
-        let p8 = decode(sow9 - 30 + 24);
-        assert_eq!(uget(&p8, &[(97, 14)]), 0);
+        let p11 = decode(sow9 + 60 + 24);
+        assert_eq!(uget(&p11, &[(44, 7)]), 11);
+        assert_eq!(uget(&p11, &[(97, 14)]), 0);
     }
 
     #[test]
@@ -1106,6 +1197,7 @@ GLUT -1.8626451492E-09 0.000000000E+00      0    0          TIME SYSTEM CORR
                 18,
                 GpsTime::from_bdt_week_sow(week, (sow0 + 6) as f64),
             ),
+            almanac: &[],
         };
         d1_subframe(&c20, &c, week, sow0 + 6, &mut want);
         for (i, &bit) in want.iter().enumerate() {

@@ -10,6 +10,7 @@
 //! - [`scenario`]: a world's geometry per epoch (the measurement level's orbits, clocks,
 //!   atmosphere, Sagnac and the scene's paths) turned into replicas and streamed.
 
+pub mod almanac;
 pub mod b1i;
 pub mod baseband;
 pub mod ca_code;
