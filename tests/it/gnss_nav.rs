@@ -391,12 +391,13 @@ fn almanac_vs_sp3(
 /// 12.5-minute cycle from the world's start, read back with an independent bit reader and
 /// flown with IS-GPS-200's almanac algorithm: every satellite's position is within 5 km
 /// of the IGS precise orbit (Sta21114.sp3) at the SP3 epochs within an hour of toa. The
-/// almanac drops the ephemeris's harmonic corrections and Δn (a few km by IS-GPS-200's own
-/// account of almanac accuracy); a wrong bit position or scale factor would put a
-/// satellite thousands of km off.
+/// almanac drops the ephemeris's harmonic corrections and Δn and has coarser scale
+/// factors, which costs hundreds of metres to a few km within hours of toa; 5 km bounds
+/// that, while a wrong bit position or scale factor puts a satellite hundreds of km off
+/// or more.
 #[test]
 fn gnss_nav_gps_almanac_flies_within_km_of_the_precise_orbits() {
-    use hybridnav::core::{EmitterId, System};
+    use hybridnav::core::System;
     use hybridnav::gnss::signal::lnav::LnavStream;
     let Some(dir) = crate::common::shared_gnss() else {
         return;

@@ -703,7 +703,8 @@ fn leap_line_rest(
 }
 
 /// A RINEX 3 `TIME SYSTEM CORR` line: A4 type, D17.10 a0 (columns 6–22), D16.9 a1
-/// (23–38), I7 reference seconds (39–45), I5 reference week (46–50).
+/// (23–38), I7 reference seconds (39–45), I5 reference week (46–50); blank reference
+/// fields read as 0 (no reference).
 fn time_system_corr(ctx: &Ctx<'_>, idx: usize, line: &str) -> Result<TimeSystemCorr, RinexError> {
     let code = cols(line, 0, 4).unwrap_or("").trim().to_string();
     if code.len() != 4 || !code.chars().all(|c| c.is_ascii_uppercase()) {
@@ -726,8 +727,13 @@ fn time_system_corr(ctx: &Ctx<'_>, idx: usize, line: &str) -> Result<TimeSystemC
     };
     let a0_s = number(5, 22, "a0")?;
     let a1_s_per_s = number(22, 38, "a1")?;
+    // Blank reference fields (GNSS-SDR 0.0.17 writes its BDUT line so) mean no reference
+    // time: the line's a1 is then not applied.
     let integer = |a: usize, b: usize, what: &str| -> Result<i64, RinexError> {
         let field = cols(line, a, b).unwrap_or("").trim();
+        if field.is_empty() {
+            return Ok(0);
+        }
         field.parse().map_err(|_| {
             ctx.syntax(
                 idx,
@@ -1851,6 +1857,13 @@ GLUT -1.8626451492e-09 0.000000000e+00      0    0          TIME SYSTEM CORR
         assert!(err.to_string().contains("a1 of GPUT"), "{err}");
         let err = parse_nav(&head.replace("GLUT", "gl-t"), "t.rnx").unwrap_err();
         assert_eq!(err.line(), Some(4));
+        // GNSS-SDR 0.0.17's RINEX header: a BDUT line without reference time or week.
+        let gsdr = head.replace(
+            "BDUT  0.0000000000e+00-4.085620730e-14     14  782",
+            "BDUT   .0000000000D+00  .000000000D+00           ",
+        );
+        let nav = parse_nav(&gsdr, "GSDR.26N").expect("GNSS-SDR's header");
+        assert_eq!(nav.time_corr[1].reference(), None);
     }
 
     #[test]

@@ -178,27 +178,28 @@ impl Almanac {
     }
 }
 
-/// The almanacs of `system`'s satellites 1..=`count` for a message sent at `t` (index
-/// PRN − 1; `None` for a satellite without a usable ephemeris).
-pub fn constellation(
+/// The almanacs of `system`'s satellites 1..=`count` for a message sent at `t`, into `out`
+/// (index PRN − 1; `None` for a satellite without a usable ephemeris). `out` keeps its
+/// capacity, so a stream that refills it every 4096 s allocates once.
+pub fn fill_constellation(
     nav: &NavData,
     system: System,
     count: u16,
     t: GpsTime,
-) -> Vec<Option<Almanac>> {
+    out: &mut Vec<Option<Almanac>>,
+) {
     let (week, toa_sow) = toa_for(system, t);
     let toa = match system {
         System::Bds => GpsTime::from_bdt_week_sow(week, toa_sow),
         _ => GpsTime::from_week_tow(week, toa_sow),
     };
-    (1..=count)
-        .map(|prn| {
-            let sat = EmitterId::new(system, prn);
-            nav.select(sat, toa)
-                .or_else(|| nav.select(sat, t))
-                .map(|e| Almanac::from_ephemeris(e, week, toa_sow))
-        })
-        .collect()
+    out.clear();
+    out.extend((1..=count).map(|prn| {
+        let sat = EmitterId::new(system, prn);
+        nav.select(sat, toa)
+            .or_else(|| nav.select(sat, t))
+            .map(|e| Almanac::from_ephemeris(e, week, toa_sow))
+    }));
 }
 
 #[cfg(test)]

@@ -37,8 +37,17 @@
 //!
 //! - D1 subframe 1: SatH1, AODC, URAI, WN, toc, TGD1/2, the BDS Klobuchar α0–α3 (bits
 //!   127–166) and β0–β3 (167–172 + 181–182, 183–198, 199–202 + 211–214), a0–a2, AODE;
-//!   subframes 2–3: the Keplerian elements; subframes 4–5: the page number only (no
-//!   almanac is broadcast).
+//!   subframes 2–3: the Keplerian elements. Subframes 4 and 5 rotate through 24 pages
+//!   ([`d1_page`]: page `SOW/30 mod 24 + 1`, a 12-minute cycle): subframe 4 pages 1–24 the
+//!   almanac of C01–C24, subframe 5 pages 1–6 that of C25–C30 (√A, a1, a0, Ω0, e, δi, toa,
+//!   Ω̇, ω, M0, ICD Figure 5-11-1; derived from the world's ephemerides,
+//!   [`crate::gnss::signal::almanac`]), page 7 the 9-bit health of C01–C19, page 8 that of
+//!   C20–C30 with WNa and toa, page 9 the time offsets to GPS, Galileo and GLONASS
+//!   (A0/A1, 0.1 ns and 0.1 ns/s), page 10 the UTC parameters (ΔtLS, ΔtLSF, WN_LSF,
+//!   A0UTC 2⁻³⁰ s, A1UTC 2⁻⁵⁰, DN), both from the navigation header ([`BdsTimeParams`]);
+//!   pages 11–24 of subframe 5 are reserved (page number only). The health word is 0 for a
+//!   satellite whose ephemeris says healthy and all ones otherwise (hybridnav's
+//!   placeholder, [`bds_health_word`]).
 //! - D2 subframe 1 pages 1–10 as §5.3.3 (page 1: SatH1, AODC, URAI, WN, toc, TGD1/2; page 2:
 //!   α/β; page 3: a0, a1's 4 MSBs; … page 10: ω's 5 LSBs, IDOT). Subframes 2–5 (integrity
 //!   and differential corrections, almanac, health, time offsets) carry the preamble,
@@ -671,7 +680,13 @@ impl BdsNavStream {
             let t = bdt(start_ms);
             let toa = almanac::toa_for(crate::core::System::Bds, t);
             if self.almanac_toa != Some(toa) {
-                self.almanac = almanac::constellation(&self.nav, crate::core::System::Bds, 30, t);
+                almanac::fill_constellation(
+                    &self.nav,
+                    crate::core::System::Bds,
+                    30,
+                    t,
+                    &mut self.almanac,
+                );
                 self.almanac_toa = Some(toa);
             }
             let common = D1Common {

@@ -437,8 +437,13 @@ impl crate::gnss::signal::baseband::NavSymbols for LnavStream {
             let start = GpsTime::from_ns(frame * 30_000_000_000);
             let toa = almanac::toa_for(crate::core::System::Gps, start);
             if self.almanac_toa != Some(toa) {
-                self.almanac =
-                    almanac::constellation(&self.nav, crate::core::System::Gps, 32, start);
+                almanac::fill_constellation(
+                    &self.nav,
+                    crate::core::System::Gps,
+                    32,
+                    start,
+                    &mut self.almanac,
+                );
                 self.almanac_toa = Some(toa);
             }
             match self.nav.select(self.sat, start) {
