@@ -238,10 +238,10 @@ pub struct D1Common<'a> {
 /// # Derivation from the navigation file's header
 ///
 /// A `TIME SYSTEM CORR` line gives `CORR_X(t) = a0 + a1·(t − t_ref)`, the sub-second part
-/// of `X − UTC` (`GPUT`, `GAUT`, `BDUT`; `GLUT` with a0 = −τ_C). BDT = UTC + ΔtLS_BDS
-/// + CORR_BD, GPST = UTC + ΔtLS_GPS + CORR_GP, ΔtLS_BDS = ΔtLS_GPS − 14 s, GST is aligned
-/// to GPST, and GLONASS time is UTC(SU) + 3 h, so the sub-second offsets of BDT from the
-/// other systems are
+/// of `X − UTC` (`GPUT`, `GAUT`, `BDUT`; `GLUT` with a0 = −τ_C). With
+/// `BDT = UTC + ΔtLS_BDS + CORR_BD`, `GPST = UTC + ΔtLS_GPS + CORR_GP`,
+/// `ΔtLS_BDS = ΔtLS_GPS − 14 s`, GST aligned to GPST and GLONASS time = UTC(SU) + 3 h, the
+/// sub-second offsets of BDT from the other systems are
 ///
 /// ```text
 /// δ_GPS = CORR_BD − CORR_GP     (BDT − GPST = −14 s + δ_GPS)
