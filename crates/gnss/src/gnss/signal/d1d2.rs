@@ -49,10 +49,16 @@
 //!   satellite whose ephemeris says healthy and all ones otherwise (hybridnav's
 //!   placeholder, [`bds_health_word`]).
 //! - D2 subframe 1 pages 1–10 as §5.3.3 (page 1: SatH1, AODC, URAI, WN, toc, TGD1/2; page 2:
-//!   α/β; page 3: a0, a1's 4 MSBs; … page 10: ω's 5 LSBs, IDOT). Subframes 2–5 (integrity
-//!   and differential corrections, almanac, health, time offsets) carry the preamble,
-//!   FraID and SOW and zeros elsewhere (page numbers included): receivers that position
-//!   from D2 read subframe 1 only.
+//!   α/β; page 3: a0, a1's 4 MSBs; … page 10: ω's 5 LSBs, IDOT). Subframe 5 ([`d2_page5`]:
+//!   page `SOW/3 mod 120 + 1`) carries D1's almanac, health and time pages at D2's page
+//!   numbers: 35–36 health, WNa, toa; 37–60 and 95–100 the almanac of C01–C24 and C25–C30;
+//!   101–102 the time offsets and UTC parameters. **Placeholders**: subframes 2–4
+//!   (integrity and differential corrections: RURAI, UDREI, Δt) and subframe 5's
+//!   ionospheric grid pages (1–13, 61–73: GIVEI, dτ) and other pages carry the preamble,
+//!   FraID, SOW (and subframe 5's page number) with zeros elsewhere — hybridnav has no
+//!   corrections or grid, and the ICD's "not monitored" codes are not written (their bit
+//!   positions were not checked here), so a receiver that trusts these zeros would read
+//!   them as values.
 //!
 //! The Klobuchar α/β are BeiDou's own set (`BDSA`/`BDSB` of a RINEX 3 header,
 //! [`NavData::klobuchar_bds`]). When the file has none they are sent as zeros, which keeps
@@ -406,7 +412,7 @@ fn d1_fields(e: &Ephemeris, c: &D1Common, week: i64, sow: i64, fra_id: u32) -> F
             match (fra_id, page) {
                 (4, p) => d1_almanac_page(&mut f, alm(p).as_ref()),
                 (5, p @ 1..=6) => d1_almanac_page(&mut f, alm(p + 24).as_ref()),
-                (5, 7 | 8) => d1_health_page(&mut f, c.almanac, page, week, sow),
+                (5, 7 | 8) => d1_health_page(&mut f, c.almanac, page == 8, week, sow),
                 (5, p) => d1_time_page(&mut f, &c.time, p),
                 _ => {}
             }
@@ -466,15 +472,16 @@ pub fn bds_health_word(a: Option<&Almanac>) -> u64 {
     }
 }
 
-/// Subframe 5 page 7 (health of C01–C19) or 8 (C20–C30, WNa, toa).
-fn d1_health_page(f: &mut Fields, almanac: &[Option<Almanac>], page: i64, week: i64, sow: i64) {
-    let first = if page == 7 { 1 } else { 20 };
-    let count = if page == 7 { 19 } else { 11 };
+/// D1 subframe 5 page 7 / D2 subframe 5 page 35 (health of C01–C19) when `!second`, page 8
+/// / page 36 (C20–C30, WNa, toa) when `second`.
+fn d1_health_page(f: &mut Fields, almanac: &[Option<Almanac>], second: bool, week: i64, sow: i64) {
+    let first = if second { 20 } else { 1 };
+    let count = if second { 11 } else { 19 };
     for (k, slot) in HEA_SLOTS.iter().take(count).enumerate() {
         let a = almanac.get(first + k - 1).copied().flatten();
         f.put_slices(slot, bds_health_word(a.as_ref()));
     }
-    if page == 8 {
+    if second {
         let t = GpsTime::from_bdt_week_sow(week, sow as f64);
         let (wna, toa) = crate::gnss::signal::almanac::toa_for(crate::core::System::Bds, t);
         f.put(190, 8, wna.rem_euclid(256) as u64);
@@ -515,9 +522,13 @@ fn split(raw: u64, width: usize, msb: usize) -> (u64, u64) {
 
 /// The decoded bits of D2 subframe `fra_id` (1–5) of the frame starting at BDT `week`,
 /// `sow` (a multiple of 3); subframe 1 is page `sow/3 mod 10 + 1`.
-fn d2_fields(e: &Ephemeris, iono: Option<&Klobuchar>, week: i64, sow: i64, fra_id: u32) -> Fields {
+fn d2_fields(e: &Ephemeris, c: &D1Common, week: i64, sow: i64, fra_id: u32) -> Fields {
+    let iono = c.iono.as_ref();
     let mut f = Fields([0; 300]);
     f.header(fra_id, sow);
+    if fra_id == 5 {
+        d2_subframe5(&mut f, c, week, sow);
+    }
     if fra_id != 1 {
         return f;
     }
@@ -597,6 +608,34 @@ fn d2_fields(e: &Ephemeris, iono: Option<&Klobuchar>, week: i64, sow: i64, fra_i
     f
 }
 
+/// The D2 page (1–120) of subframe 5 in the frame that starts at BDT second of week `sow`
+/// (a multiple of 3): `SOW/3 mod 120 + 1`, a 6-minute cycle (the ICD numbers pages without
+/// tying them to the time, as for D1's [`d1_page`]).
+pub fn d2_page5(sow: i64) -> i64 {
+    (sow / 3).rem_euclid(120) + 1
+}
+
+/// D2 subframe 5 (§5.3.3; page layouts as GNSSTk's `BDSD2Bits.hpp` gives them, the same
+/// fields at the same bits as D1's): pages 35–36 the health of C01–C30 with WNa and toa,
+/// pages 37–60 the almanac of C01–C24, pages 95–100 that of C25–C30, page 101 the time
+/// offsets to GPS, Galileo and GLONASS, page 102 the UTC parameters — the same data as D1
+/// subframes 4–5. The ionospheric grid pages (1–13, 61–73) and the rest carry the page
+/// number and zeros: hybridnav has no grid to broadcast (placeholders, not "not
+/// monitored" codes, which are not written here).
+fn d2_subframe5(f: &mut Fields, c: &D1Common, week: i64, sow: i64) {
+    let page = d2_page5(sow);
+    f.put(44, 7, page as u64);
+    let alm = |prn: i64| c.almanac.get(prn as usize - 1).copied().flatten();
+    match page {
+        35 | 36 => d1_health_page(f, c.almanac, page == 36, week, sow),
+        37..=60 => d1_almanac_page(f, alm(page - 36).as_ref()),
+        95..=100 => d1_almanac_page(f, alm(page - 70).as_ref()),
+        101 => d1_time_page(f, &c.time, 9),
+        102 => d1_time_page(f, &c.time, 10),
+        _ => {}
+    }
+}
+
 /// The 300 transmitted bits of the D1 subframe of `e` that starts at BDT `week`, `sow`,
 /// with the Klobuchar set and time parameters of `c` (a missing set goes out as zeros).
 pub fn d1_subframe(e: &Ephemeris, c: &D1Common, week: i64, sow: i64, out: &mut [u8; 300]) {
@@ -605,16 +644,17 @@ pub fn d1_subframe(e: &Ephemeris, c: &D1Common, week: i64, sow: i64, out: &mut [
 }
 
 /// The 300 transmitted bits of D2 subframe `fra_id` (1–5) of `e` in the frame that starts
-/// at BDT `week`, `sow` (a multiple of 3), with the Klobuchar set `iono`.
+/// at BDT `week`, `sow` (a multiple of 3), with the Klobuchar set, almanacs and time
+/// parameters of `c`.
 pub fn d2_subframe(
     e: &Ephemeris,
-    iono: Option<&Klobuchar>,
+    c: &D1Common,
     week: i64,
     sow: i64,
     fra_id: u32,
     out: &mut [u8; 300],
 ) {
-    d2_fields(e, iono, week, sow, fra_id).encode(out);
+    d2_fields(e, c, week, sow, fra_id).encode(out);
 }
 
 /// D1 subframes last 6 s, D2 subframes 0.6 s.
@@ -660,8 +700,30 @@ impl BdsNavStream {
     fn build(&mut self, sf: i64) {
         let iono = self.nav.klobuchar_bds;
         let bdt = |ms: i64| GpsTime::from_ns((ms + BDT_EPOCH_MS) * 1_000_000);
+        let len = if self.geo {
+            D2_SUBFRAME_MS
+        } else {
+            D1_SUBFRAME_MS
+        };
+        let start_ms = sf * len;
+        let t = bdt(start_ms);
+        let toa = almanac::toa_for(crate::core::System::Bds, t);
+        if self.almanac_toa != Some(toa) {
+            almanac::fill_constellation(
+                &self.nav,
+                crate::core::System::Bds,
+                30,
+                t,
+                &mut self.almanac,
+            );
+            self.almanac_toa = Some(toa);
+        }
+        let common = D1Common {
+            iono,
+            time: BdsTimeParams::from_nav(&self.nav, self.gpst_minus_utc_s, t),
+            almanac: &self.almanac,
+        };
         if self.geo {
-            let start_ms = sf * D2_SUBFRAME_MS;
             let frame_ms = start_ms.div_euclid(D2_FRAME_MS) * D2_FRAME_MS;
             let week = frame_ms.div_euclid(WEEK_MS);
             let sow = frame_ms.rem_euclid(WEEK_MS) / 1000;
@@ -670,30 +732,12 @@ impl BdsNavStream {
             // joins pages of two different ephemerides.
             let cycle_ms = start_ms.div_euclid(D2_PAGES_MS) * D2_PAGES_MS;
             match self.nav.select(self.sat, bdt(cycle_ms)) {
-                Some(e) => d2_subframe(e, iono.as_ref(), week, sow, fra_id, &mut self.bits),
+                Some(e) => d2_subframe(e, &common, week, sow, fra_id, &mut self.bits),
                 None => self.bits = [0; 300],
             }
         } else {
-            let start_ms = sf * D1_SUBFRAME_MS;
             let week = start_ms.div_euclid(WEEK_MS);
             let sow = start_ms.rem_euclid(WEEK_MS) / 1000;
-            let t = bdt(start_ms);
-            let toa = almanac::toa_for(crate::core::System::Bds, t);
-            if self.almanac_toa != Some(toa) {
-                almanac::fill_constellation(
-                    &self.nav,
-                    crate::core::System::Bds,
-                    30,
-                    t,
-                    &mut self.almanac,
-                );
-                self.almanac_toa = Some(toa);
-            }
-            let common = D1Common {
-                iono,
-                time: BdsTimeParams::from_nav(&self.nav, self.gpst_minus_utc_s, t),
-                almanac: &self.almanac,
-            };
             match self.nav.select(self.sat, t) {
                 Some(e) => d1_subframe(e, &common, week, sow, &mut self.bits),
                 None => self.bits = [0; 300],
@@ -1041,18 +1085,90 @@ GLUT -1.8626451492E-09 0.000000000E+00      0    0          TIME SYSTEM CORR
         assert_eq!(uget(&p11, &[(97, 14)]), 0);
     }
 
+    /// D2 subframe 5 pages 35–37, 95, 101, 102 carry exactly the fields of D1's subframe 5
+    /// pages 7, 8, subframe 4 page 1, subframe 5 page 1, pages 9, 10 (GNSSTk's D2 layout is
+    /// D1's), with their own page numbers; a grid page (1) only its number.
+    #[test]
+    fn d2_subframe_5_repeats_the_d1_almanac_health_and_time_pages() {
+        let nav = crate::gnss::rinex_nav::parse_nav(TIME_HEADER, "time.rnx").expect("header");
+        let geo = c05_2020();
+        let (week, toe_sow) = geo.toe.bdt_week_sow();
+        let t = GpsTime::from_bdt_week_sow(week, toe_sow);
+        let mut meo = c05_2020();
+        meo.sat = EmitterId::new(crate::core::System::Bds, 20);
+        // Almanacs of C05 and C20 (index PRN − 1), the rest absent.
+        let mut almanac = vec![None; 30];
+        for e in [&geo, &meo] {
+            let (w, s) = almanac::toa_for(crate::core::System::Bds, t);
+            almanac[usize::from(e.sat.number) - 1] = Some(Almanac::from_ephemeris(e, w, s));
+        }
+        let c = D1Common {
+            iono: None,
+            time: BdsTimeParams::from_nav(&nav, 18, t),
+            almanac: &almanac,
+        };
+        // The D2 frame whose subframe 5 is page `p`, the D1 frame whose subframe `fra` is
+        // page `q`: their decoded bits from 51 on (after the page number).
+        let week_start = 720 * 490; // a multiple of 360 s (D2) and 720 s (D1)
+        let d2 = |p: i64| {
+            let sow = week_start + 3 * (p - 1);
+            let mut tx = [0u8; 300];
+            d2_subframe(&geo, &c, week, sow, 5, &mut tx);
+            assert_codewords_valid(&tx);
+            let d = deinterleave(&tx);
+            assert_eq!(uget(&d, &[(44, 7)]), p as u64, "D2 Pnum");
+            d
+        };
+        let d1 = |fra: i64, q: i64| {
+            let sow = week_start + 30 * (q - 1) + 6 * (fra - 1);
+            let mut tx = [0u8; 300];
+            d1_subframe(&meo, &c, week, sow, &mut tx);
+            let d = deinterleave(&tx);
+            assert_eq!(uget(&d, &[(44, 7)]), q as u64, "D1 Pnum");
+            d
+        };
+        let info = |d: &[u8; 300]| -> Vec<u8> {
+            (1..10)
+                .flat_map(|w| (w * 30..w * 30 + 22).collect::<Vec<_>>())
+                .filter(|&i| i >= 50)
+                .map(|i| d[i])
+                .collect()
+        };
+        for (p, fra, q) in [(35, 5, 7), (37, 4, 1), (101, 5, 9), (102, 5, 10)] {
+            assert_eq!(
+                info(&d2(p)),
+                info(&d1(fra, q)),
+                "D2 page {p} vs D1 {fra}/{q}"
+            );
+        }
+        // Page 36 (WNa, toa at the frame's time) against D1 page 8 sent in the same toa.
+        assert_eq!(info(&d2(36)), info(&d1(5, 8)), "D2 page 36 vs D1 page 8");
+        // C05's almanac page is 41 (37 + 4) and not zero; C25's (page 95) is zeros.
+        assert_ne!(uget(&d2(41), &[(51, 2), (61, 22)]), 0);
+        assert_eq!(uget(&d2(95), &[(51, 2), (61, 22)]), 0);
+        let grid = d2(1);
+        assert!(
+            info(&grid).iter().all(|&b| b == 0),
+            "grid page 1 is a placeholder"
+        );
+    }
+
     #[test]
     fn d2_pages_decode_back_to_the_ephemeris() {
         let e = c05_2020();
         assert!(e.sat.is_bds_geo());
         let k = bds_klobuchar();
+        let with_k = D1Common {
+            iono: Some(k),
+            ..D1Common::default()
+        };
         let (week, toe_sow) = e.toe.bdt_week_sow();
         let sow0 = toe_sow as i64; // a multiple of 30 s: page 1
         let pages: Vec<[u8; 300]> = (0..10)
             .map(|p| {
                 let sow = sow0 + 3 * p;
                 let mut tx = [0u8; 300];
-                d2_subframe(&e, Some(&k), week, sow, 1, &mut tx);
+                d2_subframe(&e, &with_k, week, sow, 1, &mut tx);
                 assert_codewords_valid(&tx);
                 let d = deinterleave(&tx);
                 assert_eq!(uget(&d, &[(1, 11)]), PREAMBLE);
@@ -1166,7 +1282,7 @@ GLUT -1.8626451492E-09 0.000000000E+00      0    0          TIME SYSTEM CORR
         // FraID, valid codewords.
         for fra_id in 2..=5 {
             let mut tx = [0u8; 300];
-            d2_subframe(&e, Some(&k), week, sow0, fra_id, &mut tx);
+            d2_subframe(&e, &with_k, week, sow0, fra_id, &mut tx);
             assert_codewords_valid(&tx);
             let d = deinterleave(&tx);
             assert_eq!(uget(&d, &[(16, 3)]), u64::from(fra_id));
@@ -1191,7 +1307,17 @@ GLUT -1.8626451492E-09 0.000000000E+00      0    0          TIME SYSTEM CORR
         // 300 bits lasts two code periods, with no overlay code.
         let mut geo = BdsNavStream::new(Arc::clone(&nav), c05.sat, 18);
         let mut want = [0u8; 300];
-        d2_subframe(&c05, Some(&k), week, sow0 + 3, 3, &mut want);
+        d2_subframe(
+            &c05,
+            &D1Common {
+                iono: Some(k),
+                ..D1Common::default()
+            },
+            week,
+            sow0 + 3,
+            3,
+            &mut want,
+        );
         for (i, &bit) in want.iter().enumerate() {
             let ms = at(sow0 + 3, 1200 + 2 * i as i64);
             assert_eq!(geo.symbol(ms), bit, "bit {i}");
