@@ -9,7 +9,7 @@ use crate::common::{hybridnav, refused, skip, stderr, tmp_dir};
 use hybridnav::core::{Geodetic, GpsTime};
 use std::process::Command;
 
-const WORLD: &str = "worlds/gnss-iq-open-sky.toml";
+pub(crate) const WORLD: &str = "worlds/gnss-iq-open-sky.toml";
 const ROAD: &str = "worlds/gnss-iq-open-road.toml";
 
 /// GNSS-SDR's configuration for an interleaved 8-bit recording at `rate` of GPS L1 C/A:
@@ -147,6 +147,11 @@ pub(crate) struct Positioned {
     pub(crate) dir: std::path::PathBuf,
 }
 
+/// One GNSS-SDR at a time: each runs a flowgraph of a dozen threads, and on two cores
+/// shared with the other tests several at once starved them (a B1I run lost lock on three
+/// channels and output no fix; the same file alone gave 21 fixes).
+pub(crate) static ONE_RECEIVER: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Records `world` for `duration_s` at `rate` sps ci8 on `signal` (`gps-l1ca` or
 /// `bds-b1i`), writes GNSS-SDR's configuration `conf(data, out, prns)` and runs GNSS-SDR
 /// on it. `None` (after the skip is reported) when GNSS-SDR is not installed.
@@ -201,10 +206,6 @@ pub(crate) fn record_and_position(
         .map(|a| a["hybridnav:prn"].as_u64().expect("prn"))
         .collect();
     let conf_path = file("conf");
-    // One GNSS-SDR at a time: each runs a flowgraph of a dozen threads, and on two cores
-    // shared with the other tests several at once starved them (a B1I run lost lock on
-    // three channels and output no fix; the same file alone gave 21 fixes).
-    static ONE_RECEIVER: std::sync::Mutex<()> = std::sync::Mutex::new(());
     let _turn = ONE_RECEIVER.lock().unwrap_or_else(|e| e.into_inner());
     std::fs::write(
         &conf_path,
@@ -457,10 +458,10 @@ fn bds_ephemerides(log: &str) -> usize {
 const BDS_DURATION_S: u32 = 120;
 
 /// The world's navigation file and the instant the B1I recordings start (both worlds').
-const ESBC_NAV: &str = "ephemeris/ESBC00DNK_R_20201770000_01D_MN.rnx";
+pub(crate) const ESBC_NAV: &str = "ephemeris/ESBC00DNK_R_20201770000_01D_MN.rnx";
 
 /// The value of the first `<tag>…</tag>` in `xml` (GNSS-SDR's boost serialisations).
-fn xml_value(xml: &str, tag: &str) -> Option<f64> {
+pub(crate) fn xml_value(xml: &str, tag: &str) -> Option<f64> {
     let open = format!("<{tag}>");
     let i = xml.find(&open)? + open.len();
     let j = xml[i..].find('<')? + i;

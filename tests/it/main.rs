@@ -19,6 +19,7 @@ mod fusion_family;
 mod fusion_filters;
 mod gnss_canyon;
 mod gnss_iq;
+mod gnss_nav;
 mod gnss_orbits;
 mod hostile;
 mod inertial;

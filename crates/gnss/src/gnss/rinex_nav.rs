@@ -246,6 +246,14 @@ pub struct NavData {
     pub klobuchar_bds: Option<Klobuchar>,
     /// GPST − UTC leap seconds from the header.
     pub leap_seconds: Option<i32>,
+    /// The rest of a RINEX 3 `LEAP SECONDS` line when it has it: the future or past leap
+    /// seconds ΔtLSF, its week WN_LSF and day DN, and whether the line's values are in BDS
+    /// time (its time-system field `BDS`) rather than GPS's.
+    pub leap_announcement: Option<LeapAnnouncement>,
+    /// The `TIME SYSTEM CORR` lines of a RINEX 3 header (GPUT, GAUT, BDUT, GLUT, GAGP, …),
+    /// in file order; the D1 message's time offsets are derived from them
+    /// ([`crate::gnss::signal::d1d2::BdsTimeParams`]).
+    pub time_corr: Vec<TimeSystemCorr>,
     /// Number of records skipped per system letter (systems other than G and C).
     pub skipped: BTreeMap<char, usize>,
     /// GPS and BeiDou records read but not used (implausible elements, an orbit that is
@@ -253,6 +261,59 @@ pub struct NavData {
     pub dropped: Vec<DroppedRecord>,
     /// The age limits [`NavData::select`] applies.
     pub max_age: MaxAge,
+}
+
+/// One `TIME SYSTEM CORR` line (RINEX 3.05 §5.2 and Table A5): the correction
+/// `CORR(t) = a0 + a1·(t − t_ref)` (s) between two time systems, beyond their whole-second
+/// offset. For `xxUT` lines it is the system's time minus UTC beyond the leap seconds
+/// (`GPUT`: GPST − UTC(USNO) − ΔtLS; `GLUT`: a0 = −τ_C, the GLONASS time correction);
+/// for `GAGP` it is GST − GPST.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TimeSystemCorr {
+    /// The four-letter type, e.g. `GPUT`.
+    pub code: String,
+    pub a0_s: f64,
+    pub a1_s_per_s: f64,
+    /// Reference time: seconds into week `ref_week` of the line's own system (BDT weeks for
+    /// `BDUT`, GPS weeks otherwise; both zero for `GLUT`, whose a1 is zero).
+    pub ref_sow_s: f64,
+    pub ref_week: i64,
+}
+
+impl TimeSystemCorr {
+    /// The reference time as a [`GpsTime`] (`None` for a line without one).
+    pub fn reference(&self) -> Option<GpsTime> {
+        if self.ref_week == 0 && self.ref_sow_s == 0.0 {
+            return None;
+        }
+        Some(if self.code.starts_with("BD") {
+            GpsTime::from_bdt_week_sow(self.ref_week, self.ref_sow_s)
+        } else {
+            GpsTime::from_week_tow(self.ref_week, self.ref_sow_s)
+        })
+    }
+
+    /// `CORR(t)` (s).
+    pub fn at(&self, t: GpsTime) -> f64 {
+        self.a0_s
+            + self
+                .reference()
+                .map_or(0.0, |r| self.a1_s_per_s * t.seconds_since(r))
+    }
+}
+
+/// A leap second announced (or past) in a RINEX 3 `LEAP SECONDS` line (RINEX 3.05 Table
+/// A5): ΔtLSF, WN_LSF and DN as the line gives them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LeapAnnouncement {
+    /// ΔtLSF (s).
+    pub future_s: i32,
+    /// WN_LSF: a continuous week number (GPS weeks, or BDT weeks when `bds`).
+    pub week: i64,
+    /// DN: day of the week (1–7 in GPS's numbering, 0–6 in BDS's).
+    pub day: i64,
+    /// The line's values are BDS's (time-system field `BDS`).
+    pub bds: bool,
 }
 
 /// Reads a navigation file from disk; see [`parse_nav`].
@@ -282,6 +343,8 @@ struct Header {
     klobuchar: Option<Klobuchar>,
     klobuchar_bds: Option<Klobuchar>,
     leap_seconds: Option<i32>,
+    leap_announcement: Option<LeapAnnouncement>,
+    time_corr: Vec<TimeSystemCorr>,
     /// Index (0-based) of the first body line.
     body_start: usize,
 }
@@ -477,6 +540,8 @@ pub fn parse_nav(text: &str, file_name: &str) -> Result<NavData, RinexError> {
         klobuchar: header.klobuchar,
         klobuchar_bds: header.klobuchar_bds,
         leap_seconds: header.leap_seconds,
+        leap_announcement: header.leap_announcement,
+        time_corr: header.time_corr.clone(),
         ..NavData::default()
     };
     let dialect = if header.version < 3.0 {
@@ -542,6 +607,8 @@ fn parse_header(ctx: &Ctx<'_>, lines: &[&str]) -> Result<Header, RinexError> {
     let mut alpha_bds: Option<[f64; 4]> = None;
     let mut beta_bds: Option<[f64; 4]> = None;
     let mut leap_seconds = None;
+    let mut leap_announcement = None;
+    let mut time_corr = Vec::new();
     for (idx, line) in lines.iter().enumerate().skip(1) {
         let label = cols(line, 60, 80).unwrap_or("").trim();
         match label {
@@ -560,6 +627,8 @@ fn parse_header(ctx: &Ctx<'_>, lines: &[&str]) -> Result<Header, RinexError> {
                     klobuchar,
                     klobuchar_bds,
                     leap_seconds,
+                    leap_announcement,
+                    time_corr,
                     body_start: idx + 1,
                 });
             }
@@ -584,11 +653,104 @@ fn parse_header(ctx: &Ctx<'_>, lines: &[&str]) -> Result<Header, RinexError> {
                     )
                 })?;
                 leap_seconds = Some(v);
+                if version >= 3.0 {
+                    leap_announcement = leap_line_rest(ctx, idx, line)?;
+                }
             }
+            "TIME SYSTEM CORR" => time_corr.push(time_system_corr(ctx, idx, line)?),
             _ => {}
         }
     }
     Err(ctx.syntax(lines.len(), "an 'END OF HEADER' line", "end of file"))
+}
+
+/// The optional ΔtLSF, WN_LSF, DN (I6 each, columns 7–24) and time system (columns 25–27)
+/// of a RINEX 3 `LEAP SECONDS` line: `None` when the three numbers are blank, an error
+/// naming the line when only some are there or one is not an integer.
+fn leap_line_rest(
+    ctx: &Ctx<'_>,
+    idx: usize,
+    line: &str,
+) -> Result<Option<LeapAnnouncement>, RinexError> {
+    let fields: Vec<&str> = (0..3)
+        .map(|k| cols(line, 6 + 6 * k, 12 + 6 * k).unwrap_or("").trim())
+        .collect();
+    if fields.iter().all(|f| f.is_empty()) {
+        return Ok(None);
+    }
+    let names = ["ΔtLSF", "WN_LSF", "DN"];
+    let mut v = [0i64; 3];
+    for (k, (f, name)) in fields.iter().zip(names).enumerate() {
+        v[k] = f.parse().map_err(|_| {
+            ctx.syntax(
+                idx,
+                format!(
+                    "{name} (integer, columns {}-{}) after the leap seconds",
+                    7 + 6 * k,
+                    12 + 6 * k
+                ),
+                quote(f),
+            )
+        })?;
+    }
+    let system = cols(line, 24, 27).unwrap_or("").trim();
+    Ok(Some(LeapAnnouncement {
+        future_s: v[0] as i32,
+        week: v[1],
+        day: v[2],
+        bds: system == "BDS",
+    }))
+}
+
+/// A RINEX 3 `TIME SYSTEM CORR` line: A4 type, D17.10 a0 (columns 6–22), D16.9 a1
+/// (23–38), I7 reference seconds (39–45), I5 reference week (46–50); blank reference
+/// fields read as 0 (no reference).
+fn time_system_corr(ctx: &Ctx<'_>, idx: usize, line: &str) -> Result<TimeSystemCorr, RinexError> {
+    let code = cols(line, 0, 4).unwrap_or("").trim().to_string();
+    if code.len() != 4 || !code.chars().all(|c| c.is_ascii_uppercase()) {
+        return Err(ctx.syntax(
+            idx,
+            "a time system correction type such as GPUT or BDUT (columns 1-4)",
+            quote(cols(line, 0, 4).unwrap_or(line)),
+        ));
+    }
+    let number = |a: usize, b: usize, what: &str| -> Result<f64, RinexError> {
+        let field = cols(line, a, b).unwrap_or("");
+        match parse_fortran_f64(field) {
+            Ok(Some(x)) => Ok(x),
+            _ => Err(ctx.syntax(
+                idx,
+                format!("{what} of {code} (a number in columns {}-{b})", a + 1),
+                quote(field),
+            )),
+        }
+    };
+    let a0_s = number(5, 22, "a0")?;
+    let a1_s_per_s = number(22, 38, "a1")?;
+    // Blank reference fields (GNSS-SDR 0.0.17 writes its BDUT line so) mean no reference
+    // time: the line's a1 is then not applied.
+    let integer = |a: usize, b: usize, what: &str| -> Result<i64, RinexError> {
+        let field = cols(line, a, b).unwrap_or("").trim();
+        if field.is_empty() {
+            return Ok(0);
+        }
+        field.parse().map_err(|_| {
+            ctx.syntax(
+                idx,
+                format!("{what} of {code} (an integer in columns {}-{b})", a + 1),
+                quote(field),
+            )
+        })
+    };
+    let ref_sow_s = integer(38, 45, "the reference time")? as f64;
+    let ref_week = integer(45, 50, "the reference week")?;
+    Ok(TimeSystemCorr {
+        code,
+        a0_s,
+        a1_s_per_s,
+        ref_sow_s,
+        ref_week,
+    })
 }
 
 /// Four D12.4 coefficients starting at column `start`.
@@ -1309,6 +1471,8 @@ impl NavData {
             klobuchar,
             klobuchar_bds: None,
             leap_seconds,
+            leap_announcement: None,
+            time_corr: Vec::new(),
             skipped: BTreeMap::new(),
             dropped: Vec::new(),
             max_age: MaxAge::default(),
@@ -1635,6 +1799,71 @@ BDSB    .1106E+06  -.3277E+05  -.2621E+06   .1966E+06       IONOSPHERIC CORR
             msg.contains("bds.rnx") && msg.contains("ionospheric coefficient 2 of 4"),
             "{msg}"
         );
+    }
+
+    #[test]
+    fn reads_time_system_corrections_and_the_leap_second_announcement() {
+        let head =
+            "     3.04           N: GNSS NAV DATA    M: MIXED            RINEX VERSION / TYPE
+GPUT  9.3132257462E-10 2.664535259E-15 589824 2111          TIME SYSTEM CORR
+BDUT  0.0000000000e+00-4.085620730e-14     14  782          TIME SYSTEM CORR
+GLUT -1.8626451492e-09 0.000000000e+00      0    0          TIME SYSTEM CORR
+    18    18  1929     7GPS                                 LEAP SECONDS
+                                                            END OF HEADER
+";
+        let nav = parse_nav(head, "t.rnx").expect("header");
+        let codes: Vec<&str> = nav.time_corr.iter().map(|c| c.code.as_str()).collect();
+        assert_eq!(codes, ["GPUT", "BDUT", "GLUT"]);
+        let gp = &nav.time_corr[0];
+        assert_eq!(
+            (gp.a0_s, gp.a1_s_per_s),
+            (9.3132257462E-10, 2.664535259E-15)
+        );
+        assert_eq!((gp.ref_sow_s, gp.ref_week), (589_824.0, 2111));
+        // 1000 s after the reference, the drift adds 1000·a1.
+        let r = GpsTime::from_week_tow(2111, 589_824.0);
+        assert_eq!(gp.reference(), Some(r));
+        let at = gp.at(r.add_seconds(1000.0));
+        assert!((at - (9.3132257462E-10 + 1000.0 * 2.664535259E-15)).abs() < 1e-22);
+        // BDUT's reference is in BDT (week 782, second 14 = GPS week 2138, 28 s).
+        assert_eq!(
+            nav.time_corr[1].reference(),
+            Some(GpsTime::from_week_tow(2138, 28.0))
+        );
+        assert_eq!(nav.time_corr[2].reference(), None);
+        assert_eq!(nav.time_corr[2].at(r), -1.8626451492e-09);
+        assert_eq!(nav.leap_seconds, Some(18));
+        assert_eq!(
+            nav.leap_announcement,
+            Some(LeapAnnouncement {
+                future_s: 18,
+                week: 1929,
+                day: 7,
+                bds: false
+            })
+        );
+        // A bare LEAP SECONDS line announces nothing; a damaged one is refused with its line.
+        let bare = head.replace("    18  1929     7GPS", "                    ");
+        assert_eq!(
+            parse_nav(&bare, "t.rnx").expect("bare").leap_announcement,
+            None
+        );
+        let err = parse_nav(&head.replace("  1929", "  19x9"), "t.rnx").unwrap_err();
+        assert_eq!(err.line(), Some(5));
+        assert!(err.to_string().contains("WN_LSF"), "{err}");
+        let err =
+            parse_nav(&head.replace("2.664535259E-15", "2.664535259Q-15"), "t.rnx").unwrap_err();
+        assert_eq!(err.line(), Some(2));
+        assert!(err.to_string().contains("a1 of GPUT"), "{err}");
+        let err = parse_nav(&head.replace("GLUT", "gl-t"), "t.rnx").unwrap_err();
+        assert_eq!(err.line(), Some(4));
+        // GNSS-SDR 0.0.17's RINEX header: a BDUT line without reference time or week.
+        let gsdr = head.replace(
+            "BDUT  0.0000000000e+00-4.085620730e-14     14  782",
+            "BDUT   .0000000000D+00  .000000000D+00           ",
+        );
+        let nav = parse_nav(&gsdr, "GSDR.26N").expect("GNSS-SDR's header");
+        assert_eq!(nav.time_corr[1].reference(), None);
     }
 
     #[test]

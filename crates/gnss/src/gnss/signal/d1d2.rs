@@ -37,13 +37,28 @@
 //!
 //! - D1 subframe 1: SatH1, AODC, URAI, WN, toc, TGD1/2, the BDS Klobuchar α0–α3 (bits
 //!   127–166) and β0–β3 (167–172 + 181–182, 183–198, 199–202 + 211–214), a0–a2, AODE;
-//!   subframes 2–3: the Keplerian elements; subframes 4–5: the page number only (no
-//!   almanac is broadcast).
+//!   subframes 2–3: the Keplerian elements. Subframes 4 and 5 rotate through 24 pages
+//!   ([`d1_page`]: page `SOW/30 mod 24 + 1`, a 12-minute cycle): subframe 4 pages 1–24 the
+//!   almanac of C01–C24, subframe 5 pages 1–6 that of C25–C30 (√A, a1, a0, Ω0, e, δi, toa,
+//!   Ω̇, ω, M0, ICD Figure 5-11-1; derived from the world's ephemerides,
+//!   [`crate::gnss::signal::almanac`]), page 7 the 9-bit health of C01–C19, page 8 that of
+//!   C20–C30 with WNa and toa, page 9 the time offsets to GPS, Galileo and GLONASS
+//!   (A0/A1, 0.1 ns and 0.1 ns/s), page 10 the UTC parameters (ΔtLS, ΔtLSF, WN_LSF,
+//!   A0UTC 2⁻³⁰ s, A1UTC 2⁻⁵⁰, DN), both from the navigation header ([`BdsTimeParams`]);
+//!   pages 11–24 of subframe 5 are reserved (page number only). The health word is 0 for a
+//!   satellite whose ephemeris says healthy and all ones otherwise (hybridnav's
+//!   placeholder, [`bds_health_word`]).
 //! - D2 subframe 1 pages 1–10 as §5.3.3 (page 1: SatH1, AODC, URAI, WN, toc, TGD1/2; page 2:
-//!   α/β; page 3: a0, a1's 4 MSBs; … page 10: ω's 5 LSBs, IDOT). Subframes 2–5 (integrity
-//!   and differential corrections, almanac, health, time offsets) carry the preamble,
-//!   FraID and SOW and zeros elsewhere (page numbers included): receivers that position
-//!   from D2 read subframe 1 only.
+//!   α/β; page 3: a0, a1's 4 MSBs; … page 10: ω's 5 LSBs, IDOT). Subframe 5 ([`d2_page5`]:
+//!   page `SOW/3 mod 120 + 1`) carries D1's almanac, health and time pages at D2's page
+//!   numbers: 35–36 health, WNa, toa; 37–60 and 95–100 the almanac of C01–C24 and C25–C30;
+//!   101–102 the time offsets and UTC parameters. **Placeholders**: subframes 2–4
+//!   (integrity and differential corrections: RURAI, UDREI, Δt) and subframe 5's
+//!   ionospheric grid pages (1–13, 61–73: GIVEI, dτ) and other pages carry the preamble,
+//!   FraID, SOW (and subframe 5's page number) with zeros elsewhere — hybridnav has no
+//!   corrections or grid, and the ICD's "not monitored" codes are not written (their bit
+//!   positions were not checked here), so a receiver that trusts these zeros would read
+//!   them as values.
 //!
 //! The Klobuchar α/β are BeiDou's own set (`BDSA`/`BDSB` of a RINEX 3 header,
 //! [`NavData::klobuchar_bds`]). When the file has none they are sent as zeros, which keeps
@@ -58,6 +73,7 @@ use crate::core::{EmitterId, GpsTime};
 use crate::gnss::atmosphere::Klobuchar;
 use crate::gnss::ephemeris::Ephemeris;
 use crate::gnss::rinex_nav::NavData;
+use crate::gnss::signal::almanac::{self, Almanac};
 use crate::gnss::signal::baseband::NavSymbols;
 use std::sync::Arc;
 
@@ -210,8 +226,144 @@ impl Fields {
     }
 }
 
+/// What a D1 subframe carries besides its satellite's ephemeris: the BeiDou Klobuchar set
+/// (subframe 1), the almanac and health (subframe 4 pages 1–24, subframe 5 pages 1–8) and
+/// the time parameters (subframe 5 pages 9 and 10).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct D1Common<'a> {
+    pub iono: Option<Klobuchar>,
+    pub time: BdsTimeParams,
+    /// The almanacs of C01–C30 (index PRN − 1) for subframes 4 and 5; an empty slice or a
+    /// `None` sends that page's almanac as zeros and its health as "no almanac".
+    pub almanac: &'a [Option<Almanac>],
+}
+
+/// The time parameters of D1 subframe 5 pages 9 and 10 (BDS-SIS-ICD-B1I-3.0 §5.2.4.18–19),
+/// as values (s, s/s, weeks, days) before quantisation.
+///
+/// # Derivation from the navigation file's header
+///
+/// A `TIME SYSTEM CORR` line gives `CORR_X(t) = a0 + a1·(t − t_ref)`, the sub-second part
+/// of `X − UTC` (`GPUT`, `GAUT`, `BDUT`; `GLUT` with a0 = −τ_C). With
+/// `BDT = UTC + ΔtLS_BDS + CORR_BD`, `GPST = UTC + ΔtLS_GPS + CORR_GP`,
+/// `ΔtLS_BDS = ΔtLS_GPS − 14 s`, GST aligned to GPST and GLONASS time = UTC(SU) + 3 h, the
+/// sub-second offsets of BDT from the other systems are
+///
+/// ```text
+/// δ_GPS = CORR_BD − CORR_GP     (BDT − GPST = −14 s + δ_GPS)
+/// δ_Gal = CORR_BD − CORR_GA     (BDT − GST  = −14 s + δ_Gal)
+/// δ_GLO = CORR_BD − CORR_GL     (BDT − GLONASST = ΔtLS_BDS − 3 h + δ_GLO)
+/// ```
+///
+/// each defined only when both lines are in the header (zeros otherwise: a RINEX 3 header
+/// has no direct BDT−GPST line). The UTC realisations differ (UTC(NTSC) for BDUT,
+/// UTC(USNO) for GPUT, …) by a few ns (BIPM Circular T), which the derived offsets carry.
+/// The message's polynomials have no reference time: `Δt = A0 + A1·t_E` with `t_E` the BDT
+/// second of week (as GNSS-SDR's `utc_time` evaluates it), so A1 = the file's drift
+/// (`a1_BD − a1_X`, or `a1_BD` for UTC) and A0 = the file's offset at the subframe's
+/// transmission time `t` minus `A1_sent·t_E(t)`, with A1 as its field will carry it
+/// (0.1 ns/s LSB for the GPS/Galileo/GLONASS drifts, far coarser than any real drift, so
+/// those A1 go out as 0 and A0 carries the offset at `t`). A0UTC and A1UTC are zero
+/// without a `BDUT` line.
+///
+/// ΔtLS = GPST − UTC − 14 s (the leap seconds of BDT, which equalled UTC on 2006-01-01,
+/// when GPST − UTC was 14 s). ΔtLSF, WN_LSF and DN come from the `LEAP SECONDS` line when
+/// it has them (GPS values converted: ΔtLSF − 14 s, week − 1356, day − 1 from GPS's 1–7 to
+/// BDS's 0–6); otherwise no leap second is announced: ΔtLSF = ΔtLS, WN_LSF the current BDT
+/// week and DN = 6, which changes nothing (IS-GPS-200 §20.3.3.5.2.4's convention).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BdsTimeParams {
+    pub a0_gps_s: f64,
+    pub a1_gps: f64,
+    pub a0_gal_s: f64,
+    pub a1_gal: f64,
+    pub a0_glo_s: f64,
+    pub a1_glo: f64,
+    pub dt_ls_s: i32,
+    pub dt_lsf_s: i32,
+    /// WN_LSF as a full BDT week (8 LSBs sent).
+    pub wn_lsf: i64,
+    /// DN, 0–6.
+    pub dn: i64,
+    pub a0_utc_s: f64,
+    pub a1_utc: f64,
+}
+
+/// The LSB of A0/A1 GPS, Galileo and GLONASS (0.1 ns, 0.1 ns/s; ICD Table 5-13).
+pub const A_GNSS_LSB: f64 = 1e-10;
+
+impl BdsTimeParams {
+    /// The parameters for a subframe sent at `t`, from `nav`'s header and GPST − UTC
+    /// (`gpst_minus_utc_s`) (derivation in the type's documentation).
+    pub fn from_nav(nav: &NavData, gpst_minus_utc_s: i32, t: GpsTime) -> Self {
+        let corr = |code: &str| nav.time_corr.iter().rev().find(|c| c.code == code);
+        let (week, sow) = t.bdt_week_sow();
+        let bd = corr("BDUT");
+        // A0, A1 of a polynomial A0 + A1·t_E whose value at `t` is `at_t` and whose A1,
+        // as sent, is `a1` quantised to `lsb` over `width` bits.
+        let poly = |at_t: f64, a1: f64, lsb: f64, width: usize| -> (f64, f64) {
+            let raw = signed_raw(a1, lsb, width);
+            let a1_sent = sext(raw, width) as f64 * lsb;
+            (at_t - a1_sent * sow, a1)
+        };
+        let offset = |code: &str| -> (f64, f64) {
+            match (bd, corr(code)) {
+                (Some(b), Some(x)) => poly(
+                    b.at(t) - x.at(t),
+                    b.a1_s_per_s - x.a1_s_per_s,
+                    A_GNSS_LSB,
+                    16,
+                ),
+                _ => (0.0, 0.0),
+            }
+        };
+        let (a0_gps_s, a1_gps) = offset("GPUT");
+        let (a0_gal_s, a1_gal) = offset("GAUT");
+        let (a0_glo_s, a1_glo) = offset("GLUT");
+        let (a0_utc_s, a1_utc) =
+            bd.map_or((0.0, 0.0), |b| poly(b.at(t), b.a1_s_per_s, p2(-50), 24));
+        let dt_ls_s = gpst_minus_utc_s - 14;
+        let (dt_lsf_s, wn_lsf, dn) = match nav.leap_announcement {
+            Some(l) if l.bds => (l.future_s, l.week, l.day),
+            Some(l) => (l.future_s - 14, l.week - 1356, l.day - 1),
+            None => (dt_ls_s, week, 6),
+        };
+        Self {
+            a0_gps_s,
+            a1_gps,
+            a0_gal_s,
+            a1_gal,
+            a0_glo_s,
+            a1_glo,
+            dt_ls_s,
+            dt_lsf_s,
+            wn_lsf,
+            dn,
+            a0_utc_s,
+            a1_utc,
+        }
+    }
+}
+
+/// Two's complement value of the low `width` bits of `raw`.
+fn sext(raw: u64, width: usize) -> i64 {
+    let shift = 64 - width;
+    ((raw << shift) as i64) >> shift
+}
+
+/// The D1 page (1–24) of subframes 4 and 5 in the frame that contains BDT second of week
+/// `sow`. The ICD sub-commutates subframes 4 and 5 over 24 pages, a 12-minute superframe
+/// (§5.2.2), and numbers each page (Pnum) without tying the number to the time; hybridnav
+/// sends page `(SOW/30 mod 24) + 1`, as the SignalSim generator does, so page 1 starts at
+/// every multiple of 720 s of the week and page `p` at `720·k + 30·(p − 1)`. A receiver
+/// reads Pnum, so any rotation decodes.
+pub fn d1_page(sow: i64) -> i64 {
+    (sow / 30).rem_euclid(24) + 1
+}
+
 /// The decoded bits of D1 subframe `fra_id` (1–5) starting at BDT `week`, `sow`.
-fn d1_fields(e: &Ephemeris, iono: Option<&Klobuchar>, week: i64, sow: i64, fra_id: u32) -> Fields {
+fn d1_fields(e: &Ephemeris, c: &D1Common, week: i64, sow: i64, fra_id: u32) -> Fields {
+    let iono = c.iono.as_ref();
     let mut f = Fields([0; 300]);
     f.header(fra_id, sow);
     let sc = BDS_PI;
@@ -254,11 +406,112 @@ fn d1_fields(e: &Ephemeris, iono: Option<&Klobuchar>, week: i64, sow: i64, fra_i
             f.signed(&[(252, 11), (271, 21)], e.omega / sc, p2(-31));
         }
         _ => {
-            // Page number: pages 1–24 cycle with the frames.
-            f.put(44, 7, ((sow / 30).rem_euclid(24) + 1) as u64);
+            let page = d1_page(sow);
+            f.put(44, 7, page as u64);
+            let alm = |prn: i64| c.almanac.get(prn as usize - 1).copied().flatten();
+            match (fra_id, page) {
+                (4, p) => d1_almanac_page(&mut f, alm(p).as_ref()),
+                (5, p @ 1..=6) => d1_almanac_page(&mut f, alm(p + 24).as_ref()),
+                (5, 7 | 8) => d1_health_page(&mut f, c.almanac, page == 8, week, sow),
+                (5, p) => d1_time_page(&mut f, &c.time, p),
+                _ => {}
+            }
         }
     }
     f
+}
+
+/// An almanac page (subframe 4 pages 1–24: C01–C24; subframe 5 pages 1–6: C25–C30), ICD
+/// Figure 5-11-1 and Table 5-12; zeros without an almanac.
+fn d1_almanac_page(f: &mut Fields, a: Option<&Almanac>) {
+    let Some(a) = a else { return };
+    let sc = BDS_PI;
+    f.unsigned(&[(51, 2), (61, 22)], a.sqrt_a, p2(-11));
+    f.signed(&[(91, 11)], a.af1, p2(-38));
+    f.signed(&[(102, 11)], a.af0, p2(-20));
+    f.signed(&[(121, 22), (151, 2)], a.omega0 / sc, p2(-23));
+    f.unsigned(&[(153, 17)], a.e, p2(-21));
+    f.signed(&[(170, 3), (181, 13)], a.delta_i / sc, p2(-19));
+    f.unsigned(&[(194, 8)], a.toa_sow_s, 4096.0);
+    f.signed(&[(202, 1), (211, 16)], a.omega_dot / sc, p2(-38));
+    f.signed(&[(227, 6), (241, 18)], a.omega / sc, p2(-23));
+    f.signed(&[(259, 4), (271, 20)], a.m0 / sc, p2(-23));
+}
+
+/// Where the 9-bit health words Hea1–Hea19 (page 7) and Hea20–Hea30 (page 8) go, ICD
+/// Figures 5-11-2/3 (as GNSS-SDR's `Beidou_DNAV.h` and GNSSTk's `BDSD1Bits.hpp` read them).
+const HEA_SLOTS: [&[(usize, usize)]; 19] = [
+    &[(51, 2), (61, 7)],
+    &[(68, 9)],
+    &[(77, 6), (91, 3)],
+    &[(94, 9)],
+    &[(103, 9)],
+    &[(112, 1), (121, 8)],
+    &[(129, 9)],
+    &[(138, 5), (151, 4)],
+    &[(155, 9)],
+    &[(164, 9)],
+    &[(181, 9)],
+    &[(190, 9)],
+    &[(199, 4), (211, 5)],
+    &[(216, 9)],
+    &[(225, 8), (241, 1)],
+    &[(242, 9)],
+    &[(251, 9)],
+    &[(260, 3), (271, 6)],
+    &[(277, 9)],
+];
+
+/// The health word of a satellite: 0 (all information normal) when its almanac comes from
+/// an ephemeris flagged healthy; all ones otherwise — hybridnav's placeholder for "no
+/// usable almanac", not one of the ICD's per-bit meanings, which it does not model.
+pub fn bds_health_word(a: Option<&Almanac>) -> u64 {
+    match a {
+        Some(a) if a.healthy => 0,
+        _ => 0x1ff,
+    }
+}
+
+/// D1 subframe 5 page 7 / D2 subframe 5 page 35 (health of C01–C19) when `!second`, page 8
+/// / page 36 (C20–C30, WNa, toa) when `second`.
+fn d1_health_page(f: &mut Fields, almanac: &[Option<Almanac>], second: bool, week: i64, sow: i64) {
+    let first = if second { 20 } else { 1 };
+    let count = if second { 11 } else { 19 };
+    for (k, slot) in HEA_SLOTS.iter().take(count).enumerate() {
+        let a = almanac.get(first + k - 1).copied().flatten();
+        f.put_slices(slot, bds_health_word(a.as_ref()));
+    }
+    if second {
+        let t = GpsTime::from_bdt_week_sow(week, sow as f64);
+        let (wna, toa) = crate::gnss::signal::almanac::toa_for(crate::core::System::Bds, t);
+        f.put(190, 8, wna.rem_euclid(256) as u64);
+        f.put_slices(&[(198, 5), (211, 3)], (toa / 4096.0) as u64);
+    }
+}
+
+/// Subframe 5 pages 9 (time offsets to GPS, Galileo, GLONASS) and 10 (UTC), ICD Figures
+/// 5-11-4/5 and Table 5-13 (positions as GNSS-SDR's `Beidou_DNAV.h` and GNSSTk's
+/// `BDSD1Bits.hpp` read them; page 10 also as SignalSim writes it); other pages untouched.
+fn d1_time_page(f: &mut Fields, t: &BdsTimeParams, page: i64) {
+    match page {
+        9 => {
+            f.signed(&[(97, 14)], t.a0_gps_s, A_GNSS_LSB);
+            f.signed(&[(111, 2), (121, 14)], t.a1_gps, A_GNSS_LSB);
+            f.signed(&[(135, 8), (151, 6)], t.a0_gal_s, A_GNSS_LSB);
+            f.signed(&[(157, 16)], t.a1_gal, A_GNSS_LSB);
+            f.signed(&[(181, 14)], t.a0_glo_s, A_GNSS_LSB);
+            f.signed(&[(195, 8), (211, 8)], t.a1_glo, A_GNSS_LSB);
+        }
+        10 => {
+            f.signed(&[(51, 2), (61, 6)], f64::from(t.dt_ls_s), 1.0);
+            f.signed(&[(67, 8)], f64::from(t.dt_lsf_s), 1.0);
+            f.put(75, 8, t.wn_lsf.rem_euclid(256) as u64);
+            f.signed(&[(91, 22), (121, 10)], t.a0_utc_s, p2(-30));
+            f.signed(&[(131, 12), (151, 12)], t.a1_utc, p2(-50));
+            f.put(163, 8, t.dn.clamp(0, 255) as u64);
+        }
+        _ => {}
+    }
 }
 
 /// A field of `width` bits split over two pages: its `msb` most significant bits on one,
@@ -269,9 +522,13 @@ fn split(raw: u64, width: usize, msb: usize) -> (u64, u64) {
 
 /// The decoded bits of D2 subframe `fra_id` (1–5) of the frame starting at BDT `week`,
 /// `sow` (a multiple of 3); subframe 1 is page `sow/3 mod 10 + 1`.
-fn d2_fields(e: &Ephemeris, iono: Option<&Klobuchar>, week: i64, sow: i64, fra_id: u32) -> Fields {
+fn d2_fields(e: &Ephemeris, c: &D1Common, week: i64, sow: i64, fra_id: u32) -> Fields {
+    let iono = c.iono.as_ref();
     let mut f = Fields([0; 300]);
     f.header(fra_id, sow);
+    if fra_id == 5 {
+        d2_subframe5(&mut f, c, week, sow);
+    }
     if fra_id != 1 {
         return f;
     }
@@ -351,30 +608,53 @@ fn d2_fields(e: &Ephemeris, iono: Option<&Klobuchar>, week: i64, sow: i64, fra_i
     f
 }
 
+/// The D2 page (1–120) of subframe 5 in the frame that starts at BDT second of week `sow`
+/// (a multiple of 3): `SOW/3 mod 120 + 1`, a 6-minute cycle (the ICD numbers pages without
+/// tying them to the time, as for D1's [`d1_page`]).
+pub fn d2_page5(sow: i64) -> i64 {
+    (sow / 3).rem_euclid(120) + 1
+}
+
+/// D2 subframe 5 (§5.3.3; page layouts as GNSSTk's `BDSD2Bits.hpp` gives them, the same
+/// fields at the same bits as D1's): pages 35–36 the health of C01–C30 with WNa and toa,
+/// pages 37–60 the almanac of C01–C24, pages 95–100 that of C25–C30, page 101 the time
+/// offsets to GPS, Galileo and GLONASS, page 102 the UTC parameters — the same data as D1
+/// subframes 4–5. The ionospheric grid pages (1–13, 61–73) and the rest carry the page
+/// number and zeros: hybridnav has no grid to broadcast (placeholders, not "not
+/// monitored" codes, which are not written here).
+fn d2_subframe5(f: &mut Fields, c: &D1Common, week: i64, sow: i64) {
+    let page = d2_page5(sow);
+    f.put(44, 7, page as u64);
+    let alm = |prn: i64| c.almanac.get(prn as usize - 1).copied().flatten();
+    match page {
+        35 | 36 => d1_health_page(f, c.almanac, page == 36, week, sow),
+        37..=60 => d1_almanac_page(f, alm(page - 36).as_ref()),
+        95..=100 => d1_almanac_page(f, alm(page - 70).as_ref()),
+        101 => d1_time_page(f, &c.time, 9),
+        102 => d1_time_page(f, &c.time, 10),
+        _ => {}
+    }
+}
+
 /// The 300 transmitted bits of the D1 subframe of `e` that starts at BDT `week`, `sow`,
-/// with the Klobuchar set `iono` (zeros when `None`).
-pub fn d1_subframe(
-    e: &Ephemeris,
-    iono: Option<&Klobuchar>,
-    week: i64,
-    sow: i64,
-    out: &mut [u8; 300],
-) {
+/// with the Klobuchar set and time parameters of `c` (a missing set goes out as zeros).
+pub fn d1_subframe(e: &Ephemeris, c: &D1Common, week: i64, sow: i64, out: &mut [u8; 300]) {
     let fra_id = ((sow / 6).rem_euclid(5) + 1) as u32;
-    d1_fields(e, iono, week, sow, fra_id).encode(out);
+    d1_fields(e, c, week, sow, fra_id).encode(out);
 }
 
 /// The 300 transmitted bits of D2 subframe `fra_id` (1–5) of `e` in the frame that starts
-/// at BDT `week`, `sow` (a multiple of 3), with the Klobuchar set `iono`.
+/// at BDT `week`, `sow` (a multiple of 3), with the Klobuchar set, almanacs and time
+/// parameters of `c`.
 pub fn d2_subframe(
     e: &Ephemeris,
-    iono: Option<&Klobuchar>,
+    c: &D1Common,
     week: i64,
     sow: i64,
     fra_id: u32,
     out: &mut [u8; 300],
 ) {
-    d2_fields(e, iono, week, sow, fra_id).encode(out);
+    d2_fields(e, c, week, sow, fra_id).encode(out);
 }
 
 /// D1 subframes last 6 s, D2 subframes 0.6 s.
@@ -389,16 +669,26 @@ const D2_PAGES_MS: i64 = 30_000;
 pub struct BdsNavStream {
     nav: Arc<NavData>,
     sat: EmitterId,
+    /// GPST − UTC (s), for the D1 UTC parameters.
+    gpst_minus_utc_s: i32,
+    /// The almanacs of C01–C30 and the toa they are referred to (rebuilt when a subframe's
+    /// toa changes, every 4096 s).
+    almanac: Vec<Option<Almanac>>,
+    almanac_toa: Option<(i64, f64)>,
     geo: bool,
     subframe: i64,
     bits: [u8; 300],
 }
 
 impl BdsNavStream {
-    /// The stream of `sat`: D2 when it is a GEO satellite, D1 otherwise.
-    pub fn new(nav: Arc<NavData>, sat: EmitterId) -> Self {
+    /// The stream of `sat`: D2 when it is a GEO satellite, D1 otherwise; `gpst_minus_utc_s`
+    /// gives D1's leap seconds.
+    pub fn new(nav: Arc<NavData>, sat: EmitterId, gpst_minus_utc_s: i32) -> Self {
         Self {
             nav,
+            gpst_minus_utc_s,
+            almanac: Vec::new(),
+            almanac_toa: None,
             geo: sat.is_bds_geo(),
             sat,
             subframe: i64::MIN,
@@ -410,8 +700,30 @@ impl BdsNavStream {
     fn build(&mut self, sf: i64) {
         let iono = self.nav.klobuchar_bds;
         let bdt = |ms: i64| GpsTime::from_ns((ms + BDT_EPOCH_MS) * 1_000_000);
+        let len = if self.geo {
+            D2_SUBFRAME_MS
+        } else {
+            D1_SUBFRAME_MS
+        };
+        let start_ms = sf * len;
+        let t = bdt(start_ms);
+        let toa = almanac::toa_for(crate::core::System::Bds, t);
+        if self.almanac_toa != Some(toa) {
+            almanac::fill_constellation(
+                &self.nav,
+                crate::core::System::Bds,
+                30,
+                t,
+                &mut self.almanac,
+            );
+            self.almanac_toa = Some(toa);
+        }
+        let common = D1Common {
+            iono,
+            time: BdsTimeParams::from_nav(&self.nav, self.gpst_minus_utc_s, t),
+            almanac: &self.almanac,
+        };
         if self.geo {
-            let start_ms = sf * D2_SUBFRAME_MS;
             let frame_ms = start_ms.div_euclid(D2_FRAME_MS) * D2_FRAME_MS;
             let week = frame_ms.div_euclid(WEEK_MS);
             let sow = frame_ms.rem_euclid(WEEK_MS) / 1000;
@@ -420,15 +732,14 @@ impl BdsNavStream {
             // joins pages of two different ephemerides.
             let cycle_ms = start_ms.div_euclid(D2_PAGES_MS) * D2_PAGES_MS;
             match self.nav.select(self.sat, bdt(cycle_ms)) {
-                Some(e) => d2_subframe(e, iono.as_ref(), week, sow, fra_id, &mut self.bits),
+                Some(e) => d2_subframe(e, &common, week, sow, fra_id, &mut self.bits),
                 None => self.bits = [0; 300],
             }
         } else {
-            let start_ms = sf * D1_SUBFRAME_MS;
             let week = start_ms.div_euclid(WEEK_MS);
             let sow = start_ms.rem_euclid(WEEK_MS) / 1000;
-            match self.nav.select(self.sat, bdt(start_ms)) {
-                Some(e) => d1_subframe(e, iono.as_ref(), week, sow, &mut self.bits),
+            match self.nav.select(self.sat, t) {
+                Some(e) => d1_subframe(e, &common, week, sow, &mut self.bits),
                 None => self.bits = [0; 300],
             }
         }
@@ -513,7 +824,7 @@ mod tests {
         let (week, sow) = e.toe.bdt_week_sow();
         let sow = sow as i64 + 6; // FraID 2 (toe is a multiple of 30 s)
         let mut tx = [0u8; 300];
-        d1_subframe(&e, None, week, sow, &mut tx);
+        d1_subframe(&e, &D1Common::default(), week, sow, &mut tx);
         let d = deinterleave(&tx);
         let get = |sl: &[(usize, usize)]| -> u64 {
             sl.iter()
@@ -635,8 +946,12 @@ mod tests {
         let sow = sow as i64; // FraID 1
         let k = bds_klobuchar();
         let (mut with, mut without) = ([0u8; 300], [0u8; 300]);
-        d1_subframe(&e, Some(&k), week, sow, &mut with);
-        d1_subframe(&e, None, week, sow, &mut without);
+        let with_k = D1Common {
+            iono: Some(k),
+            ..D1Common::default()
+        };
+        d1_subframe(&e, &with_k, week, sow, &mut with);
+        d1_subframe(&e, &D1Common::default(), week, sow, &mut without);
         assert_codewords_valid(&with);
         let (dw, dn) = (deinterleave(&with), deinterleave(&without));
         assert_eq!(uget(&dw, &[(16, 3)]), 1);
@@ -660,8 +975,182 @@ mod tests {
         // A coefficient outside its 8-bit range saturates instead of wrapping.
         let mut big = k;
         big.beta[0] = 1e6;
-        d1_subframe(&e, Some(&big), week, sow, &mut with);
+        let big = D1Common {
+            iono: Some(big),
+            ..D1Common::default()
+        };
+        d1_subframe(&e, &big, week, sow, &mut with);
         assert_eq!(sget(&deinterleave(&with), &[(167, 6), (181, 2)]), 127);
+    }
+
+    /// A RINEX 3 header with the time-system lines an IGS merged file carries: GPUT and
+    /// GAUT of the ESBC00DNK file of 2020-06-25, BDUT and GLUT with the a0/a1 of an IGS
+    /// header of 2021 (as the `rinex` crate's tests quote it) referred to that day, and a
+    /// full LEAP SECONDS line (the 2017-01-01 leap second: GPS week 1929, day 7).
+    pub(crate) const TIME_HEADER: &str =
+        "     3.04           N: GNSS NAV DATA    M: MIXED            RINEX VERSION / TYPE
+GPUT  9.3132257462E-10 2.664535259E-15 589824 2111          TIME SYSTEM CORR
+GAUT -9.3132257462E-10 0.000000000E+00 345600 2111          TIME SYSTEM CORR
+BDUT  1.8626451492E-09-4.085620730E-14 345600  755          TIME SYSTEM CORR
+GLUT -1.8626451492E-09 0.000000000E+00      0    0          TIME SYSTEM CORR
+    18    18  1929     7GPS                                 LEAP SECONDS
+                                                            END OF HEADER
+";
+
+    #[test]
+    fn d1_subframe_5_pages_9_and_10_carry_the_time_parameters() {
+        let nav = crate::gnss::rinex_nav::parse_nav(TIME_HEADER, "time.rnx").expect("header");
+        let mut e = c05_2020();
+        e.sat = EmitterId::new(crate::core::System::Bds, 20);
+        // BDT week 755, a frame whose subframes 4–5 carry page 9 (SOW = 720k + 240), and
+        // the next frame (page 10).
+        let week = 755;
+        let sow9 = 720 * 490 + 240;
+        assert_eq!(d1_page(sow9), 9);
+        assert_eq!(d1_page(sow9 + 30), 10);
+        let decode = |sow: i64| -> [u8; 300] {
+            let t = GpsTime::from_bdt_week_sow(week, sow as f64);
+            let c = D1Common {
+                iono: None,
+                time: BdsTimeParams::from_nav(&nav, 18, t),
+                almanac: &[],
+            };
+            let mut tx = [0u8; 300];
+            d1_subframe(&e, &c, week, sow, &mut tx);
+            assert_codewords_valid(&tx);
+            deinterleave(&tx)
+        };
+        let p9 = decode(sow9 + 24);
+        let p10 = decode(sow9 + 30 + 24);
+        assert_eq!(uget(&p9, &[(16, 3)]), 5, "FraID");
+        assert_eq!(uget(&p9, &[(44, 7)]), 9, "Pnum");
+        assert_eq!(uget(&p10, &[(44, 7)]), 10, "Pnum");
+        // The header's corrections at the page's time, written out here from RINEX 3.05
+        // §5.2: CORR = a0 + a1·(t − t_ref), t_ref in the line's own system.
+        let t9 = GpsTime::from_bdt_week_sow(week, (sow9 + 24) as f64);
+        let gps_ref = |w: i64, s: f64| GpsTime::from_week_tow(w, s);
+        let corr_gp =
+            9.3132257462E-10 + 2.664535259E-15 * t9.seconds_since(gps_ref(2111, 589_824.0));
+        let corr_ga = -9.3132257462E-10;
+        let corr_bd = 1.8626451492E-09
+            - 4.085620730E-14 * t9.seconds_since(GpsTime::from_bdt_week_sow(755, 345_600.0));
+        let corr_gl = -1.8626451492E-09;
+        // Page 9 (GNSSTk's BDSD1Bits.hpp positions): 0.1 ns and 0.1 ns/s LSBs; the
+        // drifts (~1e-14) are far below 0.1 ns/s, so A1 = 0 and A0 = the offset now.
+        let ns = |sl: &[(usize, usize)]| sget(&p9, sl) as f64 * 0.1e-9;
+        let within = |name: &str, got: f64, want: f64, lsb: f64| {
+            assert!(
+                (got - want).abs() <= 0.5 * lsb * (1.0 + 1e-9),
+                "{name}: sent {want:e}, decoded {got:e}"
+            );
+        };
+        within("A0GPS", ns(&[(97, 14)]), corr_bd - corr_gp, 0.1e-9);
+        assert_eq!(sget(&p9, &[(111, 2), (121, 14)]), 0, "A1GPS");
+        within(
+            "A0Gal",
+            ns(&[(135, 8), (151, 6)]),
+            corr_bd - corr_ga,
+            0.1e-9,
+        );
+        assert_eq!(sget(&p9, &[(157, 16)]), 0, "A1Gal");
+        within("A0GLO", ns(&[(181, 14)]), corr_bd - corr_gl, 0.1e-9);
+        assert_eq!(sget(&p9, &[(195, 8), (211, 8)]), 0, "A1GLO");
+        assert_ne!(sget(&p9, &[(97, 14)]), 0, "a non-zero offset was sent");
+        // Page 10: ΔtLS = 18 − 14, the announced leap (GPS week 1929 day 7 → BDT week 573
+        // day 6, ΔtLSF 18 − 14), A0UTC + A1UTC·SOW = CORR_BD at the page's time.
+        assert_eq!(sget(&p10, &[(51, 2), (61, 6)]), 4, "ΔtLS");
+        assert_eq!(sget(&p10, &[(67, 8)]), 4, "ΔtLSF");
+        assert_eq!(uget(&p10, &[(75, 8)]), 573 % 256, "WNLSF");
+        assert_eq!(uget(&p10, &[(163, 8)]), 6, "DN");
+        let a1_utc = sget(&p10, &[(131, 12), (151, 12)]) as f64 * 2f64.powi(-50);
+        within("A1UTC", a1_utc, -4.085620730E-14, 2f64.powi(-50));
+        let a0_utc = sget(&p10, &[(91, 22), (121, 10)]) as f64 * 2f64.powi(-30);
+        let t10 = GpsTime::from_bdt_week_sow(week, (sow9 + 54) as f64);
+        let corr_bd10 = 1.8626451492E-09
+            - 4.085620730E-14 * t10.seconds_since(GpsTime::from_bdt_week_sow(755, 345_600.0));
+        within(
+            "A0UTC + A1UTC·SOW",
+            a0_utc + a1_utc * (sow9 + 54) as f64,
+            corr_bd10,
+            2f64.powi(-30),
+        );
+        // A reserved page of subframe 5 leaves those bits alone, and without the lines the
+        // offsets are zeros, the leap seconds still GPST − UTC − 14 s.
+        let bare = NavData::new(Vec::new(), None, Some(18));
+        let tp = BdsTimeParams::from_nav(&bare, 18, t9);
+        assert_eq!((tp.a0_gps_s, tp.a0_utc_s, tp.a1_utc), (0.0, 0.0, 0.0));
+        assert_eq!((tp.dt_ls_s, tp.dt_lsf_s, tp.wn_lsf, tp.dn), (4, 4, 755, 6));
+        let p11 = decode(sow9 + 60 + 24);
+        assert_eq!(uget(&p11, &[(44, 7)]), 11);
+        assert_eq!(uget(&p11, &[(97, 14)]), 0);
+    }
+
+    /// D2 subframe 5 pages 35–37, 95, 101, 102 carry exactly the fields of D1's subframe 5
+    /// pages 7, 8, subframe 4 page 1, subframe 5 page 1, pages 9, 10 (GNSSTk's D2 layout is
+    /// D1's), with their own page numbers; a grid page (1) only its number.
+    #[test]
+    fn d2_subframe_5_repeats_the_d1_almanac_health_and_time_pages() {
+        let nav = crate::gnss::rinex_nav::parse_nav(TIME_HEADER, "time.rnx").expect("header");
+        let geo = c05_2020();
+        let (week, toe_sow) = geo.toe.bdt_week_sow();
+        let t = GpsTime::from_bdt_week_sow(week, toe_sow);
+        let mut meo = c05_2020();
+        meo.sat = EmitterId::new(crate::core::System::Bds, 20);
+        // Almanacs of C05 and C20 (index PRN − 1), the rest absent.
+        let mut almanac = vec![None; 30];
+        for e in [&geo, &meo] {
+            let (w, s) = almanac::toa_for(crate::core::System::Bds, t);
+            almanac[usize::from(e.sat.number) - 1] = Some(Almanac::from_ephemeris(e, w, s));
+        }
+        let c = D1Common {
+            iono: None,
+            time: BdsTimeParams::from_nav(&nav, 18, t),
+            almanac: &almanac,
+        };
+        // The D2 frame whose subframe 5 is page `p`, the D1 frame whose subframe `fra` is
+        // page `q`: their decoded bits from 51 on (after the page number).
+        let week_start = 720 * 490; // a multiple of 360 s (D2) and 720 s (D1)
+        let d2 = |p: i64| {
+            let sow = week_start + 3 * (p - 1);
+            let mut tx = [0u8; 300];
+            d2_subframe(&geo, &c, week, sow, 5, &mut tx);
+            assert_codewords_valid(&tx);
+            let d = deinterleave(&tx);
+            assert_eq!(uget(&d, &[(44, 7)]), p as u64, "D2 Pnum");
+            d
+        };
+        let d1 = |fra: i64, q: i64| {
+            let sow = week_start + 30 * (q - 1) + 6 * (fra - 1);
+            let mut tx = [0u8; 300];
+            d1_subframe(&meo, &c, week, sow, &mut tx);
+            let d = deinterleave(&tx);
+            assert_eq!(uget(&d, &[(44, 7)]), q as u64, "D1 Pnum");
+            d
+        };
+        let info = |d: &[u8; 300]| -> Vec<u8> {
+            (1..10)
+                .flat_map(|w| (w * 30..w * 30 + 22).collect::<Vec<_>>())
+                .filter(|&i| i >= 50)
+                .map(|i| d[i])
+                .collect()
+        };
+        for (p, fra, q) in [(35, 5, 7), (37, 4, 1), (101, 5, 9), (102, 5, 10)] {
+            assert_eq!(
+                info(&d2(p)),
+                info(&d1(fra, q)),
+                "D2 page {p} vs D1 {fra}/{q}"
+            );
+        }
+        // Page 36 (WNa, toa at the frame's time) against D1 page 8 sent in the same toa.
+        assert_eq!(info(&d2(36)), info(&d1(5, 8)), "D2 page 36 vs D1 page 8");
+        // C05's almanac page is 41 (37 + 4) and not zero; C25's (page 95) is zeros.
+        assert_ne!(uget(&d2(41), &[(51, 2), (61, 22)]), 0);
+        assert_eq!(uget(&d2(95), &[(51, 2), (61, 22)]), 0);
+        let grid = d2(1);
+        assert!(
+            info(&grid).iter().all(|&b| b == 0),
+            "grid page 1 is a placeholder"
+        );
     }
 
     #[test]
@@ -669,13 +1158,17 @@ mod tests {
         let e = c05_2020();
         assert!(e.sat.is_bds_geo());
         let k = bds_klobuchar();
+        let with_k = D1Common {
+            iono: Some(k),
+            ..D1Common::default()
+        };
         let (week, toe_sow) = e.toe.bdt_week_sow();
         let sow0 = toe_sow as i64; // a multiple of 30 s: page 1
         let pages: Vec<[u8; 300]> = (0..10)
             .map(|p| {
                 let sow = sow0 + 3 * p;
                 let mut tx = [0u8; 300];
-                d2_subframe(&e, Some(&k), week, sow, 1, &mut tx);
+                d2_subframe(&e, &with_k, week, sow, 1, &mut tx);
                 assert_codewords_valid(&tx);
                 let d = deinterleave(&tx);
                 assert_eq!(uget(&d, &[(1, 11)]), PREAMBLE);
@@ -789,7 +1282,7 @@ mod tests {
         // FraID, valid codewords.
         for fra_id in 2..=5 {
             let mut tx = [0u8; 300];
-            d2_subframe(&e, Some(&k), week, sow0, fra_id, &mut tx);
+            d2_subframe(&e, &with_k, week, sow0, fra_id, &mut tx);
             assert_codewords_valid(&tx);
             let d = deinterleave(&tx);
             assert_eq!(uget(&d, &[(16, 3)]), u64::from(fra_id));
@@ -812,9 +1305,19 @@ mod tests {
         let k = bds_klobuchar();
         // C05: subframe 3 of the frame at sow0 + 3 starts 1.2 s into the frame; each of its
         // 300 bits lasts two code periods, with no overlay code.
-        let mut geo = BdsNavStream::new(Arc::clone(&nav), c05.sat);
+        let mut geo = BdsNavStream::new(Arc::clone(&nav), c05.sat, 18);
         let mut want = [0u8; 300];
-        d2_subframe(&c05, Some(&k), week, sow0 + 3, 3, &mut want);
+        d2_subframe(
+            &c05,
+            &D1Common {
+                iono: Some(k),
+                ..D1Common::default()
+            },
+            week,
+            sow0 + 3,
+            3,
+            &mut want,
+        );
         for (i, &bit) in want.iter().enumerate() {
             let ms = at(sow0 + 3, 1200 + 2 * i as i64);
             assert_eq!(geo.symbol(ms), bit, "bit {i}");
@@ -827,8 +1330,17 @@ mod tests {
         }
         assert_iono(decode_iono(&deinterleave(&tx), true), &k);
         // C20: D1 subframe 2 (6 s in), each bit over 20 periods ⊕ the NH code.
-        let mut meo = BdsNavStream::new(Arc::clone(&nav), c20.sat);
-        d1_subframe(&c20, Some(&k), week, sow0 + 6, &mut want);
+        let mut meo = BdsNavStream::new(Arc::clone(&nav), c20.sat, 18);
+        let c = D1Common {
+            iono: Some(k),
+            time: BdsTimeParams::from_nav(
+                &nav,
+                18,
+                GpsTime::from_bdt_week_sow(week, (sow0 + 6) as f64),
+            ),
+            almanac: &[],
+        };
+        d1_subframe(&c20, &c, week, sow0 + 6, &mut want);
         for (i, &bit) in want.iter().enumerate() {
             for m in 0..20 {
                 let ms = at(sow0 + 6, 20 * i as i64 + m);

@@ -22,13 +22,39 @@
 //!
 //! Subframes 1–3 carry the clock and ephemeris (Figure 20-1, Table 20-III), with the
 //! scale factors below; angles go out in semicircles (π = 3.1415926535898, the ICD's
-//! value). Subframe 4 always carries page 18 (SV ID 56: Klobuchar α/β and the UTC
-//! parameters), and subframe 5 a dummy page (data ID 01, SV ID 0): hybridnav broadcasts no
-//! almanac, which a receiver needs only for a cold start's search, not for a fix.
+//! value).
+//!
+//! Subframes 4 and 5 rotate through 25 pages, page `(TOW/30 mod 25) + 1` of the frame
+//! (12.5 min for the whole set; the ICD numbers pages without tying them to TOW, so any
+//! rotation decodes: receivers read the SV ID). Table 20-V's page assignment:
+//!
+//! - subframe 5 pages 1–24: the almanac of G01–G24 (SV ID = PRN; a dummy page, SV ID 0 and
+//!   zeros, for a PRN without an ephemeris); page 25 (SV ID 51): toa, WNa and the 6-bit
+//!   health of G01–G24;
+//! - subframe 4 pages 2, 3, 4, 5, 7, 8, 9, 10: the almanac of G25–G32; page 25 (SV ID 63):
+//!   anti-spoofing flags and SV configurations of G01–G32 and the health of G25–G32.
+//!   Every other subframe 4 page (1, 6, 11–24, and an almanac page of a PRN without an
+//!   ephemeris) carries page 18's content, SV ID 56: the Klobuchar α/β and the UTC
+//!   parameters. The ICD lets a page carry another function, named by its SV ID
+//!   (§20.3.3.5.1: "the SV ID of that page defines the format and content"); hybridnav
+//!   has nothing for the reserved, special-message and NMCT pages, and sending page 18
+//!   in their place keeps the ionosphere at most 150 s away (pages 6 and 11 around the four
+//!   almanac pages 7–10) rather than once per 12.5 min, which a short recording needs.
+//!
+//! The almanacs come from the world's ephemerides ([`crate::gnss::signal::almanac`]). Almanac
+//! page layout (§20.3.3.5.1.2, Figure 20-1 sheet 4; positions as RTKLIB's
+//! `decode_almanac` reads them): e (16 bits, 2⁻²¹), toa (8, 2¹² s), δi (16, 2⁻¹⁹ sc), Ω̇
+//! (16, 2⁻³⁸ sc/s), health (8), √A (24, 2⁻¹¹), Ω0, ω, M0 (24 each, 2⁻²³ sc), af0 (11,
+//! 2⁻²⁰ s: 8 MSBs, then af1 (11, 2⁻³⁸), then its 3 LSBs). Health words: 0 for a satellite
+//! whose ephemeris says healthy; for one flagged unhealthy the 8-bit word 111 11100 (all
+//! data bad, SV temporarily out) and the 6-bit word 1 11100; for a PRN without an
+//! ephemeris 111111 — hybridnav's reading of Table 20-VII/VIII, the finer codes are not
+//! modelled.
 
 use crate::core::GpsTime;
 use crate::gnss::atmosphere::Klobuchar;
 use crate::gnss::ephemeris::Ephemeris;
+use crate::gnss::signal::almanac::{self, Almanac};
 
 /// π as IS-GPS-200 defines it for converting semicircles (§20.3.3.4.3).
 // The ICD's rounded value on purpose: receivers convert with it, so must the encoder.
@@ -54,6 +80,8 @@ pub struct LnavContent<'a> {
     pub eph: &'a Ephemeris,
     pub klobuchar: Option<Klobuchar>,
     pub utc: UtcParams,
+    /// The almanacs of G01–G32 (index PRN − 1) for subframes 4 and 5.
+    pub almanac: &'a [Option<Almanac>],
 }
 
 /// A subframe being filled: ten words of 24 data bits (bit 1 is the word's MSB).
@@ -88,6 +116,32 @@ impl Words {
     fn put_unsigned(&mut self, first: usize, width: usize, x: f64, scale: f64) {
         let v = (x / scale).round().max(0.0) as u64;
         self.put(first, width, v & ((1u64 << width) - 1));
+    }
+
+    /// Puts `width` bits at data-bit index `i` (0-based over the 240 data bits, 24 a word,
+    /// parity left out: the numbering of RTKLIB's decoders), across word boundaries.
+    fn put_data(&mut self, i: usize, width: usize, value: u64) {
+        for k in 0..width {
+            let d = i + k;
+            self.put(
+                30 * (d / 24) + d % 24 + 1,
+                1,
+                (value >> (width - 1 - k)) & 1,
+            );
+        }
+    }
+
+    /// `x/scale` rounded to a `width`-bit two's complement field at data index `i`.
+    fn put_data_signed(&mut self, i: usize, width: usize, x: f64, scale: f64) {
+        let half = 1i64 << (width - 1);
+        let v = ((x / scale).round() as i64).clamp(-half, half - 1);
+        self.put_data(i, width, v as u64 & ((1u64 << width) - 1));
+    }
+
+    /// `x/scale` rounded to a `width`-bit unsigned field at data index `i`.
+    fn put_data_unsigned(&mut self, i: usize, width: usize, x: f64, scale: f64) {
+        let v = ((x / scale).round().max(0.0) as u64).min((1u64 << width) - 1);
+        self.put_data(i, width, v);
     }
 
     /// A 32-bit field split as 8 MSBs ending word `w` and 24 LSBs filling word `w + 1`.
@@ -213,8 +267,29 @@ fn subframe_words(c: &LnavContent<'_>, frame_start: GpsTime, id: u32, start_tow:
             w.put_signed(279, 14, e.idot / sc, 2f64.powi(-43));
         }
         4 => {
-            // Page 18: data ID 01, SV ID 56.
+            let page = lnav_page(frame_start);
+            // Data ID 01 on every page of both subframes.
             w.put(61, 2, 1);
+            const SF4_ALMANAC: [(i64, usize); 8] = [
+                (2, 25),
+                (3, 26),
+                (4, 27),
+                (5, 28),
+                (7, 29),
+                (8, 30),
+                (9, 31),
+                (10, 32),
+            ];
+            let prn = SF4_ALMANAC.iter().find(|p| p.0 == page).map(|p| p.1);
+            if let Some(a) = prn.and_then(|n| c.almanac.get(n - 1).copied().flatten()) {
+                almanac_page(&mut w, &a);
+                return w;
+            }
+            if page == 25 {
+                sf4_page25(&mut w, c.almanac);
+                return w;
+            }
+            // Page 18's content (SV ID 56).
             w.put(63, 6, 56);
             let k = c.klobuchar.unwrap_or(Klobuchar {
                 alpha: [0.0; 4],
@@ -239,11 +314,85 @@ fn subframe_words(c: &LnavContent<'_>, frame_start: GpsTime, id: u32, start_tow:
             w.put(271, 8, (c.utc.leap_seconds as i64 as u64) & 0xff);
         }
         _ => {
-            // Dummy page: data ID 01, SV ID 0.
+            let page = lnav_page(frame_start);
             w.put(61, 2, 1);
+            if page == 25 {
+                sf5_page25(&mut w, c.almanac, frame_start);
+            } else if let Some(a) = c.almanac.get(page as usize - 1).copied().flatten() {
+                almanac_page(&mut w, &a);
+            }
+            // Otherwise a dummy page: SV ID 0, zeros.
         }
     }
     w
+}
+
+/// The page (1–25) of subframes 4 and 5 in the frame that starts at `frame_start`.
+pub fn lnav_page(frame_start: GpsTime) -> i64 {
+    ((frame_start.tow_s().round() as i64) / 30).rem_euclid(25) + 1
+}
+
+/// The 8-bit almanac health of a satellite (module documentation).
+fn health8(a: &Almanac) -> u64 {
+    if a.healthy {
+        0
+    } else {
+        0b111_11100
+    }
+}
+
+/// The 6-bit health of subframe 4/5 page 25.
+fn health6(a: Option<&Almanac>) -> u64 {
+    match a {
+        Some(a) if a.healthy => 0,
+        Some(_) => 0b1_11100,
+        None => 0b11_1111,
+    }
+}
+
+/// An almanac page (SV ID = PRN), IS-GPS-200 §20.3.3.5.1.2.
+fn almanac_page(w: &mut Words, a: &Almanac) {
+    let sc = GPS_PI;
+    w.put_data(50, 6, u64::from(a.sat.number));
+    w.put_data_unsigned(56, 16, a.e, 2f64.powi(-21));
+    w.put_data_unsigned(72, 8, a.toa_sow_s, 4096.0);
+    w.put_data_signed(80, 16, a.delta_i / sc, 2f64.powi(-19));
+    w.put_data_signed(96, 16, a.omega_dot / sc, 2f64.powi(-38));
+    w.put_data(112, 8, health8(a));
+    w.put_data_unsigned(120, 24, a.sqrt_a, 2f64.powi(-11));
+    w.put_data_signed(144, 24, a.omega0 / sc, 2f64.powi(-23));
+    w.put_data_signed(168, 24, a.omega / sc, 2f64.powi(-23));
+    w.put_data_signed(192, 24, a.m0 / sc, 2f64.powi(-23));
+    let half = 1i64 << 10;
+    let af0 = ((a.af0 / 2f64.powi(-20)).round() as i64).clamp(-half, half - 1) as u64 & 0x7ff;
+    w.put_data(216, 8, af0 >> 3);
+    w.put_data_signed(224, 11, a.af1, 2f64.powi(-38));
+    w.put_data(235, 3, af0 & 0b111);
+}
+
+/// Subframe 5 page 25 (SV ID 51): toa, WNa, health of G01–G24.
+fn sf5_page25(w: &mut Words, almanac: &[Option<Almanac>], frame_start: GpsTime) {
+    let (week, toa) = almanac::toa_for(crate::core::System::Gps, frame_start);
+    w.put_data(50, 6, 51);
+    w.put_data(56, 8, (toa / 4096.0) as u64);
+    w.put_data(64, 8, week.rem_euclid(256) as u64);
+    for prn in 1..=24usize {
+        let a = almanac.get(prn - 1).copied().flatten();
+        w.put_data(72 + 6 * (prn - 1), 6, health6(a.as_ref()));
+    }
+}
+
+/// Subframe 4 page 25 (SV ID 63): anti-spoofing flag and configuration of G01–G32 (A-S off,
+/// configuration 001 for a PRN with an almanac, 000 otherwise) and the health of G25–G32.
+fn sf4_page25(w: &mut Words, almanac: &[Option<Almanac>]) {
+    w.put_data(50, 6, 63);
+    for prn in 1..=32usize {
+        let a = almanac.get(prn - 1).copied().flatten();
+        w.put_data(56 + 4 * (prn - 1), 4, u64::from(a.is_some()));
+        if prn >= 25 {
+            w.put_data(186 + 6 * (prn - 25), 6, health6(a.as_ref()));
+        }
+    }
 }
 
 /// A satellite's LNAV symbols over time: the frame in force is rebuilt from the navigation
@@ -255,6 +404,9 @@ pub struct LnavStream {
     utc: UtcParams,
     frame: i64,
     bits: [u8; FRAME_BITS],
+    /// The almanacs of G01–G32 and their toa (rebuilt when a frame's toa changes).
+    almanac: Vec<Option<Almanac>>,
+    almanac_toa: Option<(i64, f64)>,
 }
 
 impl LnavStream {
@@ -270,6 +422,8 @@ impl LnavStream {
             utc: UtcParams { leap_seconds },
             frame: i64::MIN,
             bits: [0; FRAME_BITS],
+            almanac: Vec::new(),
+            almanac_toa: None,
         }
     }
 }
@@ -281,12 +435,24 @@ impl crate::gnss::signal::baseband::NavSymbols for LnavStream {
         if frame != self.frame {
             self.frame = frame;
             let start = GpsTime::from_ns(frame * 30_000_000_000);
+            let toa = almanac::toa_for(crate::core::System::Gps, start);
+            if self.almanac_toa != Some(toa) {
+                almanac::fill_constellation(
+                    &self.nav,
+                    crate::core::System::Gps,
+                    32,
+                    start,
+                    &mut self.almanac,
+                );
+                self.almanac_toa = Some(toa);
+            }
             match self.nav.select(self.sat, start) {
                 Some(eph) => {
                     let content = LnavContent {
                         eph,
                         klobuchar: self.nav.klobuchar,
                         utc: self.utc,
+                        almanac: &self.almanac,
                     };
                     frame_bits(&content, start, &mut self.bits);
                 }
@@ -344,6 +510,7 @@ mod tests {
                 beta: [0.1167e+06, -0.2294e+06, -0.1311e+06, 0.1049e+07],
             }),
             utc: UtcParams { leap_seconds: 15 },
+            almanac: &[],
         };
         let start = GpsTime::from_week_tow(1590, 345_600.0);
         let mut bits = [0u8; FRAME_BITS];

@@ -2,14 +2,17 @@
 //! acquire, track, decode and position from (`hybridnav gnss iq`).
 //!
 //! - [`ca_code`]: GPS L1 C/A Gold codes (IS-GPS-200 §3.3.2.3).
-//! - [`lnav`]: the GPS LNAV message (subframes 1–5, TLM/HOW, parity; IS-GPS-200 §20.3).
-//! - [`b1i`]: BeiDou B1I ranging codes; [`d1d2`]: the D1 message with its NH code (MEO/IGSO)
-//!   and the 500 bit/s D2 message (GEO), both with BCH(15,11), interleaving and the BDS
-//!   Klobuchar set of the RINEX header.
+//! - [`lnav`]: the GPS LNAV message (subframes 1–5 with the 25-page almanac rotation,
+//!   TLM/HOW, parity; IS-GPS-200 §20.3).
+//! - [`b1i`]: BeiDou B1I ranging codes; [`d1d2`]: the D1 message with its NH code (MEO/IGSO;
+//!   almanac, health and time pages in subframes 4–5) and the 500 bit/s D2 message (GEO),
+//!   both with BCH(15,11), interleaving and the BDS Klobuchar set of the RINEX header.
+//! - [`almanac`]: the almanacs both messages carry, derived from the world's ephemerides.
 //! - [`baseband`]: replicas, noise, AGC and quantisation; the sample formats.
 //! - [`scenario`]: a world's geometry per epoch (the measurement level's orbits, clocks,
 //!   atmosphere, Sagnac and the scene's paths) turned into replicas and streamed.
 
+pub mod almanac;
 pub mod b1i;
 pub mod baseband;
 pub mod ca_code;

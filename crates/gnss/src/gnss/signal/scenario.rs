@@ -479,7 +479,11 @@ pub fn record(
                     sat,
                     w.leap_seconds,
                 )),
-                Signal::BdsB1i => Box::new(d1d2::BdsNavStream::new(Arc::clone(&w.nav), sat)),
+                Signal::BdsB1i => Box::new(d1d2::BdsNavStream::new(
+                    Arc::clone(&w.nav),
+                    sat,
+                    w.leap_seconds,
+                )),
             };
             Some(Channel {
                 sat,
