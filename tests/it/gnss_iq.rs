@@ -152,6 +152,30 @@ pub(crate) struct Positioned {
 /// channels and output no fix; the same file alone gave 21 fixes).
 pub(crate) static ONE_RECEIVER: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
+/// The PRN of every satellite a recording's SigMF metadata annotates, in its order.
+pub(crate) fn annotated_prns(meta: &serde_json::Value) -> Vec<u64> {
+    meta["annotations"]
+        .as_array()
+        .expect("annotations")
+        .iter()
+        .map(|a| a["hybridnav:prn"].as_u64().expect("prn"))
+        .collect()
+}
+
+/// Runs GNSS-SDR on the configuration `conf` with its logs and outputs in `dir`, and
+/// returns its console output (the caller holds [`ONE_RECEIVER`]).
+pub(crate) fn run_gnss_sdr(tag: &str, conf: &std::path::Path, dir: &std::path::Path) -> String {
+    let t0 = std::time::Instant::now();
+    let run = Command::new("gnss-sdr")
+        .arg(format!("--config_file={}", conf.display()))
+        .arg(format!("--log_dir={}", dir.display()))
+        .current_dir(dir)
+        .output()
+        .expect("run gnss-sdr");
+    eprintln!("{tag}: gnss-sdr took {:.1} s", t0.elapsed().as_secs_f64());
+    String::from_utf8_lossy(&run.stdout).into_owned()
+}
+
 /// Records `world` for `duration_s` at `rate` sps ci8 on `signal` (`gps-l1ca` or
 /// `bds-b1i`), writes GNSS-SDR's configuration `conf(data, out, prns)` and runs GNSS-SDR
 /// on it. `None` (after the skip is reported) when GNSS-SDR is not installed.
@@ -199,12 +223,7 @@ pub(crate) fn record_and_position(
     assert_eq!(meta["global"]["core:datatype"], "ci8");
     let data_len = std::fs::metadata(file("sigmf-data")).expect("data").len();
     assert_eq!(data_len, 2 * u64::from(duration_s) * rate as u64);
-    let prns: Vec<u64> = meta["annotations"]
-        .as_array()
-        .expect("annotations")
-        .iter()
-        .map(|a| a["hybridnav:prn"].as_u64().expect("prn"))
-        .collect();
+    let prns = annotated_prns(&meta);
     let conf_path = file("conf");
     let _turn = ONE_RECEIVER.lock().unwrap_or_else(|e| e.into_inner());
     std::fs::write(
@@ -216,16 +235,8 @@ pub(crate) fn record_and_position(
         ),
     )
     .expect("write conf");
-    let t0 = std::time::Instant::now();
-    let run = Command::new("gnss-sdr")
-        .arg(format!("--config_file={}", conf_path.display()))
-        .arg(format!("--log_dir={}", d.display()))
-        .current_dir(&d)
-        .output()
-        .expect("run gnss-sdr");
-    eprintln!("{tag}: gnss-sdr took {:.1} s", t0.elapsed().as_secs_f64());
     Some(Positioned {
-        log: String::from_utf8_lossy(&run.stdout).into_owned(),
+        log: run_gnss_sdr(tag, &conf_path, &d),
         prns,
         truth: Truth::read(&file("truth.csv")),
         dir: d,

@@ -4,7 +4,9 @@
 //! compared field by field with what the world's navigation header makes the encoder send.
 
 use crate::common::{hybridnav, repo, skip, stderr, tmp_dir};
-use crate::gnss_iq::{bds_conf, xml_value, ESBC_NAV, ONE_RECEIVER, WORLD};
+use crate::gnss_iq::{
+    annotated_prns, bds_conf, run_gnss_sdr, xml_value, ESBC_NAV, ONE_RECEIVER, WORLD,
+};
 use hybridnav::core::GpsTime;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -80,12 +82,7 @@ fn bds_through_gnss_sdr(
     let meta: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(file("sigmf-meta")).expect("meta"))
             .expect("meta is JSON");
-    let prns: Vec<u64> = meta["annotations"]
-        .as_array()
-        .expect("annotations")
-        .iter()
-        .map(|a| a["hybridnav:prn"].as_u64().expect("prn"))
-        .collect();
+    let prns = annotated_prns(&meta);
     let _turn = ONE_RECEIVER.lock().unwrap_or_else(|e| e.into_inner());
     let conf = file("conf");
     std::fs::write(
@@ -98,17 +95,10 @@ fn bds_through_gnss_sdr(
         ),
     )
     .expect("write conf");
-    let t0 = std::time::Instant::now();
-    let run = Command::new("gnss-sdr")
-        .arg(format!("--config_file={}", conf.display()))
-        .arg(format!("--log_dir={}", d.display()))
-        .current_dir(&d)
-        .output()
-        .expect("run gnss-sdr");
-    eprintln!("{tag}: gnss-sdr took {:.1} s", t0.elapsed().as_secs_f64());
+    let log = run_gnss_sdr(tag, &conf, &d);
     // The samples are not needed any more (630 MB).
     let _ = std::fs::remove_file(file("sigmf-data"));
-    Some((d, String::from_utf8_lossy(&run.stdout).into_owned()))
+    Some((d, log))
 }
 
 /// The world starts at 2020-06-25 02:00:18 GPST = 02:00:04 BDT, BDT week 755 second

@@ -1380,6 +1380,39 @@ mod tests {
     }
 
     /// The SNR where PER crosses 10⁻² on `grid`, measured by `f`.
+    /// The two-path channel of the tests: an echo 30 samples late at −3 dB and phase 1 rad.
+    fn echo_30_samples() -> Vec<Complex32> {
+        impulse_response(&[
+            (0.0, Complex64::new(1.0, 0.0)),
+            (30.0, Complex64::from_polar(0.5f64.sqrt(), 1.0)),
+        ])
+        .unwrap()
+    }
+
+    /// The thresholds on `grid` of `prof` in `mode` through the static channel `h`
+    /// (10 frames a point, seed `seed`) with the ideal and with the estimated channel.
+    fn ideal_and_estimated(
+        prof: Profile,
+        mode: PnMode,
+        h: &[Complex32],
+        grid: &[f64],
+        seed: u64,
+    ) -> (f64, f64) {
+        let run = |csi| {
+            let cfg = ChannelBer {
+                profile: prof,
+                mode,
+                h,
+                doppler: &[],
+                csi,
+                frames: 10,
+                seed,
+            };
+            threshold(grid, |s| measure_channel_point(&cfg, s).unwrap())
+        };
+        (run(Csi::Ideal), run(Csi::Estimated))
+    }
+
     fn threshold(grid: &[f64], mut f: impl FnMut(f64) -> BerPoint) -> f64 {
         let pts: Vec<_> = grid
             .iter()
@@ -1420,19 +1453,7 @@ mod tests {
                 crate::dtmb::ber::measure_point(prof, mode, s, 10, seed).unwrap()
             });
             let h = [Complex32::new(1.0, 0.0)];
-            let run = |csi| {
-                let cfg = ChannelBer {
-                    profile: prof,
-                    mode,
-                    h: &h,
-                    doppler: &[],
-                    csi,
-                    frames: 10,
-                    seed,
-                };
-                threshold(&grid, |s| measure_channel_point(&cfg, s).unwrap())
-            };
-            let (ide, est) = (run(Csi::Ideal), run(Csi::Estimated));
+            let (ide, est) = ideal_and_estimated(prof, mode, &h, &grid, seed);
             println!(
                 "{mode} one path: AWGN {awgn:.3} dB, genie {ide:.3} dB, estimated {est:.3} dB"
             );
@@ -1483,27 +1504,11 @@ mod tests {
     fn a_two_path_channel_matches_its_per_carrier_snr() {
         let prof = profile(Constellation::Qam64, CodeRate::R06);
         let seed = 1;
-        let h = impulse_response(&[
-            (0.0, Complex64::new(1.0, 0.0)),
-            (30.0, Complex64::from_polar(0.5f64.sqrt(), 1.0)),
-        ])
-        .unwrap();
+        let h = echo_30_samples();
         for mode in [PnMode::Pn945, PnMode::Pn595] {
             let shift = frame_power_shift_db(mode);
             let grid = grid_from(16.2 + shift, 10);
-            let run = |csi| {
-                let cfg = ChannelBer {
-                    profile: prof,
-                    mode,
-                    h: &h,
-                    doppler: &[],
-                    csi,
-                    frames: 10,
-                    seed,
-                };
-                threshold(&grid, |s| measure_channel_point(&cfg, s).unwrap())
-            };
-            let (ide, est) = (run(Csi::Ideal), run(Csi::Estimated));
+            let (ide, est) = ideal_and_estimated(prof, mode, &h, &grid, seed);
             let hk = frequency_response(&h);
             let sym = threshold(&grid, |s| {
                 let var = mode.nominal_frame_power() / 10f64.powf(s / 10.0)
@@ -1615,19 +1620,7 @@ mod tests {
         };
         let (a1, a3780) = (awgn(c1), awgn(c3780));
         let h = [Complex32::new(1.0, 0.0)];
-        let run = |csi| {
-            let cfg = ChannelBer {
-                profile: c1,
-                mode,
-                h: &h,
-                doppler: &[],
-                csi,
-                frames: 10,
-                seed,
-            };
-            threshold(&grid, |s| measure_channel_point(&cfg, s).unwrap())
-        };
-        let (ide, est) = (run(Csi::Ideal), run(Csi::Estimated));
+        let (ide, est) = ideal_and_estimated(c1, mode, &h, &grid, seed);
         println!(
             "C=1 one path: AWGN C=1 {a1:.3} dB, AWGN C=3780 {a3780:.3} dB, genie {ide:.3} dB, \
              estimated {est:.3} dB"
@@ -1654,27 +1647,11 @@ mod tests {
     fn a_two_path_single_carrier_channel_matches_its_post_mmse_sinr() {
         let seed = 1;
         let prof = single(Constellation::Qam64, CodeRate::R06);
-        let h = impulse_response(&[
-            (0.0, Complex64::new(1.0, 0.0)),
-            (30.0, Complex64::from_polar(0.5f64.sqrt(), 1.0)),
-        ])
-        .unwrap();
+        let h = echo_30_samples();
         for mode in [PnMode::Pn945, PnMode::Pn595] {
             let shift = frame_power_shift_db(mode);
             let grid = grid_from(18.6 + shift, 12);
-            let run = |csi| {
-                let cfg = ChannelBer {
-                    profile: prof,
-                    mode,
-                    h: &h,
-                    doppler: &[],
-                    csi,
-                    frames: 10,
-                    seed,
-                };
-                threshold(&grid, |s| measure_channel_point(&cfg, s).unwrap())
-            };
-            let (ide, est) = (run(Csi::Ideal), run(Csi::Estimated));
+            let (ide, est) = ideal_and_estimated(prof, mode, &h, &grid, seed);
             let sinr = threshold(&grid, |s| {
                 let var = mode.nominal_frame_power() / 10f64.powf(s / 10.0)
                     * (1.0 + 30.0 / BODY_LEN as f64);

@@ -385,6 +385,17 @@ mod tests {
         InsEkfConfig::from_imu(&imu.resolve().unwrap())
     }
 
+    /// Five directions (ECEF, not normalised) to satellites spread over the sky.
+    fn sky() -> [Vector3<f64>; 5] {
+        [
+            Vector3::new(1.0, 0.2, 0.3),
+            Vector3::new(-0.5, 1.0, 0.4),
+            Vector3::new(0.1, -1.0, 0.8),
+            Vector3::new(-0.7, -0.6, 0.5),
+            Vector3::new(0.3, 0.4, 1.0),
+        ]
+    }
+
     /// A range from an emitter `d` (ECEF offset from the receiver) with σ 2 m, and a range
     /// rate with σ 0.1 m/s.
     fn range(sys: System, d: Vector3<f64>, at: &Vector3<f64>) -> RangeMeasurement {
@@ -459,13 +470,7 @@ mod tests {
     fn the_loose_information_is_that_of_a_least_squares_fix() {
         let frame = frame();
         let at = frame.origin_ecef();
-        let dirs = [
-            Vector3::new(1.0, 0.2, 0.3),
-            Vector3::new(-0.5, 1.0, 0.4),
-            Vector3::new(0.1, -1.0, 0.8),
-            Vector3::new(-0.7, -0.6, 0.5),
-            Vector3::new(0.3, 0.4, 1.0),
-        ];
+        let dirs = sky();
         let mut ranges: Vec<RangeMeasurement> = dirs
             .iter()
             .map(|d| range(System::Gps, d.normalize() * 2.2e7, &at))
@@ -523,13 +528,7 @@ mod tests {
         let f_b = q_nb.inverse() * (-g);
         let w_b = q_nb.inverse() * w;
         let at = frame.ecef_of_enu(&init.pos_enu_m);
-        let dirs = [
-            Vector3::new(1.0, 0.2, 0.3),
-            Vector3::new(-0.5, 1.0, 0.4),
-            Vector3::new(0.1, -1.0, 0.8),
-            Vector3::new(-0.7, -0.6, 0.5),
-            Vector3::new(0.3, 0.4, 1.0),
-        ];
+        let dirs = sky();
         let ranges: Vec<RangeMeasurement> = dirs
             .iter()
             .map(|d| {
