@@ -255,15 +255,8 @@ pub fn impulse_response(paths: &[(f64, Complex64)]) -> Result<Vec<Complex32>, Dt
             hi - lo
         )));
     }
-    let k = KERNEL_HALF_WIDTH as f64;
-    let len = ((hi - lo) + k).ceil() as usize + KERNEL_HALF_WIDTH;
-    let mut h = vec![Complex64::default(); len];
-    for (n, x) in h.iter_mut().enumerate() {
-        for &(d, g) in paths {
-            *x += g * kernel(n as f64 - (d - lo + k));
-        }
-    }
-    let e: f64 = h.iter().map(|x| x.norm_sqr()).sum();
+    let (mut h, grid) = response_on_grid(paths);
+    let e = grid.energy;
     if !(e > 0.0 && e.is_finite()) {
         return Err(bad("the paths cancel: the response has no energy".into()));
     }
@@ -278,11 +271,7 @@ pub fn impulse_response(paths: &[(f64, Complex64)]) -> Result<Vec<Complex32>, Dt
     while h.len() > 1 && h.last().is_some_and(|x| x.norm_sqr() == 0.0) {
         h.pop();
     }
-    let lead = h
-        .iter()
-        .take_while(|x| x.norm_sqr() == 0.0)
-        .count()
-        .min(h.len() - 1);
+    let lead = grid.lead;
     h.drain(..lead);
     let s = 1.0 / e.sqrt();
     Ok(h.iter()
@@ -321,8 +310,8 @@ pub fn doppler_responses(
     }
     let plain: Vec<(f64, Complex64)> = paths.iter().map(|&(d, g, _)| (d, g)).collect();
     let h = impulse_response(&plain)?;
-    let (grid, e, lead) = response_grid(&plain);
-    let s = 1.0 / e.sqrt();
+    let grid = response_on_grid(&plain).1;
+    let (e, s) = (grid.energy, 1.0 / grid.energy.sqrt());
     let mut groups: Vec<DopplerTaps> = Vec::new();
     for &(_, _, f) in paths {
         if groups.iter().any(|g| g.doppler_hz.to_bits() == f.to_bits()) {
@@ -337,7 +326,7 @@ pub fn doppler_responses(
             .map(|n| {
                 let x: Complex64 = members
                     .iter()
-                    .map(|&(d, g)| g * kernel((lead + n) as f64 - (d - grid.0 + grid.1)))
+                    .map(|&(d, g)| g * kernel(grid.offset(n, d)))
                     .sum();
                 if x.norm_sqr() < 1e-12 * e {
                     Complex32::default()
@@ -354,10 +343,25 @@ pub fn doppler_responses(
     Ok((h, groups))
 }
 
-/// The grid [`impulse_response`] puts paths on (validated paths): the earliest delay and
-/// the kernel's offset `K`, the response's energy before scaling, and the taps it trims
-/// from the start.
-fn response_grid(paths: &[(f64, Complex64)]) -> ((f64, f64), f64, usize) {
+/// Where [`impulse_response`] puts validated paths: the earliest delay `lo` (a path of
+/// delay `d` sits at `d − lo + K`, `K` the kernel's half width), the response's energy
+/// before scaling, and the taps below 10⁻¹² of it that the response drops from the start.
+struct ResponseGrid {
+    lo: f64,
+    energy: f64,
+    lead: usize,
+}
+
+impl ResponseGrid {
+    /// Sample `n` of the trimmed response relative to a path of delay `d`.
+    fn offset(&self, n: usize, d: f64) -> f64 {
+        (self.lead + n) as f64 - (d - self.lo + KERNEL_HALF_WIDTH as f64)
+    }
+}
+
+/// The untrimmed, unscaled response `Σ_p g_p φ(n − (d_p − lo + K))` of validated paths and
+/// its [`ResponseGrid`].
+fn response_on_grid(paths: &[(f64, Complex64)]) -> (Vec<Complex64>, ResponseGrid) {
     let (lo, hi) = paths.iter().fold((f64::MAX, f64::MIN), |(a, b), (d, _)| {
         (a.min(*d), b.max(*d))
     });
@@ -371,9 +375,13 @@ fn response_grid(paths: &[(f64, Complex64)]) -> ((f64, f64), f64, usize) {
                 .sum()
         })
         .collect();
-    let e: f64 = h.iter().map(|x| x.norm_sqr()).sum();
-    let lead = h.iter().take_while(|x| x.norm_sqr() < 1e-12 * e).count();
-    ((lo, k), e, lead.min(len - 1))
+    let energy: f64 = h.iter().map(|x| x.norm_sqr()).sum();
+    let lead = h
+        .iter()
+        .take_while(|x| x.norm_sqr() < 1e-12 * energy)
+        .count()
+        .min(len - 1);
+    (h, ResponseGrid { lo, energy, lead })
 }
 
 /// The frequency response `H_k = Σ_n h[n] e^{−j2πkn/N}` on the 3780 carriers (physical

@@ -54,6 +54,7 @@
 //! initialises, the gait's velocity that a walker's range rates do not describe) is
 //! counted, which only lowers the bound.
 
+use super::attitude::BodyTruth;
 use super::ins_ekf::{initial_covariance, process_noise_rate, InsEkfConfig};
 use super::ins_tight::{tidx, Cov18, TightClockConfig, N_TIGHT};
 use super::{skew, LocalEarth};
@@ -339,16 +340,10 @@ impl InsBound {
 
 /// The truth an IMU step of the bound needs, from a body truth: `C_b^n` and
 /// `f^n = a^n − g^n(h) + 2 ω_ie × v^n` (the ideal IMU's specific force in ENU).
-pub fn truth_dynamics(
-    earth: &LocalEarth,
-    q_nb: &nalgebra::UnitQuaternion<f64>,
-    pos_enu_m: &Vector3<f64>,
-    vel_enu_mps: &Vector3<f64>,
-    acc_enu_mps2: &Vector3<f64>,
-) -> (Matrix3<f64>, Vector3<f64>) {
-    let c = q_nb.to_rotation_matrix().into_inner();
-    let f_n = acc_enu_mps2 - earth.gravity_enu_mps2(pos_enu_m.z)
-        + 2.0 * earth.omega_ie_enu_rps.cross(vel_enu_mps);
+pub fn truth_dynamics(earth: &LocalEarth, b: &BodyTruth) -> (Matrix3<f64>, Vector3<f64>) {
+    let c = b.q_nb.to_rotation_matrix().into_inner();
+    let f_n = b.acc_enu_mps2 - earth.gravity_enu_mps2(b.pos_enu_m.z)
+        + 2.0 * earth.omega_ie_enu_rps.cross(&b.vel_enu_mps);
     (c, f_n)
 }
 

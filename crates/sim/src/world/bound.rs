@@ -415,12 +415,11 @@ impl World {
         let imu_step_s = 1.0 / spec.rate_hz;
         for i in 0..trials.max(1) {
             let rng = TrialRng::new(seed, i);
-            let (Ok(trajectory), Ok(body_path)) =
-                (self.build_trajectory(&rng), self.build_trajectory(&rng))
-            else {
+            // The body truth owns the trial's trajectory; the engine's truth is its path.
+            let Ok(path) = self.build_trajectory(&rng) else {
                 continue;
             };
-            let Ok(body) = PlatformTruth::of_trial(body_path, &self.file.platform.attitude(), &rng)
+            let Ok(body) = PlatformTruth::of_trial(path, &self.file.platform.attitude(), &rng)
             else {
                 continue;
             };
@@ -438,13 +437,7 @@ impl World {
                         break;
                     }
                     let b = body.sample(t_imu);
-                    let (c, f_n) = truth_dynamics(
-                        &earth,
-                        &b.q_nb,
-                        &b.pos_enu_m,
-                        &b.vel_enu_mps,
-                        &b.acc_enu_mps2,
-                    );
+                    let (c, f_n) = truth_dynamics(&earth, &b);
                     for (m, st) in models.iter().zip(states.iter_mut()) {
                         m.bound.predict(st, t_imu, &c, &f_n, b.pos_enu_m.z);
                     }
@@ -452,7 +445,7 @@ impl World {
                         k_imu += 1;
                     }
                 }
-                let truth = truth_at(&self.frame, self.start, trajectory.as_ref(), SimTime(t_ns));
+                let truth = truth_at(&self.frame, self.start, body.trajectory(), SimTime(t_ns));
                 rx.sample(t_ns, &truth);
                 for ((m, st), sum) in models.iter().zip(states.iter_mut()).zip(mse_sum.iter_mut()) {
                     if rx.epoch_of(|s| m.ranges.contains(&s), &mut mine) {

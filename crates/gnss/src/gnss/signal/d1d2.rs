@@ -75,6 +75,7 @@ use crate::gnss::ephemeris::Ephemeris;
 use crate::gnss::rinex_nav::NavData;
 use crate::gnss::signal::almanac::{self, Almanac};
 use crate::gnss::signal::baseband::NavSymbols;
+use crate::gnss::signal::{signed_raw, unsigned_raw};
 use std::sync::Arc;
 
 /// π of the BDS ICD.
@@ -97,18 +98,6 @@ pub fn bch15_11(info: u32) -> u32 {
         reg = ((reg << 1) & 0b1111) ^ if fb == 1 { 0b0011 } else { 0 };
     }
     reg
-}
-
-/// `x/scale` rounded to a `width`-bit two's complement field, saturated at its range.
-fn signed_raw(x: f64, scale: f64, width: usize) -> u64 {
-    let half = 1i64 << (width - 1);
-    let v = ((x / scale).round() as i64).clamp(-half, half - 1);
-    v as u64 & ((1u64 << width) - 1)
-}
-
-/// `x/scale` rounded to a `width`-bit unsigned field, saturated at its range.
-fn unsigned_raw(x: f64, scale: f64, width: usize) -> u64 {
-    ((x / scale).round().max(0.0) as u64).min((1u64 << width) - 1)
 }
 
 /// The 300 decoded bits of a subframe (1-based positions) being filled.
@@ -226,11 +215,13 @@ impl Fields {
     }
 }
 
-/// What a D1 subframe carries besides its satellite's ephemeris: the BeiDou Klobuchar set
-/// (subframe 1), the almanac and health (subframe 4 pages 1–24, subframe 5 pages 1–8) and
-/// the time parameters (subframe 5 pages 9 and 10).
+/// What a D1 or D2 subframe carries besides its satellite's ephemeris, the same for every
+/// satellite: the BeiDou Klobuchar set (D1 subframe 1, D2 subframe 1 page 2), the almanac
+/// and health (D1 subframe 4 pages 1–24 and subframe 5 pages 1–8; D2 subframe 5 pages
+/// 35–60 and 95–100) and the time parameters (D1 subframe 5 pages 9 and 10; D2 subframe 5
+/// pages 101 and 102).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct D1Common<'a> {
+pub struct SharedPages<'a> {
     pub iono: Option<Klobuchar>,
     pub time: BdsTimeParams,
     /// The almanacs of C01–C30 (index PRN − 1) for subframes 4 and 5; an empty slice or a
@@ -362,7 +353,7 @@ pub fn d1_page(sow: i64) -> i64 {
 }
 
 /// The decoded bits of D1 subframe `fra_id` (1–5) starting at BDT `week`, `sow`.
-fn d1_fields(e: &Ephemeris, c: &D1Common, week: i64, sow: i64, fra_id: u32) -> Fields {
+fn d1_fields(e: &Ephemeris, c: &SharedPages, week: i64, sow: i64, fra_id: u32) -> Fields {
     let iono = c.iono.as_ref();
     let mut f = Fields([0; 300]);
     f.header(fra_id, sow);
@@ -522,7 +513,7 @@ fn split(raw: u64, width: usize, msb: usize) -> (u64, u64) {
 
 /// The decoded bits of D2 subframe `fra_id` (1–5) of the frame starting at BDT `week`,
 /// `sow` (a multiple of 3); subframe 1 is page `sow/3 mod 10 + 1`.
-fn d2_fields(e: &Ephemeris, c: &D1Common, week: i64, sow: i64, fra_id: u32) -> Fields {
+fn d2_fields(e: &Ephemeris, c: &SharedPages, week: i64, sow: i64, fra_id: u32) -> Fields {
     let iono = c.iono.as_ref();
     let mut f = Fields([0; 300]);
     f.header(fra_id, sow);
@@ -622,7 +613,7 @@ pub fn d2_page5(sow: i64) -> i64 {
 /// subframes 4–5. The ionospheric grid pages (1–13, 61–73) and the rest carry the page
 /// number and zeros: hybridnav has no grid to broadcast (placeholders, not "not
 /// monitored" codes, which are not written here).
-fn d2_subframe5(f: &mut Fields, c: &D1Common, week: i64, sow: i64) {
+fn d2_subframe5(f: &mut Fields, c: &SharedPages, week: i64, sow: i64) {
     let page = d2_page5(sow);
     f.put(44, 7, page as u64);
     let alm = |prn: i64| c.almanac.get(prn as usize - 1).copied().flatten();
@@ -638,7 +629,7 @@ fn d2_subframe5(f: &mut Fields, c: &D1Common, week: i64, sow: i64) {
 
 /// The 300 transmitted bits of the D1 subframe of `e` that starts at BDT `week`, `sow`,
 /// with the Klobuchar set and time parameters of `c` (a missing set goes out as zeros).
-pub fn d1_subframe(e: &Ephemeris, c: &D1Common, week: i64, sow: i64, out: &mut [u8; 300]) {
+pub fn d1_subframe(e: &Ephemeris, c: &SharedPages, week: i64, sow: i64, out: &mut [u8; 300]) {
     let fra_id = ((sow / 6).rem_euclid(5) + 1) as u32;
     d1_fields(e, c, week, sow, fra_id).encode(out);
 }
@@ -648,7 +639,7 @@ pub fn d1_subframe(e: &Ephemeris, c: &D1Common, week: i64, sow: i64, out: &mut [
 /// parameters of `c`.
 pub fn d2_subframe(
     e: &Ephemeris,
-    c: &D1Common,
+    c: &SharedPages,
     week: i64,
     sow: i64,
     fra_id: u32,
@@ -718,7 +709,7 @@ impl BdsNavStream {
             );
             self.almanac_toa = Some(toa);
         }
-        let common = D1Common {
+        let common = SharedPages {
             iono,
             time: BdsTimeParams::from_nav(&self.nav, self.gpst_minus_utc_s, t),
             almanac: &self.almanac,
@@ -824,7 +815,7 @@ mod tests {
         let (week, sow) = e.toe.bdt_week_sow();
         let sow = sow as i64 + 6; // FraID 2 (toe is a multiple of 30 s)
         let mut tx = [0u8; 300];
-        d1_subframe(&e, &D1Common::default(), week, sow, &mut tx);
+        d1_subframe(&e, &SharedPages::default(), week, sow, &mut tx);
         let d = deinterleave(&tx);
         let get = |sl: &[(usize, usize)]| -> u64 {
             sl.iter()
@@ -946,12 +937,12 @@ mod tests {
         let sow = sow as i64; // FraID 1
         let k = bds_klobuchar();
         let (mut with, mut without) = ([0u8; 300], [0u8; 300]);
-        let with_k = D1Common {
+        let with_k = SharedPages {
             iono: Some(k),
-            ..D1Common::default()
+            ..SharedPages::default()
         };
         d1_subframe(&e, &with_k, week, sow, &mut with);
-        d1_subframe(&e, &D1Common::default(), week, sow, &mut without);
+        d1_subframe(&e, &SharedPages::default(), week, sow, &mut without);
         assert_codewords_valid(&with);
         let (dw, dn) = (deinterleave(&with), deinterleave(&without));
         assert_eq!(uget(&dw, &[(16, 3)]), 1);
@@ -975,9 +966,9 @@ mod tests {
         // A coefficient outside its 8-bit range saturates instead of wrapping.
         let mut big = k;
         big.beta[0] = 1e6;
-        let big = D1Common {
+        let big = SharedPages {
             iono: Some(big),
-            ..D1Common::default()
+            ..SharedPages::default()
         };
         d1_subframe(&e, &big, week, sow, &mut with);
         assert_eq!(sget(&deinterleave(&with), &[(167, 6), (181, 2)]), 127);
@@ -1010,7 +1001,7 @@ GLUT -1.8626451492E-09 0.000000000E+00      0    0          TIME SYSTEM CORR
         assert_eq!(d1_page(sow9 + 30), 10);
         let decode = |sow: i64| -> [u8; 300] {
             let t = GpsTime::from_bdt_week_sow(week, sow as f64);
-            let c = D1Common {
+            let c = SharedPages {
                 iono: None,
                 time: BdsTimeParams::from_nav(&nav, 18, t),
                 almanac: &[],
@@ -1102,7 +1093,7 @@ GLUT -1.8626451492E-09 0.000000000E+00      0    0          TIME SYSTEM CORR
             let (w, s) = almanac::toa_for(crate::core::System::Bds, t);
             almanac[usize::from(e.sat.number) - 1] = Some(Almanac::from_ephemeris(e, w, s));
         }
-        let c = D1Common {
+        let c = SharedPages {
             iono: None,
             time: BdsTimeParams::from_nav(&nav, 18, t),
             almanac: &almanac,
@@ -1158,9 +1149,9 @@ GLUT -1.8626451492E-09 0.000000000E+00      0    0          TIME SYSTEM CORR
         let e = c05_2020();
         assert!(e.sat.is_bds_geo());
         let k = bds_klobuchar();
-        let with_k = D1Common {
+        let with_k = SharedPages {
             iono: Some(k),
-            ..D1Common::default()
+            ..SharedPages::default()
         };
         let (week, toe_sow) = e.toe.bdt_week_sow();
         let sow0 = toe_sow as i64; // a multiple of 30 s: page 1
@@ -1309,9 +1300,9 @@ GLUT -1.8626451492E-09 0.000000000E+00      0    0          TIME SYSTEM CORR
         let mut want = [0u8; 300];
         d2_subframe(
             &c05,
-            &D1Common {
+            &SharedPages {
                 iono: Some(k),
-                ..D1Common::default()
+                ..SharedPages::default()
             },
             week,
             sow0 + 3,
@@ -1331,7 +1322,7 @@ GLUT -1.8626451492E-09 0.000000000E+00      0    0          TIME SYSTEM CORR
         assert_iono(decode_iono(&deinterleave(&tx), true), &k);
         // C20: D1 subframe 2 (6 s in), each bit over 20 periods ⊕ the NH code.
         let mut meo = BdsNavStream::new(Arc::clone(&nav), c20.sat, 18);
-        let c = D1Common {
+        let c = SharedPages {
             iono: Some(k),
             time: BdsTimeParams::from_nav(
                 &nav,

@@ -55,6 +55,7 @@ use crate::core::GpsTime;
 use crate::gnss::atmosphere::Klobuchar;
 use crate::gnss::ephemeris::Ephemeris;
 use crate::gnss::signal::almanac::{self, Almanac};
+use crate::gnss::signal::{signed_raw, unsigned_raw};
 
 /// π as IS-GPS-200 defines it for converting semicircles (§20.3.3.4.3).
 // The ICD's rounded value on purpose: receivers convert with it, so must the encoder.
@@ -133,15 +134,12 @@ impl Words {
 
     /// `x/scale` rounded to a `width`-bit two's complement field at data index `i`.
     fn put_data_signed(&mut self, i: usize, width: usize, x: f64, scale: f64) {
-        let half = 1i64 << (width - 1);
-        let v = ((x / scale).round() as i64).clamp(-half, half - 1);
-        self.put_data(i, width, v as u64 & ((1u64 << width) - 1));
+        self.put_data(i, width, signed_raw(x, scale, width));
     }
 
     /// `x/scale` rounded to a `width`-bit unsigned field at data index `i`.
     fn put_data_unsigned(&mut self, i: usize, width: usize, x: f64, scale: f64) {
-        let v = ((x / scale).round().max(0.0) as u64).min((1u64 << width) - 1);
-        self.put_data(i, width, v);
+        self.put_data(i, width, unsigned_raw(x, scale, width));
     }
 
     /// A 32-bit field split as 8 MSBs ending word `w` and 24 LSBs filling word `w + 1`.
@@ -363,8 +361,7 @@ fn almanac_page(w: &mut Words, a: &Almanac) {
     w.put_data_signed(144, 24, a.omega0 / sc, 2f64.powi(-23));
     w.put_data_signed(168, 24, a.omega / sc, 2f64.powi(-23));
     w.put_data_signed(192, 24, a.m0 / sc, 2f64.powi(-23));
-    let half = 1i64 << 10;
-    let af0 = ((a.af0 / 2f64.powi(-20)).round() as i64).clamp(-half, half - 1) as u64 & 0x7ff;
+    let af0 = signed_raw(a.af0, 2f64.powi(-20), 11);
     w.put_data(216, 8, af0 >> 3);
     w.put_data_signed(224, 11, a.af1, 2f64.powi(-38));
     w.put_data(235, 3, af0 & 0b111);

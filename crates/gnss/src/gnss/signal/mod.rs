@@ -20,6 +20,19 @@ pub mod d1d2;
 pub mod lnav;
 pub mod scenario;
 
+/// `x/scale` rounded to a `width`-bit two's complement field, saturated at its range (the
+/// navigation messages' signed fields).
+pub(crate) fn signed_raw(x: f64, scale: f64, width: usize) -> u64 {
+    let half = 1i64 << (width - 1);
+    let v = ((x / scale).round() as i64).clamp(-half, half - 1);
+    v as u64 & ((1u64 << width) - 1)
+}
+
+/// `x/scale` rounded to a `width`-bit unsigned field, saturated at its range.
+pub(crate) fn unsigned_raw(x: f64, scale: f64, width: usize) -> u64 {
+    ((x / scale).round().max(0.0) as u64).min((1u64 << width) - 1)
+}
+
 /// Why a recording cannot be made.
 #[derive(Debug, thiserror::Error)]
 pub enum SignalError {
