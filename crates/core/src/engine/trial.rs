@@ -237,6 +237,7 @@ impl Pending {
         s.nis_count += out.nis_count;
         s.nis_dof += out.nis_dof;
         s.rejected_gate += out.rejected_gate;
+        s.rejected_gate_state_led += out.rejected_gate_state_led;
         s.mode = out.mode.or(s.mode);
         s.nis_unwatched |= out.nis_unwatched;
         self.processed = true;

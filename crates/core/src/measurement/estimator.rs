@@ -42,6 +42,11 @@ pub struct EpochOutcome {
     /// Of `rejected`, how many an innovation gate refused as outliers (the rest were
     /// refused for invalid input or a numerical failure).
     pub rejected_gate: u32,
+    /// Of `rejected_gate`, those refused while the filter's own variance along the
+    /// measurement, `H P Hᵀ`, was at least the measurement's `R`: the gate then trusted
+    /// the less certain of the two. The divergence watch counts only these towards a
+    /// persistently gated filter ([`crate::engine::health`]).
+    pub rejected_gate_state_led: u32,
     /// The integration mode chosen this epoch, for estimators that select one.
     pub mode: Option<&'static str>,
     /// The NIS above goes to the records only, not to the divergence watch's χ² test:

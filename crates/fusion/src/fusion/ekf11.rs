@@ -306,7 +306,15 @@ pub enum Ekf11Error {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum RejectReason {
     /// The normalised innovation squared exceeded the configured gate (an outlier).
-    Gate,
+    ///
+    /// `state_led` records where the innovation's variance `S = H P Hᵀ + R` came from:
+    /// true when the filter's own share, `H P Hᵀ`, was at least the measurement's `R`
+    /// (for a vector, compared by trace). Refusing such a measurement means trusting a
+    /// state that is itself the less certain of the two, which is what a filter that has
+    /// lost its track does; refusing a measurement noisier than the state is the gate
+    /// removing an outlier. The divergence watch ([`hybridnav_core::engine::health`])
+    /// counts only the former towards a persistently gated filter.
+    Gate { state_led: bool },
     /// The measurement holds a NaN or infinite number.
     NonFiniteInput,
     /// The stated noise is zero, negative, or (for a fix) not a positive-definite matrix.
@@ -737,7 +745,9 @@ impl Ekf11 {
             if nis > g {
                 return UpdateOutcome::Rejected {
                     nis,
-                    reason: RejectReason::Gate,
+                    reason: RejectReason::Gate {
+                        state_led: s.trace() - r.trace() >= r.trace(),
+                    },
                 };
             }
         }
@@ -894,7 +904,9 @@ impl Ekf11 {
             if nis > g {
                 return UpdateOutcome::Rejected {
                     nis,
-                    reason: RejectReason::Gate,
+                    reason: RejectReason::Gate {
+                        state_led: s - r_var >= r_var,
+                    },
                 };
             }
         }
@@ -1688,7 +1700,10 @@ mod tests {
                         );
                         worst_nis = worst_nis.max(diff);
                         accepted += usize::from(a.is_accepted());
-                        gated += usize::from(a.reject_reason() == Some(RejectReason::Gate));
+                        gated += usize::from(matches!(
+                            a.reject_reason(),
+                            Some(RejectReason::Gate { .. })
+                        ));
                     }
                     compare(&f, &g, &format!("epoch {epoch} after {}", m.emitter));
                 }

@@ -78,8 +78,9 @@ fn tally_outcome(out: &mut EpochOutcome, o: UpdateOutcome, dim: u32) {
         }
         UpdateOutcome::Rejected { reason, .. } => {
             out.rejected += 1;
-            if reason == RejectReason::Gate {
+            if let RejectReason::Gate { state_led } = reason {
                 out.rejected_gate += 1;
+                out.rejected_gate_state_led += u32::from(state_led);
             }
         }
     }

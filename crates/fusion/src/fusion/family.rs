@@ -323,9 +323,12 @@ fn tally(out: &mut EpochOutcome, rep: &UpdateReport, dim: u32) {
             out.record_nis(nis, dim);
         }
         UpdateOutcome::Rejected {
-            reason: RejectReason::Gate,
+            reason: RejectReason::Gate { .. },
             ..
-        } => out.rejected_gate += rep.rejected,
+        } => {
+            out.rejected_gate += rep.rejected;
+            out.rejected_gate_state_led += rep.rejected_state_led;
+        }
         _ => {}
     }
 }
@@ -553,6 +556,7 @@ impl Core {
                         },
                         used: 0,
                         rejected: M as u32,
+                        rejected_state_led: 0,
                     }
                 } else {
                     // A particle filter has no innovation covariance, so no NIS.
@@ -560,6 +564,7 @@ impl Core {
                         outcome: UpdateOutcome::Accepted { nis: f64::NAN },
                         used: M as u32,
                         rejected: 0,
+                        rejected_state_led: 0,
                     }
                 }
             }

@@ -129,6 +129,10 @@ pub struct UpdateReport {
     pub used: u32,
     /// Components removed by a gate (or all of them when the update was refused).
     pub rejected: u32,
+    /// Of `rejected`, the components an innovation gate refused while the filter's own
+    /// variance along them, `(H P Hᵀ)_jj`, was at least the measurement's `R_jj`
+    /// ([`RejectReason::Gate`]'s `state_led`).
+    pub rejected_state_led: u32,
 }
 
 impl UpdateReport {
@@ -137,6 +141,23 @@ impl UpdateReport {
             outcome: UpdateOutcome::Rejected { nis, reason },
             used: 0,
             rejected: M as u32,
+            rejected_state_led: 0,
+        }
+    }
+
+    /// The whole update refused by a gate; `state_led` of its `M` components were led by
+    /// the state's variance.
+    fn gated<const M: usize>(nis: f64, state_led: u32) -> Self {
+        Self {
+            outcome: UpdateOutcome::Rejected {
+                nis,
+                reason: RejectReason::Gate {
+                    state_led: 2 * state_led >= M as u32,
+                },
+            },
+            used: 0,
+            rejected: M as u32,
+            rejected_state_led: state_led,
         }
     }
 }
@@ -201,6 +222,10 @@ fn symmetrise<const N: usize>(p: &SMatrix<f64, N, N>) -> SMatrix<f64, N, N> {
 struct Gated<const N: usize, const M: usize> {
     keep: [bool; M],
     used: u32,
+    /// Components whose `(H P Hᵀ)_jj ≥ R_jj`, and how many of those the residual gate
+    /// removed.
+    state_led: u32,
+    state_led_gated: u32,
     nu: SVector<f64, M>,
     s: SMatrix<f64, M, M>,
     pxz: SMatrix<f64, N, M>,
@@ -209,14 +234,22 @@ struct Gated<const N: usize, const M: usize> {
 fn apply_residual_gate<const N: usize, const M: usize>(
     gate: Option<ResidualGate>,
     extra_keep: &[bool; M],
+    r: &SMatrix<f64, M, M>,
     mut nu: SVector<f64, M>,
     mut s: SMatrix<f64, M, M>,
     mut pxz: SMatrix<f64, N, M>,
 ) -> Gated<N, M> {
     let mut keep = *extra_keep;
-    if let Some(g) = gate {
-        for (j, k) in keep.iter_mut().enumerate() {
-            *k &= g.keeps(nu[j], s[(j, j)]);
+    let (mut state_led, mut state_led_gated) = (0, 0);
+    for j in 0..M {
+        // S_jj − R_jj is (H P Hᵀ)_jj, the state's share of the innovation's variance.
+        let led = s[(j, j)] - r[(j, j)] >= r[(j, j)];
+        state_led += u32::from(led);
+        if let Some(g) = gate {
+            if keep[j] && !g.keeps(nu[j], s[(j, j)]) {
+                keep[j] = false;
+                state_led_gated += u32::from(led);
+            }
         }
     }
     let mut used = 0;
@@ -234,6 +267,8 @@ fn apply_residual_gate<const N: usize, const M: usize>(
     Gated {
         keep,
         used,
+        state_led,
+        state_led_gated,
         nu,
         s,
         pxz,
@@ -247,7 +282,7 @@ fn gain_and_nis<const N: usize, const M: usize>(
     chi2_prob: Option<f64>,
 ) -> Result<(SMatrix<f64, N, M>, f64), UpdateReport> {
     if g.used == 0 {
-        return Err(UpdateReport::refused::<M>(RejectReason::Gate, f64::NAN));
+        return Err(UpdateReport::gated::<M>(f64::NAN, g.state_led_gated));
     }
     let Some(chol) = g.s.cholesky() else {
         return Err(UpdateReport::refused::<M>(
@@ -258,18 +293,19 @@ fn gain_and_nis<const N: usize, const M: usize>(
     let nis = g.nu.dot(&chol.solve(&g.nu));
     if let Some(p) = chi2_prob {
         if nis > chi2::quantile(p, f64::from(g.used)) {
-            return Err(UpdateReport::refused::<M>(RejectReason::Gate, nis));
+            return Err(UpdateReport::gated::<M>(nis, g.state_led));
         }
     }
     let k = chol.solve(&g.pxz.transpose()).transpose();
     Ok((k, nis))
 }
 
-fn accepted<const M: usize>(nis: f64, used: u32) -> UpdateReport {
+fn accepted<const N: usize, const M: usize>(nis: f64, g: &Gated<N, M>) -> UpdateReport {
     UpdateReport {
         outcome: UpdateOutcome::Accepted { nis },
-        used,
-        rejected: M as u32 - used,
+        used: g.used,
+        rejected: M as u32 - g.used,
+        rejected_state_led: g.state_led_gated,
     }
 }
 
@@ -386,7 +422,7 @@ impl<const N: usize> Ekf<N> {
         if !(finite(nu.iter()) && finite(s.iter())) {
             return UpdateReport::refused::<M>(RejectReason::NumericalFailure, f64::NAN);
         }
-        let g = apply_residual_gate(self.gating.residual, &[true; M], nu, s, pht);
+        let g = apply_residual_gate(self.gating.residual, &[true; M], &r, nu, s, pht);
         let (k, nis) = match gain_and_nis(&g, self.gating.chi2_prob) {
             Ok(v) => v,
             Err(rep) => return rep,
@@ -399,7 +435,7 @@ impl<const N: usize> Ekf<N> {
         }
         self.x = x;
         self.p = p;
-        accepted::<M>(nis, g.used)
+        accepted(nis, &g)
     }
 }
 
@@ -639,7 +675,7 @@ impl<const N: usize> SigmaPointKf<N> {
         if !(finite(nu.iter()) && finite(s.iter()) && finite(m.pxz.iter())) {
             return UpdateReport::refused::<M>(RejectReason::NumericalFailure, f64::NAN);
         }
-        let g = apply_residual_gate(self.gating.residual, &[true; M], nu, s, m.pxz);
+        let g = apply_residual_gate(self.gating.residual, &[true; M], &r, nu, s, m.pxz);
         let (k, nis) = match gain_and_nis(&g, self.gating.chi2_prob) {
             Ok(v) => v,
             Err(rep) => return rep,
@@ -651,7 +687,7 @@ impl<const N: usize> SigmaPointKf<N> {
         }
         self.x = x;
         self.p = p;
-        accepted::<M>(nis, g.used)
+        accepted(nis, &g)
     }
 }
 
@@ -1065,7 +1101,7 @@ impl<const N: usize, const M: usize> StrongTrackingFilter<N, M> {
         };
         let pht = p_prior * h.transpose();
         let s = h * pht + r;
-        let g = apply_residual_gate(self.gating.residual, &[true; M], nu, s, pht);
+        let g = apply_residual_gate(self.gating.residual, &[true; M], &r, nu, s, pht);
         let (k, nis) = match gain_and_nis(&g, self.gating.chi2_prob) {
             Ok(v) => v,
             Err(rep) => return rep,
@@ -1081,7 +1117,7 @@ impl<const N: usize, const M: usize> StrongTrackingFilter<N, M> {
         self.v = Some(v);
         self.pending = None;
         self.last_lambda = lambda;
-        accepted::<M>(nis, g.used)
+        accepted(nis, &g)
     }
 }
 
@@ -1282,7 +1318,7 @@ impl<const N: usize> RelativeEntropyKf<N> {
             aleph_i[j] = 0.5 * (chi[(j, j)].max(0.0) / r[(j, j)]).ln_1p();
             keep[j] = aleph_i[j] < self.threshold;
         }
-        let g = apply_residual_gate(self.residual_gate, &keep, nu, s, psi);
+        let g = apply_residual_gate(self.residual_gate, &keep, &r, nu, s, psi);
         let coupling = CouplingReport {
             aleph,
             aleph_i,
@@ -1302,7 +1338,7 @@ impl<const N: usize> RelativeEntropyKf<N> {
         }
         self.x = x;
         self.p = p;
-        (accepted::<M>(nis, g.used), Some(coupling))
+        (accepted(nis, &g), Some(coupling))
     }
 }
 
@@ -1403,8 +1439,56 @@ mod tests {
             })
             .unwrap();
         let rep = c.update(&both, &SVector::<f64, 2>::new(1.0, 100.0));
-        assert_eq!(rep.outcome.reject_reason(), Some(RejectReason::Gate));
+        assert!(matches!(
+            rep.outcome.reject_reason(),
+            Some(RejectReason::Gate { .. })
+        ));
         assert_eq!(c.state(), &x0);
+    }
+
+    /// A gated component is "state-led" exactly when the prior variance along it, here
+    /// `P_jj = 4`, is at least its noise `R_jj`: with `R = diag(1, 9)` an outlier on x is
+    /// refused against the state's greater doubt, one on y against the measurement's;
+    /// the χ² refusal of the whole vector counts the components whose `P_jj ≥ R_jj`. Every
+    /// filter of the family reports the same count.
+    #[test]
+    fn gated_components_are_state_led_when_the_state_is_the_less_certain() {
+        let (x0, p0) = prior();
+        let r = SMatrix::<f64, 2, 2>::from_diagonal(&SVector::<f64, 2>::new(1.0, 9.0));
+        let fix = PositionFixModel::<4, 2>::new([0, 2], r).unwrap();
+        let residual = Gating {
+            chi2_prob: None,
+            residual: Some(ResidualGate::sigmas(3.0)),
+        };
+        let state_led = |z: SVector<f64, 2>, gating: Gating| {
+            let mut ekf = Ekf::new(x0, p0).unwrap().with_gating(gating).unwrap();
+            let mut ckf = SigmaPointKf::cubature(x0, p0)
+                .unwrap()
+                .with_gating(gating)
+                .unwrap();
+            let (a, b) = (ekf.update(&fix, &z), ckf.update(&fix, &z));
+            assert_eq!(
+                (a.rejected, a.rejected_state_led),
+                (b.rejected, b.rejected_state_led)
+            );
+            (a.rejected, a.rejected_state_led)
+        };
+        // Innovations 100 and 1 (x0 = (0, 1, 0, −1)): x refused, state-led (4 ≥ 1).
+        assert_eq!(
+            state_led(SVector::<f64, 2>::new(100.0, 1.0), residual),
+            (1, 1)
+        );
+        // y refused, measurement-led (4 < 9).
+        assert_eq!(
+            state_led(SVector::<f64, 2>::new(1.0, 100.0), residual),
+            (1, 0)
+        );
+        let chi2 = Gating {
+            chi2_prob: Some(0.999),
+            residual: None,
+        };
+        assert_eq!(state_led(SVector::<f64, 2>::new(1.0, 100.0), chi2), (2, 1));
+        assert_eq!(state_led(SVector::<f64, 2>::new(0.5, 0.5), chi2), (0, 0));
     }
 
     #[test]

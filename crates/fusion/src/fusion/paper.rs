@@ -1107,9 +1107,12 @@ where
                             out.record_nis(nis, 1);
                         }
                         crate::fusion::ekf11::UpdateOutcome::Rejected {
-                            reason: crate::fusion::ekf11::RejectReason::Gate,
+                            reason: crate::fusion::ekf11::RejectReason::Gate { .. },
                             ..
-                        } => out.rejected_gate += rep.rejected,
+                        } => {
+                            out.rejected_gate += rep.rejected;
+                            out.rejected_gate_state_led += rep.rejected_state_led;
+                        }
                         _ => {}
                     }
                 }

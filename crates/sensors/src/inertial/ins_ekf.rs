@@ -131,6 +131,9 @@ pub struct FixOutcome {
     pub nis: f64,
     /// False when the NIS gate rejected the fix (the state is then unchanged).
     pub accepted: bool,
+    /// For a gated fix: whether the filter's own variance along it, `tr(H P Hᵀ)`, was at
+    /// least the fix's, `tr(R)` (`hybridnav_fusion::fusion::ekf11::RejectReason::Gate`).
+    pub state_led: bool,
 }
 
 /// The closed-loop INS / fix Kalman filter.
@@ -253,6 +256,8 @@ pub fn error_dynamics(
 pub(crate) enum JosephStep<const N: usize> {
     Gated {
         nis: f64,
+        /// `tr(H P Hᵀ) ≥ tr(R)`.
+        state_led: bool,
     },
     Update {
         nis: f64,
@@ -285,13 +290,17 @@ pub(crate) fn joseph_update<const N: usize, const M: usize>(
         return Err(InsFixError::NonFinite { what });
     }
     let hp = h * p;
-    let s = hp * h.transpose() + r;
+    let hph = hp * h.transpose();
+    let s = hph + r;
     let chol = s
         .cholesky()
         .ok_or(InsFixError::NotPositiveDefinite { what })?;
     let nis = z.dot(&chol.solve(z));
     if gate.is_some_and(|g| nis > g) {
-        return Ok(JosephStep::Gated { nis });
+        return Ok(JosephStep::Gated {
+            nis,
+            state_led: hph.trace() >= r.trace(),
+        });
     }
     // K = P Hᵀ S⁻¹ = (S⁻¹ H P)ᵀ since P and S are symmetric.
     let k = chol.solve(&hp).transpose();
@@ -398,9 +407,10 @@ impl InsEkf {
         what: &'static str,
     ) -> Result<FixOutcome, InsFixError> {
         match joseph_update(&self.p, &z, &h, &r, self.nis_gate, what)? {
-            JosephStep::Gated { nis } => Ok(FixOutcome {
+            JosephStep::Gated { nis, state_led } => Ok(FixOutcome {
                 nis,
                 accepted: false,
+                state_led,
             }),
             JosephStep::Update { nis, dx, p } => {
                 self.p = p;
@@ -408,6 +418,7 @@ impl InsEkf {
                 Ok(FixOutcome {
                     nis,
                     accepted: true,
+                    state_led: false,
                 })
             }
         }

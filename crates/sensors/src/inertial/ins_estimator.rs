@@ -494,9 +494,10 @@ fn tally_scalar(
             out.used += 1;
             out.record_nis(o.nis, 1);
         }
-        Ok(Some(_)) => {
+        Ok(Some(o)) => {
             out.rejected += 1;
             out.rejected_gate += 1;
+            out.rejected_gate_state_led += u32::from(o.state_led);
         }
         Ok(None) => {}
         Err(_) => out.rejected += 1,
@@ -804,11 +805,12 @@ impl InsEstimator {
                         self.cfg.residual_gate_c.is_some()
                     }
                     crate::fusion::ekf11::UpdateOutcome::Rejected { reason, .. } => {
-                        reason == crate::fusion::ekf11::RejectReason::Gate
+                        matches!(reason, crate::fusion::ekf11::RejectReason::Gate { .. })
                     }
                 };
                 if gated {
                     out.rejected_gate += rep.rejected;
+                    out.rejected_gate_state_led += rep.rejected_state_led;
                 }
             }
         }

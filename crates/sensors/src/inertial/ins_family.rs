@@ -380,6 +380,7 @@ impl InsFamilyFilter {
                 },
                 used: 0,
                 rejected: 6,
+                rejected_state_led: 0,
             };
         }
         self.applied = self.transition.phi * self.applied;

@@ -512,9 +512,10 @@ impl InsTightEkf {
         what: &'static str,
     ) -> Result<FixOutcome, InsFixError> {
         match joseph_update(&self.p, &z, &h, &r, gate, what)? {
-            JosephStep::Gated { nis } => Ok(FixOutcome {
+            JosephStep::Gated { nis, state_led } => Ok(FixOutcome {
                 nis,
                 accepted: false,
+                state_led,
             }),
             JosephStep::Update { nis, dx, p } => {
                 if dx.iter().any(|v| !v.is_finite())
@@ -527,6 +528,7 @@ impl InsTightEkf {
                 Ok(FixOutcome {
                     nis,
                     accepted: true,
+                    state_led: false,
                 })
             }
         }
@@ -557,6 +559,7 @@ impl InsTightEkf {
             return Ok(FixOutcome {
                 nis,
                 accepted: false,
+                state_led: s - r >= r,
             });
         }
         let k = c / s;
@@ -570,6 +573,7 @@ impl InsTightEkf {
         Ok(FixOutcome {
             nis,
             accepted: true,
+            state_led: false,
         })
     }
 
@@ -722,15 +726,17 @@ impl InsTightEkf {
                 Ok(FixOutcome {
                     nis,
                     accepted: true,
+                    state_led: false,
                 })
             }
             UpdateOutcome::Rejected {
                 reason: RejectReason::NumericalFailure,
                 ..
             } => Err(bad),
-            UpdateOutcome::Rejected { nis, .. } => Ok(FixOutcome {
+            UpdateOutcome::Rejected { nis, reason } => Ok(FixOutcome {
                 nis,
                 accepted: false,
+                state_led: matches!(reason, RejectReason::Gate { state_led: true }),
             }),
         }
     }

@@ -605,7 +605,9 @@ impl PdrEstimator {
         let innov = z - pos;
         let nis = innov.dot(&chol.solve(&innov));
         if self.cfg.nis_gate.is_some_and(|g| nis > g) {
-            return PdrUpdate::Gated;
+            return PdrUpdate::Gated {
+                state_led: self.p[(0, 0)] + self.p[(1, 1)] >= r.trace(),
+            };
         }
         // K = P Hᵀ S⁻¹ = (S⁻¹ H P)ᵀ, Joseph form.
         let hp: SMatrix<f64, 2, 6> = self.p.fixed_rows::<2>(0).into_owned();
@@ -748,8 +750,9 @@ enum PdrUpdate {
     Used { nis: f64, dof: u32 },
     /// The measurement started the filter (the first fix) or its range-difference anchor.
     Anchored,
-    /// The innovation gate refused it as an outlier.
-    Gated,
+    /// The innovation gate refused it as an outlier; `state_led` when the filter's own
+    /// position variance was at least the fix's (by trace).
+    Gated { state_led: bool },
     /// Invalid input, or no filter state to update yet.
     Refused,
     /// The update produced a non-finite state or covariance, which was not kept.
@@ -765,9 +768,12 @@ impl PdrUpdate {
                 out.record_nis(nis, dof);
             }
             PdrUpdate::Anchored => out.used += n,
-            PdrUpdate::Gated => {
+            PdrUpdate::Gated { state_led } => {
                 out.rejected += n;
                 out.rejected_gate += n;
+                if state_led {
+                    out.rejected_gate_state_led += n;
+                }
             }
             PdrUpdate::Refused => out.rejected += n,
             PdrUpdate::Failed => {
