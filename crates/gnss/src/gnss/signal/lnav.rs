@@ -45,12 +45,15 @@
 //! page layout (§20.3.3.5.1.2, Figure 20-1 sheet 4; positions as RTKLIB's
 //! `decode_almanac` reads them): e (16 bits, 2⁻²¹), toa (8, 2¹² s), δi (16, 2⁻¹⁹ sc), Ω̇
 //! (16, 2⁻³⁸ sc/s), health (8), √A (24, 2⁻¹¹), Ω0, ω, M0 (24 each, 2⁻²³ sc), af0 (11,
-//! 2⁻²⁰ s: 8 MSBs, then af1 (11, 2⁻³⁸), then its 3 LSBs). Health words: 0 for a satellite
-//! whose ephemeris says healthy; for one flagged unhealthy the 8-bit word 111 11100 (all
-//! data bad, SV temporarily out) and the 6-bit word 1 11100; for a PRN without an
-//! ephemeris 111111 — hybridnav's reading of Table 20-VII/VIII, the finer codes are not
-//! modelled.
-
+//! 2⁻²⁰ s: 8 MSBs, then af1 (11, 2⁻³⁸), then its 3 LSBs).
+//!
+//! Health words follow IS-GPS-200 §20.3.3.5.1.3 and Tables 20-VII/20-VIII ([`health6`],
+//! [`health8`]): `000000` / `000 00000` for a satellite whose ephemeris says healthy; for
+//! one flagged unhealthy the ephemeris's own 6-bit subframe-1 word (same layout: NAV-data
+//! summary bit, then the signal code) and, in the 8-bit word, `111` ALL DATA BAD when that
+//! summary bit is set followed by the same signal code; for a PRN without an almanac the
+//! page-25 combination `111111` ("SV not available") and a dummy almanac page. Checked
+//! by the tests below with a reader written from the IS's tables.
 use crate::core::GpsTime;
 use crate::gnss::atmosphere::Klobuchar;
 use crate::gnss::ephemeris::Ephemeris;
@@ -330,22 +333,52 @@ pub fn lnav_page(frame_start: GpsTime) -> i64 {
     ((frame_start.tow_s().round() as i64) / 30).rem_euclid(25) + 1
 }
 
-/// The 8-bit almanac health of a satellite (module documentation).
-fn health8(a: &Almanac) -> u64 {
-    if a.healthy {
-        0
-    } else {
-        0b111_11100
+/// The 6-bit health word of subframe 5 page 25 (G01–G24) and subframe 4 page 25
+/// (G25–G32), IS-GPS-200 §20.3.3.5.1.3: the MSB summarises the NAV data (0 all OK, 1 some
+/// or all bad, as §20.3.3.3.1.4 defines it for subframe 1) and the five LSBs give the
+/// signal components' health with Table 20-VIII's codes.
+///
+/// - A satellite whose ephemeris says healthy: `000000`.
+/// - One whose ephemeris flags it unhealthy: the ephemeris's own subframe-1 health word,
+///   which has the same layout (§20.3.3.5.1.3: "the six-bit words provide a one-bit
+///   summary of the NAV data's health status in the MSB position in accordance with
+///   paragraph 20.3.3.3.1.4"); a non-zero health value with no bit inside the 6-bit field
+///   (not a subframe-1 word, so only from a hand-written record) goes out as `1 11100`,
+///   NAV data bad and Table 20-VIII's "SV is temporarily out".
+/// - A PRN without an almanac: `111111`, the combination §20.3.3.5.1.3 reserves in page 25
+///   for "the SV which has that ID is not available and there may be no data regarding
+///   that SV in that page of subframes 4 and 5 that is assigned to normally contain the
+///   almanac data of that SV".
+pub fn health6(a: Option<&Almanac>) -> u64 {
+    match a {
+        None => HEALTH6_NOT_AVAILABLE,
+        Some(a) if a.healthy => 0,
+        Some(a) => match u64::from(a.health_word) & 0x3f {
+            0 => (1 << 5) | SIGNALS_SV_TEMPORARILY_OUT,
+            h => h,
+        },
     }
 }
 
-/// The 6-bit health of subframe 4/5 page 25.
-fn health6(a: Option<&Almanac>) -> u64 {
-    match a {
-        Some(a) if a.healthy => 0,
-        Some(_) => 0b1_11100,
-        None => 0b11_1111,
-    }
+/// Page 25's "SV not available" combination (§20.3.3.5.1.3).
+pub const HEALTH6_NOT_AVAILABLE: u64 = 0b11_1111;
+/// Table 20-VIII's `11100`: "SV is temporarily out (do not use this SV during current
+/// pass)".
+const SIGNALS_SV_TEMPORARILY_OUT: u64 = 0b1_1100;
+/// Table 20-VII's `111`: "ALL DATA BAD".
+const NAV_ALL_DATA_BAD: u64 = 0b111;
+
+/// The 8-bit health word of an almanac page (§20.3.3.5.1.3): three MSBs with Table
+/// 20-VII's NAV data codes, five LSBs with Table 20-VIII's signal codes, the latter the
+/// same as in [`health6`]. The 6-bit word's summary bit cannot say which of Table
+/// 20-VII's failures occurred, so a set summary bit goes out as the table's most
+/// inclusive code, `111` ALL DATA BAD, and a clear one as `000` ALL DATA OK. A PRN
+/// without an almanac has no almanac page (a dummy page, SV ID 0, is sent instead), so no
+/// 8-bit word.
+pub fn health8(a: &Almanac) -> u64 {
+    let h6 = health6(Some(a));
+    let nav = if h6 >> 5 == 1 { NAV_ALL_DATA_BAD } else { 0 };
+    (nav << 5) | (h6 & 0x1f)
 }
 
 /// An almanac page (SV ID = PRN), IS-GPS-200 §20.3.3.5.1.2.
