@@ -582,6 +582,78 @@ mod tests {
         assert_eq!(field(&sfs[3], 241, 8), 15);
     }
 
+    /// The almanac health words read at the positions IS-GPS-200 §20.3.3.5.1.3 states in
+    /// words ("the 24 MSBs of words four through nine in page 25 of subframe 5", "bits 19
+    /// through 24 of word 8, the 24 MSBs of word 9, and the 18 MSBs of word 10 in page 25
+    /// of subframe 4", "bits 17 through 24 of word five" of an almanac page), against the
+    /// meanings of Tables 20-VII/20-VIII: a healthy satellite 000000; one whose ephemeris
+    /// says 1 00001 (NAV data bad, all signals weak) sends that word and 111 00001 on its
+    /// page; 0 00100 (NAV data OK, L1 P signal weak) stays 0 00100 / 000 00100; a PRN
+    /// without an almanac 111111 ("SV not available") and a dummy page.
+    #[test]
+    fn almanac_health_words_follow_is_gps_200() {
+        let mut almanac = vec![None; 32];
+        let mut put = |prn: u16, health: u32| {
+            let mut e = g02_2010();
+            e.sat = crate::core::EmitterId::new(crate::core::System::Gps, prn);
+            e.health = health;
+            let a = Almanac::from_ephemeris(&e, 1590, 344_064.0);
+            almanac[usize::from(prn) - 1] = Some(a);
+        };
+        put(1, 0);
+        put(2, 0b10_0001);
+        put(3, 0b00_0100);
+        put(25, 0b10_0001);
+        put(26, 0);
+        let eph = g02_2010();
+        let content = LnavContent {
+            eph: &eph,
+            klobuchar: None,
+            utc: UtcParams { leap_seconds: 15 },
+            almanac: &almanac,
+        };
+        // Subframes 4 and 5 of the frame carrying page `p` (TOW 345 000 is a multiple of
+        // 750 s, the 25-page cycle).
+        let pages = |p: i64| {
+            let start = GpsTime::from_week_tow(1590, (345_000 + 30 * (p - 1)) as f64);
+            assert_eq!(lnav_page(start), p);
+            let mut bits = [0u8; FRAME_BITS];
+            frame_bits(&content, start, &mut bits);
+            let sf: Vec<Vec<u8>> = bits.chunks(SUBFRAME_BITS).map(decode_subframe).collect();
+            (sf[3].clone(), sf[4].clone())
+        };
+        let (sf4_25, sf5_25) = pages(25);
+        // Subframe 5 page 25: SV n's 6 bits start at bit (n − 1) % 4 · 6 + 1 of word
+        // 4 + (n − 1) / 4.
+        let h_sf5 = |n: usize| field(&sf5_25, 30 * (3 + (n - 1) / 4) + (n - 1) % 4 * 6 + 1, 6);
+        assert_eq!(field(&sf5_25, 63, 6), 51, "SV ID 51");
+        assert_eq!(h_sf5(1), 0, "G01 healthy");
+        assert_eq!(h_sf5(2), 0b10_0001, "G02: NAV data bad, all signals weak");
+        assert_eq!(h_sf5(3), 0b00_0100, "G03: NAV OK, L1 P signal weak");
+        for n in 4..=24 {
+            assert_eq!(h_sf5(n), 0b11_1111, "G{n:02}: SV not available");
+        }
+        // Subframe 4 page 25: G25 at word 8 bits 19–24, G26–G29 word 9, G30–G32 word 10.
+        let sf4_pos = [229, 241, 247, 253, 259, 271, 277, 283];
+        assert_eq!(field(&sf4_25, 63, 6), 63, "SV ID 63");
+        let h_sf4: Vec<u64> = sf4_pos.iter().map(|&b| field(&sf4_25, b, 6)).collect();
+        assert_eq!(h_sf4, [0b10_0001, 0, 63, 63, 63, 63, 63, 63]);
+        // Almanac pages (subframe 5 page n = G0n): SV ID in word 3 bits 3–8, the 8-bit
+        // health in word 5 bits 17–24 (NAV code 3 MSBs, signal code 5 LSBs).
+        let page_health = |p: i64| {
+            let (_, sf5) = pages(p);
+            (field(&sf5, 63, 6), field(&sf5, 137, 8))
+        };
+        assert_eq!(page_health(1), (1, 0));
+        assert_eq!(
+            page_health(2),
+            (2, 0b111_00001),
+            "ALL DATA BAD, all signals weak"
+        );
+        assert_eq!(page_health(3), (3, 0b000_00100), "ALL DATA OK, L1 P weak");
+        assert_eq!(page_health(4), (0, 0), "G04: dummy page");
+    }
+
     #[test]
     fn ura_table() {
         assert_eq!(ura_index(2.0), 0);
