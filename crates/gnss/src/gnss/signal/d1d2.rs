@@ -45,20 +45,31 @@
 //!   C20–C30 with WNa and toa, page 9 the time offsets to GPS, Galileo and GLONASS
 //!   (A0/A1, 0.1 ns and 0.1 ns/s), page 10 the UTC parameters (ΔtLS, ΔtLSF, WN_LSF,
 //!   A0UTC 2⁻³⁰ s, A1UTC 2⁻⁵⁰, DN), both from the navigation header ([`BdsTimeParams`]);
-//!   pages 11–24 of subframe 5 are reserved (page number only). The health word is 0 for a
-//!   satellite whose ephemeris says healthy and all ones otherwise (hybridnav's
-//!   placeholder, [`bds_health_word`]).
+//!   pages 11–24 of subframe 5 are reserved (page number only). The health words Hea_i
+//!   follow ICD Table 5-15 ([`bds_health_word`]): 0 for a satellite whose ephemeris says
+//!   healthy; 1 1111 1111 ("in failure or permanently shut off") for one flagged SatH1 = 1
+//!   and for a slot without an almanac.
 //! - D2 subframe 1 pages 1–10 as §5.3.3 (page 1: SatH1, AODC, URAI, WN, toc, TGD1/2; page 2:
 //!   α/β; page 3: a0, a1's 4 MSBs; … page 10: ω's 5 LSBs, IDOT). Subframe 5 ([`d2_page5`]:
 //!   page `SOW/3 mod 120 + 1`) carries D1's almanac, health and time pages at D2's page
 //!   numbers: 35–36 health, WNa, toa; 37–60 and 95–100 the almanac of C01–C24 and C25–C30;
-//!   101–102 the time offsets and UTC parameters. **Placeholders**: subframes 2–4
-//!   (integrity and differential corrections: RURAI, UDREI, Δt) and subframe 5's
-//!   ionospheric grid pages (1–13, 61–73: GIVEI, dτ) and other pages carry the preamble,
-//!   FraID, SOW (and subframe 5's page number) with zeros elsewhere — hybridnav has no
-//!   corrections or grid, and the ICD's "not monitored" codes are not written (their bit
-//!   positions were not checked here), so a receiver that trusts these zeros would read
-//!   them as values.
+//!   101–102 the time offsets and UTC parameters.
+//! - D2 subframes 2–4 (integrity and differential corrections, pages 1–6,
+//!   [`d2_integrity_page`]) and subframe 5's ionospheric grid pages (1–13, 61–73):
+//!   hybridnav has no monitoring network and no grid, and says so with the codes public
+//!   D2 encoders and decoders use rather than with zeros (which would read as "correction
+//!   0 m, best UDRE, grid delay 0 m, best GIVE"): every BDID 0 (BDID = 1 marks a
+//!   satellite whose integrity and corrections are sent, as SatGen uses it), every UDREI and RURAI slot 15 ([`UDREI_SENT`], [`RURAI_SENT`]), every Δt
+//!   0, every grid point dτ = 1 1111 1111 with GIVEI = 1111 ([`GRID_POINT_SENT`]). Bit
+//!   positions: a public Python D2 decoder's tables (`D2DictSf2`, `Sf3`, `Sf4`,
+//!   `Sf5IonoGridA/B`), the Racelogic SatGen generator's `NavigationDataB1ID2` (subframes
+//!   2, 3 and the grid) and the "bnav" decoder's `Ionosphere::parseIonospherePage` (the
+//!   grid) agree. **Not confirmed** from any source read: the ICD's names for UDREI 15 and
+//!   RURAI 15 (its UDRE/RURA tables were not available), which of dτ = 510 / 511 is "not
+//!   monitored" (the bnav decoder treats both as no value; SatGen sends 511), a "not
+//!   available" code of Δt (none is used: the slots belong to no satellite), and the codes
+//!   of SatH2 and BDEpID (sent 00). GIVEI has no "not monitored" code: its table
+//!   (§5.3.3.8.2, as bnav quotes it) gives GIVE = 45 m for index 15.
 //!
 //! The Klobuchar α/β are BeiDou's own set (`BDSA`/`BDSB` of a RINEX 3 header,
 //! [`NavData::klobuchar_bds`]). When the file has none they are sent as zeros, which keeps
