@@ -2,6 +2,9 @@
 //! against an independent receiver: GNSS-SDR (Debian `gnss-sdr` 0.0.17) decodes hybridnav's
 //! recordings and writes what it decoded as XML (`bds_dnav_utc_model.xml`), which is
 //! compared field by field with what the world's navigation header makes the encoder send.
+//! What GNSS-SDR 0.0.17 does not decode (the almanacs; D2 subframes 2–4 and the
+//! ionospheric grid pages) is read back from the symbol streams with readers written
+//! here from the ICD tables and public decoders/generators, independent of the encoder.
 
 use crate::common::{hybridnav, repo, skip, stderr, tmp_dir};
 use crate::gnss_iq::{
@@ -647,7 +650,7 @@ fn gnss_nav_d2_integrity_and_grid_pages_carry_no_corrections() {
     for page in (1..=13i64).chain(61..=73) {
         let n = if page == 13 || page == 73 { 4 } else { 13 };
         let mut layout = vec![("rev", 1), ("Pnum", 7)];
-        layout.extend(std::iter::repeat(("ion", 13)).take(n));
+        layout.extend(std::iter::repeat_n(("ion", 13), n));
         layout.push(("rev", 186 - 8 - 13 * n));
         let f = sequential_fields(&decoded(s0 + 3 * (page - 1), 5), &layout);
         assert_eq!(bits_value(&f[1].1), page as u64, "subframe 5 Pnum");

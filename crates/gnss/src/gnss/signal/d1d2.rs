@@ -1311,9 +1311,9 @@ GLUT -1.8626451492E-09 0.000000000E+00      0    0          TIME SYSTEM CORR
             .flat_map(|f| f.iter().flat_map(|&(a, b)| a..=b))
             .collect();
         for w in 1..10 {
-            for i in (30 * w)..(30 * w + 22) {
+            for (i, &bit) in d.iter().enumerate().skip(30 * w).take(22) {
                 if i >= 42 && !used.contains(&i) {
-                    assert_eq!(d[i], 0, "{what}: reserved bit {i} (0-based)");
+                    assert_eq!(bit, 0, "{what}: reserved bit {i} (0-based)");
                 }
             }
         }
