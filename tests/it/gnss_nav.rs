@@ -2,6 +2,9 @@
 //! against an independent receiver: GNSS-SDR (Debian `gnss-sdr` 0.0.17) decodes hybridnav's
 //! recordings and writes what it decoded as XML (`bds_dnav_utc_model.xml`), which is
 //! compared field by field with what the world's navigation header makes the encoder send.
+//! What GNSS-SDR 0.0.17 does not decode (the almanacs; D2 subframes 2–4 and the
+//! ionospheric grid pages) is read back from the symbol streams with readers written
+//! here from the ICD tables and public decoders/generators, independent of the encoder.
 
 use crate::common::{hybridnav, repo, skip, stderr, tmp_dir};
 use crate::gnss_iq::{
@@ -537,4 +540,122 @@ fn gnss_nav_bds_almanac_flies_within_km_of_the_precise_orbits() {
         // ns-level datum of the SP3 clocks.
         assert!(*c < 1.0e-6, "{sat}: almanac clock {c:e} s from SP3");
     }
+}
+
+/// The information bits of a decoded D2 subframe after SOW (bit 43 on, check bits left
+/// out) cut into consecutive fields of `layout` (name, width), in transmission order: the
+/// way the Racelogic SatGen generator (`NavigationDataB1ID2`) composes its words, and the
+/// ICD 3.0 subframe 4 as a public Python D2 decoder's `D2DictSf4` lays it out. Returns each
+/// field's bits.
+fn sequential_fields<'a>(d: &[u8], layout: &[(&'a str, usize)]) -> Vec<(&'a str, Vec<u8>)> {
+    let info: Vec<u8> = (43..=300)
+        .filter(|&b| {
+            let in_word = (b - 1) % 30;
+            in_word < 22
+        })
+        .map(|b| d[b - 1])
+        .collect();
+    assert_eq!(info.len(), 186, "information bits after SOW");
+    let total: usize = layout.iter().map(|f| f.1).sum();
+    assert_eq!(total, 186, "layout covers the subframe");
+    let mut at = 0;
+    layout
+        .iter()
+        .map(|&(name, w)| {
+            let bits = info[at..at + w].to_vec();
+            at += w;
+            (name, bits)
+        })
+        .collect()
+}
+
+fn bits_value(bits: &[u8]) -> u64 {
+    bits.iter().fold(0, |a, &b| (a << 1) | u64::from(b))
+}
+
+/// The D2 integrity subframes (2–4, pages 1–6) and the ionospheric grid pages (subframe 5
+/// pages 1–13, 61–73) that the GEO C05's symbol stream carries, cut into fields in
+/// transmission order (SatGen's word composition; subframe 4 as the ICD 3.0 decoder's
+/// table): Pnum counts 1–6, no BDID set, every UDREI and RURAI 15, every Δt 0, every one
+/// of the 320 grid points dτ = 511 and GIVEI = 15, reserved bits 0. No external tool: the
+/// reading is the independent part (the encoder's positions are in d1d2.rs).
+#[test]
+fn gnss_nav_d2_integrity_and_grid_pages_carry_no_corrections() {
+    use hybridnav::core::{EmitterId, System};
+    use hybridnav::gnss::signal::d1d2::BdsNavStream;
+    let nav = hybridnav::gnss::rinex_nav::read_nav_file(&repo().join(ESBC_NAV)).expect("nav");
+    let mut stream =
+        BdsNavStream::new(std::sync::Arc::new(nav), EmitterId::new(System::Bds, 5), 18);
+    // Subframe `fra` (1–5) of the D2 frame that starts at BDT `sow`, decoded: 500 bit/s,
+    // two code periods a bit, no overlay code.
+    let mut decoded = |sow: i64, fra: i64| {
+        let ms = GpsTime::from_bdt_week_sow(BDT_WEEK, sow as f64).ns() / 1_000_000;
+        let d = bds_decoded_bits(&subframe_bits(&mut stream, ms + 600 * (fra - 1), 2));
+        assert_eq!(
+            bds_field(&d, &[(1, 11)]),
+            0b111_0001_0010,
+            "preamble at {sow}/{fra}"
+        );
+        assert_eq!(bds_field(&d, &[(16, 3)]), fra as u64, "FraID");
+        assert_eq!(bds_field(&d, &[(19, 8), (31, 12)]), sow as u64, "SOW");
+        d
+    };
+    let check = |fields: &[(&str, Vec<u8>)], what: &str| {
+        for (name, bits) in fields {
+            let v = bits_value(bits);
+            match *name {
+                "rev" | "BDID" | "SatH2" | "BDEpID" | "dt" => {
+                    assert!(bits.iter().all(|&b| b == 0), "{what}: {name} not 0")
+                }
+                "UDREI" | "RURAI" => assert_eq!(v, 15, "{what}: {name}"),
+                "ion" => {
+                    assert_eq!(v >> 4, 511, "{what}: dτ");
+                    assert_eq!(v & 0xf, 15, "{what}: GIVEI");
+                }
+                _ => {}
+            }
+        }
+    };
+    // A frame start that is a multiple of 360 s: integrity page 1 and subframe 5 page 1.
+    let s0 = 352_800;
+    for page in 1..=6i64 {
+        let sow = s0 + 3 * (page - 1);
+        let mut sf2 = vec![
+            ("rev", 1),
+            ("Pnum", 4),
+            ("SatH2", 2),
+            ("BDID", 30),
+            ("rev", 60),
+        ];
+        sf2.extend([("UDREI", 4); 18]);
+        sf2.extend([("RURAI", 4), ("dt", 13)]);
+        let f = sequential_fields(&decoded(sow, 2), &sf2);
+        assert_eq!(bits_value(&f[1].1), page as u64, "subframe 2 Pnum");
+        check(&f, &format!("subframe 2 page {page}"));
+        let sf3 = [
+            ("rev", 1),
+            ("RURAI", 4),
+            ("dt", 13),
+            ("RURAI", 4),
+            ("dt", 13),
+            ("rev", 151),
+        ];
+        check(&sequential_fields(&decoded(sow, 3), &sf3), "subframe 3");
+        let mut sf4 = vec![("rev", 94), ("BDEpID", 2), ("BDID", 33)];
+        sf4.extend([("UDREI", 4); 6]);
+        sf4.extend([("RURAI", 4), ("dt", 13), ("rev", 16)]);
+        check(&sequential_fields(&decoded(sow, 4), &sf4), "subframe 4");
+    }
+    let mut points = 0;
+    for page in (1..=13i64).chain(61..=73) {
+        let n = if page == 13 || page == 73 { 4 } else { 13 };
+        let mut layout = vec![("rev", 1), ("Pnum", 7)];
+        layout.extend(std::iter::repeat_n(("ion", 13), n));
+        layout.push(("rev", 186 - 8 - 13 * n));
+        let f = sequential_fields(&decoded(s0 + 3 * (page - 1), 5), &layout);
+        assert_eq!(bits_value(&f[1].1), page as u64, "subframe 5 Pnum");
+        check(&f, &format!("grid page {page}"));
+        points += n;
+    }
+    assert_eq!(points, 320, "grid points");
 }

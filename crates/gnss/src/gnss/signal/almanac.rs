@@ -78,6 +78,10 @@ pub struct Almanac {
     pub af1: f64,
     /// The ephemeris it comes from flags the satellite healthy.
     pub healthy: bool,
+    /// That ephemeris's broadcast health word as read from the navigation file (GPS: the
+    /// 6-bit SV health of subframe 1, IS-GPS-200 §20.3.3.3.1.4; BeiDou: SatH1), from which
+    /// the almanac health words are derived (lnav.rs, d1d2.rs).
+    pub health_word: u32,
 }
 
 /// The almanac reference time for a message sent at `t` by `system`: (week, second of week)
@@ -126,6 +130,7 @@ impl Almanac {
             af0,
             af1,
             healthy: e.is_healthy(),
+            health_word: e.health,
         };
         if e.sat.is_bds_geo() {
             return Self::osculating(base, e, toa, mu, omega_e);

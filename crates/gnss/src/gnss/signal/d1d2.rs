@@ -45,20 +45,31 @@
 //!   C20–C30 with WNa and toa, page 9 the time offsets to GPS, Galileo and GLONASS
 //!   (A0/A1, 0.1 ns and 0.1 ns/s), page 10 the UTC parameters (ΔtLS, ΔtLSF, WN_LSF,
 //!   A0UTC 2⁻³⁰ s, A1UTC 2⁻⁵⁰, DN), both from the navigation header ([`BdsTimeParams`]);
-//!   pages 11–24 of subframe 5 are reserved (page number only). The health word is 0 for a
-//!   satellite whose ephemeris says healthy and all ones otherwise (hybridnav's
-//!   placeholder, [`bds_health_word`]).
+//!   pages 11–24 of subframe 5 are reserved (page number only). The health words Hea_i
+//!   follow ICD Table 5-15 ([`bds_health_word`]): 0 for a satellite whose ephemeris says
+//!   healthy; 1 1111 1111 ("in failure or permanently shut off") for one flagged SatH1 = 1
+//!   and for a slot without an almanac.
 //! - D2 subframe 1 pages 1–10 as §5.3.3 (page 1: SatH1, AODC, URAI, WN, toc, TGD1/2; page 2:
 //!   α/β; page 3: a0, a1's 4 MSBs; … page 10: ω's 5 LSBs, IDOT). Subframe 5 ([`d2_page5`]:
 //!   page `SOW/3 mod 120 + 1`) carries D1's almanac, health and time pages at D2's page
 //!   numbers: 35–36 health, WNa, toa; 37–60 and 95–100 the almanac of C01–C24 and C25–C30;
-//!   101–102 the time offsets and UTC parameters. **Placeholders**: subframes 2–4
-//!   (integrity and differential corrections: RURAI, UDREI, Δt) and subframe 5's
-//!   ionospheric grid pages (1–13, 61–73: GIVEI, dτ) and other pages carry the preamble,
-//!   FraID, SOW (and subframe 5's page number) with zeros elsewhere — hybridnav has no
-//!   corrections or grid, and the ICD's "not monitored" codes are not written (their bit
-//!   positions were not checked here), so a receiver that trusts these zeros would read
-//!   them as values.
+//!   101–102 the time offsets and UTC parameters.
+//! - D2 subframes 2–4 (integrity and differential corrections, pages 1–6,
+//!   [`d2_integrity_page`]) and subframe 5's ionospheric grid pages (1–13, 61–73):
+//!   hybridnav has no monitoring network and no grid, and says so with the codes public
+//!   D2 encoders and decoders use rather than with zeros (which would read as "correction
+//!   0 m, best UDRE, grid delay 0 m, best GIVE"): every BDID 0 (BDID = 1 marks a
+//!   satellite whose integrity and corrections are sent, as SatGen uses it), every UDREI and RURAI slot 15 ([`UDREI_SENT`], [`RURAI_SENT`]), every Δt
+//!   0, every grid point dτ = 1 1111 1111 with GIVEI = 1111 ([`GRID_POINT_SENT`]). Bit
+//!   positions: a public Python D2 decoder's tables (`D2DictSf2`, `Sf3`, `Sf4`,
+//!   `Sf5IonoGridA/B`), the Racelogic SatGen generator's `NavigationDataB1ID2` (subframes
+//!   2, 3 and the grid) and the "bnav" decoder's `Ionosphere::parseIonospherePage` (the
+//!   grid) agree. **Not confirmed** from any source read: the ICD's names for UDREI 15 and
+//!   RURAI 15 (its UDRE/RURA tables were not available), which of dτ = 510 / 511 is "not
+//!   monitored" (the bnav decoder treats both as no value; SatGen sends 511), a "not
+//!   available" code of Δt (none is used: the slots belong to no satellite), and the codes
+//!   of SatH2 and BDEpID (sent 00). GIVEI has no "not monitored" code: its table
+//!   (§5.3.3.8.2, as bnav quotes it) gives GIVE = 45 m for index 15.
 //!
 //! The Klobuchar α/β are BeiDou's own set (`BDSA`/`BDSB` of a RINEX 3 header,
 //! [`NavData::klobuchar_bds`]). When the file has none they are sent as zeros, which keeps
@@ -453,13 +464,32 @@ const HEA_SLOTS: [&[(usize, usize)]; 19] = [
     &[(277, 9)],
 ];
 
-/// The health word of a satellite: 0 (all information normal) when its almanac comes from
-/// an ephemeris flagged healthy; all ones otherwise — hybridnav's placeholder for "no
-/// usable almanac", not one of the ICD's per-bit meanings, which it does not model.
+/// The bits of the 9-bit satellite health word Hea_i (BDS-SIS-ICD Table 5-15, MSB = bit
+/// 8, as GNSSTk's `BDSD1NavHealth.hpp`/`BDSD2NavHealth.hpp` quote the table): 0 means OK
+/// in every bit. Bit 8: satellite clock; bits 7, 6, 5: B1I, B2I, B3I signal power more
+/// than 10 dB below nominal; bit 1: navigation message abnormal (GNSSTk: "IOD over
+/// limit"); bits 4–2 and 0 reserved. With bit 8 set the table's footnote gives the other
+/// eight their meaning: all 0, "the satellite clock is unavailable"; all 1, "the
+/// satellite is in failure or permanently shut off"; anything else reserved.
+pub const HEA_CLOCK_UNAVAILABLE: u64 = 0x100;
+/// Hea = 1 1111 1111: "the satellite is in failure or permanently shut off" (Table 5-15).
+pub const HEA_FAILED_OR_SHUT_OFF: u64 = 0x1ff;
+
+/// The health word Hea_i of a satellite (subframe 5 pages 7–8 of D1, 35–36 of D2), with
+/// Table 5-15's meanings ([`HEA_FAILED_OR_SHUT_OFF`]):
+///
+/// - almanac from an ephemeris that says healthy (SatH1 = 0): 0, all OK;
+/// - almanac from an ephemeris flagged unhealthy (SatH1 = 1, the only health a BeiDou
+///   navigation file carries, which says the satellite is unusable but not why): 1 1111
+///   1111, "in failure or permanently shut off", the table's one code for a satellite
+///   that is out as a whole (1 0000 0000 would assert a clock failure nobody reported);
+/// - no almanac (no satellite in the slot, or none with an ephemeris near toa): the same
+///   1 1111 1111 — the ICD gives no separate "not in the constellation" value that could
+///   be confirmed here (GNSSTk quotes only the two footnote codes).
 pub fn bds_health_word(a: Option<&Almanac>) -> u64 {
     match a {
         Some(a) if a.healthy => 0,
-        _ => 0x1ff,
+        _ => HEA_FAILED_OR_SHUT_OFF,
     }
 }
 
@@ -517,8 +547,10 @@ fn d2_fields(e: &Ephemeris, c: &SharedPages, week: i64, sow: i64, fra_id: u32) -
     let iono = c.iono.as_ref();
     let mut f = Fields([0; 300]);
     f.header(fra_id, sow);
-    if fra_id == 5 {
-        d2_subframe5(&mut f, c, week, sow);
+    match fra_id {
+        2..=4 => d2_integrity(&mut f, sow, fra_id),
+        5 => d2_subframe5(&mut f, c, week, sow),
+        _ => {}
     }
     if fra_id != 1 {
         return f;
@@ -599,6 +631,120 @@ fn d2_fields(e: &Ephemeris, c: &SharedPages, week: i64, sow: i64, fra_id: u32) -
     f
 }
 
+/// The page (1–6) of D2 subframes 2–4 in the frame that starts at BDT second of week
+/// `sow` (a multiple of 3): `SOW/3 mod 6 + 1`, an 18 s cycle (as the SatGen generator
+/// numbers them; subframe 2 carries the number, Pnum, subframes 3 and 4 none).
+pub fn d2_integrity_page(sow: i64) -> i64 {
+    (sow / 3).rem_euclid(6) + 1
+}
+
+/// The value sent in every UDREI (user differential range error index, 4 bits) slot.
+/// 15 is the top of the 4-bit range, the value the Racelogic SatGen D2 generator
+/// (`NavigationDataB1ID2`, `udrei = 15`) sends in every slot. The ICD's UDRE table that
+/// names each index (§5.3.3, "not monitored" / "not available" in the SBAS convention) was
+/// not available in any source checked here, so its label is not asserted.
+pub const UDREI_SENT: u64 = 15;
+/// The value sent in every RURAI (regional user range accuracy index, 4 bits) slot: 15,
+/// the top of the range, which SatGen sends for a satellite it flags unhealthy
+/// (`ruraiBad = 15`; `ruraiGood = 4` otherwise). Its table entry was not read either.
+pub const RURAI_SENT: u64 = 15;
+/// The value of every ionospheric grid point (13 bits: dτ, 9 bits at 0.125 m, then GIVEI,
+/// 4 bits): dτ = 1 1111 1111 and GIVEI = 1111. dτ = 511 is what SatGen writes to every
+/// grid point (`dTau = 63.875` m, with `givei = 15`); the "bnav" D2 decoder reads
+/// dτ ≥ 510 as "no value" ("maximum value is 63.875 m, which is 511") and quotes the
+/// GIVEI table of ICD §5.3.3.8.2, where GIVEI 15 is not a flag but the largest error
+/// class, GIVE = 45.0 m ("according to the ICD there are no invalid values [of GIVEI]").
+/// Which of 510 and 511 the ICD calls "not monitored" was not confirmed.
+pub const GRID_POINT_SENT: u64 = (0x1ff << 4) | 0xf;
+
+/// Where D2 subframes 2–4 (pages 1–6) put their fields, in the decoded numbering
+/// (BDS-SIS-ICD-B1I-3.0 §5.3.2, Figures 5-18-x). Subframe 2: Pnum 44–47, SatH2 48–49,
+/// BDID1–BDID30 (one bit each) 50–52, 61–82, 91–95, reserved, UDREI1–UDREI18 from 172,
+/// RURAI1 276–279, Δt1 280–292. Subframe 3: RURAI2 44–47, Δt2, RURAI3 69–72, Δt3.
+/// Subframe 4 (the ICD 3.0 extension to C31–C63): BDEpID 169–170, BDID31–BDID63,
+/// UDREI19–UDREI24, RURAI4 252–255, Δt4. Positions as a public Python D2 decoder's tables
+/// (`D2DictSf2`/`Sf3`/`Sf4`) give them; subframes 2 and 3 also as SatGen's
+/// `NavigationDataB1ID2` composes its words (its subframe 4 predates ICD 3.0 and is all
+/// reserved, so subframe 4 rests on the one decoder).
+const UDREI_SLOTS_SF2: [&[(usize, usize)]; 18] = [
+    &[(172, 1), (181, 3)],
+    &[(184, 4)],
+    &[(188, 4)],
+    &[(192, 4)],
+    &[(196, 4)],
+    &[(200, 3), (211, 1)],
+    &[(212, 4)],
+    &[(216, 4)],
+    &[(220, 4)],
+    &[(224, 4)],
+    &[(228, 4)],
+    &[(232, 1), (241, 3)],
+    &[(244, 4)],
+    &[(248, 4)],
+    &[(252, 4)],
+    &[(256, 4)],
+    &[(260, 3), (271, 1)],
+    &[(272, 4)],
+];
+const UDREI_SLOTS_SF4: [&[(usize, usize)]; 6] = [
+    &[(220, 4)],
+    &[(224, 4)],
+    &[(228, 4)],
+    &[(232, 1), (241, 3)],
+    &[(244, 4)],
+    &[(248, 4)],
+];
+/// The RURAI fields of subframes 2 (RURAI1), 3 (RURAI2, RURAI3) and 4 (RURAI4).
+const RURAI_SLOTS: [(u32, usize); 4] = [(2, 276), (3, 44), (3, 69), (4, 252)];
+
+/// D2 subframes 2–4 (§5.3.3: integrity and differential correction information). hybridnav
+/// runs no monitoring network, so no satellite is given corrections: every BDID (BDID1–63:
+/// "1" when the satellite's integrity and differential information is broadcast, as
+/// SatGen sets it for the satellites it sends RURAI/Δt for) is 0, every UDREI and RURAI
+/// slot carries [`UDREI_SENT`] / [`RURAI_SENT`], and every equivalent clock correction
+/// Δt (13 bits, 0.1 m) is 0 — no "not available" code of Δt could be confirmed in any
+/// source (SatGen sends 0 for satellites it does not correct), and with every BDID 0 the
+/// Δt slots belong to no satellite. SatH2 and BDEpID (2 bits each) are sent as 00: their
+/// code tables were not found in any source checked here. Reserved bits are 0.
+fn d2_integrity(f: &mut Fields, sow: i64, fra_id: u32) {
+    if fra_id == 2 {
+        f.put(44, 4, d2_integrity_page(sow) as u64);
+        for slot in UDREI_SLOTS_SF2 {
+            f.put_slices(slot, UDREI_SENT);
+        }
+    }
+    if fra_id == 4 {
+        for slot in UDREI_SLOTS_SF4 {
+            f.put_slices(slot, UDREI_SENT);
+        }
+    }
+    for (sf, first) in RURAI_SLOTS {
+        if sf == fra_id {
+            f.put(first, 4, RURAI_SENT);
+        }
+    }
+}
+
+/// The 13 grid points Ion1–Ion13 of an ionospheric grid page (subframe 5 pages 1–13 and
+/// 61–73; pages 13 and 73 carry Ion1–Ion4 only, 320 points in all), in the decoded
+/// numbering: as the "bnav" decoder (`Ionosphere::parseIonospherePage`) and the Python
+/// decoder's `D2DictSf5IonoGridA`/`B` read them and SatGen writes them.
+const GRID_SLOTS: [&[(usize, usize)]; 13] = [
+    &[(51, 2), (61, 11)],
+    &[(72, 11), (91, 2)],
+    &[(93, 13)],
+    &[(106, 7), (121, 6)],
+    &[(127, 13)],
+    &[(140, 3), (151, 10)],
+    &[(161, 12), (181, 1)],
+    &[(182, 13)],
+    &[(195, 8), (211, 5)],
+    &[(216, 13)],
+    &[(229, 4), (241, 9)],
+    &[(250, 13)],
+    &[(271, 13)],
+];
+
 /// The D2 page (1–120) of subframe 5 in the frame that starts at BDT second of week `sow`
 /// (a multiple of 3): `SOW/3 mod 120 + 1`, a 6-minute cycle (the ICD numbers pages without
 /// tying them to the time, as for D1's [`d1_page`]).
@@ -610,14 +756,20 @@ pub fn d2_page5(sow: i64) -> i64 {
 /// fields at the same bits as D1's): pages 35–36 the health of C01–C30 with WNa and toa,
 /// pages 37–60 the almanac of C01–C24, pages 95–100 that of C25–C30, page 101 the time
 /// offsets to GPS, Galileo and GLONASS, page 102 the UTC parameters — the same data as D1
-/// subframes 4–5. The ionospheric grid pages (1–13, 61–73) and the rest carry the page
-/// number and zeros: hybridnav has no grid to broadcast (placeholders, not "not
-/// monitored" codes, which are not written here).
+/// subframes 4–5. The ionospheric grid pages (1–13, 61–73) carry [`GRID_POINT_SENT`] in
+/// every grid point: hybridnav has no grid to broadcast. The reserved pages carry only
+/// their number.
 fn d2_subframe5(f: &mut Fields, c: &SharedPages, week: i64, sow: i64) {
     let page = d2_page5(sow);
     f.put(44, 7, page as u64);
     let alm = |prn: i64| c.almanac.get(prn as usize - 1).copied().flatten();
     match page {
+        1..=13 | 61..=73 => {
+            let points = if page % 60 == 13 { 4 } else { 13 };
+            for slot in GRID_SLOTS.iter().take(points) {
+                f.put_slices(slot, GRID_POINT_SENT);
+            }
+        }
         35 | 36 => d1_health_page(f, c.almanac, page == 36, week, sow),
         37..=60 => d1_almanac_page(f, alm(page - 36).as_ref()),
         95..=100 => d1_almanac_page(f, alm(page - 70).as_ref()),
@@ -1137,11 +1289,207 @@ GLUT -1.8626451492E-09 0.000000000E+00      0    0          TIME SYSTEM CORR
         // C05's almanac page is 41 (37 + 4) and not zero; C25's (page 95) is zeros.
         assert_ne!(uget(&d2(41), &[(51, 2), (61, 22)]), 0);
         assert_eq!(uget(&d2(95), &[(51, 2), (61, 22)]), 0);
-        let grid = d2(1);
-        assert!(
-            info(&grid).iter().all(|&b| b == 0),
-            "grid page 1 is a placeholder"
-        );
+        // A reserved page (14) carries its number only.
+        assert!(info(&d2(14)).iter().all(|&b| b == 0), "page 14 reserved");
+    }
+
+    /// A field of decoded bits over 0-based inclusive ranges `[first, last]`, the notation
+    /// of the Python D2 decoder's tables (`D2DictSf2` …) whose positions are transcribed
+    /// below, MSBs first.
+    fn field0(d: &[u8; 300], ranges: &[(usize, usize)]) -> u64 {
+        ranges
+            .iter()
+            .flat_map(|&(a, b)| a..=b)
+            .fold(0, |acc, i| (acc << 1) | u64::from(d[i]))
+    }
+
+    /// Asserts that every information bit (0-based) of `d` outside the header (bits 0–41:
+    /// preamble, reserved, FraID, SOW) and outside `fields` is 0: the reserved bits.
+    fn assert_reserved_zero(d: &[u8; 300], fields: &[&[(usize, usize)]], what: &str) {
+        let used: Vec<usize> = fields
+            .iter()
+            .flat_map(|f| f.iter().flat_map(|&(a, b)| a..=b))
+            .collect();
+        for w in 1..10 {
+            for (i, &bit) in d.iter().enumerate().skip(30 * w).take(22) {
+                if i >= 42 && !used.contains(&i) {
+                    assert_eq!(bit, 0, "{what}: reserved bit {i} (0-based)");
+                }
+            }
+        }
+    }
+
+    /// The D2 integrity subframes (2–4, pages 1–6) and the ionospheric grid pages of
+    /// subframe 5 (1–13, 61–73), read with positions transcribed from the Python D2
+    /// decoder's tables (0-based; subframes 2–3 also agree with SatGen's
+    /// `NavigationDataB1ID2`, the grid with the "bnav" decoder), not from the encoder's
+    /// constants: no BDID is set, every UDREI and RURAI slot is 15, every Δt is 0, every
+    /// grid point is dτ = 511 with GIVEI = 15, and every other information bit is 0.
+    #[test]
+    fn d2_integrity_subframes_and_grid_pages_carry_no_corrections() {
+        let e = c05_2020();
+        let (week, _) = e.toe.bdt_week_sow();
+        let base = 720 * 490; // a multiple of 18 s (subframes 2–4) and 360 s (subframe 5)
+        let c = SharedPages::default();
+        let decoded = |sow: i64, fra: u32| {
+            let mut tx = [0u8; 300];
+            d2_subframe(&e, &c, week, sow, fra, &mut tx);
+            assert_codewords_valid(&tx);
+            let d = deinterleave(&tx);
+            assert_eq!(field0(&d, &[(0, 10)]), 0b111_0001_0010, "preamble");
+            assert_eq!(field0(&d, &[(15, 17)]), u64::from(fra), "FraID");
+            assert_eq!(field0(&d, &[(18, 25), (30, 41)]), sow as u64, "SOW");
+            d
+        };
+        // D2DictSf2: UDREI1 … UDREI18.
+        let udrei_sf2: [&[(usize, usize)]; 18] = [
+            &[(171, 171), (180, 182)],
+            &[(183, 186)],
+            &[(187, 190)],
+            &[(191, 194)],
+            &[(195, 198)],
+            &[(199, 201), (210, 210)],
+            &[(211, 214)],
+            &[(215, 218)],
+            &[(219, 222)],
+            &[(223, 226)],
+            &[(227, 230)],
+            &[(231, 231), (240, 242)],
+            &[(243, 246)],
+            &[(247, 250)],
+            &[(251, 254)],
+            &[(255, 258)],
+            &[(259, 261), (270, 270)],
+            &[(271, 274)],
+        ];
+        // D2DictSf4: UDREI19 … UDREI24.
+        let udrei_sf4: [&[(usize, usize)]; 6] = [
+            &[(219, 222)],
+            &[(223, 226)],
+            &[(227, 230)],
+            &[(231, 231), (240, 242)],
+            &[(243, 246)],
+            &[(247, 250)],
+        ];
+        for page in 1..=6u64 {
+            let sow = base + 3 * (page as i64 - 1);
+            // Subframe 2.
+            let d = decoded(sow, 2);
+            let pnum: &[(usize, usize)] = &[(43, 46)];
+            let sath2: &[(usize, usize)] = &[(47, 48)];
+            let bdid: &[(usize, usize)] = &[(49, 51), (60, 81), (90, 94)];
+            let rurai1: &[(usize, usize)] = &[(275, 278)];
+            let dt1: &[(usize, usize)] = &[(279, 291)];
+            assert_eq!(field0(&d, pnum), page, "Pnum");
+            assert_eq!(field0(&d, sath2), 0, "SatH2");
+            assert_eq!(field0(&d, bdid), 0, "BDID1–30");
+            for (i, u) in udrei_sf2.iter().enumerate() {
+                assert_eq!(field0(&d, u), 15, "UDREI{} page {page}", i + 1);
+            }
+            assert_eq!(field0(&d, rurai1), 15, "RURAI1");
+            assert_eq!(field0(&d, dt1), 0, "Δt1");
+            let mut f2: Vec<&[(usize, usize)]> = vec![pnum, sath2, bdid, rurai1, dt1];
+            f2.extend(udrei_sf2);
+            assert_reserved_zero(&d, &f2, "subframe 2");
+            // Subframe 3 (D2DictSf3).
+            let d = decoded(sow, 3);
+            let rurai2: &[(usize, usize)] = &[(43, 46)];
+            let dt2: &[(usize, usize)] = &[(47, 51), (60, 67)];
+            let rurai3: &[(usize, usize)] = &[(68, 71)];
+            let dt3: &[(usize, usize)] = &[(72, 81), (90, 92)];
+            assert_eq!(field0(&d, rurai2), 15, "RURAI2");
+            assert_eq!(field0(&d, dt2), 0, "Δt2");
+            assert_eq!(field0(&d, rurai3), 15, "RURAI3");
+            assert_eq!(field0(&d, dt3), 0, "Δt3");
+            assert_reserved_zero(&d, &[rurai2, dt2, rurai3, dt3], "subframe 3");
+            // Subframe 4 (D2DictSf4).
+            let d = decoded(sow, 4);
+            let bdepid: &[(usize, usize)] = &[(168, 169)];
+            let bdid_ext: &[(usize, usize)] = &[(170, 171), (180, 201), (210, 218)];
+            let rurai4: &[(usize, usize)] = &[(251, 254)];
+            let dt4: &[(usize, usize)] = &[(255, 261), (270, 275)];
+            assert_eq!(field0(&d, bdepid), 0, "BDEpID");
+            assert_eq!(field0(&d, bdid_ext), 0, "BDID31–63");
+            for (i, u) in udrei_sf4.iter().enumerate() {
+                assert_eq!(field0(&d, u), 15, "UDREI{} page {page}", i + 19);
+            }
+            assert_eq!(field0(&d, rurai4), 15, "RURAI4");
+            assert_eq!(field0(&d, dt4), 0, "Δt4");
+            let mut f4: Vec<&[(usize, usize)]> = vec![bdepid, bdid_ext, rurai4, dt4];
+            f4.extend(udrei_sf4);
+            assert_reserved_zero(&d, &f4, "subframe 4");
+        }
+        // D2DictSf5IonoGridA (pages 1–12, 61–72: IonoA … IonoM) and B (13, 73: A … D).
+        let grid: [&[(usize, usize)]; 13] = [
+            &[(50, 51), (60, 70)],
+            &[(71, 81), (90, 91)],
+            &[(92, 104)],
+            &[(105, 111), (120, 125)],
+            &[(126, 138)],
+            &[(139, 141), (150, 159)],
+            &[(160, 171), (180, 180)],
+            &[(181, 193)],
+            &[(194, 201), (210, 214)],
+            &[(215, 227)],
+            &[(228, 231), (240, 248)],
+            &[(249, 261)],
+            &[(270, 282)],
+        ];
+        let pnum5: &[(usize, usize)] = &[(43, 49)];
+        let mut points = 0;
+        for page in (1..=13).chain(61..=73) {
+            let d = decoded(base + 3 * (page - 1), 5);
+            assert_eq!(field0(&d, pnum5), page as u64, "Pnum");
+            let n = if page == 13 || page == 73 { 4 } else { 13 };
+            for (i, g) in grid.iter().take(n).enumerate() {
+                let v = field0(&d, g);
+                // dτ: the 9 MSBs (0.125 m); GIVEI: the 4 LSBs.
+                assert_eq!(v >> 4, 511, "dτ of Ion{} page {page}", i + 1);
+                assert_eq!(v & 0xf, 15, "GIVEI of Ion{} page {page}", i + 1);
+                points += 1;
+            }
+            let mut fields: Vec<&[(usize, usize)]> = vec![pnum5];
+            fields.extend(grid.iter().take(n));
+            assert_reserved_zero(&d, &fields, "grid page");
+        }
+        assert_eq!(points, 320, "the ICD's 320 grid points");
+    }
+
+    /// The 9-bit health words Hea_i (D1 subframe 5 page 7, read at the Python decoder's
+    /// `D1DictHealthA` positions) against ICD Table 5-15 as GNSSTk quotes it: 0 for a
+    /// healthy satellite; for one whose ephemeris says SatH1 = 1 and for an empty slot,
+    /// bit 8 (clock) set with the other eight all 1, "in failure or permanently shut off".
+    #[test]
+    fn bds_health_words_follow_table_5_15() {
+        let mut ok = c05_2020();
+        ok.sat = EmitterId::new(crate::core::System::Bds, 1);
+        let mut bad = ok.clone();
+        bad.sat = EmitterId::new(crate::core::System::Bds, 2);
+        bad.health = 1; // SatH1 = 1
+        let (w, s) = ok.toe.bdt_week_sow();
+        let mut almanac = vec![None; 30];
+        almanac[0] = Some(Almanac::from_ephemeris(&ok, w, s));
+        almanac[1] = Some(Almanac::from_ephemeris(&bad, w, s));
+        let c = SharedPages {
+            almanac: &almanac,
+            ..SharedPages::default()
+        };
+        let week = 755;
+        let sow = 720 * 490 + 30 * 6 + 24; // page 7, subframe 5
+        assert_eq!(d1_page(sow), 7);
+        let mut tx = [0u8; 300];
+        d1_subframe(&ok, &c, week, sow, &mut tx);
+        let d = deinterleave(&tx);
+        let hea = [
+            field0(&d, &[(50, 51), (60, 66)]),
+            field0(&d, &[(67, 75)]),
+            field0(&d, &[(76, 81), (90, 92)]),
+        ];
+        // Table 5-15 read bit by bit: bit 8 clock, bits 7–5 B1I/B2I/B3I, bit 1 message.
+        let failed_or_shut_off = |h: u64| h >> 8 == 1 && h & 0xff == 0xff;
+        assert_eq!(hea[0], 0, "C01 healthy: every bit OK");
+        assert!(failed_or_shut_off(hea[1]), "C02 SatH1 = 1: {:09b}", hea[1]);
+        assert!(failed_or_shut_off(hea[2]), "C03 no almanac: {:09b}", hea[2]);
     }
 
     #[test]

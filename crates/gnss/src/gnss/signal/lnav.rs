@@ -45,12 +45,15 @@
 //! page layout (§20.3.3.5.1.2, Figure 20-1 sheet 4; positions as RTKLIB's
 //! `decode_almanac` reads them): e (16 bits, 2⁻²¹), toa (8, 2¹² s), δi (16, 2⁻¹⁹ sc), Ω̇
 //! (16, 2⁻³⁸ sc/s), health (8), √A (24, 2⁻¹¹), Ω0, ω, M0 (24 each, 2⁻²³ sc), af0 (11,
-//! 2⁻²⁰ s: 8 MSBs, then af1 (11, 2⁻³⁸), then its 3 LSBs). Health words: 0 for a satellite
-//! whose ephemeris says healthy; for one flagged unhealthy the 8-bit word 111 11100 (all
-//! data bad, SV temporarily out) and the 6-bit word 1 11100; for a PRN without an
-//! ephemeris 111111 — hybridnav's reading of Table 20-VII/VIII, the finer codes are not
-//! modelled.
-
+//! 2⁻²⁰ s: 8 MSBs, then af1 (11, 2⁻³⁸), then its 3 LSBs).
+//!
+//! Health words follow IS-GPS-200 §20.3.3.5.1.3 and Tables 20-VII/20-VIII ([`health6`],
+//! [`health8`]): `000000` / `000 00000` for a satellite whose ephemeris says healthy; for
+//! one flagged unhealthy the ephemeris's own 6-bit subframe-1 word (same layout: NAV-data
+//! summary bit, then the signal code) and, in the 8-bit word, `111` ALL DATA BAD when that
+//! summary bit is set followed by the same signal code; for a PRN without an almanac the
+//! page-25 combination `111111` ("SV not available") and a dummy almanac page. Checked
+//! by the tests below with a reader written from the IS's tables.
 use crate::core::GpsTime;
 use crate::gnss::atmosphere::Klobuchar;
 use crate::gnss::ephemeris::Ephemeris;
@@ -330,22 +333,52 @@ pub fn lnav_page(frame_start: GpsTime) -> i64 {
     ((frame_start.tow_s().round() as i64) / 30).rem_euclid(25) + 1
 }
 
-/// The 8-bit almanac health of a satellite (module documentation).
-fn health8(a: &Almanac) -> u64 {
-    if a.healthy {
-        0
-    } else {
-        0b111_11100
+/// The 6-bit health word of subframe 5 page 25 (G01–G24) and subframe 4 page 25
+/// (G25–G32), IS-GPS-200 §20.3.3.5.1.3: the MSB summarises the NAV data (0 all OK, 1 some
+/// or all bad, as §20.3.3.3.1.4 defines it for subframe 1) and the five LSBs give the
+/// signal components' health with Table 20-VIII's codes.
+///
+/// - A satellite whose ephemeris says healthy: `000000`.
+/// - One whose ephemeris flags it unhealthy: the ephemeris's own subframe-1 health word,
+///   which has the same layout (§20.3.3.5.1.3: "the six-bit words provide a one-bit
+///   summary of the NAV data's health status in the MSB position in accordance with
+///   paragraph 20.3.3.3.1.4"); a non-zero health value with no bit inside the 6-bit field
+///   (not a subframe-1 word, so only from a hand-written record) goes out as `1 11100`,
+///   NAV data bad and Table 20-VIII's "SV is temporarily out".
+/// - A PRN without an almanac: `111111`, the combination §20.3.3.5.1.3 reserves in page 25
+///   for "the SV which has that ID is not available and there may be no data regarding
+///   that SV in that page of subframes 4 and 5 that is assigned to normally contain the
+///   almanac data of that SV".
+pub fn health6(a: Option<&Almanac>) -> u64 {
+    match a {
+        None => HEALTH6_NOT_AVAILABLE,
+        Some(a) if a.healthy => 0,
+        Some(a) => match u64::from(a.health_word) & 0x3f {
+            0 => (1 << 5) | SIGNALS_SV_TEMPORARILY_OUT,
+            h => h,
+        },
     }
 }
 
-/// The 6-bit health of subframe 4/5 page 25.
-fn health6(a: Option<&Almanac>) -> u64 {
-    match a {
-        Some(a) if a.healthy => 0,
-        Some(_) => 0b1_11100,
-        None => 0b11_1111,
-    }
+/// Page 25's "SV not available" combination (§20.3.3.5.1.3).
+pub const HEALTH6_NOT_AVAILABLE: u64 = 0b11_1111;
+/// Table 20-VIII's `11100`: "SV is temporarily out (do not use this SV during current
+/// pass)".
+const SIGNALS_SV_TEMPORARILY_OUT: u64 = 0b1_1100;
+/// Table 20-VII's `111`: "ALL DATA BAD".
+const NAV_ALL_DATA_BAD: u64 = 0b111;
+
+/// The 8-bit health word of an almanac page (§20.3.3.5.1.3): three MSBs with Table
+/// 20-VII's NAV data codes, five LSBs with Table 20-VIII's signal codes, the latter the
+/// same as in [`health6`]. The 6-bit word's summary bit cannot say which of Table
+/// 20-VII's failures occurred, so a set summary bit goes out as the table's most
+/// inclusive code, `111` ALL DATA BAD, and a clear one as `000` ALL DATA OK. A PRN
+/// without an almanac has no almanac page (a dummy page, SV ID 0, is sent instead), so no
+/// 8-bit word.
+pub fn health8(a: &Almanac) -> u64 {
+    let h6 = health6(Some(a));
+    let nav = if h6 >> 5 == 1 { NAV_ALL_DATA_BAD } else { 0 };
+    (nav << 5) | (h6 & 0x1f)
 }
 
 /// An almanac page (SV ID = PRN), IS-GPS-200 §20.3.3.5.1.2.
@@ -547,6 +580,78 @@ mod tests {
         assert_eq!(field(&sfs[0], 211, 8), u64::from(eph.iodc & 0xff));
         assert_eq!(field(&sfs[3], 63, 6), 56);
         assert_eq!(field(&sfs[3], 241, 8), 15);
+    }
+
+    /// The almanac health words read at the positions IS-GPS-200 §20.3.3.5.1.3 states in
+    /// words ("the 24 MSBs of words four through nine in page 25 of subframe 5", "bits 19
+    /// through 24 of word 8, the 24 MSBs of word 9, and the 18 MSBs of word 10 in page 25
+    /// of subframe 4", "bits 17 through 24 of word five" of an almanac page), against the
+    /// meanings of Tables 20-VII/20-VIII: a healthy satellite 000000; one whose ephemeris
+    /// says 1 00001 (NAV data bad, all signals weak) sends that word and 111 00001 on its
+    /// page; 0 00100 (NAV data OK, L1 P signal weak) stays 0 00100 / 000 00100; a PRN
+    /// without an almanac 111111 ("SV not available") and a dummy page.
+    #[test]
+    fn almanac_health_words_follow_is_gps_200() {
+        let mut almanac = vec![None; 32];
+        let mut put = |prn: u16, health: u32| {
+            let mut e = g02_2010();
+            e.sat = crate::core::EmitterId::new(crate::core::System::Gps, prn);
+            e.health = health;
+            let a = Almanac::from_ephemeris(&e, 1590, 344_064.0);
+            almanac[usize::from(prn) - 1] = Some(a);
+        };
+        put(1, 0);
+        put(2, 0b10_0001);
+        put(3, 0b00_0100);
+        put(25, 0b10_0001);
+        put(26, 0);
+        let eph = g02_2010();
+        let content = LnavContent {
+            eph: &eph,
+            klobuchar: None,
+            utc: UtcParams { leap_seconds: 15 },
+            almanac: &almanac,
+        };
+        // Subframes 4 and 5 of the frame carrying page `p` (TOW 345 000 is a multiple of
+        // 750 s, the 25-page cycle).
+        let pages = |p: i64| {
+            let start = GpsTime::from_week_tow(1590, (345_000 + 30 * (p - 1)) as f64);
+            assert_eq!(lnav_page(start), p);
+            let mut bits = [0u8; FRAME_BITS];
+            frame_bits(&content, start, &mut bits);
+            let sf: Vec<Vec<u8>> = bits.chunks(SUBFRAME_BITS).map(decode_subframe).collect();
+            (sf[3].clone(), sf[4].clone())
+        };
+        let (sf4_25, sf5_25) = pages(25);
+        // Subframe 5 page 25: SV n's 6 bits start at bit (n − 1) % 4 · 6 + 1 of word
+        // 4 + (n − 1) / 4.
+        let h_sf5 = |n: usize| field(&sf5_25, 30 * (3 + (n - 1) / 4) + (n - 1) % 4 * 6 + 1, 6);
+        assert_eq!(field(&sf5_25, 63, 6), 51, "SV ID 51");
+        assert_eq!(h_sf5(1), 0, "G01 healthy");
+        assert_eq!(h_sf5(2), 0b10_0001, "G02: NAV data bad, all signals weak");
+        assert_eq!(h_sf5(3), 0b00_0100, "G03: NAV OK, L1 P signal weak");
+        for n in 4..=24 {
+            assert_eq!(h_sf5(n), 0b11_1111, "G{n:02}: SV not available");
+        }
+        // Subframe 4 page 25: G25 at word 8 bits 19–24, G26–G29 word 9, G30–G32 word 10.
+        let sf4_pos = [229, 241, 247, 253, 259, 271, 277, 283];
+        assert_eq!(field(&sf4_25, 63, 6), 63, "SV ID 63");
+        let h_sf4: Vec<u64> = sf4_pos.iter().map(|&b| field(&sf4_25, b, 6)).collect();
+        assert_eq!(h_sf4, [0b10_0001, 0, 63, 63, 63, 63, 63, 63]);
+        // Almanac pages (subframe 5 page n = G0n): SV ID in word 3 bits 3–8, the 8-bit
+        // health in word 5 bits 17–24 (NAV code 3 MSBs, signal code 5 LSBs).
+        let page_health = |p: i64| {
+            let (_, sf5) = pages(p);
+            (field(&sf5, 63, 6), field(&sf5, 137, 8))
+        };
+        assert_eq!(page_health(1), (1, 0));
+        assert_eq!(
+            page_health(2),
+            (2, 0b111_00001),
+            "ALL DATA BAD, all signals weak"
+        );
+        assert_eq!(page_health(3), (3, 0b000_00100), "ALL DATA OK, L1 P weak");
+        assert_eq!(page_health(4), (0, 0), "G04: dummy page");
     }
 
     #[test]
