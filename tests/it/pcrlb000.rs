@@ -215,3 +215,64 @@ fn pcrlb_of_seed004_range_rows() {
         );
     }
 }
+
+/// A world's `[sensors.emitters]` ranges count on the 12-state bound. Seed 003's emitters
+/// (3 GPS satellites, 2 BeiDou, 1 DTMB tower, σ 10 m) under an `ekf11` row that takes the
+/// GPS and DTMB ones: at the first instant (t = 1 s) the estimator knows nothing of the
+/// position and the clock (flat prior), so the bound is the least-squares covariance of
+/// that epoch's four ranges with one clock shared by GPS and DTMB (seed 000's model,
+/// §5.1), written here from the geometry alone: `tr[(Hᵀ H / σ²)⁻¹]` over the position,
+/// `H`'s rows `[−u_jᵀ, 1]`.
+#[test]
+fn emitter_ranges_count_on_the_pva_clock_bound() {
+    let path = repo().join("worlds/seed003-seamless.toml");
+    let text = std::fs::read_to_string(&path).expect("seed 003 world");
+    let head = &text[..text.find("[[estimator]]").expect("an estimator table")];
+    let text = format!(
+        "{head}\n[[estimator]]\nname = \"EKF 12-state\"\nsources = [\"gps\", \"dtmb\"]\nfilter = \"ekf11\"\n"
+    );
+    let world = hybridnav::world::parse_world(&text, &path).expect("world");
+    let bounds = world.pva_clock_pcrlb(1, 1);
+    let b = bounds[0].as_ref().expect("the 12-state row is bounded");
+    assert!(b.measurement_determined, "four ranges, four unknowns");
+    let (t_s, bound_m) = b.bound.by_epoch[0];
+    assert_eq!(t_s, 1.0, "the emitters' first sample is one period in");
+
+    let rng = hybridnav::core::TrialRng::new(1, 0);
+    let trajectory = world.build_trajectory(&rng).expect("trajectory");
+    let truth_enu = trajectory.state_at(1.0).pos_enu_m;
+    let r = world.frame.ecef_of_enu(&truth_enu);
+    let emitters = world
+        .file
+        .sensors
+        .emitters
+        .as_ref()
+        .unwrap()
+        .resolve(&world.frame)
+        .unwrap();
+    let mut info = nalgebra::Matrix4::<f64>::zeros();
+    let mut n = 0;
+    for e in emitters.iter().filter(|e| {
+        matches!(
+            e.id.system,
+            hybridnav::core::System::Gps | hybridnav::core::System::Dtmb
+        )
+    }) {
+        let u = (e.pos_ecef_m - r).normalize();
+        let h = nalgebra::RowVector4::new(-u.x, -u.y, -u.z, 1.0);
+        info += h.transpose() * h / (e.sigma_m * e.sigma_m);
+        n += 1;
+    }
+    assert_eq!(n, 4);
+    let cov = info.try_inverse().expect("determined");
+    let expected_m = (cov[(0, 0)] + cov[(1, 1)] + cov[(2, 2)]).sqrt();
+    eprintln!("first-epoch bound {bound_m:.6} m, least squares {expected_m:.6} m");
+    assert!(
+        (bound_m - expected_m).abs() <= 1e-6 * expected_m,
+        "bound {bound_m} m against least squares {expected_m} m"
+    );
+    // Later epochs add the process model's memory: the bound can only fall below one
+    // epoch's least squares.
+    let last = b.bound.by_epoch.last().unwrap().1;
+    assert!(last < expected_m, "{last} vs {expected_m}");
+}

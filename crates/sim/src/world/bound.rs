@@ -55,8 +55,11 @@
 //! reach, so it would no longer be a lower bound. An estimator that takes position fixes
 //! (`fixes = ["fm"]`: a WKNN fingerprint fix is a nonlinear, database- and
 //! aiding-dependent function of the RSSI scan, whose error is neither Gaussian nor of the
-//! covariance it reports) or ranges from a receiver other than GNSS, DTMB and TC-OFDM
-//! (`[sensors.emitters]`) therefore gets no bound (`None`).
+//! covariance it reports) therefore gets no bound (`None`). The ranges of
+//! `[sensors.emitters]` are counted like the receivers' (each emitter's `‖r_j − r‖` with
+//! its σ, at the emitters' instants `k/rate_hz`, `k ≥ 1`, outages excepted): their
+//! noise is white and Gaussian with exactly that σ, and their clock terms are the
+//! model's clock states.
 //!
 //! # The INS rows
 //!
@@ -73,6 +76,7 @@
 //! as measuring the INS velocity, which can only lower it.
 
 use super::World;
+use crate::beacons::ResolvedEmitter;
 use crate::core::{SimTime, System, TrialRng};
 use crate::dtmb::DtmbSource;
 use crate::engine::trial::truth_at;
@@ -95,6 +99,7 @@ use crate::measurement::{RangeMeasurement, Truth};
 use crate::tcofdm::TcofdmSource;
 use crate::world::schema::EstimatorSpec;
 use crate::world::schema::FilterKind;
+use nalgebra::Vector3;
 use std::sync::Arc;
 
 /// The PCRLB of one estimator's model over a run: its position-RMSE bound at every epoch
@@ -333,13 +338,22 @@ impl World {
         if let Some(tc) = &sensors.tcofdm {
             add_grid(((1e9 / tc.rate_hz).round() as i64).max(1));
         }
+        if let Some(em) = &sensors.emitters {
+            // The emitters' first sample is one period after the start.
+            let step_ns = emitter_period_ns(em.rate_hz);
+            let mut t = step_ns;
+            while t <= end.0 {
+                instants_ns.push(t);
+                t += step_ns;
+            }
+        }
         instants_ns.sort_unstable();
         instants_ns.dedup();
         instants_ns
     }
 
-    /// The world's GNSS, DTMB and TC-OFDM receivers of trial `rng`, to be held at the
-    /// truth ([`TruthReceivers`]).
+    /// The world's GNSS, DTMB and TC-OFDM receivers and emitters of trial `rng`, to be
+    /// held at the truth ([`TruthReceivers`]).
     fn truth_receivers(&self, rng: &TrialRng, end: SimTime) -> Result<TruthReceivers, String> {
         let sensors = &self.file.sensors;
         let gnss = sensors.gnss.as_ref().map(|g| {
@@ -353,6 +367,13 @@ impl World {
         let clock = Arc::new(self.receiver_clock(rng));
         let dtmb = self.dtmb_source(Arc::clone(&clock), None, rng, end)?;
         let tcofdm = self.tcofdm_source(clock, None, rng, end)?;
+        let emitters = match &sensors.emitters {
+            Some(cfg) => Some((
+                cfg.resolve(&self.frame).map_err(|e| e.to_string())?,
+                emitter_period_ns(cfg.rate_hz),
+            )),
+            None => None,
+        };
         Ok(TruthReceivers {
             gnss_step: sensors
                 .gnss
@@ -368,7 +389,9 @@ impl World {
             gnss_ranges: Vec::with_capacity(64),
             dtmb_ranges: Vec::with_capacity(8),
             tcofdm_ranges: Vec::with_capacity(8),
-            now: [false; 3],
+            emitter_ranges: Vec::with_capacity(emitters.as_ref().map_or(0, |e| e.0.len())),
+            emitters,
+            now: [false; 4],
         })
     }
 
@@ -535,28 +558,21 @@ impl World {
     }
 
     /// The tuning of seed 000's model an estimator runs, or `None` when it does not run
-    /// that model or takes measurements the bound cannot count (see the module
-    /// documentation): position fixes, or ranges of a system that only a receiver other
-    /// than `[sensors.gnss]`, `[sensors.dtmb]` and `[sensors.tcofdm]` provides.
+    /// that model or takes position fixes, which the bound cannot count (see the module
+    /// documentation).
     fn pva_clock_config(&self, e: &EstimatorSpec) -> Option<Ekf11Config> {
-        if !e.runs_pva_clock() || !e.fixes.is_empty() {
-            return None;
-        }
-        let sensors = &self.file.sensors;
-        let counted = |s: System| match s {
-            System::Gps | System::Bds | System::Dtmb => sensors.emitters.is_none(),
-            System::Tcofdm => sensors.emitters.is_none(),
-        };
-        e.sources
-            .iter()
-            .all(|s| counted(*s))
-            .then(|| e.ekf.unwrap_or_default())
+        (e.runs_pva_clock() && e.fixes.is_empty()).then(|| e.ekf.unwrap_or_default())
     }
 }
 
-/// The world's GNSS, DTMB and TC-OFDM receivers of one trial held at the truth: at each
-/// instant, the ranges each gives there with the σ it reports (see the module
-/// documentation), and whether each had a batch. Reuses its buffers.
+/// The emitters' sampling period (ns), as `EmittersSource` keeps it.
+fn emitter_period_ns(rate_hz: f64) -> i64 {
+    ((1e9 / rate_hz).round() as i64).max(1)
+}
+
+/// The world's GNSS, DTMB and TC-OFDM receivers and emitters of one trial held at the
+/// truth: at each instant, the ranges each gives there with the σ it reports (see the
+/// module documentation), and whether each had a batch. Reuses its buffers.
 struct TruthReceivers {
     gnss: Option<GnssGeometry>,
     gnss_step: Option<i64>,
@@ -569,8 +585,12 @@ struct TruthReceivers {
     gnss_ranges: Vec<RangeMeasurement>,
     dtmb_ranges: Vec<RangeMeasurement>,
     tcofdm_ranges: Vec<RangeMeasurement>,
-    /// Whether the GNSS, DTMB and TC-OFDM receivers had a batch at the last instant.
-    now: [bool; 3],
+    /// `[sensors.emitters]`, resolved, and their period (ns).
+    emitters: Option<(Vec<ResolvedEmitter>, i64)>,
+    emitter_ranges: Vec<RangeMeasurement>,
+    /// Whether the GNSS, DTMB and TC-OFDM receivers and the emitters had a batch at the
+    /// last instant.
+    now: [bool; 4],
 }
 
 impl TruthReceivers {
@@ -581,6 +601,7 @@ impl TruthReceivers {
             due(self.gnss_step),
             due(self.dtmb_step),
             due(self.tcofdm_step),
+            t_ns > 0 && due(self.emitters.as_ref().map(|e| e.1)),
         ];
         self.gnss_ranges.clear();
         if let (Some(geo), true) = (self.gnss.as_mut(), self.now[0]) {
@@ -608,6 +629,28 @@ impl TruthReceivers {
         if let (Some(tc), true) = (self.tcofdm.as_mut(), self.now[2]) {
             tc.noise_free_ranges(truth, &mut self.tcofdm_ranges);
         }
+        self.emitter_ranges.clear();
+        if let (Some((emitters, _)), true) = (self.emitters.as_ref(), self.now[3]) {
+            let t_s = SimTime(t_ns).seconds();
+            // Only the geometry and σ enter the information; the rest is what
+            // `EmittersSource` reports without its noise and clock terms.
+            self.emitter_ranges.extend(
+                emitters
+                    .iter()
+                    .filter(|e| !e.outages_s.iter().any(|w| t_s >= w[0] && t_s < w[1]))
+                    .map(|e| RangeMeasurement {
+                        emitter: e.id,
+                        emitter_pos_ecef_m: e.pos_ecef_m,
+                        emitter_vel_ecef_mps: Vector3::zeros(),
+                        pseudorange_m: (e.pos_ecef_m - truth.pos_ecef_m).norm(),
+                        sigma_m: e.sigma_m,
+                        range_rate_mps: None,
+                        sigma_rate_mps: 1.0,
+                        cn0_dbhz: 45.0,
+                        elevation_rad: 0.0,
+                    }),
+            );
+        }
     }
 
     /// Whether the last instant is an epoch of an estimator that uses the systems `uses`
@@ -616,7 +659,12 @@ impl TruthReceivers {
     fn epoch_of(&self, uses: impl Fn(System) -> bool, out: &mut Vec<RangeMeasurement>) -> bool {
         let epoch = (self.now[0] && (uses(System::Gps) || uses(System::Bds)))
             || (self.now[1] && uses(System::Dtmb))
-            || (self.now[2] && uses(System::Tcofdm));
+            || (self.now[2] && uses(System::Tcofdm))
+            || (self.now[3]
+                && self
+                    .emitters
+                    .as_ref()
+                    .is_some_and(|(emitters, _)| emitters.iter().any(|e| uses(e.id.system))));
         out.clear();
         if epoch {
             out.extend(
@@ -624,6 +672,7 @@ impl TruthReceivers {
                     .iter()
                     .chain(&self.dtmb_ranges)
                     .chain(&self.tcofdm_ranges)
+                    .chain(&self.emitter_ranges)
                     .filter(|m| uses(m.system()))
                     .copied(),
             );
