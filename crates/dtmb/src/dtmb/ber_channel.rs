@@ -195,16 +195,21 @@ impl LsEstimator {
 pub enum Csi {
     /// The true impulse response and noise variance (a genie).
     Ideal,
-    /// Estimated from each frame's PN header (see the module documentation).
+    /// Estimated from the PN header before each body only (see the module documentation):
+    /// with Doppler the body is equalised with the channel of 312 µs earlier (PN945).
     Estimated,
+    /// Estimated from the header before and the header after each body (the next frame's)
+    /// and interpolated linearly in time to the body's centre (module documentation).
+    Interpolated,
 }
 
 impl Csi {
-    /// `ideal` or `estimated`.
+    /// `ideal`, `estimated` or `interpolated`.
     pub fn name(self) -> &'static str {
         match self {
             Csi::Ideal => "ideal",
             Csi::Estimated => "estimated",
+            Csi::Interpolated => "interpolated",
         }
     }
 }
@@ -215,9 +220,10 @@ impl std::str::FromStr for Csi {
         match s.to_ascii_lowercase().as_str() {
             "ideal" => Ok(Csi::Ideal),
             "estimated" => Ok(Csi::Estimated),
+            "interpolated" => Ok(Csi::Interpolated),
             _ => Err(DtmbError::InvalidParameter {
                 name: "--csi",
-                reason: format!("expected ideal or estimated, got {s:?}"),
+                reason: format!("expected ideal, estimated or interpolated, got {s:?}"),
             }),
         }
     }
@@ -433,6 +439,62 @@ pub struct TdsReceiver {
     /// Kept taps and noise estimate of the last frame.
     taps_kept: usize,
     sigma2_est: f32,
+    /// The estimates of the header before the body (`est[0]`) and after it (`est[1]`,
+    /// the next frame's; `Csi::Interpolated` only — `Csi::Estimated` uses `est[0]`).
+    est: [HeaderEstimate; 2],
+    /// The weight `α` of the header after the body in the interpolation to the body's
+    /// centre ([`interpolation_weight`]).
+    alpha: f32,
+    /// The last next header received and its phase: when the next frame's own header is
+    /// this one (bit for bit), its estimate `est[1]` is reused as that frame's `est[0]`
+    /// instead of being computed again (the same input gives the same estimate).
+    next_cache: Vec<Complex32>,
+    next_cache_phase: Option<usize>,
+}
+
+/// One header's channel estimate: the taps (zero past `len`), how many were kept, the
+/// noise variance per sample `σ̂²` and the estimate's error variance per carrier `σ_E²`.
+#[derive(Clone, Debug)]
+struct HeaderEstimate {
+    taps: Vec<Complex32>,
+    len: usize,
+    kept: usize,
+    sigma2: f32,
+    err_var: f32,
+}
+
+impl HeaderEstimate {
+    fn new(capacity: usize) -> Self {
+        Self {
+            taps: vec![Complex32::default(); capacity],
+            len: 1,
+            kept: 0,
+            sigma2: 0.0,
+            err_var: 0.0,
+        }
+    }
+}
+
+/// Where in its header (samples from the header's start) a `mode` estimate measures the
+/// channel: the centre of the samples it uses — the cyclic core's, `G + (P − 1)/2`, for
+/// PN420/PN945 (209 and 472), the least-squares rows' `(W − 1 + H − 1)/2` for PN595
+/// (405.5).
+pub fn estimate_centre(mode: PnMode) -> f64 {
+    if mode.is_cyclic() {
+        mode.preamble_len() as f64 + (mode.period() - 1) as f64 / 2.0
+    } else {
+        ((PN595_LS_TAPS - 1) + (mode.header_len() - 1)) as f64 / 2.0
+    }
+}
+
+/// The weight `α` of the next header's estimate when the estimates of the headers before
+/// (at `t_a`, [`estimate_centre`]) and after a body (at `t_b = t_a + F`, `F` the frame
+/// length) are interpolated linearly to the body's centre `t_c = H + (N − 1)/2`:
+/// `ĥ_c = (1 − α) ĥ_a + α ĥ_b`, `α = (t_c − t_a)/F`. PN945: `(2834.5 − 472)/4725 = 0.5`
+/// exactly; PN420: 0.5001; PN595: 0.4752.
+pub fn interpolation_weight(mode: PnMode) -> f64 {
+    let body_centre = mode.header_len() as f64 + (BODY_LEN - 1) as f64 / 2.0;
+    (body_centre - estimate_centre(mode)) / mode.frame_len() as f64
 }
 
 impl std::fmt::Debug for TdsReceiver {
@@ -483,7 +545,7 @@ impl TdsReceiver {
                 hl + 1
             )));
         }
-        if csi == Csi::Estimated {
+        if csi != Csi::Ideal {
             if !mode.is_cyclic() && h.len() > PN595_LS_TAPS {
                 return Err(bad(format!(
                     "the impulse response spans {} samples, beyond the {} taps (a delay \
@@ -534,7 +596,7 @@ impl TdsReceiver {
             }
             headers[ph] = hd;
         }
-        let ls = (csi == Csi::Estimated && !mode.is_cyclic())
+        let ls = (csi != Csi::Ideal && !mode.is_cyclic())
             .then(|| LsEstimator::new(&headers[0], fft_p.as_ref(), &mut scratch));
         Ok(Self {
             mode,
@@ -558,6 +620,10 @@ impl TdsReceiver {
             modem: BodyModulator::new(),
             taps_kept: 0,
             sigma2_est: noise_var,
+            est: [HeaderEstimate::new(hl + 1), HeaderEstimate::new(hl + 1)],
+            alpha: interpolation_weight(mode) as f32,
+            next_cache: vec![Complex32::default(); hl],
+            next_cache_phase: None,
         })
     }
 
@@ -595,11 +661,11 @@ impl TdsReceiver {
     }
 
     /// Estimates the channel from a received header (`rx_header`, `H` samples from the
-    /// frame start) of phase `phase` into `self.h`; returns the per-carrier error
-    /// variance `σ_E²` of the estimate.
-    fn estimate(&mut self, rx_header: &[Complex32], phase: usize) -> f32 {
+    /// frame start) of phase `phase` into `self.est[slot]`.
+    fn estimate(&mut self, rx_header: &[Complex32], phase: usize, slot: usize) {
         if self.ls.is_some() {
-            return self.estimate_ls(rx_header);
+            self.estimate_ls(rx_header, slot);
+            return;
         }
         let p = self.mode.period();
         let g = self.mode.preamble_len();
@@ -626,7 +692,8 @@ impl TdsReceiver {
         }
         let kappa = (10.0 * w as f32).ln();
         let thr = kappa * noise_h;
-        self.h[..self.h_len.max(w)].fill(Complex32::default());
+        let e = &mut self.est[slot];
+        e.taps[..e.len.max(w)].fill(Complex32::default());
         // Lags whose power passes the threshold are the response's taps; the others are
         // set to zero (a kept noise lag costs σ_h², a dropped tap its power).
         let mut kept = 0;
@@ -634,27 +701,27 @@ impl TdsReceiver {
         for t in 0..w {
             let x = self.corr[t];
             if x.norm_sqr() > thr {
-                self.h[t] = x;
+                e.taps[t] = x;
                 kept += 1;
                 last = t;
             }
         }
         // With the bias removed, ĥ[τ] = h[τ](1 + 1/P): undo the peak's 1 + 1/P.
         let pf = p as f32;
-        for x in self.h[..=last].iter_mut() {
+        for x in e.taps[..=last].iter_mut() {
             *x /= 1.0 + 1.0 / pf;
         }
-        self.h_len = last + 1;
-        self.taps_kept = kept;
-        self.sigma2_est = noise_h * pf * self.mode.header_power_ratio() as f32;
-        kept as f32 * noise_h
+        e.len = last + 1;
+        e.kept = kept;
+        e.sigma2 = noise_h * pf * self.mode.header_power_ratio() as f32;
+        e.err_var = kept as f32 * noise_h;
     }
 
     /// The PN595 least-squares estimate (module documentation) from the received header
-    /// into `self.h`; returns `σ_E²`.
-    fn estimate_ls(&mut self, rx_header: &[Complex32]) -> f32 {
+    /// into `self.est[slot]`.
+    fn estimate_ls(&mut self, rx_header: &[Complex32], slot: usize) {
         let Some(ls) = self.ls.as_mut() else {
-            return 0.0;
+            return;
         };
         let w = PN595_LS_TAPS;
         let hl = rx_header.len();
@@ -703,20 +770,74 @@ impl TdsReceiver {
         // Lag m keeps its estimate when |ĥ[m]|² > κ σ̂² d_m, κ = ln(10 W): a noise-only
         // lag's |ĥ|²/(σ² d_m) is exponential with mean 1, so 0.1 false tap a frame.
         let kappa = (10.0 * w as f32).ln();
-        self.h[..self.h_len.max(w)].fill(Complex32::default());
+        let e = &mut self.est[slot];
+        e.taps[..e.len.max(w)].fill(Complex32::default());
         let (mut kept, mut last, mut err) = (0, 0, 0.0);
         for (m, (x, d)) in ls.lags.iter().zip(&ls.diag).enumerate() {
             if x.norm_sqr() > kappa * sigma2 * d {
-                self.h[m] = *x;
+                e.taps[m] = *x;
                 kept += 1;
                 last = m;
                 err += sigma2 * d;
             }
         }
-        self.h_len = last + 1;
+        e.len = last + 1;
+        e.kept = kept;
+        e.sigma2 = sigma2;
+        e.err_var = err;
+    }
+
+    /// `Csi::Estimated`: the estimate of the header before the body, `est[0]`, becomes the
+    /// response in use; returns its `σ_E²`.
+    fn use_header_estimate(&mut self) -> f32 {
+        let e = &self.est[0];
+        self.h[..self.h_len.max(e.len)].fill(Complex32::default());
+        self.h[..e.len].copy_from_slice(&e.taps[..e.len]);
+        self.h_len = e.len;
+        self.taps_kept = e.kept;
+        self.sigma2_est = e.sigma2;
+        e.err_var
+    }
+
+    /// `Csi::Interpolated`: the estimates of the header before the body (`est[0]`, reused
+    /// from the previous frame's look-ahead when it is the same header) and after it
+    /// (`est[1]`), interpolated to the body's centre, `ĥ_c = (1 − α) ĥ_a + α ĥ_b`, into the
+    /// response in use. The two estimates' errors are independent (disjoint samples), so
+    /// the per-carrier error variance is `(1 − α)² σ_E,a² + α² σ_E,b²` (half of one
+    /// estimate's at `α = ½`) and the noise estimate `(1 − α) σ̂_a² + α σ̂_b²`; the taps in
+    /// use are those either estimate kept. Returns `σ_E²`.
+    fn interpolate_estimates(
+        &mut self,
+        rx_header: &[Complex32],
+        next_header: &[Complex32],
+        phase: usize,
+        next_phase: usize,
+    ) -> f32 {
+        let cached = self.next_cache_phase == Some(phase)
+            && crate::dtmb::same_bits(&self.next_cache, rx_header);
+        if cached {
+            self.est.swap(0, 1);
+        } else {
+            self.estimate(rx_header, phase, 0);
+        }
+        self.estimate(next_header, next_phase, 1);
+        self.next_cache.copy_from_slice(next_header);
+        self.next_cache_phase = Some(next_phase);
+        let (a, b) = (&self.est[0], &self.est[1]);
+        let alpha = self.alpha;
+        let l = a.len.max(b.len);
+        self.h[..self.h_len.max(l)].fill(Complex32::default());
+        let mut kept = 0;
+        for ((o, &xa), &xb) in self.h[..l].iter_mut().zip(&a.taps[..l]).zip(&b.taps[..l]) {
+            *o = xa * (1.0 - alpha) + xb * alpha;
+            if xa != Complex32::default() || xb != Complex32::default() {
+                kept += 1;
+            }
+        }
+        self.h_len = l;
         self.taps_kept = kept;
-        self.sigma2_est = sigma2;
-        err
+        self.sigma2_est = (1.0 - alpha) * a.sigma2 + alpha * b.sigma2;
+        (1.0 - alpha).powi(2) * a.err_var + alpha * alpha * b.err_var
     }
 
     /// The PN595 least-squares estimate of every lag `0..W` of the last frame (before the
@@ -757,7 +878,13 @@ impl TdsReceiver {
             });
         }
         let est_var = match self.csi {
-            Csi::Estimated => self.estimate(&rx[..hl], phase),
+            Csi::Estimated => {
+                self.estimate(&rx[..hl], phase, 0);
+                self.use_header_estimate()
+            }
+            Csi::Interpolated => {
+                self.interpolate_estimates(&rx[..hl], &next_header[..hl], phase, next_phase)
+            }
             Csi::Ideal => {
                 let l = self.h_true.len();
                 self.h[..l].copy_from_slice(&self.h_true);
@@ -768,6 +895,14 @@ impl TdsReceiver {
         };
         let l = self.h_len;
         let h = &self.h[..l];
+        // The known headers' own convolutions are removed with the channel at their time:
+        // the interpolating receiver has each header's estimate (zero past its length, so
+        // both are `l` long here); the others use the one response.
+        let (h_own, h_next) = if self.csi == Csi::Interpolated {
+            (&self.est[0].taps[..l], &self.est[1].taps[..l])
+        } else {
+            (h, h)
+        };
         let c = &self.headers[phase];
         let c_next = &self.headers[next_phase];
         self.body.copy_from_slice(&rx[hl..]);
@@ -776,11 +911,11 @@ impl TdsReceiver {
             // (after removing the next header's own convolution).
             let mut own_tail = Complex32::default();
             for m in n + 1..l {
-                own_tail += h[m] * c[hl + n - m];
+                own_tail += h_own[m] * c[hl + n - m];
             }
             let mut next_head = Complex32::default();
             for m in 0..=n {
-                next_head += h[m] * c_next[n - m];
+                next_head += h_next[m] * c_next[n - m];
             }
             self.body[n] += next_header[n] - next_head - own_tail;
         }
