@@ -175,7 +175,7 @@ pub fn ber(a: &BerArgs) -> Result<()> {
         (a.tower.is_some(), "--tower"),
         (a.trial != 0, "--trial"),
         (a.at_s != 0.0, "--at-s"),
-        (a.csi != "estimated", "--csi"),
+        (a.csi != "interpolated", "--csi"),
         (a.no_doppler, "--no-doppler"),
     ] {
         if given {
@@ -223,7 +223,7 @@ fn ber_world(a: &BerArgs) -> Result<()> {
     use crate::world::dtmb_iq::{tower_channel_at, DataLayerOverride, WorldIqRequest};
     let path = a.world.as_deref().unwrap_or(std::path::Path::new(""));
     let csis: Vec<Csi> = match a.csi.to_ascii_lowercase().as_str() {
-        "both" => vec![Csi::Estimated, Csi::Ideal],
+        "both" => vec![Csi::Interpolated, Csi::Ideal],
         s => vec![s.parse()?],
     };
     let grid = parse_snr_range(&a.snr_db)?;

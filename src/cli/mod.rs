@@ -219,10 +219,12 @@ pub enum DtmbCommand {
         /// With --world: the instant of the channel, seconds from the world's start.
         #[arg(long, default_value_t = 0.0, value_name = "T")]
         at_s: f64,
-        /// With --world: the receiver's channel knowledge: estimated (from the PN
-        /// headers), ideal (the true response; with Doppler, at each body's centre), or
-        /// both (two curves).
-        #[arg(long, default_value = "estimated")]
+        /// With --world: the receiver's channel knowledge: interpolated (estimated from
+        /// the PN headers before and after each body, interpolated linearly to the body's
+        /// centre), estimated (from the header before the body only), ideal (the true
+        /// response; with Doppler, at each body's centre), or both (two curves:
+        /// interpolated and ideal).
+        #[arg(long, default_value = "interpolated")]
         csi: String,
         /// With --world: hold the channel static (no Doppler), to measure what the
         /// receiver's motion costs against the same paths standing still.

@@ -83,6 +83,18 @@ fn dtmb_ber_kehui_tower_at_its_link_budget_snr_loses_no_packet() {
     let p = measure_channel_point(&moving, ch.snr_db).unwrap();
     println!("Kehui D01 moving at {:.2} dB: {p:?}", ch.snr_db);
     assert_eq!((p.packet_errors, p.ldpc_failures), (0, 0), "{p:?}");
+    // And with the interpolating receiver (`dtmb ber --world`'s default).
+    let interp = ChannelBer {
+        csi: Csi::Interpolated,
+        ..moving.clone()
+    };
+    let p = measure_channel_point(&interp, ch.snr_db).unwrap();
+    println!(
+        "Kehui D01 moving, interpolated, at {:.2} dB: {p:?}",
+        ch.snr_db
+    );
+    assert!(p.packets >= 20 * 6, "{p:?}");
+    assert_eq!((p.packet_errors, p.ldpc_failures), (0, 0), "{p:?}");
 }
 
 /// The Dopplers `dtmb ber --world` applies are the trial's receiver motion at `--at-s`:
@@ -165,14 +177,14 @@ fn dtmb_ber_world_command_prints_the_margin_and_writes_both_curves() {
     );
     assert!(text.contains("link-budget SNR"), "{text}");
     assert!(
-        text.contains("# CSI estimated") && text.contains("# CSI ideal"),
+        text.contains("# CSI interpolated") && text.contains("# CSI ideal"),
         "{text}"
     );
     let body = std::fs::read_to_string(&csv).unwrap();
     let lines: Vec<&str> = body.lines().collect();
     assert!(lines[0].starts_with("csi,snr_db,frames,") && lines[0].ends_with(",link_snr_db"));
     assert_eq!(lines.len(), 1 + 2 * 3, "{body}");
-    assert!(lines[1].starts_with("estimated,11.5,3,") && lines[4].starts_with("ideal,11.5,3,"));
+    assert!(lines[1].starts_with("interpolated,11.5,3,") && lines[4].starts_with("ideal,11.5,3,"));
     // Far above 16QAM 0.8's AWGN threshold (12.4 dB) on a flat channel: nothing wrong.
     let last: Vec<&str> = lines[3].split(',').collect();
     assert_eq!(last[4], "0", "{}", lines[3]);
@@ -206,7 +218,7 @@ fn dtmb_ber_world_refuses_bad_input() {
     );
     run(
         &["--world", "worlds/seed000-kehui.toml", "--csi", "genie"],
-        &["--csi", "ideal or estimated"],
+        &["--csi", "ideal, estimated or interpolated"],
     );
     run(
         &["--world", "worlds/seed000-kehui.toml", "--mode", "pn420"],
