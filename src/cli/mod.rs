@@ -230,6 +230,12 @@ pub enum DtmbCommand {
         /// receiver's motion costs against the same paths standing still.
         #[arg(long)]
         no_doppler: bool,
+        /// With --world: give the estimating receivers the true frame start. By default
+        /// they acquire it (and the frame number) from the PN headers with the ranging
+        /// receiver's frame sync and start each frame 16 samples before the first path
+        /// found; the genie always has the true timing.
+        #[arg(long)]
+        true_timing: bool,
     },
     /// Write DTMB baseband frames through white noise as a SigMF recording
     /// (BASE.sigmf-data and BASE.sigmf-meta, with an annotation per frame); with --world,
@@ -452,6 +458,7 @@ pub fn run(cli: Cli) -> Result<()> {
             at_s,
             csi,
             no_doppler,
+            true_timing,
         }) => dtmb::ber(&dtmb::BerArgs {
             qam,
             fec,
@@ -468,6 +475,7 @@ pub fn run(cli: Cli) -> Result<()> {
             at_s,
             csi,
             no_doppler,
+            true_timing,
         }),
         Command::Dtmb(DtmbCommand::Iq {
             mode,

@@ -135,7 +135,8 @@ fn dtmb_ber_world_dopplers_are_the_range_rate_of_the_trial() {
 }
 
 /// The command line: the link-budget SNR and the paths are printed, both receivers'
-/// curves are measured (`--csi both`), and the CSV holds one row per receiver and grid
+/// curves are measured (`--csi both`: interpolated and ideal), the estimating receiver's
+/// acquired timing is reported, and the CSV holds one row per receiver and grid
 /// point with the link SNR; the same arguments give the same file.
 #[test]
 fn dtmb_ber_world_command_prints_the_margin_and_writes_both_curves() {
@@ -178,6 +179,14 @@ fn dtmb_ber_world_command_prints_the_margin_and_writes_both_curves() {
     assert!(text.contains("link-budget SNR"), "{text}");
     assert!(
         text.contains("# CSI interpolated") && text.contains("# CSI ideal"),
+        "{text}"
+    );
+    // The estimating receiver acquires the timing (the genie does not) and finds the
+    // frame number at every point, far above the sync's SNR needs.
+    assert!(
+        text.contains("# CSI interpolated: frame start acquired")
+            && text.contains("frame number wrong at 0")
+            && !text.contains("# CSI ideal: frame start acquired"),
         "{text}"
     );
     let body = std::fs::read_to_string(&csv).unwrap();
@@ -234,6 +243,7 @@ fn dtmb_ber_world_refuses_bad_input() {
     );
     run(&["--tower", "D01"], &["--tower needs --world"]);
     run(&["--no-doppler"], &["--no-doppler needs --world"]);
+    run(&["--true-timing"], &["--true-timing needs --world"]);
     run(&["--csi", "ideal"], &["--csi needs --world"]);
     run(&["--world", "no/such/world.toml"], &["no/such/world.toml"]);
 }

@@ -21,8 +21,9 @@
 //! `h[n] = Σ_p g_p φ(n − τ_p)` with `φ` the waveform's interpolation kernel
 //! ([`super::kernel`]), so fractional delays are exact for hybridnav's waveform.
 //!
-//! **Receiver** (frame timing: the true frame start, i.e. the start of `h`; no
-//! synchronisation error is modelled). For frame `i` with header `c_i` and body `d_i`:
+//! **Receiver** (frame timing: the true frame start, i.e. the start of `h`, in
+//! [`measure_channel_point`]; [`measure_channel_point_synced`] finds it — see
+//! *Synchronisation* below). For frame `i` with header `c_i` and body `d_i`:
 //!
 //! 1. *Channel estimate* (`Csi::Estimated`). Cyclic headers (PN420/PN945): the `P`-chip
 //!    core of the header follows its cyclic preamble of `G` chips (217 or 82), so when
@@ -130,9 +131,25 @@
 //! The SNR is defined on the static response (the received power at the reference
 //! instant). When every shift is zero the stream is the static one, bit for bit.
 //!
+//! **Synchronisation** ([`measure_channel_point_synced`]). The estimating receiver starts
+//! listening at a random sample of the first frame and acquires the frame start and the
+//! frame number from the PN headers with hybridnav's frame synchroniser
+//! ([`super::receiver::Receiver::sync`], the ranging receiver's: FFT correlation with every
+//! header phase, frame number from two consecutive headers, first-path detection, fine
+//! timing by the band-limited correlation's maximum). Frames then start
+//! [`SYNC_ADVANCE_SAMPLES`] = `K` samples before the first path's header start (rounded):
+//! the response of a path begins up to `K` samples before it (the kernel's support), so
+//! the whole response stays causal in the estimate's window, at the price of `K` lags of
+//! the delay spread covered and `10 log10(1 + K/N)` = 0.018 dB of reconstruction noise.
+//! The timing is held: the channel's delays do not drift here. No carrier-frequency
+//! offset is modelled or estimated (the paths' Dopplers belong to the channel, which the
+//! estimates track). The genie keeps the true timing.
+//!
 //! Random streams of `TrialRng::new(seed, 0)`: `dtmb/ber/payload` (the stream's key, as
 //! [`super::ber::measure_point`], so the same packets) and `dtmb/ber/noise`; every SNR
-//! point starts both afresh (common random numbers).
+//! point starts both afresh (common random numbers); the synchronised receiver's block start
+//! and the noise it hears before the first frame come from `dtmb/ber/timing`, so its frames
+//! carry the same payload and noise.
 
 use super::ber::{count_packets, BerPoint, MAX_BER_FRAMES};
 use super::data_layer::{DataLayer, Profile};
