@@ -493,6 +493,10 @@ pub struct TdsReceiver {
     /// instead of being computed again (the same input gives the same estimate).
     next_cache: Vec<Complex32>,
     next_cache_phase: Option<usize>,
+    /// The nonzero taps `(lag, value)` of the responses that remove this header's tail and
+    /// the next header's head in the reconstruction (capacity `H + 1`: never reallocated).
+    own_taps: Vec<(usize, Complex32)>,
+    next_taps: Vec<(usize, Complex32)>,
 }
 
 /// One header's channel estimate: the taps (zero past `len`), how many were kept, the
@@ -667,6 +671,8 @@ impl TdsReceiver {
             alpha: interpolation_weight(mode) as f32,
             next_cache: vec![Complex32::default(); hl],
             next_cache_phase: None,
+            own_taps: Vec::with_capacity(hl + 1),
+            next_taps: Vec::with_capacity(hl + 1),
         })
     }
 
@@ -948,17 +954,37 @@ impl TdsReceiver {
         };
         let c = &self.headers[phase];
         let c_next = &self.headers[next_phase];
+        // The sums run over the nonzero taps only, in increasing lag: an estimate is a few
+        // taps spread over up to 218 lags (a false tap far out makes `l` large), so this
+        // costs `l` times the taps instead of `l²`. A zero tap's products are zeros, which
+        // leave the sums' bits unchanged, so the result is the full sums' bit for bit.
+        self.own_taps.clear();
+        self.own_taps.extend(
+            h_own
+                .iter()
+                .enumerate()
+                .filter(|(_, x)| **x != Complex32::default())
+                .map(|(m, x)| (m, *x)),
+        );
+        self.next_taps.clear();
+        self.next_taps.extend(
+            h_next
+                .iter()
+                .enumerate()
+                .filter(|(_, x)| **x != Complex32::default())
+                .map(|(m, x)| (m, *x)),
+        );
         self.body.copy_from_slice(&rx[hl..]);
         for n in 0..l.saturating_sub(1) {
             // This header's tail in the body, and the body's tail in the next header
             // (after removing the next header's own convolution).
             let mut own_tail = Complex32::default();
-            for m in n + 1..l {
-                own_tail += h_own[m] * c[hl + n - m];
+            for &(m, hm) in self.own_taps.iter().filter(|(m, _)| *m > n) {
+                own_tail += hm * c[hl + n - m];
             }
             let mut next_head = Complex32::default();
-            for m in 0..=n {
-                next_head += h_next[m] * c_next[n - m];
+            for &(m, hm) in self.next_taps.iter().take_while(|(m, _)| *m <= n) {
+                next_head += hm * c_next[n - m];
             }
             self.body[n] += next_header[n] - next_head - own_tail;
         }
