@@ -371,7 +371,7 @@ fn ber_world(a: &BerArgs) -> Result<()> {
             });
             let wrong = acquired
                 .iter()
-                .filter(|x| x.frame_index != x.true_frame_index)
+                .filter(|x| x.frame_index.is_some_and(|i| i != x.true_frame_index))
                 .count();
             println!(
                 "# CSI {}: frame start acquired {lo}..{hi} samples from the true one over the \
