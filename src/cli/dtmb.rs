@@ -356,7 +356,11 @@ fn ber_world(a: &BerArgs) -> Result<()> {
         let mut acquired = Vec::new();
         let (points, _, per) = run_curve(&grid, |snr| {
             if synced {
-                let (p, acq) = measure_channel_point_synced(&cfg, snr)?;
+                let (p, acq) = measure_channel_point_synced(&cfg, snr).map_err(|e| {
+                    anyhow::anyhow!(
+                        "{e} (--true-timing gives the estimating receiver the true frame start)"
+                    )
+                })?;
                 acquired.push(acq);
                 Ok(p)
             } else {
