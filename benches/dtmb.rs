@@ -398,6 +398,43 @@ fn bench_channel_receiver(c: &mut Criterion) {
             },
         );
     }
+    // The interpolating receiver (the default of `dtmb ber --world`) as it streams: three
+    // consecutive frames in a ring, each received with the next one's header, so each
+    // frame's own header estimate is the previous call's look-ahead (one estimate a
+    // frame); and cold, the same frame again and again (two estimates a frame).
+    {
+        let mut rx = TdsReceiver::new(MODE, Csi::Interpolated, &h, var).unwrap();
+        let mut st = ChannelStream::new(MODE, &h);
+        let phases: Vec<usize> = (0..3).map(|i| MODE.phase_of_frame(i)).collect();
+        let ys: Vec<Vec<Complex32>> = phases
+            .iter()
+            .map(|&p| {
+                let mut y = vec![Complex32::default(); n];
+                st.next_frame(rx.header(p), &logical, &mut y).unwrap();
+                hybridnav::dtmb::noise::add_awgn(&mut y, var.sqrt(), &mut rng);
+                y
+            })
+            .collect();
+        let mut eq = vec![Complex32::default(); BODY_LEN];
+        let mut w = vec![0f32; BODY_LEN];
+        let mut i = 0;
+        g.bench_function("estimate_equalise_frame_pn945_interpolated", |b| {
+            b.iter(|| {
+                let j = (i + 1) % 3;
+                rx.receive_frame(&ys[i], &ys[j][..hl], phases[i], phases[j], &mut eq, &mut w)
+                    .unwrap();
+                i = j;
+                black_box(&eq);
+            })
+        });
+        g.bench_function("estimate_equalise_frame_pn945_interpolated_cold", |b| {
+            b.iter(|| {
+                rx.receive_frame(&ys[0], &ys[1][..hl], phases[0], phases[1], &mut eq, &mut w)
+                    .unwrap();
+                black_box(&eq);
+            })
+        });
+    }
     // PN595 (least-squares estimate) with C = 3780 and C = 1 (MMSE frequency-domain
     // equalisation) bodies, same channel and SNR.
     use hybridnav::dtmb::frame::CarrierMode;

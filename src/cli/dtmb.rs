@@ -57,6 +57,7 @@ pub struct BerArgs {
     pub at_s: f64,
     pub csi: String,
     pub no_doppler: bool,
+    pub true_timing: bool,
 }
 
 /// The data-layer profile of `dtmb ber` from its options (each `None` takes the default:
@@ -175,8 +176,9 @@ pub fn ber(a: &BerArgs) -> Result<()> {
         (a.tower.is_some(), "--tower"),
         (a.trial != 0, "--trial"),
         (a.at_s != 0.0, "--at-s"),
-        (a.csi != "estimated", "--csi"),
+        (a.csi != "interpolated", "--csi"),
         (a.no_doppler, "--no-doppler"),
+        (a.true_timing, "--true-timing"),
     ] {
         if given {
             anyhow::bail!("{what} needs --world (without it the channel is white noise)");
@@ -217,13 +219,14 @@ pub fn ber(a: &BerArgs) -> Result<()> {
 fn ber_world(a: &BerArgs) -> Result<()> {
     use crate::dtmb::ber::parse_snr_range;
     use crate::dtmb::ber_channel::{
-        doppler_responses, frequency_response, measure_channel_point, ChannelBer, Csi,
+        doppler_responses, frequency_response, measure_channel_point, measure_channel_point_synced,
+        ChannelBer, Csi, SYNC_ADVANCE_SAMPLES,
     };
     use crate::dtmb::pn::PnMode;
     use crate::world::dtmb_iq::{tower_channel_at, DataLayerOverride, WorldIqRequest};
     let path = a.world.as_deref().unwrap_or(std::path::Path::new(""));
     let csis: Vec<Csi> = match a.csi.to_ascii_lowercase().as_str() {
-        "both" => vec![Csi::Estimated, Csi::Ideal],
+        "both" => vec![Csi::Interpolated, Csi::Ideal],
         s => vec![s.parse()?],
     };
     let grid = parse_snr_range(&a.snr_db)?;
@@ -306,7 +309,7 @@ fn ber_world(a: &BerArgs) -> Result<()> {
     }
     println!(
         "# channel: {} taps at 7.56 Msps ({}), |H_k|² at {:.4} s from {:.2} to {:.2} dB on \
-         the 3780 carriers; receiver timing: the true frame start",
+         the 3780 carriers; receiver timing: {}",
         h.len(),
         if a.no_doppler {
             "static: --no-doppler".to_string()
@@ -318,7 +321,16 @@ fn ber_world(a: &BerArgs) -> Result<()> {
         },
         ch.at_s,
         10.0 * lo.max(1e-30).log10(),
-        10.0 * hi.log10()
+        10.0 * hi.log10(),
+        if a.true_timing {
+            "the true frame start (--true-timing)".to_string()
+        } else {
+            format!(
+                "acquired from the PN headers by the estimating receivers (frame sync, \
+                 frames started {SYNC_ADVANCE_SAMPLES} samples before the first path), the \
+                 true frame start for the genie"
+            )
+        }
     );
     println!(
         "# {} {} frames per point after a {}-frame interleaver delay",
@@ -340,7 +352,38 @@ fn ber_world(a: &BerArgs) -> Result<()> {
             frames: a.frames,
             seed,
         };
-        let (points, _, per) = run_curve(&grid, |snr| Ok(measure_channel_point(&cfg, snr)?))?;
+        let synced = csi != Csi::Ideal && !a.true_timing;
+        let mut acquired = Vec::new();
+        let (points, _, per) = run_curve(&grid, |snr| {
+            if synced {
+                let (p, acq) = measure_channel_point_synced(&cfg, snr).map_err(|e| {
+                    anyhow::anyhow!(
+                        "{e} (--true-timing gives the estimating receiver the true frame start)"
+                    )
+                })?;
+                acquired.push(acq);
+                Ok(p)
+            } else {
+                Ok(measure_channel_point(&cfg, snr)?)
+            }
+        })?;
+        if !acquired.is_empty() {
+            // The receiver's frame start relative to the response's start (the true frame
+            // start), over the grid's points.
+            let (lo, hi) = acquired.iter().fold((i64::MAX, i64::MIN), |(l, h), x| {
+                (l.min(x.offset_samples), h.max(x.offset_samples))
+            });
+            let wrong = acquired
+                .iter()
+                .filter(|x| x.frame_index.is_some_and(|i| i != x.true_frame_index))
+                .count();
+            println!(
+                "# CSI {}: frame start acquired {lo}..{hi} samples from the true one over the \
+                 {} points; frame number wrong at {wrong}",
+                csi.name(),
+                acquired.len(),
+            );
+        }
         if let Some(t) = per {
             println!(
                 "# CSI {}: PER 1e-2 at {t:.2} dB; the link budget gives {:.2} dB, a margin of \

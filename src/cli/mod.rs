@@ -219,15 +219,23 @@ pub enum DtmbCommand {
         /// With --world: the instant of the channel, seconds from the world's start.
         #[arg(long, default_value_t = 0.0, value_name = "T")]
         at_s: f64,
-        /// With --world: the receiver's channel knowledge: estimated (from the PN
-        /// headers), ideal (the true response; with Doppler, at each body's centre), or
-        /// both (two curves).
-        #[arg(long, default_value = "estimated")]
+        /// With --world: the receiver's channel knowledge: interpolated (estimated from
+        /// the PN headers before and after each body, interpolated linearly to the body's
+        /// centre), estimated (from the header before the body only), ideal (the true
+        /// response; with Doppler, at each body's centre), or both (two curves:
+        /// interpolated and ideal).
+        #[arg(long, default_value = "interpolated")]
         csi: String,
         /// With --world: hold the channel static (no Doppler), to measure what the
         /// receiver's motion costs against the same paths standing still.
         #[arg(long)]
         no_doppler: bool,
+        /// With --world: give the estimating receivers the true frame start. By default
+        /// they acquire it (and the frame number) from the PN headers with the ranging
+        /// receiver's frame sync and start each frame 16 samples before the first path
+        /// found; the genie always has the true timing.
+        #[arg(long)]
+        true_timing: bool,
     },
     /// Write DTMB baseband frames through white noise as a SigMF recording
     /// (BASE.sigmf-data and BASE.sigmf-meta, with an annotation per frame); with --world,
@@ -450,6 +458,7 @@ pub fn run(cli: Cli) -> Result<()> {
             at_s,
             csi,
             no_doppler,
+            true_timing,
         }) => dtmb::ber(&dtmb::BerArgs {
             qam,
             fec,
@@ -466,6 +475,7 @@ pub fn run(cli: Cli) -> Result<()> {
             at_s,
             csi,
             no_doppler,
+            true_timing,
         }),
         Command::Dtmb(DtmbCommand::Iq {
             mode,

@@ -83,6 +83,18 @@ fn dtmb_ber_kehui_tower_at_its_link_budget_snr_loses_no_packet() {
     let p = measure_channel_point(&moving, ch.snr_db).unwrap();
     println!("Kehui D01 moving at {:.2} dB: {p:?}", ch.snr_db);
     assert_eq!((p.packet_errors, p.ldpc_failures), (0, 0), "{p:?}");
+    // And with the interpolating receiver (`dtmb ber --world`'s default).
+    let interp = ChannelBer {
+        csi: Csi::Interpolated,
+        ..moving.clone()
+    };
+    let p = measure_channel_point(&interp, ch.snr_db).unwrap();
+    println!(
+        "Kehui D01 moving, interpolated, at {:.2} dB: {p:?}",
+        ch.snr_db
+    );
+    assert!(p.packets >= 20 * 6, "{p:?}");
+    assert_eq!((p.packet_errors, p.ldpc_failures), (0, 0), "{p:?}");
 }
 
 /// The Dopplers `dtmb ber --world` applies are the trial's receiver motion at `--at-s`:
@@ -123,7 +135,8 @@ fn dtmb_ber_world_dopplers_are_the_range_rate_of_the_trial() {
 }
 
 /// The command line: the link-budget SNR and the paths are printed, both receivers'
-/// curves are measured (`--csi both`), and the CSV holds one row per receiver and grid
+/// curves are measured (`--csi both`: interpolated and ideal), the estimating receiver's
+/// acquired timing is reported, and the CSV holds one row per receiver and grid
 /// point with the link SNR; the same arguments give the same file.
 #[test]
 fn dtmb_ber_world_command_prints_the_margin_and_writes_both_curves() {
@@ -165,14 +178,22 @@ fn dtmb_ber_world_command_prints_the_margin_and_writes_both_curves() {
     );
     assert!(text.contains("link-budget SNR"), "{text}");
     assert!(
-        text.contains("# CSI estimated") && text.contains("# CSI ideal"),
+        text.contains("# CSI interpolated") && text.contains("# CSI ideal"),
+        "{text}"
+    );
+    // The estimating receiver acquires the timing (the genie does not) and finds the
+    // frame number at every point, far above the sync's SNR needs.
+    assert!(
+        text.contains("# CSI interpolated: frame start acquired")
+            && text.contains("frame number wrong at 0")
+            && !text.contains("# CSI ideal: frame start acquired"),
         "{text}"
     );
     let body = std::fs::read_to_string(&csv).unwrap();
     let lines: Vec<&str> = body.lines().collect();
     assert!(lines[0].starts_with("csi,snr_db,frames,") && lines[0].ends_with(",link_snr_db"));
     assert_eq!(lines.len(), 1 + 2 * 3, "{body}");
-    assert!(lines[1].starts_with("estimated,11.5,3,") && lines[4].starts_with("ideal,11.5,3,"));
+    assert!(lines[1].starts_with("interpolated,11.5,3,") && lines[4].starts_with("ideal,11.5,3,"));
     // Far above 16QAM 0.8's AWGN threshold (12.4 dB) on a flat channel: nothing wrong.
     let last: Vec<&str> = lines[3].split(',').collect();
     assert_eq!(last[4], "0", "{}", lines[3]);
@@ -206,7 +227,7 @@ fn dtmb_ber_world_refuses_bad_input() {
     );
     run(
         &["--world", "worlds/seed000-kehui.toml", "--csi", "genie"],
-        &["--csi", "ideal or estimated"],
+        &["--csi", "ideal, estimated or interpolated"],
     );
     run(
         &["--world", "worlds/seed000-kehui.toml", "--mode", "pn420"],
@@ -222,6 +243,7 @@ fn dtmb_ber_world_refuses_bad_input() {
     );
     run(&["--tower", "D01"], &["--tower needs --world"]);
     run(&["--no-doppler"], &["--no-doppler needs --world"]);
+    run(&["--true-timing"], &["--true-timing needs --world"]);
     run(&["--csi", "ideal"], &["--csi needs --world"]);
     run(&["--world", "no/such/world.toml"], &["no/such/world.toml"]);
 }

@@ -139,8 +139,8 @@ pub fn uhf_channel_center_hz(n: u32) -> Result<f64, DtmbError> {
 }
 
 /// Whether two sample sequences are equal bit for bit: the tests that compare the
-/// vectorised builds of the hot loops with their portable code.
-#[cfg(test)]
+/// vectorised builds of the hot loops with their portable code, and the interpolating
+/// channel receiver's check that a frame's header is the one it looked ahead at.
 pub(crate) fn same_bits(a: &[num_complex::Complex32], b: &[num_complex::Complex32]) -> bool {
     a.len() == b.len()
         && a.iter()
