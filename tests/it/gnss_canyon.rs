@@ -313,6 +313,8 @@ struct Calibration {
     per_class: BTreeMap<Class, (Vec<f64>, Vec<f64>)>,
     /// Class → the satellites GNSS-SDR contributed.
     satellites: BTreeMap<Class, Vec<u32>>,
+    /// Class → each common sample's PRN, in `per_class`'s order.
+    prns: BTreeMap<Class, Vec<u32>>,
     log: String,
 }
 
@@ -323,6 +325,25 @@ impl Calibration {
             Some((a, b)) if !a.is_empty() => (a.len(), stats(a).3 / stats(b).3),
             _ => (0, f64::NAN),
         }
+    }
+
+    /// GNSS-SDR's RMS over the measurement level's in `class` over the satellites `only`,
+    /// with the sample count.
+    fn ratio_of(&self, class: Class, only: &[u32]) -> (usize, f64) {
+        let (Some((a, b)), Some(prns)) = (self.per_class.get(&class), self.prns.get(&class)) else {
+            return (0, f64::NAN);
+        };
+        let (a, b): (Vec<f64>, Vec<f64>) = a
+            .iter()
+            .zip(b)
+            .zip(prns)
+            .filter(|(_, p)| only.contains(p))
+            .map(|((x, y), _)| (*x, *y))
+            .unzip();
+        if a.is_empty() {
+            return (0, f64::NAN);
+        }
+        (a.len(), stats(&a).3 / stats(&b).3)
     }
 
     /// The issue's criterion: `required` has at least `min_n` common samples, and it and
@@ -426,6 +447,7 @@ fn calibrate(
     );
     let mut per_class = BTreeMap::new();
     let mut satellites = BTreeMap::new();
+    let mut prns = BTreeMap::new();
     for c in [Class::Los, Class::LosMultipath, Class::Nlos] {
         let keys: Vec<(i64, u32)> = sdr
             .keys()
@@ -443,16 +465,30 @@ fn calibrate(
                  m; measurement level mean {bm:.2} std {bsd:.2} RMS {brms:.2} m; ratio {:.2}",
                 arms / brms
             );
+            for &sat in &sats {
+                let (x, y): (Vec<f64>, Vec<f64>) = keys
+                    .iter()
+                    .filter(|k| k.1 == sat)
+                    .map(|k| (sdr[k], ml[k]))
+                    .unzip();
+                let ((n, am, _, arms), (_, bm, _, brms)) = (stats(&x), stats(&y));
+                eprintln!(
+                    "{tag}:   {c:?} PRN {sat}: n {n}; GNSS-SDR mean {am:.2} RMS {arms:.2} m; \
+                     measurement level mean {bm:.2} RMS {brms:.2} m"
+                );
+            }
         } else {
             eprintln!("{tag}: {c:?}: no common samples");
         }
         per_class.insert(c, (a, b));
         satellites.insert(c, sats);
+        prns.insert(c, keys.iter().map(|k| k.1).collect());
     }
     let _ = std::fs::remove_dir_all(&r.dir);
     Some(Calibration {
         per_class,
         satellites,
+        prns,
         log: r.log,
     })
 }
@@ -466,6 +502,52 @@ fn gps_conf_matched(data: &str, rate: f64, out: &str, _: &[u64]) -> String {
     gps_conf(data, rate, out).replace(
         "Tracking_1C.early_late_space_chips=0.5",
         "Tracking_1C.early_late_space_chips=0.25",
+    )
+}
+
+/// [`gps_conf_matched`] set for weak signals, the GPS NLOS satellites at 30–34 dB-Hz
+/// (docs/validation.md, "GPS NLOS at 30–34 dB-Hz"), with GNSS-SDR's documented options only:
+///
+/// - Acquisition: 10 ms coherent integration (`coherent_integration_time_ms=10`): the
+///   coherent SNR C/N0·T is 3.4 dB at 33.4 dB-Hz over 1 ms, 13.4 dB over 10 ms (Kaplan &
+///   Hegarty, *Understanding GPS/GNSS*, 3rd ed., acquisition chapter: below ≈ 35 dB-Hz a
+///   1 ms search does not detect). 10 ms is half a 20 ms LNAV bit, so of two consecutive
+///   10 ms blocks at least one has no bit transition; `bit_transition_flag=true` is GNSS-SDR's
+///   option for that, with `max_dwells=2`. The Doppler bins shrink with T: 50 Hz = 1/(2T)
+///   (a ±25 Hz worst-case error costs sinc(π·25 Hz·10 ms) = 0.9 dB). `pfa=1e-4`: with the
+///   default 10⁻³ GNSS-SDR's threshold let through 11 false alarms in 663 searches of PRNs
+///   absent or below 20 dB-Hz (1.7 %, one 90 s run), each holding a channel for seconds;
+///   at 10⁻⁴, 4 in 1157 (0.3 %) (docs/validation.md).
+/// - Tracking: after bit synchronisation, 20 ms correlations (`extend_correlation_symbols=20`),
+///   the measurement level's predetection time (`link::TrackingConfig::integration_time_s`,
+///   default 0.02 s), with the same DLL: `dll_bw_narrow_hz=2.0` and
+///   `early_late_space_narrow_chips=0.25` (the world's `dll_bandwidth_hz` and half its
+///   `correlator_spacing_chips`). `pll_bw_narrow_hz=10`: B_n·T = 0.2, well below 1 so the
+///   digital loop behaves as its analogue design (the code comparison does not depend on it;
+///   the DLL is carrier-aided).
+/// - `carrier_lock_th=0.3`: GNSS-SDR 0.0.17's carrier-lock test (cos 2φ of the prompt,
+///   smoothed) is run on 1 ms correlations until the tracking's bit synchronisation, and
+///   at 1 ms its expected value for a locked carrier is 0.37 at 30 dB-Hz, 0.57 at 33 and
+///   ≈ 0.7 at 35 (E[cos 2 arg(A + n)] at C/N0·T, by Monte Carlo, docs/validation.md), so
+///   below ≈ 35 dB-Hz the default 0.7 fails on average and its 5000 failures drop the
+///   channel within seconds. 0.3 lies below the value at 30 dB-Hz, the class's lower
+///   bound; noise (expected 0) still fails it. The bit synchronisation itself (GPS L1:
+///   all 160 one-millisecond symbols of an LNAV preamble read correctly,
+///   (1 − Q(√(2·C/N0·T)))¹⁶⁰ = 2–9 % per 6 s subframe at 32.9–33.7 dB-Hz) comes seconds
+///   to tens of seconds after acquisition; after it the 20 ms test (expected 0.975 at 33 dB-Hz) passes.
+fn gps_conf_weak(data: &str, rate: f64, out: &str, p: &[u64]) -> String {
+    let c = gps_conf_matched(data, rate, out, p)
+        .replace(
+            "Acquisition_1C.coherent_integration_time_ms=1\n",
+            "Acquisition_1C.coherent_integration_time_ms=10\nAcquisition_1C.bit_transition_flag=true\n",
+        )
+        .replace("Acquisition_1C.max_dwells=4", "Acquisition_1C.max_dwells=2")
+        .replace("Acquisition_1C.pfa=0.001", "Acquisition_1C.pfa=0.0001")
+        .replace("Acquisition_1C.doppler_step=250", "Acquisition_1C.doppler_step=50");
+    format!(
+        "{c}Tracking_1C.extend_correlation_symbols=20\nTracking_1C.pll_bw_narrow_hz=10.0\n\
+         Tracking_1C.dll_bw_narrow_hz=2.0\nTracking_1C.early_late_space_narrow_chips=0.25\n\
+         Tracking_1C.carrier_lock_th=0.3\n"
     )
 }
 
@@ -575,4 +657,45 @@ fn gnss_canyon_walking_receiver_errors_agree_with_gnss_sdr() {
     };
     eprintln!("walk: satellites per class {:?}", cal.satellites);
     cal.assert_agrees(Class::LosMultipath, 150);
+}
+
+/// GPS's NLOS class at 30–34 dB-Hz: at 15:00 (`worlds/gnss-iq-urban-canyon-1500.toml`) G08,
+/// G10 and G32 are received only by wall reflections (6.7–8.5 m excess, 33–34 dB-Hz; their
+/// direct paths through the blocks at 21–25 dB-Hz), with G01 and G11 in line of sight.
+/// GNSS-SDR's default 1 ms acquisition never acquires them; set for weak signals
+/// ([`gps_conf_weak`]) it acquires and tracks them. Asserted: ≥ 20 common samples of these
+/// three satellites and their RMS ratio (GNSS-SDR over the measurement level) within 2×, and
+/// every class with 20 or more samples within 2× (G21, NLOS by a 1.6–1.8 m reflection after
+/// it sets ≈ 30 s in, belongs to the NLOS class too).
+///
+/// Ignored for now: only the epochs after GNSS-SDR's receiver-time step at its first fix
+/// are reduced (as in the other canyon tests), and here the fix waits for an NLOS
+/// satellite's bit synchronisation and ephemeris (three satellites are in line of sight),
+/// so the number of compared epochs is random. Its runs (2026-12-04): 90 s, fix ≈ 78 s in,
+/// G08, G10, G32 n = 33, ratio 0.90 (passed); 120 s, 5 epochs after the fix, n = 15,
+/// ratio 1.03 (failed on n). Run by hand with `--ignored`; the fix needed is to reduce the
+/// pre-fix observables with their own time-tag offset.
+#[test]
+#[ignore = "the compared epochs follow GNSS-SDR's first fix, which waits for an NLOS satellite (docs/validation.md)"]
+fn gnss_canyon_gps_weak_nlos_errors_agree_with_gnss_sdr() {
+    const WEAK_NLOS: [u32; 3] = [8, 10, 32];
+    let Some(cal) = calibrate(
+        "canyon-gps-nlos",
+        CANYON_1500,
+        GPS_L1CA,
+        90,
+        2.6e6,
+        gps_conf_weak,
+    ) else {
+        return;
+    };
+    eprintln!("canyon-gps-nlos: satellites per class {:?}", cal.satellites);
+    let (n, ratio) = cal.ratio_of(Class::Nlos, &WEAK_NLOS);
+    eprintln!("canyon-gps-nlos: G08, G10, G32: n {n}, RMS ratio {ratio:.2}");
+    assert!(n >= 20, "{n} samples of G08, G10, G32:\n{}", cal.log);
+    assert!(
+        (0.5..=2.0).contains(&ratio),
+        "G08, G10, G32: GNSS-SDR RMS / measurement RMS = {ratio:.2}"
+    );
+    cal.assert_agrees(Class::Nlos, 20);
 }
