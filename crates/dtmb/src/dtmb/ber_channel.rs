@@ -958,22 +958,8 @@ impl TdsReceiver {
         // taps spread over up to 218 lags (a false tap far out makes `l` large), so this
         // costs `l` times the taps instead of `l²`. A zero tap's products are zeros, which
         // leave the sums' bits unchanged, so the result is the full sums' bit for bit.
-        self.own_taps.clear();
-        self.own_taps.extend(
-            h_own
-                .iter()
-                .enumerate()
-                .filter(|(_, x)| **x != Complex32::default())
-                .map(|(m, x)| (m, *x)),
-        );
-        self.next_taps.clear();
-        self.next_taps.extend(
-            h_next
-                .iter()
-                .enumerate()
-                .filter(|(_, x)| **x != Complex32::default())
-                .map(|(m, x)| (m, *x)),
-        );
+        nonzero_taps(h_own, &mut self.own_taps);
+        nonzero_taps(h_next, &mut self.next_taps);
         self.body.copy_from_slice(&rx[hl..]);
         for n in 0..l.saturating_sub(1) {
             // This header's tail in the body, and the body's tail in the next header
@@ -1525,6 +1511,17 @@ pub fn measure_per_carrier_point(
     Ok(p)
 }
 
+/// The nonzero taps of `h` with their lags, in increasing lag, into `out` (cleared first;
+/// no allocation once `out` has grown to the estimate's size).
+fn nonzero_taps(h: &[Complex32], out: &mut Vec<(usize, Complex32)>) {
+    out.clear();
+    out.extend(
+        h.iter()
+            .enumerate()
+            .filter(|(_, x)| **x != Complex32::default())
+            .map(|(m, x)| (m, *x)),
+    );
+}
 #[cfg(test)]
 mod tests {
     use super::*;
