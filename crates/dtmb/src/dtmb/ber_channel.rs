@@ -1232,6 +1232,48 @@ fn check_frames(frames: usize, snr_db: f64) -> Result<(), DtmbError> {
     Ok(())
 }
 
+/// What [`measure_channel_point`] and [`measure_channel_point_synced`] share: the
+/// transmitter with its payload key, the channel, the noise at the SNR point and both
+/// receivers, all drawn from the named streams of `cfg.seed` (common random numbers).
+struct ChannelChain {
+    rx: TdsReceiver,
+    key: u64,
+    noise: crate::core::StreamRng,
+    tx: DataLayer,
+    data_rx: DataReceiver,
+    stream: ChannelStream,
+    /// The noise's σ per complex sample at `snr_db`.
+    sigma: f32,
+}
+
+impl ChannelChain {
+    fn new(cfg: &ChannelBer<'_>, snr_db: f64) -> Result<Self, DtmbError> {
+        let (mode, carrier) = (cfg.mode, cfg.profile.carrier);
+        let energy: f32 = cfg.h.iter().map(|x| x.norm_sqr()).sum();
+        let var =
+            (mode.nominal_frame_power() * f64::from(energy) / 10f64.powf(snr_db / 10.0)) as f32;
+        let streams = TrialRng::new(cfg.seed, 0);
+        let key: u64 = streams.stream("dtmb/ber/payload").random();
+        Ok(Self {
+            rx: TdsReceiver::with_carrier(mode, carrier, cfg.csi, cfg.h, var)?,
+            key,
+            noise: streams.stream("dtmb/ber/noise"),
+            tx: DataLayer::new(cfg.profile, PacketSource::pseudo_random(key)),
+            data_rx: DataReceiver::new(cfg.profile),
+            stream: ChannelStream::with_doppler(mode, carrier, cfg.h, cfg.doppler)?,
+            sigma: var.sqrt(),
+        })
+    }
+
+    /// The data receiver's codeword counts into `p`.
+    fn finish(&self, mut p: BerPoint) -> BerPoint {
+        let st = self.data_rx.stats();
+        p.codewords = st.codewords;
+        p.ldpc_failures = st.ldpc_failures;
+        p
+    }
+}
+
 /// Measures one SNR point through the channel (see the module documentation).
 ///
 /// # Errors
@@ -1240,16 +1282,7 @@ fn check_frames(frames: usize, snr_db: f64) -> Result<(), DtmbError> {
 pub fn measure_channel_point(cfg: &ChannelBer<'_>, snr_db: f64) -> Result<BerPoint, DtmbError> {
     check_frames(cfg.frames, snr_db)?;
     let mode = cfg.mode;
-    let carrier = cfg.profile.carrier;
-    let energy: f32 = cfg.h.iter().map(|x| x.norm_sqr()).sum();
-    let var = (mode.nominal_frame_power() * f64::from(energy) / 10f64.powf(snr_db / 10.0)) as f32;
-    let mut rx = TdsReceiver::with_carrier(mode, carrier, cfg.csi, cfg.h, var)?;
-    let streams = TrialRng::new(cfg.seed, 0);
-    let key: u64 = streams.stream("dtmb/ber/payload").random();
-    let mut noise = streams.stream("dtmb/ber/noise");
-    let mut tx = DataLayer::new(cfg.profile, PacketSource::pseudo_random(key));
-    let mut data_rx = DataReceiver::new(cfg.profile);
-    let mut stream = ChannelStream::with_doppler(mode, carrier, cfg.h, cfg.doppler)?;
+    let mut c = ChannelChain::new(cfg, snr_db)?;
     let moving = cfg.doppler.iter().any(|g| g.doppler_hz != 0.0);
     let mut h_mid = vec![Complex32::default(); cfg.h.len()];
     let hl = mode.header_len();
@@ -1262,33 +1295,29 @@ pub fn measure_channel_point(cfg: &ChannelBer<'_>, snr_db: f64) -> Result<BerPoi
     let mut w = vec![0f32; BODY_LEN];
     let mut out = Vec::new();
     let mut p = BerPoint::empty(snr_db, cfg.frames);
-    let sigma = var.sqrt();
     let total = cfg.profile.interleaver_delay_frames() + cfg.frames;
     // Frame k is received once frame k + 1's header is in: one frame more is sent.
     for k in 0..=total {
         let phase = mode.phase_of_frame(k % fsf);
-        tx.next_frame(cfg.profile.si_index(), &mut logical)?;
-        stream.next_frame(rx.header(phase), &logical, &mut y)?;
-        crate::dtmb::noise::add_awgn(&mut y, sigma, &mut noise);
+        c.tx.next_frame(cfg.profile.si_index(), &mut logical)?;
+        c.stream.next_frame(c.rx.header(phase), &logical, &mut y)?;
+        crate::dtmb::noise::add_awgn(&mut y, c.sigma, &mut c.noise);
         if k > 0 {
             let prev_phase = mode.phase_of_frame((k - 1) % fsf);
             if moving {
                 // The genie's response: the true one at the centre of frame k − 1's body.
                 let centre = ((k - 1) * fl + hl) as f64 + (BODY_LEN - 1) as f64 / 2.0;
-                stream.response_at(centre, &mut h_mid);
-                rx.set_true_response(&h_mid)?;
+                c.stream.response_at(centre, &mut h_mid);
+                c.rx.set_true_response(&h_mid)?;
             }
-            rx.receive_frame(&y_prev, &y[..hl], prev_phase, phase, &mut eq, &mut w)?;
+            c.rx.receive_frame(&y_prev, &y[..hl], prev_phase, phase, &mut eq, &mut w)?;
             out.clear();
-            data_rx.push_frame_weighted(&eq, &w, &mut out);
-            count_packets(&out, key, &mut p);
+            c.data_rx.push_frame_weighted(&eq, &w, &mut out);
+            count_packets(&out, c.key, &mut p);
         }
         std::mem::swap(&mut y, &mut y_prev);
     }
-    let st = data_rx.stats();
-    p.codewords = st.codewords;
-    p.ldpc_failures = st.ldpc_failures;
-    Ok(p)
+    Ok(c.finish(p))
 }
 
 /// How far before the first path's header start ([`super::receiver::SyncResult`]'s
@@ -1364,21 +1393,12 @@ pub fn measure_channel_point_synced(
             span - SYNC_ADVANCE_SAMPLES
         )));
     }
-    let carrier = cfg.profile.carrier;
-    let energy: f32 = cfg.h.iter().map(|x| x.norm_sqr()).sum();
-    let var = (mode.nominal_frame_power() * f64::from(energy) / 10f64.powf(snr_db / 10.0)) as f32;
-    let mut rx = TdsReceiver::with_carrier(mode, carrier, cfg.csi, cfg.h, var)?;
-    let streams = TrialRng::new(cfg.seed, 0);
-    let key: u64 = streams.stream("dtmb/ber/payload").random();
-    let mut noise = streams.stream("dtmb/ber/noise");
-    let mut timing = streams.stream("dtmb/ber/timing");
-    let mut tx = DataLayer::new(cfg.profile, PacketSource::pseudo_random(key));
-    let mut data_rx = DataReceiver::new(cfg.profile);
-    let mut stream = ChannelStream::with_doppler(mode, carrier, cfg.h, cfg.doppler)?;
+    let mut c = ChannelChain::new(cfg, snr_db)?;
+    let mut timing = TrialRng::new(cfg.seed, 0).stream("dtmb/ber/timing");
     let hl = mode.header_len();
     let fl = mode.frame_len();
     let fsf = mode.frames_per_superframe();
-    let sigma = var.sqrt();
+    let sigma = c.sigma;
     // The last four received frames, oldest first; before the transmission, noise.
     let mut hist = vec![Complex32::default(); 4 * fl];
     crate::dtmb::noise::add_awgn(&mut hist, sigma, &mut timing);
@@ -1395,11 +1415,12 @@ pub fn measure_channel_point_synced(
     // acquisition needs two frames and a header, and a receiver that starts early needs
     // the frame before.
     for k in 0..=total + 1 {
-        tx.next_frame(cfg.profile.si_index(), &mut logical)?;
+        c.tx.next_frame(cfg.profile.si_index(), &mut logical)?;
         hist.copy_within(fl.., 0);
         let y = &mut hist[3 * fl..];
-        stream.next_frame(rx.header(mode.phase_of_frame(k % fsf)), &logical, y)?;
-        crate::dtmb::noise::add_awgn(y, sigma, &mut noise);
+        c.stream
+            .next_frame(c.rx.header(mode.phase_of_frame(k % fsf)), &logical, y)?;
+        crate::dtmb::noise::add_awgn(y, sigma, &mut c.noise);
         if k < 2 {
             continue;
         }
@@ -1440,7 +1461,7 @@ pub fn measure_channel_point_synced(
             mode.phase_of_frame(j % fsf),
             mode.phase_of_frame((j + 1) % fsf),
         );
-        rx.receive_frame(
+        c.rx.receive_frame(
             &hist[s0..s0 + fl],
             &hist[s0 + fl..s0 + fl + hl],
             phase,
@@ -1449,12 +1470,10 @@ pub fn measure_channel_point_synced(
             &mut w,
         )?;
         out.clear();
-        data_rx.push_frame_weighted(&eq, &w, &mut out);
-        count_packets(&out, key, &mut p);
+        c.data_rx.push_frame_weighted(&eq, &w, &mut out);
+        count_packets(&out, c.key, &mut p);
     }
-    let st = data_rx.stats();
-    p.codewords = st.codewords;
-    p.ldpc_failures = st.ldpc_failures;
+    let p = c.finish(p);
     acq.map(|a| (p, a))
         .ok_or_else(|| bad("no frame was received".into()))
 }

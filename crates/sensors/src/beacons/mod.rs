@@ -144,6 +144,38 @@ pub struct ResolvedEmitter {
     pub outages_s: Vec<[f64; 2]>,
 }
 
+impl ResolvedEmitter {
+    /// Whether the emitter is in one of its outage windows at `t_s` (seconds after the
+    /// start).
+    pub fn in_outage(&self, t_s: f64) -> bool {
+        self.outages_s.iter().any(|w| t_s >= w[0] && t_s < w[1])
+    }
+
+    /// The range measurement a receiver at `receiver_ecef_m` makes of this emitter with
+    /// pseudorange `pseudorange_m` (the geometric range plus whatever clock and noise the
+    /// caller adds) and the emitter's σ.
+    pub fn range_measurement(
+        &self,
+        receiver_ecef_m: &Vector3<f64>,
+        pseudorange_m: f64,
+    ) -> RangeMeasurement {
+        let d = self.pos_ecef_m - receiver_ecef_m;
+        // The geocentric vertical: the elevation is informative only.
+        let up = receiver_ecef_m.normalize();
+        RangeMeasurement {
+            emitter: self.id,
+            emitter_pos_ecef_m: self.pos_ecef_m,
+            emitter_vel_ecef_mps: Vector3::zeros(),
+            pseudorange_m,
+            sigma_m: self.sigma_m,
+            range_rate_mps: None,
+            sigma_rate_mps: 1.0,
+            cn0_dbhz: 45.0,
+            elevation_rad: (d.dot(&up) / d.norm()).clamp(-1.0, 1.0).asin(),
+        }
+    }
+}
+
 fn issue(key: impl Into<String>, message: impl Into<String>) -> ConfigIssue {
     ConfigIssue {
         key: key.into(),
@@ -152,6 +184,11 @@ fn issue(key: impl Into<String>, message: impl Into<String>) -> ConfigIssue {
 }
 
 impl EmittersConfig {
+    /// The sampling period (ns) of `rate_hz`.
+    pub fn period_ns(&self) -> i64 {
+        ((1e9 / self.rate_hz).round() as i64).max(1)
+    }
+
     /// The total clock term (m) of a system's ranges, `b_u + b_sys`.
     pub fn clock_m(&self, s: System) -> f64 {
         self.receiver_clock_m + self.clock_offset_m.get(s).unwrap_or(0.0)
@@ -342,7 +379,7 @@ impl EmittersSource {
             emitters,
             clocks_m: cfg.clocks_m(),
             rngs,
-            period_ns: ((1e9 / cfg.rate_hz).round() as i64).max(1),
+            period_ns: cfg.period_ns(),
             end,
         })
     }
@@ -364,28 +401,18 @@ impl Source for EmittersSource {
         out.t = truth.t;
         out.source = SourceKind::Emitters;
         let t_s = truth.sim.seconds();
-        // The geocentric vertical: the elevation is informative only.
-        let up = truth.pos_ecef_m.normalize();
         for (e, rng) in self.emitters.iter().zip(self.rngs.iter_mut()) {
             // The noise is drawn even in an outage, so an emitter's noise sequence does
             // not depend on when it is received.
             let n: f64 = rng.sample(StandardNormal);
-            if e.outages_s.iter().any(|w| t_s >= w[0] && t_s < w[1]) {
+            if e.in_outage(t_s) {
                 continue;
             }
-            let d = e.pos_ecef_m - truth.pos_ecef_m;
-            let range_m = d.norm();
-            out.items.push(Measurement::Range(RangeMeasurement {
-                emitter: e.id,
-                emitter_pos_ecef_m: e.pos_ecef_m,
-                emitter_vel_ecef_mps: Vector3::zeros(),
-                pseudorange_m: range_m + self.clocks_m[e.id.system.index()] + e.sigma_m * n,
-                sigma_m: e.sigma_m,
-                range_rate_mps: None,
-                sigma_rate_mps: 1.0,
-                cn0_dbhz: 45.0,
-                elevation_rad: (d.dot(&up) / range_m).clamp(-1.0, 1.0).asin(),
-            }));
+            let range_m = (e.pos_ecef_m - truth.pos_ecef_m).norm();
+            let pseudorange_m = range_m + self.clocks_m[e.id.system.index()] + e.sigma_m * n;
+            out.items.push(Measurement::Range(
+                e.range_measurement(&truth.pos_ecef_m, pseudorange_m),
+            ));
         }
         let next = SimTime(truth.sim.0 + self.period_ns);
         (next <= self.end).then_some(next)

@@ -99,7 +99,6 @@ use crate::measurement::{RangeMeasurement, Truth};
 use crate::tcofdm::TcofdmSource;
 use crate::world::schema::EstimatorSpec;
 use crate::world::schema::FilterKind;
-use nalgebra::Vector3;
 use std::sync::Arc;
 
 /// The PCRLB of one estimator's model over a run: its position-RMSE bound at every epoch
@@ -215,7 +214,7 @@ impl World {
                         ranges.clear();
                         for em in &emitters {
                             let sys = em.id.system;
-                            let out = em.outages_s.iter().any(|w| t_s >= w[0] && t_s < w[1]);
+                            let out = em.in_outage(t_s);
                             if e.sources.contains(&sys) && !out {
                                 ranges.push((em.pos_enu_m, sys, em.sigma_m));
                             }
@@ -340,7 +339,7 @@ impl World {
         }
         if let Some(em) = &sensors.emitters {
             // The emitters' first sample is one period after the start.
-            let step_ns = emitter_period_ns(em.rate_hz);
+            let step_ns = em.period_ns();
             let mut t = step_ns;
             while t <= end.0 {
                 instants_ns.push(t);
@@ -370,7 +369,7 @@ impl World {
         let emitters = match &sensors.emitters {
             Some(cfg) => Some((
                 cfg.resolve(&self.frame).map_err(|e| e.to_string())?,
-                emitter_period_ns(cfg.rate_hz),
+                cfg.period_ns(),
             )),
             None => None,
         };
@@ -565,11 +564,6 @@ impl World {
     }
 }
 
-/// The emitters' sampling period (ns), as `EmittersSource` keeps it.
-fn emitter_period_ns(rate_hz: f64) -> i64 {
-    ((1e9 / rate_hz).round() as i64).max(1)
-}
-
 /// The world's GNSS, DTMB and TC-OFDM receivers and emitters of one trial held at the
 /// truth: at each instant, the ranges each gives there with the σ it reports (see the
 /// module documentation), and whether each had a batch. Reuses its buffers.
@@ -632,24 +626,13 @@ impl TruthReceivers {
         self.emitter_ranges.clear();
         if let (Some((emitters, _)), true) = (self.emitters.as_ref(), self.now[3]) {
             let t_s = SimTime(t_ns).seconds();
-            // Only the geometry and σ enter the information; the rest is what
-            // `EmittersSource` reports without its noise and clock terms.
-            self.emitter_ranges.extend(
-                emitters
-                    .iter()
-                    .filter(|e| !e.outages_s.iter().any(|w| t_s >= w[0] && t_s < w[1]))
-                    .map(|e| RangeMeasurement {
-                        emitter: e.id,
-                        emitter_pos_ecef_m: e.pos_ecef_m,
-                        emitter_vel_ecef_mps: Vector3::zeros(),
-                        pseudorange_m: (e.pos_ecef_m - truth.pos_ecef_m).norm(),
-                        sigma_m: e.sigma_m,
-                        range_rate_mps: None,
-                        sigma_rate_mps: 1.0,
-                        cn0_dbhz: 45.0,
-                        elevation_rad: 0.0,
-                    }),
-            );
+            // Only the geometry and σ enter the information: the geometric range stands
+            // for the pseudorange, without the source's clock terms and noise.
+            self.emitter_ranges
+                .extend(emitters.iter().filter(|e| !e.in_outage(t_s)).map(|e| {
+                    let range_m = (e.pos_ecef_m - truth.pos_ecef_m).norm();
+                    e.range_measurement(&truth.pos_ecef_m, range_m)
+                }));
         }
     }
 
