@@ -22,8 +22,10 @@ world has no atmosphere or orbit residuals), with the receiver clock removed at 
 and los+mp of paths.csv). For GNSS-SDR the true direct-path code phase comes from
 paths.csv (interpolated at the epoch's true time) and is compared with the transmit time
 GNSS-SDR assigns (TOW_at_current_symbol) modulo 1 ms. GNSS-SDR's receiver time is tied to
-the sample count; its one offset to the recording's time is fitted (a common time-tag
-offset reads as a common error). Only (satellite, epoch) pairs present in both levels
+the sample count and steps at its first fix; each stretch between steps has its one offset
+to the recording's time fitted (a common time-tag offset reads as a common error). A
+channel's sample more than one chip from its epoch's median (a loop that lost the signal
+but still flags it valid) is counted and left out. Only (satellite, epoch) pairs present in both levels
 are tabulated.
 
 BeiDou B1I: the code is 2046 chips at 2.046 Mchip/s (the same 1 ms period as C/A, so the
@@ -80,14 +82,15 @@ def klass(prn, t):
     return cls.get((prn, round(round(t * 10) / 10, 3)))
 # GNSS-SDR observables dump: epochs x 8 channels x (RX_time, TOW, Doppler, phase, PR, PRN, valid)
 d = np.fromfile(f"{run}/obs.dat", dtype="<f8").reshape(-1, channels, 7)
-# GNSS-SDR steps its receiver time once, at its first fix; keep the rows after the last step.
+# GNSS-SDR steps its receiver time at its first fix; each stretch between steps keeps one
+# offset to the recording's time, found on its own (tens of ms before the fix).
 d = d[d[:, 0, 0] > 0]
 steps = np.nonzero(np.abs(np.diff(d[:, 0, 0]) - 0.02) > 1e-6)[0]
 print("receiver-time steps at", [(d[i, 0, 0], d[i + 1, 0, 0]) for i in steps])
-if len(steps): d = d[steps[-1] + 1:]
-def sdr_errors(Cs):
+stretches = np.split(d, steps + 1)
+def sdr_errors(rows, Cs):
     out = []
-    for row in d:
+    for row in rows:
         R = row[0, 0]
         if R == 0: continue
         t = R - Cs
@@ -106,21 +109,30 @@ rho = {}
 for r in csv.DictReader(open(f"{exp}/ranges.csv")):
     if r["system"] == system:
         rho[(round(float(r["gpst_tow_s"])), int(r["emitter"][1:]))] = float(r["true_range_m"])
-coarse = []
-for row in d:
-    for ch in row:
-        if ch[6] != 1: continue
-        prn = int(ch[5]); t = round(row[0, 0])
-        if klass(prn, t) in ("los", "los+mp") and (t, prn) in rho:
-            coarse.append(row[0, 0] - ch[1] - rho[(t, prn)] / C_MPS + sat_clock_s(prn, t))
-Cs = float(np.median(coarse))
-print(f"GNSS-SDR time-tag offset from its pseudoranges {Cs*1e3:.3f} ms")
-for _ in range(3):
-    e = sdr_errors(Cs)
-    los = [x[2] for x in e if klass(x[1], x[0]) in ("los", "los+mp")]
-    Cs += np.mean(los) / C_MPS  # a late time tag reads as a common positive error
-sdr = {(t, p): v for t, p, v in sdr_errors(Cs)}
-print(f"GNSS-SDR time offset {Cs*1e3:.4f} ms")
+sdr = {}
+for rows in stretches:
+    coarse = []
+    for row in rows:
+        for ch in row:
+            if ch[6] != 1: continue
+            prn = int(ch[5]); t = round(row[0, 0])
+            if klass(prn, t) in ("los", "los+mp") and (t, prn) in rho:
+                coarse.append(row[0, 0] - ch[1] - rho[(t, prn)] / C_MPS + sat_clock_s(prn, t))
+    if not coarse: continue
+    Cs = float(np.median(coarse))
+    for _ in range(3):
+        los = [x[2] for x in sdr_errors(rows, Cs) if klass(x[1], x[0]) in ("los", "los+mp")]
+        if not los: break
+        Cs += np.mean(los) / C_MPS  # a late time tag reads as a common positive error
+    print(f"stretch of {len(rows)} epochs from RX {rows[0, 0, 0]:.2f} s: GNSS-SDR time offset {Cs*1e3:.4f} ms")
+    sdr.update({(t, p): v for t, p, v in sdr_errors(rows, Cs)})
+# A channel that has lost the signal but still flags its pseudorange valid: more than one
+# chip from its epoch's median, beyond the DLL's reach; counted and left out.
+by_t = collections.defaultdict(list)
+for (t, p), v in sdr.items(): by_t[t].append(v)
+lost = {k: v for k, v in sdr.items() if abs(v - np.median(by_t[k[0]])) > C_MPS / CHIP}
+print("lost lock:", {k: round(v) for k, v in lost.items()})
+sdr = {k: v for k, v in sdr.items() if k not in lost}
 ml = {}
 for r in csv.DictReader(open(f"{exp}/ranges.csv")):
     if r["system"] != system: continue
