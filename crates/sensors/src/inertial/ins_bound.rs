@@ -51,8 +51,17 @@
 //! (the estimator's). Information the estimator might have beyond this (levelling better
 //! than its stated σ) is not counted, which is where the bound could rise above an
 //! estimator; information it does not have (the first epoch's range rates before it
-//! initialises, the gait's velocity that a walker's range rates do not describe) is
-//! counted, which only lowers the bound.
+//! initialises) is counted, which only lowers the bound.
+//!
+//! # The gait
+//!
+//! A walker's receiver measures the velocity of the walk, while a handheld IMU also moves
+//! with the gait. The estimators take that as velocity noise of σ `fix_velocity_noise_mps`
+//! (white at the fix rate), the loose one on each fix's velocity and the tight one on each
+//! range rate along its line of sight; the bound takes the same
+//! ([`InsBound::with_velocity_noise`]), so that it is the bound of their model. Without
+//! it (`[0, 0]`) the rates are counted as measuring the IMU's velocity exactly, to their
+//! receiver's σ.
 
 use super::attitude::BodyTruth;
 use super::ins_ekf::{initial_covariance, process_noise_rate, InsEkfConfig};
@@ -90,6 +99,26 @@ pub fn add_epoch_information(
     ranges: &[RangeMeasurement],
     rates: bool,
 ) {
+    add_information(
+        info,
+        truth_pos_ecef_m,
+        truth_vel_ecef_mps,
+        ranges,
+        rates,
+        &Matrix3::zeros(),
+    );
+}
+
+/// [`add_epoch_information`] with `rate_noise_ecef_m2ps2` (ECEF, m²/s²) of velocity that
+/// the range rates do not describe: a rate along `u` has variance `σ_ρ̇² + uᵀ Σ u`.
+fn add_information(
+    info: &mut EpochInfo,
+    truth_pos_ecef_m: &Vector3<f64>,
+    truth_vel_ecef_mps: &Vector3<f64>,
+    ranges: &[RangeMeasurement],
+    rates: bool,
+    rate_noise_ecef_m2ps2: &Matrix3<f64>,
+) {
     for m in ranges {
         let d = m.emitter_pos_ecef_m - truth_pos_ecef_m;
         let rho = d.norm();
@@ -111,7 +140,8 @@ pub fn add_epoch_information(
                 .copy_from(&(-(dv - u * u.dot(&dv)) / rho));
             h.fixed_rows_mut::<3>(3).copy_from(&(-u));
             h[DRIFT] = 1.0;
-            *info += h * h.transpose() / (m.sigma_rate_mps * m.sigma_rate_mps);
+            let var = m.sigma_rate_mps * m.sigma_rate_mps + u.dot(&(rate_noise_ecef_m2ps2 * u));
+            *info += h * h.transpose() / var;
         }
     }
 }
@@ -153,6 +183,9 @@ pub struct InsBound {
     earth: LocalEarth,
     /// ECEF → ENU (the world frame's rotation).
     enu_from_ecef: Matrix3<f64>,
+    /// Covariance (ENU, m²/s²) of the IMU's velocity that the fixes' velocities and the
+    /// range rates do not describe ([`InsBound::with_velocity_noise`]).
+    vel_noise_enu_m2ps2: Matrix3<f64>,
 }
 
 impl InsBound {
@@ -190,7 +223,49 @@ impl InsBound {
             inv_tau,
             earth,
             enu_from_ecef,
+            vel_noise_enu_m2ps2: Matrix3::zeros(),
         }
+    }
+
+    /// The same bound for an estimator that takes `[horizontal, vertical]` σ (m/s) of the
+    /// IMU's velocity as not described by its velocity measurements (its
+    /// `fix_velocity_noise_mps`, a walker's gait): loose, added to the velocity block of
+    /// each fix's covariance, as the loose filter adds it; tight, to each range rate's
+    /// variance along its line of sight, as the tight filter does. The gait is a narrow-band
+    /// oscillation, not white noise; as noise white at the fix rate it is the model the
+    /// estimators run, so the bound stays that of their model.
+    pub fn with_velocity_noise(mut self, sigma_mps: [f64; 2]) -> Self {
+        let [h, v] = sigma_mps;
+        self.vel_noise_enu_m2ps2 = Matrix3::from_diagonal(&Vector3::new(h * h, h * h, v * v));
+        self
+    }
+
+    /// Adds to `info` the information of one epoch's `ranges` (and range rates, when
+    /// `rates`) at the truth, as [`add_epoch_information`] does, with the tight
+    /// coupling's velocity noise on each range rate. Does not allocate.
+    pub fn add_epoch_information(
+        &self,
+        info: &mut EpochInfo,
+        truth_pos_ecef_m: &Vector3<f64>,
+        truth_vel_ecef_mps: &Vector3<f64>,
+        ranges: &[RangeMeasurement],
+        rates: bool,
+    ) {
+        let noise = match self.coupling {
+            // The loose coupling adds it to the fix ([`InsBound::information`]).
+            BoundCoupling::Loose => Matrix3::zeros(),
+            BoundCoupling::Tight(_) => {
+                self.enu_from_ecef.transpose() * self.vel_noise_enu_m2ps2 * self.enu_from_ecef
+            }
+        };
+        add_information(
+            info,
+            truth_pos_ecef_m,
+            truth_vel_ecef_mps,
+            ranges,
+            rates,
+            &noise,
+        );
     }
 
     /// The prior at `t_s`.
@@ -303,7 +378,21 @@ impl InsBound {
                 let mut t = SMatrix::<f64, 6, 6>::zeros();
                 t.fixed_view_mut::<3, 3>(0, 0).copy_from(&rt);
                 t.fixed_view_mut::<3, 3>(3, 3).copy_from(&rt);
-                let enu = t.transpose() * kv * t;
+                let mut enu = t.transpose() * kv * t;
+                // The fix's covariance gains the velocity noise, as the loose filter's
+                // fix velocity does. Only a fix that determines position and velocity has
+                // a covariance; one that does not (fewer than four rates) keeps its
+                // information, which can only lower the bound.
+                if self.vel_noise_enu_m2ps2 != Matrix3::zeros() {
+                    if let Some(ch) = (0.5 * (enu + enu.transpose())).cholesky() {
+                        let mut cov = ch.inverse();
+                        let mut vv = cov.fixed_view_mut::<3, 3>(3, 3);
+                        vv += self.vel_noise_enu_m2ps2;
+                        if let Some(ci) = cov.cholesky() {
+                            enu = ci.inverse();
+                        }
+                    }
+                }
                 out.fixed_view_mut::<6, 6>(0, 0)
                     .copy_from(&(0.5 * (enu + enu.transpose())));
             }
@@ -532,100 +621,143 @@ mod tests {
                 m
             })
             .collect();
-        // Loose: the builtin filter with position fixes of the epoch's least-squares
-        // covariance, from the bound's own prior (flat position and velocity stand in as
-        // 10 km and 10 km/s so that the filter's Joseph form stays well conditioned).
+        // Loose: the builtin filter with fixes of the epoch's least-squares covariance,
+        // from the bound's own prior (flat position and velocity stand in as 10 km and
+        // 10 km/s so that the filter's Joseph form stays well conditioned). Position fixes
+        // alone, then position and velocity fixes with the gait's velocity noise (the
+        // emitters are at rest, so a fix's position and velocity errors are uncorrelated
+        // and the filter's separate blocks are the whole covariance).
         let mut c0 = c;
         c0.init_pos_sigma_m = 1e4;
         c0.init_vel_sigma_mps = 1e4;
         c0.init_tilt_sigma_rad = 0.03;
         c0.init_heading_sigma_rad = 1f64.to_radians();
-        let mut bound = InsBound::new(&c, 0.03, BoundCoupling::Loose, earth, *frame.rotation());
-        bound
-            .prior
-            .fixed_view_mut::<15, 15>(0, 0)
-            .copy_from(&initial_covariance(&c0));
-        let mut ekf = InsEkf::new(init, earth, &c0);
-        let mut st = bound.start(0.0);
-        let mut info = EpochInfo::zeros();
-        add_epoch_information(&mut info, &at, &Vector3::zeros(), &ranges, false);
-        let info18 = bound.information(&info);
-        let pos_cov = info18
-            .fixed_view::<3, 3>(0, 0)
-            .into_owned()
-            .try_inverse()
-            .unwrap();
         let (cn, fn_) = (q_nb.to_rotation_matrix().into_inner(), -g);
         let imu_at = |k: u32| ImuSample {
             t_s: f64::from(k) / rate,
             gyro_rps: w_b,
             accel_mps2: f_b,
         };
-        for k in 1..=300 {
-            let s = imu_at(k);
-            ekf.propagate(&s);
-            bound.predict(&mut st, s.t_s, &cn, &fn_, 1.2);
-            if k % 100 == 0 {
-                ekf.update_position(&init.pos_enu_m, &pos_cov).unwrap();
-                assert!(bound.update(&mut st, &info18));
+        let gait = [0.1, 0.25];
+        let mut loose_mse = Vec::new();
+        for (rates, noise) in [(false, [0.0, 0.0]), (true, [0.0, 0.0]), (true, gait)] {
+            let mut bound = InsBound::new(&c, 0.03, BoundCoupling::Loose, earth, *frame.rotation())
+                .with_velocity_noise(noise);
+            bound
+                .prior
+                .fixed_view_mut::<15, 15>(0, 0)
+                .copy_from(&initial_covariance(&c0));
+            let mut ekf = InsEkf::new(init, earth, &c0);
+            let mut st = bound.start(0.0);
+            let mut info = EpochInfo::zeros();
+            bound.add_epoch_information(&mut info, &at, &Vector3::zeros(), &ranges, rates);
+            // The fix's covariance, from the epoch's information without the noise.
+            let fix_cov = BoundCoupling::Loose;
+            let plain = InsBound::new(&c, 0.03, fix_cov, earth, *frame.rotation());
+            let k6 = plain
+                .information(&info)
+                .fixed_view::<6, 6>(0, 0)
+                .into_owned();
+            let (pos_cov, vel_cov) = if rates {
+                let cov = k6.try_inverse().unwrap();
+                let [h, v] = noise;
+                let extra = Matrix3::from_diagonal(&Vector3::new(h * h, h * h, v * v));
+                let vel = cov.fixed_view::<3, 3>(3, 3).into_owned() + extra;
+                (cov.fixed_view::<3, 3>(0, 0).into_owned(), Some(vel))
+            } else {
+                let pos = k6.fixed_view::<3, 3>(0, 0).into_owned();
+                (pos.try_inverse().unwrap(), None)
+            };
+            let info18 = bound.information(&info);
+            for k in 1..=300 {
+                let s = imu_at(k);
+                ekf.propagate(&s);
+                bound.predict(&mut st, s.t_s, &cn, &fn_, 1.2);
+                if k % 100 == 0 {
+                    match vel_cov {
+                        Some(vc) => ekf
+                            .update_position_velocity(
+                                &init.pos_enu_m,
+                                &pos_cov,
+                                &Vector3::zeros(),
+                                &vc,
+                            )
+                            .unwrap(),
+                        None => ekf.update_position(&init.pos_enu_m, &pos_cov).unwrap(),
+                    };
+                    assert!(bound.update(&mut st, &info18));
+                }
             }
+            let p = ekf.covariance();
+            let b = st.b.fixed_view::<15, 15>(0, 0).into_owned();
+            let rel = normalised_gap(&p.fixed_view::<15, 15>(0, 0).into_owned(), &b);
+            assert!(
+                rel < 1e-6,
+                "loose {rates} {noise:?}: normalised difference {rel:e}"
+            );
+            let pos = (0..3).map(|i| p[(i, i)]).sum::<f64>();
+            assert!((st.position_mse_m2() - pos).abs() < 1e-6 * pos);
+            loose_mse.push(st.b[(3, 3)] + st.b[(4, 4)] + st.b[(5, 5)]);
         }
-        let p = ekf.covariance();
-        let b = st.b.fixed_view::<15, 15>(0, 0).into_owned();
-        let rel = normalised_gap(&p.fixed_view::<15, 15>(0, 0).into_owned(), &b);
-        assert!(rel < 1e-6, "loose: normalised difference {rel:e}");
-        let pos = (0..3).map(|i| p[(i, i)]).sum::<f64>();
-        assert!((st.position_mse_m2() - pos).abs() < 1e-6 * pos);
+        // The noise is felt: the velocity bound with it lies above the one without.
+        assert!(loose_mse[2] > 1.5 * loose_mse[1], "{loose_mse:?}");
 
-        // Tight: the tight EKF with every pseudorange and range rate at the truth.
+        // Tight: the tight EKF with every pseudorange and range rate at the truth, without
+        // and with the gait's velocity noise on the rates.
         let clk = TightClockConfig {
             gate_chi2: None,
             ..TightClockConfig::default()
         };
-        let mut bound = InsBound::new(
-            &c,
-            0.03,
-            BoundCoupling::Tight(clk),
-            earth,
-            *frame.rotation(),
-        );
-        let mut c1 = c0;
-        c1.nis_gate = None;
-        let mut tight = InsTightEkf::new(init, earth, &c1, &clk);
-        bound.prior = *tight.covariance();
-        let mut st = bound.start(0.0);
-        let mut info = EpochInfo::zeros();
-        add_epoch_information(&mut info, &at, &Vector3::zeros(), &ranges, true);
-        let info18 = bound.information(&info);
-        for k in 1..=300 {
-            let s = imu_at(k);
-            tight.propagate(&s);
-            bound.predict(&mut st, s.t_s, &cn, &fn_, 1.2);
-            if k % 100 == 0 {
-                for m in &ranges {
-                    // The true range and rate as measured: the innovation is zero.
-                    let mut m = *m;
-                    m.pseudorange_m = (m.emitter_pos_ecef_m - at).norm();
-                    let u = (m.emitter_pos_ecef_m - at).normalize();
-                    m.range_rate_mps = Some(u.dot(&m.emitter_vel_ecef_mps));
-                    tight.update_range(&m, &frame, 0.0).unwrap();
-                    tight.update_range_rate(&m, &frame, 0.0).unwrap();
+        let mut tight_mse = Vec::new();
+        for noise in [[0.0, 0.0], gait] {
+            let mut bound = InsBound::new(
+                &c,
+                0.03,
+                BoundCoupling::Tight(clk),
+                earth,
+                *frame.rotation(),
+            )
+            .with_velocity_noise(noise);
+            let mut c1 = c0;
+            c1.nis_gate = None;
+            let mut tight = InsTightEkf::new(init, earth, &c1, &clk).with_velocity_noise(noise);
+            bound.prior = *tight.covariance();
+            let mut st = bound.start(0.0);
+            let mut info = EpochInfo::zeros();
+            bound.add_epoch_information(&mut info, &at, &Vector3::zeros(), &ranges, true);
+            let info18 = bound.information(&info);
+            for k in 1..=300 {
+                let s = imu_at(k);
+                tight.propagate(&s);
+                bound.predict(&mut st, s.t_s, &cn, &fn_, 1.2);
+                if k % 100 == 0 {
+                    for m in &ranges {
+                        // The true range and rate as measured: the innovation is zero.
+                        let mut m = *m;
+                        m.pseudorange_m = (m.emitter_pos_ecef_m - at).norm();
+                        let u = (m.emitter_pos_ecef_m - at).normalize();
+                        m.range_rate_mps = Some(u.dot(&m.emitter_vel_ecef_mps));
+                        tight.update_range(&m, &frame, 0.0).unwrap();
+                        tight.update_range_rate(&m, &frame, 0.0).unwrap();
+                    }
+                    assert!(bound.update(&mut st, &info18));
                 }
-                assert!(bound.update(&mut st, &info18));
             }
+            let p = tight.covariance();
+            let rel = normalised_gap(
+                &p.fixed_view::<15, 15>(0, 0).into_owned(),
+                &st.b.fixed_view::<15, 15>(0, 0).into_owned(),
+            );
+            assert!(rel < 1e-6, "tight {noise:?}: normalised difference {rel:e}");
+            let clocks = (15..18)
+                .map(|i| (p[(i, i)] - st.b[(i, i)]).abs() / p[(i, i)])
+                .fold(0.0, f64::max);
+            assert!(
+                clocks < 1e-6,
+                "tight clocks {noise:?}: relative difference {clocks:e}"
+            );
+            tight_mse.push(st.b[(3, 3)] + st.b[(4, 4)] + st.b[(5, 5)]);
         }
-        let p = tight.covariance();
-        let rel = normalised_gap(
-            &p.fixed_view::<15, 15>(0, 0).into_owned(),
-            &st.b.fixed_view::<15, 15>(0, 0).into_owned(),
-        );
-        assert!(rel < 1e-6, "tight: normalised difference {rel:e}");
-        let clocks = (15..18)
-            .map(|i| (p[(i, i)] - st.b[(i, i)]).abs() / p[(i, i)])
-            .fold(0.0, f64::max);
-        assert!(
-            clocks < 1e-6,
-            "tight clocks: relative difference {clocks:e}"
-        );
+        assert!(tight_mse[1] > 1.5 * tight_mse[0], "{tight_mse:?}");
     }
 }

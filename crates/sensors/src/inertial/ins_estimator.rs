@@ -192,8 +192,9 @@ pub struct InsFilterConfig {
     #[serde(default)]
     pub joint_fix: bool,
     /// σ of what a fix velocity does not describe of the IMU's motion, `[horizontal,
-    /// vertical]` (m/s), added in quadrature to the fix velocity's covariance; default
-    /// `[0, 0]`. A walker's receiver reports the velocity of the walk, while a handheld
+    /// vertical]` (m/s), added in quadrature to the fix velocity's covariance (tightly
+    /// coupled: to each range rate's variance, projected on its line of sight,
+    /// [`InsTightEkf::with_velocity_noise`]); default `[0, 0]`. A walker's receiver reports the velocity of the walk, while a handheld
     /// or body-worn IMU also moves with the gait (`[platform.attitude]`'s bounce and
     /// surge: amplitudes B/ω₀ vertically and S/ω₀ forward, so σ = B/(√2 ω₀) ≈ 0.25 m/s
     /// and S/(√2 ω₀) ≈ 0.09 m/s for the default gait).
@@ -898,6 +899,7 @@ impl InsEstimator {
         let kf = match self.cfg.kalman {
             _ if self.cfg.coupling == InsCoupling::Tight => {
                 match InsTightEkf::new(init, self.earth, &c, &TightClockConfig::default())
+                    .with_velocity_noise(self.cfg.fix_velocity_noise_mps)
                     .with_kalman(&self.cfg.kalman_config())
                 {
                     Ok(k) => InsCore::Tight(Box::new(k)),

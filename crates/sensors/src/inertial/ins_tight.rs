@@ -236,6 +236,9 @@ pub struct InsTightEkf {
     /// Seed 004's eq. 24 gate of the generic filters (the STF's statistic leaves out
     /// what it removes).
     residual_gate: Option<ResidualGate>,
+    /// Variance (m²/s², ENU) of the IMU's velocity that a range rate does not describe
+    /// (a walker's gait, [`Self::with_velocity_noise`]); zero by default.
+    rate_velocity_var_enu: Vector3<f64>,
 }
 
 impl InsTightEkf {
@@ -269,7 +272,21 @@ impl InsTightEkf {
             fading: None,
             last_aleph: None,
             residual_gate: None,
+            rate_velocity_var_enu: Vector3::zeros(),
         }
+    }
+
+    /// The same filter with `[horizontal, vertical]` σ (m/s) of the IMU's motion that a
+    /// range rate does not describe: the receiver reports the rate of the walk, while a
+    /// handheld IMU also moves with the gait (the loosely coupled filter's
+    /// `fix_velocity_noise_mps`, [`super::ins_estimator::InsFilterConfig`]). Along the
+    /// unit vector `u` (ENU) to the emitter, a rate's variance becomes
+    /// `σ_ρ̇² + σ_h² (u_e² + u_n²) + σ_v² u_u²`: the projection of the velocity noise
+    /// `diag(σ_h², σ_h², σ_v²)` the loose filter adds to a fix velocity's covariance.
+    pub fn with_velocity_noise(mut self, sigma_mps: [f64; 2]) -> Self {
+        let [h, v] = sigma_mps;
+        self.rate_velocity_var_enu = Vector3::new(h * h, h * h, v * v);
+        self
     }
 
     /// The same filter with its scalar updates decided by one of seed 004's four filters
@@ -667,12 +684,13 @@ impl InsTightEkf {
             h[3 + i] = -u_enu[i];
         }
         h[tidx::CLOCK_DRIFT] = 1.0;
+        let gait_var = u_enu.component_mul(&u_enu).dot(&self.rate_velocity_var_enu);
         Some((
             z,
             TightScalarModel {
                 los_enu_m: None,
                 h,
-                r: m.sigma_rate_mps * m.sigma_rate_mps,
+                r: m.sigma_rate_mps * m.sigma_rate_mps + gait_var,
             },
         ))
     }

@@ -72,8 +72,9 @@
 //! beat the recursion, this model's randomness is the IMU's own noise along the given
 //! trajectory, so the bound is computed trial by trial and needs no "determined" flag
 //! beyond the first fix. The range rates describe the walker's path, while the IMU also
-//! moves with the gait (a quarter of a metre per second vertically); the bound counts them
-//! as measuring the INS velocity, which can only lower it.
+//! moves with the gait (a quarter of a metre per second vertically); the bound takes the
+//! estimator's `fix_velocity_noise_mps` as the velocity they do not describe, as the
+//! estimator does ([`InsBound::with_velocity_noise`]).
 
 use super::World;
 use crate::beacons::ResolvedEmitter;
@@ -86,9 +87,7 @@ use crate::fusion::pcrlb::{PaperBound, PvaClockBound, DETERMINED_POS_MSE_M2};
 use crate::gnss::measurement::{GnssGeometry, LinkGeometry};
 use crate::inertial::attitude::PlatformTruth;
 use crate::inertial::imu::ImuConfig;
-use crate::inertial::ins_bound::{
-    add_epoch_information, truth_dynamics, BoundCoupling, EpochInfo, InsBound,
-};
+use crate::inertial::ins_bound::{truth_dynamics, BoundCoupling, EpochInfo, InsBound};
 use crate::inertial::ins_ekf::InsEkfConfig;
 use crate::inertial::ins_estimator::{InsCoupling, InsEstimator};
 use crate::inertial::ins_tight::TightClockConfig;
@@ -472,7 +471,7 @@ impl World {
                 for ((m, st), sum) in models.iter().zip(states.iter_mut()).zip(mse_sum.iter_mut()) {
                     if rx.epoch_of(|s| m.ranges.contains(&s), &mut mine) {
                         let mut info = EpochInfo::zeros();
-                        add_epoch_information(
+                        m.bound.add_epoch_information(
                             &mut info,
                             &truth.pos_ecef_m,
                             &truth.vel_ecef_mps,
@@ -549,8 +548,14 @@ impl World {
                 coupling,
                 earth,
                 *self.frame.rotation(),
+            )
+            .with_velocity_noise(cfg.fix_velocity_noise_mps),
+            key: (
+                *est.error_model(),
+                tilt_rad,
+                coupling,
+                cfg.fix_velocity_noise_mps,
             ),
-            key: (*est.error_model(), tilt_rad, coupling),
             ranges,
             rates: cfg.use_gnss_velocity,
         })
@@ -668,7 +673,7 @@ impl TruthReceivers {
 /// another, and the ranges it counts.
 struct InsModel {
     bound: InsBound,
-    key: (InsEkfConfig, f64, BoundCoupling),
+    key: (InsEkfConfig, f64, BoundCoupling, [f64; 2]),
     /// The systems whose ranges the estimator's fixes (or tight updates) take.
     ranges: Vec<System>,
     /// Whether it takes the GNSS range rates.
