@@ -789,14 +789,15 @@ fn gnss_canyon_gps_weak_nlos_errors_agree_with_gnss_sdr() {
 ///   2·gamma_p_inv(2K, (1 − P_fa)^(1/N)), the χ²(4K) quantile, twice the noise mean:
 ///   957.7 for K = 180 and N = 4200 × 40 cells (its log: 957.742; noise searches gave
 ///   502 ± 11). A signal of coherent SNR s per dwell (C/N0·1 ms times the NH, code-phase
-///   and Doppler losses, ≈ 0.54 on average) adds 2Ks, so it is detected only when s exceeds
-///   ≈ 1 + 3.7·√(2/K) whatever P_fa: ≥ 32.7 dB-Hz as K → ∞, and in a Monte Carlo of the
-///   test at K = 180 a search detects 4 % at 33.3, 8 % at 33.6, 13 % at 34.0 and 0 at
+///   and Doppler losses, 0.65 × 0.78 × 0.98 ≈ 0.50 on average) adds 2Ks, so it is detected
+///   only when s ≳ 1 + z·√(2/K), z ≈ 6.3 at P_fa = 10⁻³ and ≥ 3.7 for any P_fa: s ≥ 1.66
+///   (35.2 dB-Hz at the mean loss) at K = 180, s ≥ 1 (33.0 dB-Hz) as K → ∞. In a Monte
+///   Carlo of the test at K = 180 a search detects 4 % at 33.3, 8 % at 33.6, 13 % at 34.0 and 0 at
 ///   31.0 dB-Hz. So C21 (33.3–34.0 dB-Hz) is acquirable and C12 (30.4–31.1) and C22
 ///   (28.0–28.6) are not, with any of 0.0.17's B1I acquisition options (P_fa only moves the
 ///   threshold's tail; the peak-ratio test used without `pfa` compares each dwell with the
 ///   same threshold, and at the first dwell noise alone gives a ratio ≈ 1.4, above C12's
-///   ≈ 1.3 after 180). K = 180: the code's Doppler drifts the peak by ≤ ¼ chip (half a
+///   ≈ 1.25 after 180). K = 180: the code's Doppler drifts the peak by ≤ ¼ chip (half a
 ///   4.2 Msps cell) over the dwells at C21's 1.0–1.1 kHz (1.4 chip/s). `pfa` stays 10⁻³:
 ///   the threshold lies 22 standard deviations of a noise cell above its mean (χ²(360)),
 ///   so false alarms do not occur (noise searches peaked at ≤ 597).
