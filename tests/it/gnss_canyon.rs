@@ -793,22 +793,24 @@ fn gnss_canyon_gps_weak_nlos_errors_agree_with_gnss_sdr() {
 ///   only when s ≳ 1 + z·√(2/K), z ≈ 6.3 at P_fa = 10⁻³ and ≥ 3.7 for any P_fa: s ≥ 1.66
 ///   (35.2 dB-Hz at the mean loss) at K = 180, s ≥ 1 (33.0 dB-Hz) as K → ∞. In a Monte
 ///   Carlo of the test at K = 180 a search detects 4 % at 33.3, 8 % at 33.6, 13 % at 34.0
-///   and 0 at 31.0 dB-Hz. Each satellite's attenuated direct path (0.06 chip ahead) beats with its
-///   reflection over 80–120 s (paths.csv's amplitudes and phases), so the received C/N0
-///   swings: C21 30.3–36.2 dB-Hz, C12 26.4–33.5 (≥ 33 dB-Hz 16 % of the time), C22
+///   and 0 at 31.0 dB-Hz. Each satellite's attenuated direct path (0.06 chip ahead) beats
+///   with its reflection over 80–120 s (paths.csv's amplitudes and phases), so the received
+///   C/N0 swings: C21 30.3–36.2 dB-Hz, C12 26.4–33.5 (≥ 33 dB-Hz 16 % of the time), C22
 ///   23.9–31.3. C21 is acquirable, C12 only near its beat's peaks, C22 not, with any of
 ///   0.0.17's B1I acquisition options (P_fa only moves the threshold's tail; the peak-ratio
 ///   test used without `pfa` compares each dwell with the same threshold, and at the first
-///   dwell noise alone gives a ratio ≈ 1.4, above C12's ≈ 1.25 after 180 at 30.7 dB-Hz). K = 180: the code's Doppler drifts the peak by ≤ ¼ chip (half a
-///   4.2 Msps cell) over the dwells at C21's 1.0–1.1 kHz (1.4 chip/s). `pfa` stays 10⁻³:
+///   dwell noise alone gives a ratio ≈ 1.4, above C12's ≈ 1.25 after 180 at 30.7 dB-Hz).
+///   K = 180: the code's Doppler drifts the peak by ≤ ¼ chip (half a 4.2 Msps cell) over
+///   the dwells at C21's 1.0–1.1 kHz (1.4 chip/s). `pfa` stays 10⁻³:
 ///   the threshold lies 22 standard deviations of a noise cell above its mean (χ²(360)),
 ///   so false alarms do not occur (noise searches peaked at ≤ 597).
 /// - `Channels.in_acquisition` = the channel count: with a few percent per search, one
 ///   search at a time (each 180 ms of data, eight unacquired satellites in turn) reaches
 ///   C21 once per ≈ 1.8 s and needs tens of seconds to succeed (one run: at 49.8 s, its 28th
 ///   search); searching every channel at once tries each satellite every 180 ms.
-/// - Tracking: after the NH synchronisation, 20 ms correlations (`extend_correlation_symbols=20`,
-///   one D1 bit: GNSS-SDR wipes the NH code), the measurement level's predetection time,
+/// - Tracking: after the NH synchronisation, 20 ms correlations
+///   (`extend_correlation_symbols=20`, one D1 bit: GNSS-SDR wipes the NH code), the
+///   measurement level's predetection time,
 ///   with the world's DLL (`dll_bw_narrow_hz=2.0`, `early_late_space_narrow_chips=0.25`) and
 ///   `pll_bw_narrow_hz=10` (B_n·T = 0.2), as for GPS.
 /// - `carrier_lock_th` stays at its default 0.7, unlike GPS: GNSS-SDR runs no lock test in
