@@ -848,10 +848,9 @@ fn bds_conf_weak(data: &str, rate: f64, out: &str, prns: &[u64]) -> String {
 /// (its 28th search), n = 69, RMS 8.31 m against 8.61 m (0.97), LOS + multipath 0.54 m
 /// against 0.48 m (1.11); with every channel searching, C21 acquired 2.3 s in (its 11th),
 /// n = 117, 8.47 m against 8.25 m (1.03), LOS + multipath 1.10. The test's three runs: C21
-/// acquired within 2 s and n = 117, ratio 1.03, each time; C12 acquired once in each, held
-/// in the second only (n = 34, 9.32 m against 8.84 m; the three together 1.03); LOS +
-/// multipath 1.09–1.10. GNSS-SDR takes 9–15 min here (every channel searching, on two cores
-/// shared at a load of 10–13).
+/// n = 117, ratio 1.03, each time; C12 acquired in each, held in the second only (n = 34,
+/// 9.32 m against 8.84 m; the three together 1.03); LOS + multipath 1.09–1.10. GNSS-SDR
+/// takes 9–15 min here (every channel searching, on two cores shared at a load of 10–13).
 #[test]
 fn gnss_canyon_bds_weak_nlos_errors_agree_with_gnss_sdr() {
     const WEAK_NLOS: [u32; 3] = [12, 21, 22];
