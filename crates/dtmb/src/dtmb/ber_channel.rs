@@ -131,6 +131,67 @@
 //! The SNR is defined on the static response (the received power at the reference
 //! instant). When every shift is zero the stream is the static one, bit for bit.
 //!
+//! **Carrier-frequency offset** ([`Oscillator`], [`groups_with_cfo`], [`CfoCorrector`]).
+//! A receiver whose local oscillator is off by `f_o` (a TCXO of the common ±2 ppm
+//! stability grade — IQD, "Specifying TCXOs", stability code G — is off by up to
+//! ±1.2 kHz at 600 MHz) sees every path shifted by the same `f_o`: [`groups_with_cfo`]
+//! adds it to every Doppler group (a static channel becomes one group, `h`), so
+//! `y[n] = e^{j2π f_o n/f_s} Σ_m h_n[m] x[n − m] + w[n]`. With `f_o = 0` the groups, and so
+//! the stream, are those without it, bit for bit. Uncorrected, `f_o` is a frequency offset
+//! of `ε = f_o/2 kHz` carrier spacings (ICI `1 − a²` above: 0.59 at 1 kHz) that also turns
+//! by `2π f_o F/f_s` (3.9 rad in PN945 at 1 kHz) from header to header: the
+//! interpolation's chord `cos(π f_o F/f_s)` is −0.38 there, the estimate turned over.
+//!
+//! *Estimate.* The cyclic headers (PN420/PN945) repeat their core `P` chips later: header
+//! chips `n` and `n + P` are equal for `n < H − P`. Received samples `n ≥ G` are free of
+//! the previous body's spill for every response the channel estimate covers
+//! (`L − 1 ≤ G`), so the `N = H − P − G` pairs `n = G .. H − P` (the core's first `G'`
+//! chips and the postamble: 217 in PN945, 83 in PN420) give
+//! `Z = Σ_n r*[n] r[n + P] = e^{jθ} Σ_n |s[n]|² + noise`, `θ = 2π f_o P/f_s`, and
+//! `f̂ = arg(Z) f_s/(2πP)` ([`cfo_header_correlation`]), unambiguous within
+//! `±f_s/(2P)` = ±7397 Hz (PN945), ±14 824 Hz (PN420) ([`cfo_range_hz`]). PN595's
+//! header is not cyclic but is the same in every frame: consecutive headers are
+//! correlated at the lag `D = F` = 4375 over the `N = 378` samples `n = W − 1 .. H` free
+//! of the previous body, range `±f_s/(2F)` = **±864 Hz only** — less than a ±2 ppm
+//! oscillator's offset anywhere in UHF (±0.95 kHz at 474 MHz): a PN595 receiver needs a
+//! coarse frequency acquisition first (e.g. a frequency search in the frame sync), which is
+//! not modelled. Beyond the range the estimate wraps to `f_o − 2k f_s/(2D)`.
+//! The correlation's phase is the power-weighted mean of the paths' shifts plus `f_o`: a
+//! common Doppler is corrected with the offset (no receiver can tell them apart).
+//!
+//! *Variance* (the repetition estimator of Moose, "A technique for orthogonal frequency
+//! division multiplexing frequency offset correction", IEEE Trans. Commun. 42(10), 1994;
+//! Schmidl & Cox, "Robust frequency and timing synchronization for OFDM", IEEE Trans.
+//! Commun. 45(12), 1997; van de Beek, Sandell, Börjesson, "ML estimation of time and
+//! frequency offset in OFDM systems", IEEE Trans. Signal Process. 45(7), 1997). With `s`
+//! the noiseless samples (`s[n + D] = e^{jθ} s[n]`) and `E_s` their power,
+//! `Z e^{−jθ} = N E_s + Σ_n (s*[n] w'[n + D] + s[n] w'*[n] + w'*[n] w'[n + D])`; the `2N`
+//! noise samples are distinct (`H − P ≤ G + P`), so the imaginary part has variance
+//! `N(2 E_s σ² + σ⁴)/2` and, for small errors,
+//!
+//! ```text
+//! var(θ̂) = (1/N) (1/γ + 1/(2γ²)),   γ = E_s/σ²,   var(f̂) = var(θ̂) (f_s/(2πD))²
+//! ```
+//!
+//! — Moose's and Schmidl & Cox's `1/(Nγ)` at high SNR, and the noise-times-noise term at
+//! low SNR (PN945, one path: 22 Hz at 15 dB frame SNR, 141 Hz at 0 dB from one header).
+//! *Accumulation*: the correlations of every header received so far are summed,
+//! `f̂ = arg(Σ_k Z_k) f_s/(2πD)`. The modelled offset is constant over a measurement (a
+//! point lasts well under a second, a TCXO drifts over minutes with temperature), and for
+//! a constant offset the coherent sum is the maximum-likelihood combination of headers
+//! with independent noise (each weighted by its own power), so the cyclic headers'
+//! variance falls as `1/K` over `K` headers (1.4 Hz after PN945's 240-frame interleaver
+//! delay at 15 dB). A first-order loop would follow a drift at the price of a window of
+//! about `2/g` frames for a gain `g`; none is needed here. For PN595 consecutive pairs
+//! share a header and the signal-times-noise terms of every inner header cancel in the
+//! imaginary part (`Im(s* w) + Im(s w*) = 0`): the sum measures the phase from the first
+//! header to the last, `var(θ̂) = 1/(K² N γ) + 1/(2K N γ²)` over `K` pairs.
+//! *Correction*: the stream is turned back sample by sample, `e^{−jφ(n)}` with `φ`
+//! advancing by `2π f̂/f_s` (the estimate including the next header, which the receiver
+//! holds anyway) and continuous across frames, before the channel estimate; the residual
+//! is a slow rotation the estimates follow. The genie knows `f_o`: it turns the stream
+//! back by `2π f_o n/f_s` from the first frame's start and knows the response without it.
+//!
 //! **Synchronisation** ([`measure_channel_point_synced`]). The estimating receiver starts
 //! listening at a random sample of the first frame and acquires the frame start and the
 //! frame number from the PN headers with hybridnav's frame synchroniser
@@ -141,9 +202,9 @@
 //! the response of a path begins up to `K` samples before it (the kernel's support), so
 //! the whole response stays causal in the estimate's window, at the price of `K` lags of
 //! the delay spread covered and `10 log10(1 + K/N)` = 0.018 dB of reconstruction noise.
-//! The timing is held: the channel's delays do not drift here. No carrier-frequency
-//! offset is modelled or estimated (the paths' Dopplers belong to the channel, which the
-//! estimates track). The genie keeps the true timing.
+//! The timing is held: the channel's delays do not drift here. The frame sync acquires
+//! through a CFO uncorrected (1 kHz turns a PN945 header by 0.79 rad); the frames at the
+//! acquired timing are then corrected as above. The genie keeps the true timing.
 //!
 //! Random streams of `TrialRng::new(seed, 0)`: `dtmb/ber/payload` (the stream's key, as
 //! [`super::ber::measure_point`], so the same packets) and `dtmb/ber/noise`; every SNR
@@ -2994,7 +3055,7 @@ mod tests {
     /// The CFO estimator's spread against its analytic variance (the repetition
     /// estimator of Moose, "A technique for orthogonal frequency division multiplexing
     /// frequency offset correction", IEEE Trans. Commun. 42(10), 1994; Schmidl & Cox,
-    /// IEEE Trans. Commun. 45(12), 1997, eq. 11 at high SNR; the noise-times-noise term
+    /// IEEE Trans. Commun. 45(12), 1997, at high SNR; the noise-times-noise term
     /// `1/(2γ²)` of the module documentation below it). One path turning at 300 Hz (inside
     /// every mode's range), frame SNRs 15 dB (the 64QAM 0.6 threshold) and 0 dB (where
     /// the noise-times-noise term is a quarter of the variance in PN945), 2100 frames:
