@@ -349,7 +349,10 @@ fn dtmb_ber_world_cfo_is_corrected_and_costs_everything_without() {
         "--out",
         csv.to_str().unwrap(),
     ]);
-    assert!(text.contains("not corrected (--no-cfo-correction)"), "{text}");
+    assert!(
+        text.contains("not corrected (--no-cfo-correction)"),
+        "{text}"
+    );
     let body = std::fs::read_to_string(&csv).unwrap();
     let row: Vec<&str> = body.lines().nth(1).unwrap().split(',').collect();
     let header: Vec<&str> = body.lines().next().unwrap().split(',').collect();

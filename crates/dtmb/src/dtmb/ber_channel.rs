@@ -3300,7 +3300,8 @@ mod tests {
     /// (the 0.15 dB of two thresholds' Monte-Carlo noise — common payload and noise here,
     /// so less — plus the residual: the accumulated estimate's error after the
     /// interleaver's delay is ~1 Hz, whose phase the estimates follow), as is the
-    /// correcting receiver's with no offset at all.
+    /// correcting receiver's with no offset at all. PN595, whose range is ±864 Hz, the
+    /// same at 500 Hz.
     #[test]
     fn a_corrected_1_khz_cfo_keeps_the_threshold() {
         let prof = profile(Constellation::Qam64, CodeRate::R06);
@@ -3361,6 +3362,30 @@ mod tests {
         assert!((zero - still).abs() < 0.2, "{zero} vs {still}");
         assert!((corrected - still).abs() < 0.2, "{corrected} vs {still}");
         assert!((per_header - still).abs() < 0.2, "{per_header} vs {still}");
+        assert!((synced - still).abs() < bound, "{synced} vs {still}");
+        // PN595 (range ±864 Hz): 500 Hz, from consecutive headers, same bounds; its grid
+        // shifted by the frame power as in the one-path test.
+        let m = PnMode::Pn595;
+        let cfg = ChannelBer { mode: m, ..cfg };
+        let on = Oscillator {
+            cfo_hz: 500.0,
+            correct: true,
+        };
+        let grid = grid_from(14.3 + frame_power_shift_db(m), 9);
+        let still = threshold(&grid, |s| measure_channel_point(&cfg, s).unwrap());
+        let corrected = threshold(&grid, |s| {
+            measure_channel_point_with_cfo(&cfg, on, s).unwrap()
+        });
+        let synced = threshold(&grid, |s| {
+            measure_channel_point_synced_with_cfo(&cfg, on, s)
+                .unwrap()
+                .0
+        });
+        println!(
+            "PN595: no offset {still:.3} dB; 500 Hz corrected: interpolated {corrected:.3}, \
+             acquired timing {synced:.3} dB"
+        );
+        assert!((corrected - still).abs() < 0.2, "{corrected} vs {still}");
         assert!((synced - still).abs() < bound, "{synced} vs {still}");
     }
 
