@@ -293,7 +293,7 @@ fn dtmb_ber_world_single_carrier_and_static_channel() {
 /// 1000/482·10⁶ = 2.075 ppm, printed. Corrected from the PN headers, the interpolating
 /// receiver's PER 10⁻² threshold (acquired timing) lies within 0.2 dB of the one
 /// without an offset (the Monte-Carlo 0.15 dB of two thresholds plus the residual of the
-/// accumulated estimate, ~1 Hz; ber_channel's `a_corrected_1_khz_cfo_keeps_the_threshold`);
+/// accumulated estimate, 1.7 Hz analytic; ber_channel's `a_corrected_1_khz_cfo_keeps_the_threshold`);
 /// left uncorrected (`--no-cfo-correction`) half a carrier spacing of offset loses every
 /// packet at 25 dB, 10 dB above the threshold. The options are refused where they mean
 /// nothing.
