@@ -1737,7 +1737,24 @@ pub fn cfo_range_hz(mode: PnMode) -> f64 {
 /// (module documentation): for the cyclic headers `r` is `header` (the pairs lie inside
 /// it, `prev` is not used), for PN595 `r*[n]` is taken from `prev`, the previous frame's
 /// header, and `r[n + D]` from `header`. Its phase is `2π f D/f_s`.
-pub fn cfo_header_correlation(mode: PnMode, header: &[Complex32], prev: &[Complex32]) -> Complex64 {
+///
+/// # Errors
+/// [`DtmbError::BufferLength`] when `header` (PN595: or `prev`) is not `H` samples long.
+pub fn cfo_header_correlation(
+    mode: PnMode,
+    header: &[Complex32],
+    prev: &[Complex32],
+) -> Result<Complex64, DtmbError> {
+    let hl = mode.header_len();
+    for (x, what) in [(header, "CFO header"), (prev, "previous CFO header")] {
+        if x.len() != hl && (what == "CFO header" || !mode.is_cyclic()) {
+            return Err(DtmbError::BufferLength {
+                what,
+                expected: hl,
+                got: x.len(),
+            });
+        }
+    }
     let c = |a: &Complex32, b: &Complex32| {
         let z = a.conj() * b;
         Complex64::new(f64::from(z.re), f64::from(z.im))
@@ -1745,19 +1762,18 @@ pub fn cfo_header_correlation(mode: PnMode, header: &[Complex32], prev: &[Comple
     if mode.is_cyclic() {
         let (g, p) = (mode.preamble_len(), mode.period());
         let n = cfo_pairs(mode);
-        header[g..g + n]
+        Ok(header[g..g + n]
             .iter()
             .zip(&header[g + p..g + p + n])
             .map(|(a, b)| c(a, b))
-            .sum()
+            .sum())
     } else {
         let w = PN595_LS_TAPS - 1;
-        let hl = mode.header_len();
-        prev[w..hl]
+        Ok(prev[w..hl]
             .iter()
             .zip(&header[w..hl])
             .map(|(a, b)| c(a, b))
-            .sum()
+            .sum())
     }
 }
 
@@ -1820,18 +1836,28 @@ impl CfoCorrector {
 
     /// Adds a received (uncorrected) header to the estimate: its correlation (PN595: with
     /// the previous header, from the second header on).
-    pub fn push_header(&mut self, header: &[Complex32]) {
+    ///
+    /// # Errors
+    /// [`DtmbError::BufferLength`] when `header` is not `H` samples long.
+    pub fn push_header(&mut self, header: &[Complex32]) -> Result<(), DtmbError> {
         if self.mode.is_cyclic() {
-            self.acc += cfo_header_correlation(self.mode, header, &[]);
+            self.acc += cfo_header_correlation(self.mode, header, &[])?;
             self.headers += 1;
         } else {
             if self.have_prev {
-                self.acc += cfo_header_correlation(self.mode, header, &self.prev);
+                self.acc += cfo_header_correlation(self.mode, header, &self.prev)?;
                 self.headers += 1;
+            } else if header.len() != self.prev.len() {
+                return Err(DtmbError::BufferLength {
+                    what: "CFO header",
+                    expected: self.prev.len(),
+                    got: header.len(),
+                });
             }
             self.prev.copy_from_slice(header);
             self.have_prev = true;
         }
+        Ok(())
     }
 
     /// The current estimate (Hz): the known offset, or `arg(Σ Z_k) f_s/(2πD)` (0 before
@@ -1892,12 +1918,12 @@ impl CfoCorrector {
         if self.started {
             self.out.copy_within(fl.., 0);
         } else {
-            self.push_header(&frame[..hl]);
+            self.push_header(&frame[..hl])?;
             let omega = tau * self.estimate_hz();
             Self::derotate(&mut self.phase, omega, &frame[..hl], &mut self.out[..hl]);
             self.started = true;
         }
-        self.push_header(next_header);
+        self.push_header(next_header)?;
         let omega = tau * self.estimate_hz();
         let (body, next) = self.out[hl..].split_at_mut(fl - hl);
         Self::derotate(&mut self.phase, omega, &frame[hl..], body);
@@ -3014,7 +3040,7 @@ mod tests {
             stream.next_frame(&hd, &sym, &mut y).unwrap();
             crate::dtmb::noise::add_awgn(&mut y, sigma as f32, &mut rng);
             if mode.is_cyclic() || k > 0 {
-                out.push(cfo_header_correlation(mode, &y[..hl], &prev));
+                out.push(cfo_header_correlation(mode, &y[..hl], &prev).unwrap());
             }
             prev.copy_from_slice(&y[..hl]);
         }
@@ -3086,7 +3112,7 @@ mod tests {
                 for b in headers.chunks_exact(21 * hl) {
                     let mut c = CfoCorrector::new(mode);
                     for hd in b.chunks_exact(hl) {
-                        c.push_header(hd);
+                        c.push_header(hd).unwrap();
                     }
                     assert_eq!(c.correlations() as f64, k);
                     blocks.push(c.estimate_hz());
@@ -3180,7 +3206,7 @@ mod tests {
                 let headers = cfo_block_headers(mode, &h, f, snr, 60, 11);
                 let mut c = CfoCorrector::new(mode);
                 for hd in headers.chunks_exact(hl) {
-                    c.push_header(hd);
+                    c.push_header(hd).unwrap();
                 }
                 let sd = cfo_std_hz(mode, gamma, c.correlations() as f64);
                 let got = c.estimate_hz();
@@ -3203,7 +3229,8 @@ mod tests {
     /// [`measure_channel_point`], static and moving, every receiver); and a nonzero offset
     /// turns the static stream by `e^{j2πf n/f_s}` (the definition of a common frequency
     /// shift), checked sample by sample over three frames against the static stream
-    /// turned in double precision (within 10⁻⁵ of unit power, single precision).
+    /// turned in double precision (within 10⁻⁵ of unit power, single precision). Wrong
+    /// lengths are refused.
     #[test]
     fn zero_cfo_is_the_channel_without_one_bit_for_bit() {
         let paths = [
@@ -3250,6 +3277,13 @@ mod tests {
         };
         let e = measure_channel_point_with_cfo(&c, nan, 12.0).unwrap_err();
         assert!(e.to_string().contains("cfo_hz"), "{e}");
+        let short = [Complex32::default(); 10];
+        assert!(CfoCorrector::new(PnMode::Pn595)
+            .push_header(&short)
+            .is_err());
+        assert!(cfo_header_correlation(PnMode::Pn945, &short, &[]).is_err());
+        let mut k = CfoCorrector::new(PnMode::Pn945);
+        assert!(k.correct(&short, &short).is_err());
         // A nonzero offset on the static channel.
         let mode = PnMode::Pn420;
         let f = 1234.5;
