@@ -58,6 +58,8 @@ pub struct BerArgs {
     pub csi: String,
     pub no_doppler: bool,
     pub true_timing: bool,
+    pub cfo_hz: Option<f64>,
+    pub no_cfo_correction: bool,
 }
 
 /// The data-layer profile of `dtmb ber` from its options (each `None` takes the default:
@@ -179,6 +181,8 @@ pub fn ber(a: &BerArgs) -> Result<()> {
         (a.csi != "interpolated", "--csi"),
         (a.no_doppler, "--no-doppler"),
         (a.true_timing, "--true-timing"),
+        (a.cfo_hz.is_some(), "--cfo-hz"),
+        (a.no_cfo_correction, "--no-cfo-correction"),
     ] {
         if given {
             anyhow::bail!("{what} needs --world (without it the channel is white noise)");
@@ -219,8 +223,8 @@ pub fn ber(a: &BerArgs) -> Result<()> {
 fn ber_world(a: &BerArgs) -> Result<()> {
     use crate::dtmb::ber::parse_snr_range;
     use crate::dtmb::ber_channel::{
-        doppler_responses, frequency_response, measure_channel_point, measure_channel_point_synced,
-        ChannelBer, Csi, SYNC_ADVANCE_SAMPLES,
+        cfo_range_hz, doppler_responses, frequency_response, measure_channel_point_synced_with_cfo,
+        measure_channel_point_with_cfo, ChannelBer, Csi, Oscillator, SYNC_ADVANCE_SAMPLES,
     };
     use crate::dtmb::pn::PnMode;
     use crate::world::dtmb_iq::{tower_channel_at, DataLayerOverride, WorldIqRequest};
@@ -230,6 +234,16 @@ fn ber_world(a: &BerArgs) -> Result<()> {
         s => vec![s.parse()?],
     };
     let grid = parse_snr_range(&a.snr_db)?;
+    if a.no_cfo_correction && a.cfo_hz.is_none() {
+        anyhow::bail!("--no-cfo-correction needs --cfo-hz (without it there is no offset)");
+    }
+    if a.cfo_hz.is_some_and(|f| !f.is_finite()) {
+        anyhow::bail!("--cfo-hz must be a finite frequency in Hz");
+    }
+    let osc = Oscillator {
+        cfo_hz: a.cfo_hz.unwrap_or(0.0),
+        correct: a.cfo_hz.is_some() && !a.no_cfo_correction,
+    };
     let w = super::load_world(path).map_err(|e| anyhow::anyhow!("{e}"))?;
     let seed = a.seed.unwrap_or(w.file.montecarlo.seed);
     let req = WorldIqRequest {
@@ -332,6 +346,23 @@ fn ber_world(a: &BerArgs) -> Result<()> {
             )
         }
     );
+    if let Some(f) = a.cfo_hz {
+        println!(
+            "# receiver CFO {f:.1} Hz ({:.3} ppm at {:.0} MHz) on every path: {}",
+            f / ch.freq_hz * 1e6,
+            ch.freq_hz * 1e-6,
+            if osc.correct {
+                format!(
+                    "estimated from the PN headers and corrected (unambiguous within \
+                     ±{:.0} Hz in {}), known to the genie",
+                    cfo_range_hz(ch.mode),
+                    ch.mode.name()
+                )
+            } else {
+                "not corrected (--no-cfo-correction)".to_string()
+            }
+        );
+    }
     println!(
         "# {} {} frames per point after a {}-frame interleaver delay",
         profile.name(),
@@ -356,15 +387,16 @@ fn ber_world(a: &BerArgs) -> Result<()> {
         let mut acquired = Vec::new();
         let (points, _, per) = run_curve(&grid, |snr| {
             if synced {
-                let (p, acq) = measure_channel_point_synced(&cfg, snr).map_err(|e| {
-                    anyhow::anyhow!(
+                let (p, acq) =
+                    measure_channel_point_synced_with_cfo(&cfg, osc, snr).map_err(|e| {
+                        anyhow::anyhow!(
                         "{e} (--true-timing gives the estimating receiver the true frame start)"
                     )
-                })?;
+                    })?;
                 acquired.push(acq);
                 Ok(p)
             } else {
-                Ok(measure_channel_point(&cfg, snr)?)
+                Ok(measure_channel_point_with_cfo(&cfg, osc, snr)?)
             }
         })?;
         if !acquired.is_empty() {

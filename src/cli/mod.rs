@@ -236,6 +236,16 @@ pub enum DtmbCommand {
         /// found; the genie always has the true timing.
         #[arg(long)]
         true_timing: bool,
+        /// With --world: the receiver's carrier-frequency offset in Hz (its local
+        /// oscillator's error, e.g. 1000 = 1.7 ppm at 600 MHz), added to every path's
+        /// Doppler shift. The estimating receivers then estimate it from the PN headers and
+        /// correct it (the genie knows it) unless --no-cfo-correction. Without the option:
+        /// no offset and no correction.
+        #[arg(long, allow_hyphen_values = true, value_name = "HZ")]
+        cfo_hz: Option<f64>,
+        /// With --cfo-hz: leave the offset uncorrected (to see what it costs).
+        #[arg(long)]
+        no_cfo_correction: bool,
     },
     /// Write DTMB baseband frames through white noise as a SigMF recording
     /// (BASE.sigmf-data and BASE.sigmf-meta, with an annotation per frame); with --world,
@@ -459,6 +469,8 @@ pub fn run(cli: Cli) -> Result<()> {
             csi,
             no_doppler,
             true_timing,
+            cfo_hz,
+            no_cfo_correction,
         }) => dtmb::ber(&dtmb::BerArgs {
             qam,
             fec,
@@ -476,6 +488,8 @@ pub fn run(cli: Cli) -> Result<()> {
             csi,
             no_doppler,
             true_timing,
+            cfo_hz,
+            no_cfo_correction,
         }),
         Command::Dtmb(DtmbCommand::Iq {
             mode,

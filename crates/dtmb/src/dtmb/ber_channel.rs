@@ -131,6 +131,68 @@
 //! The SNR is defined on the static response (the received power at the reference
 //! instant). When every shift is zero the stream is the static one, bit for bit.
 //!
+//! **Carrier-frequency offset** ([`Oscillator`], [`groups_with_cfo`], [`CfoCorrector`]).
+//! A receiver whose local oscillator is off by `f_o` (a TCXO of the common ±2 ppm
+//! stability grade — IQD, "Specifying TCXOs", stability code G — is off by up to
+//! ±1.2 kHz at 600 MHz) sees every path shifted by the same `f_o`: [`groups_with_cfo`]
+//! adds it to every Doppler group (a static channel becomes one group, `h`), so
+//! `y[n] = e^{j2π f_o n/f_s} Σ_m h_n[m] x[n − m] + w[n]`. With `f_o = 0` the groups, and so
+//! the stream, are those without it, bit for bit. Uncorrected, `f_o` is a frequency offset
+//! of `ε = f_o/2 kHz` carrier spacings (ICI `1 − a²` above: 0.59 at 1 kHz) that also turns
+//! by `2π f_o F/f_s` (3.9 rad in PN945 at 1 kHz) from header to header: the
+//! interpolation's chord `cos(π f_o F/f_s)` is −0.38 there, the estimate turned over.
+//!
+//! *Estimate.* The cyclic headers (PN420/PN945) repeat their core `P` chips later: header
+//! chips `n` and `n + P` are equal for `n < H − P`. Received samples `n ≥ G` are free of
+//! the previous body's spill for every response the channel estimate covers
+//! (`L − 1 ≤ G`), so the `N = H − P − G` pairs `n = G .. H − P` (the core's first `G'`
+//! chips and the postamble: 217 in PN945, 83 in PN420) give
+//! `Z = Σ_n r*[n] r[n + P] = e^{jθ} Σ_n |s[n]|² + noise`, `θ = 2π f_o P/f_s`, and
+//! `f̂ = arg(Z) f_s/(2πP)` ([`cfo_header_correlation`]), unambiguous within
+//! `±f_s/(2P)` = ±7397 Hz (PN945), ±14 824 Hz (PN420) ([`cfo_range_hz`]). PN595's
+//! header is not cyclic but is the same in every frame: consecutive headers are
+//! correlated at the lag `D = F` = 4375 over the `N = 378` samples `n = W − 1 .. H` free
+//! of the previous body, range `±f_s/(2F)` = **±864 Hz only** — less than a ±2 ppm
+//! oscillator's offset anywhere in UHF (±0.95 kHz at 474 MHz): a PN595 receiver needs a
+//! coarse frequency acquisition first (e.g. a frequency search in the frame sync), which is
+//! not modelled. Beyond the range the estimate wraps to `f_o − 2k f_s/(2D)`.
+//! The correlation's phase is the power-weighted mean of the paths' shifts plus `f_o`: a
+//! common Doppler is corrected with the offset (no receiver can tell them apart).
+//!
+//! *Variance* (the repetition estimator of Moose, "A technique for orthogonal frequency
+//! division multiplexing frequency offset correction", IEEE Trans. Commun. 42(10), 1994;
+//! Schmidl & Cox, "Robust frequency and timing synchronization for OFDM", IEEE Trans.
+//! Commun. 45(12), 1997; van de Beek, Sandell, Börjesson, "ML estimation of time and
+//! frequency offset in OFDM systems", IEEE Trans. Signal Process. 45(7), 1997). With `s`
+//! the noiseless samples (`s[n + D] = e^{jθ} s[n]`) and `E_s` their power,
+//! `Z e^{−jθ} = N E_s + Σ_n (s*[n] w'[n + D] + s[n] w'*[n] + w'*[n] w'[n + D])`; the `2N`
+//! noise samples are distinct (`H − P ≤ G + P`), so the imaginary part has variance
+//! `N(2 E_s σ² + σ⁴)/2` and, for small errors,
+//!
+//! ```text
+//! var(θ̂) = (1/N) (1/γ + 1/(2γ²)),   γ = E_s/σ²,   var(f̂) = var(θ̂) (f_s/(2πD))²
+//! ```
+//!
+//! — Moose's and Schmidl & Cox's `1/(Nγ)` at high SNR, and the noise-times-noise term at
+//! low SNR (PN945, one path: 22 Hz at 15 dB frame SNR, 141 Hz at 0 dB from one header).
+//! *Accumulation*: the correlations of every header received so far are summed,
+//! `f̂ = arg(Σ_k Z_k) f_s/(2πD)`. The modelled offset is constant over a measurement (a
+//! point lasts well under a second, a TCXO drifts over minutes with temperature), and for
+//! a constant offset the coherent sum is the maximum-likelihood combination of headers
+//! with independent noise (each weighted by its own power), so the cyclic headers'
+//! variance falls as `1/K` over `K` headers (in PN945 at 15 dB, 22 Hz/√171 = 1.7 Hz
+//! after the 170-frame interleaver delay of M = 240). A first-order loop would follow a
+//! drift at the price of a window of about `2/g` frames for a gain `g`; none is needed
+//! here. For PN595 consecutive pairs share a header and the signal-times-noise terms of
+//! every inner header cancel in the imaginary part (`Im(s* w) + Im(s w*) = 0`): the sum
+//! measures the phase from the first header to the last, `var(θ̂) = 1/(K² N γ) + 1/(2K N
+//! γ²)` over `K` pairs.
+//! *Correction*: the stream is turned back sample by sample, `e^{−jφ(n)}` with `φ`
+//! advancing by `2π f̂/f_s` (the estimate including the next header, which the receiver
+//! holds anyway) and continuous across frames, before the channel estimate; the residual
+//! is a slow rotation the estimates follow. The genie knows `f_o`: it turns the stream
+//! back by `2π f_o n/f_s` from the first frame's start and knows the response without it.
+//!
 //! **Synchronisation** ([`measure_channel_point_synced`]). The estimating receiver starts
 //! listening at a random sample of the first frame and acquires the frame start and the
 //! frame number from the PN headers with hybridnav's frame synchroniser
@@ -141,9 +203,9 @@
 //! the response of a path begins up to `K` samples before it (the kernel's support), so
 //! the whole response stays causal in the estimate's window, at the price of `K` lags of
 //! the delay spread covered and `10 log10(1 + K/N)` = 0.018 dB of reconstruction noise.
-//! The timing is held: the channel's delays do not drift here. No carrier-frequency
-//! offset is modelled or estimated (the paths' Dopplers belong to the channel, which the
-//! estimates track). The genie keeps the true timing.
+//! The timing is held: the channel's delays do not drift here. The frame sync acquires
+//! through a CFO uncorrected (1 kHz turns a PN945 header by 0.79 rad); the frames at the
+//! acquired timing are then corrected as above. The genie keeps the true timing.
 //!
 //! Random streams of `TrialRng::new(seed, 0)`: `dtmb/ber/payload` (the stream's key, as
 //! [`super::ber::measure_point`], so the same packets) and `dtmb/ber/noise`; every SNR
@@ -1242,13 +1304,28 @@ struct ChannelChain {
     tx: DataLayer,
     data_rx: DataReceiver,
     stream: ChannelStream,
+    /// Whether the stream's response turns (a Doppler shift or a CFO).
+    moving: bool,
+    /// The receiver's CFO correction (`None`: not corrected).
+    cfo: Option<CfoCorrector>,
     /// The noise's σ per complex sample at `snr_db`.
     sigma: f32,
 }
 
 impl ChannelChain {
-    fn new(cfg: &ChannelBer<'_>, snr_db: f64) -> Result<Self, DtmbError> {
+    fn new(cfg: &ChannelBer<'_>, osc: Oscillator, snr_db: f64) -> Result<Self, DtmbError> {
         let (mode, carrier) = (cfg.mode, cfg.profile.carrier);
+        if !osc.cfo_hz.is_finite() {
+            return Err(DtmbError::InvalidParameter {
+                name: "cfo_hz",
+                reason: format!("must be finite, got {}", osc.cfo_hz),
+            });
+        }
+        let groups = groups_with_cfo(cfg.h, cfg.doppler, osc.cfo_hz);
+        let cfo = osc.correct.then(|| match cfg.csi {
+            Csi::Ideal => CfoCorrector::known(mode, osc.cfo_hz),
+            _ => CfoCorrector::new(mode),
+        });
         let energy: f32 = cfg.h.iter().map(|x| x.norm_sqr()).sum();
         let var =
             (mode.nominal_frame_power() * f64::from(energy) / 10f64.powf(snr_db / 10.0)) as f32;
@@ -1260,7 +1337,9 @@ impl ChannelChain {
             noise: streams.stream("dtmb/ber/noise"),
             tx: DataLayer::new(cfg.profile, PacketSource::pseudo_random(key)),
             data_rx: DataReceiver::new(cfg.profile),
-            stream: ChannelStream::with_doppler(mode, carrier, cfg.h, cfg.doppler)?,
+            stream: ChannelStream::with_doppler(mode, carrier, cfg.h, &groups)?,
+            moving: groups.iter().any(|g| g.doppler_hz != 0.0),
+            cfo,
             sigma: var.sqrt(),
         })
     }
@@ -1280,10 +1359,26 @@ impl ChannelChain {
 /// [`DtmbError::InvalidParameter`] for zero or too many frames, a non-finite SNR and as
 /// [`TdsReceiver::new`].
 pub fn measure_channel_point(cfg: &ChannelBer<'_>, snr_db: f64) -> Result<BerPoint, DtmbError> {
+    measure_channel_point_with_cfo(cfg, Oscillator::default(), snr_db)
+}
+
+/// [`measure_channel_point`] with the receiver's oscillator `osc`: the stream carries its
+/// CFO on every path ([`groups_with_cfo`]) and, with `osc.correct`, the receiver corrects
+/// it before the channel estimate ([`CfoCorrector`]; the genie with the true offset,
+/// phase 0 at the first frame's start, and the true response without it). With
+/// `Oscillator::default()` this is [`measure_channel_point`].
+///
+/// # Errors
+/// As [`measure_channel_point`], and a non-finite CFO.
+pub fn measure_channel_point_with_cfo(
+    cfg: &ChannelBer<'_>,
+    osc: Oscillator,
+    snr_db: f64,
+) -> Result<BerPoint, DtmbError> {
     check_frames(cfg.frames, snr_db)?;
     let mode = cfg.mode;
-    let mut c = ChannelChain::new(cfg, snr_db)?;
-    let moving = cfg.doppler.iter().any(|g| g.doppler_hz != 0.0);
+    let mut c = ChannelChain::new(cfg, osc, snr_db)?;
+    let moving = c.moving;
     let mut h_mid = vec![Complex32::default(); cfg.h.len()];
     let hl = mode.header_len();
     let fl = mode.frame_len();
@@ -1308,9 +1403,22 @@ pub fn measure_channel_point(cfg: &ChannelBer<'_>, snr_db: f64) -> Result<BerPoi
                 // The genie's response: the true one at the centre of frame k − 1's body.
                 let centre = ((k - 1) * fl + hl) as f64 + (BODY_LEN - 1) as f64 / 2.0;
                 c.stream.response_at(centre, &mut h_mid);
+                if c.cfo.is_some() {
+                    // The genie removed the offset's phase 2π f n/f_s: the response
+                    // without it.
+                    let r = phasor(-osc.cfo_hz, centre);
+                    let r = Complex32::new(r.re as f32, r.im as f32);
+                    for x in h_mid.iter_mut() {
+                        *x *= r;
+                    }
+                }
                 c.rx.set_true_response(&h_mid)?;
             }
-            c.rx.receive_frame(&y_prev, &y[..hl], prev_phase, phase, &mut eq, &mut w)?;
+            let (frame, next) = match c.cfo.as_mut() {
+                Some(k) => k.correct(&y_prev, &y[..hl])?,
+                None => (&y_prev[..], &y[..hl]),
+            };
+            c.rx.receive_frame(frame, next, prev_phase, phase, &mut eq, &mut w)?;
             out.clear();
             c.data_rx.push_frame_weighted(&eq, &w, &mut out);
             count_packets(&out, c.key, &mut p);
@@ -1366,6 +1474,21 @@ pub fn measure_channel_point_synced(
     cfg: &ChannelBer<'_>,
     snr_db: f64,
 ) -> Result<(BerPoint, Acquisition), DtmbError> {
+    measure_channel_point_synced_with_cfo(cfg, Oscillator::default(), snr_db)
+}
+
+/// [`measure_channel_point_synced`] with the receiver's oscillator `osc`
+/// ([`measure_channel_point_with_cfo`]): the frame synchroniser acquires through the
+/// offset (uncorrected), then every frame at the acquired timing is corrected by the
+/// [`CfoCorrector`] before the channel estimate when `osc.correct`.
+///
+/// # Errors
+/// As [`measure_channel_point_synced`], and a non-finite CFO.
+pub fn measure_channel_point_synced_with_cfo(
+    cfg: &ChannelBer<'_>,
+    osc: Oscillator,
+    snr_db: f64,
+) -> Result<(BerPoint, Acquisition), DtmbError> {
     use super::receiver::{Receiver, SyncConfig};
     check_frames(cfg.frames, snr_db)?;
     let mode = cfg.mode;
@@ -1393,7 +1516,7 @@ pub fn measure_channel_point_synced(
             span - SYNC_ADVANCE_SAMPLES
         )));
     }
-    let mut c = ChannelChain::new(cfg, snr_db)?;
+    let mut c = ChannelChain::new(cfg, osc, snr_db)?;
     let mut timing = TrialRng::new(cfg.seed, 0).stream("dtmb/ber/timing");
     let hl = mode.header_len();
     let fl = mode.frame_len();
@@ -1461,14 +1584,12 @@ pub fn measure_channel_point_synced(
             mode.phase_of_frame(j % fsf),
             mode.phase_of_frame((j + 1) % fsf),
         );
-        c.rx.receive_frame(
-            &hist[s0..s0 + fl],
-            &hist[s0 + fl..s0 + fl + hl],
-            phase,
-            next_phase,
-            &mut eq,
-            &mut w,
-        )?;
+        let (frame, next) = (&hist[s0..s0 + fl], &hist[s0 + fl..s0 + fl + hl]);
+        let (frame, next) = match c.cfo.as_mut() {
+            Some(k) => k.correct(frame, next)?,
+            None => (frame, next),
+        };
+        c.rx.receive_frame(frame, next, phase, next_phase, &mut eq, &mut w)?;
         out.clear();
         c.data_rx.push_frame_weighted(&eq, &w, &mut out);
         count_packets(&out, c.key, &mut p);
@@ -1541,6 +1662,276 @@ fn nonzero_taps(h: &[Complex32], out: &mut Vec<(usize, Complex32)>) {
             .map(|(m, x)| (m, *x)),
     );
 }
+/// The receiver's local oscillator in [`measure_channel_point_with_cfo`] and
+/// [`measure_channel_point_synced_with_cfo`]: its carrier-frequency offset and whether
+/// the receivers correct it (module documentation, *Carrier-frequency offset*). The
+/// default, no offset and no correction, is [`measure_channel_point`]'s receiver.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Oscillator {
+    /// The receiver's carrier-frequency offset (Hz): the received signal turns at
+    /// `cfo_hz` on top of every path's Doppler shift.
+    pub cfo_hz: f64,
+    /// Whether the receivers correct it: the estimating ones ([`Csi::Estimated`],
+    /// [`Csi::Interpolated`]) estimate it from the PN headers ([`CfoCorrector`]); the
+    /// genie ([`Csi::Ideal`]) knows it.
+    pub correct: bool,
+}
+
+/// The Doppler groups of a channel `h` with `groups` ([`doppler_responses`]; empty for a
+/// static channel) seen by a receiver whose oscillator is off by `cfo_hz`: a common
+/// frequency shift of every path, so `cfo_hz` is added to every group's shift (a static
+/// channel becomes one group, `h` itself). With `cfo_hz = 0` the groups are returned
+/// unchanged, so the stream is the one without an offset, bit for bit.
+pub fn groups_with_cfo(h: &[Complex32], groups: &[DopplerTaps], cfo_hz: f64) -> Vec<DopplerTaps> {
+    if cfo_hz == 0.0 {
+        return groups.to_vec();
+    }
+    if groups.is_empty() {
+        return vec![DopplerTaps {
+            doppler_hz: cfo_hz,
+            taps: h.to_vec(),
+        }];
+    }
+    groups
+        .iter()
+        .map(|g| DopplerTaps {
+            doppler_hz: g.doppler_hz + cfo_hz,
+            taps: g.taps.clone(),
+        })
+        .collect()
+}
+
+/// The lag `D` (samples) between the two copies of the header that the CFO estimate
+/// correlates: the core length `P` for the cyclic headers (511 PN945, 255 PN420), the
+/// frame length `F` = 4375 for PN595 (consecutive headers).
+pub fn cfo_lag_samples(mode: PnMode) -> usize {
+    if mode.is_cyclic() {
+        mode.period()
+    } else {
+        mode.frame_len()
+    }
+}
+
+/// The sample pairs `N` per header of the CFO estimate: header samples free of the
+/// previous body's spill for any response the channel estimate covers. Cyclic headers:
+/// samples `n = G .. H − P` pair with `n + P` (the core's first `G'` chips with the
+/// postamble that repeats them), `N = H − P − G = G'` (217 PN945, 83 PN420). PN595:
+/// samples `n = W − 1 .. H` ([`PN595_LS_TAPS`] = `W`) of two consecutive headers,
+/// `N = 378`.
+pub fn cfo_pairs(mode: PnMode) -> usize {
+    if mode.is_cyclic() {
+        mode.header_len() - mode.period() - mode.preamble_len()
+    } else {
+        mode.header_len() - (PN595_LS_TAPS - 1)
+    }
+}
+
+/// The CFO estimate's unambiguous range `±f_s/(2D)` (Hz, [`cfo_lag_samples`]): 7397 Hz
+/// PN945, 14 824 Hz PN420, 864 Hz PN595. An offset beyond it is estimated wrapped, as
+/// `f − 2k·f_s/(2D)` with the integer `k` that brings it into the range.
+pub fn cfo_range_hz(mode: PnMode) -> f64 {
+    super::pn::SAMPLE_RATE_HZ / (2.0 * cfo_lag_samples(mode) as f64)
+}
+
+/// One header's CFO correlation `Z = Σ_n r*[n] r[n + D]` over the [`cfo_pairs`] pairs
+/// (module documentation): for the cyclic headers `r` is `header` (the pairs lie inside
+/// it, `prev` is not used), for PN595 `r*[n]` is taken from `prev`, the previous frame's
+/// header, and `r[n + D]` from `header`. Its phase is `2π f D/f_s`.
+///
+/// # Errors
+/// [`DtmbError::BufferLength`] when `header` (PN595: or `prev`) is not `H` samples long.
+pub fn cfo_header_correlation(
+    mode: PnMode,
+    header: &[Complex32],
+    prev: &[Complex32],
+) -> Result<Complex64, DtmbError> {
+    let hl = mode.header_len();
+    for (x, what) in [(header, "CFO header"), (prev, "previous CFO header")] {
+        if x.len() != hl && (what == "CFO header" || !mode.is_cyclic()) {
+            return Err(DtmbError::BufferLength {
+                what,
+                expected: hl,
+                got: x.len(),
+            });
+        }
+    }
+    let c = |a: &Complex32, b: &Complex32| {
+        let z = a.conj() * b;
+        Complex64::new(f64::from(z.re), f64::from(z.im))
+    };
+    if mode.is_cyclic() {
+        let (g, p) = (mode.preamble_len(), mode.period());
+        let n = cfo_pairs(mode);
+        Ok(header[g..g + n]
+            .iter()
+            .zip(&header[g + p..g + p + n])
+            .map(|(a, b)| c(a, b))
+            .sum())
+    } else {
+        let w = PN595_LS_TAPS - 1;
+        Ok(prev[w..hl]
+            .iter()
+            .zip(&header[w..hl])
+            .map(|(a, b)| c(a, b))
+            .sum())
+    }
+}
+
+/// The receiver's CFO estimation and correction (module documentation, *Carrier-frequency
+/// offset*): the headers' correlations [`cfo_header_correlation`] are summed over every
+/// header received so far, `f̂ = arg(Σ_k Z_k) f_s/(2πD)`, and the stream is turned back by
+/// `e^{−jφ(n)}`, `φ` advancing by the latest `2πf̂/f_s` every sample (continuous across
+/// frames). Streaming, one frame and the next header at a time, with its buffers allocated
+/// once. With a known offset (the genie) the estimate is that offset and `φ(n) = 2πf n/f_s`
+/// from the first frame's start.
+pub struct CfoCorrector {
+    mode: PnMode,
+    known_hz: Option<f64>,
+    /// `Σ_k Z_k` and the headers it holds.
+    acc: Complex64,
+    headers: usize,
+    /// The previous raw header (PN595's pair), and whether there is one.
+    prev: Vec<Complex32>,
+    have_prev: bool,
+    /// The corrected frame and the corrected next header (`F + H` samples).
+    out: Vec<Complex32>,
+    started: bool,
+    /// The phase `φ` of the next sample to correct (radians, reduced to one turn).
+    phase: f64,
+}
+
+impl std::fmt::Debug for CfoCorrector {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CfoCorrector")
+            .field("mode", &self.mode)
+            .field("estimate_hz", &self.estimate_hz())
+            .field("headers", &self.headers)
+            .finish_non_exhaustive()
+    }
+}
+
+impl CfoCorrector {
+    /// An estimating corrector for `mode` frames.
+    pub fn new(mode: PnMode) -> Self {
+        Self {
+            mode,
+            known_hz: None,
+            acc: Complex64::default(),
+            headers: 0,
+            prev: vec![Complex32::default(); mode.header_len()],
+            have_prev: false,
+            out: vec![Complex32::default(); mode.frame_len() + mode.header_len()],
+            started: false,
+            phase: 0.0,
+        }
+    }
+
+    /// A corrector that knows the offset `cfo_hz` (the genie's).
+    pub fn known(mode: PnMode, cfo_hz: f64) -> Self {
+        Self {
+            known_hz: Some(cfo_hz),
+            ..Self::new(mode)
+        }
+    }
+
+    /// Adds a received (uncorrected) header to the estimate: its correlation (PN595: with
+    /// the previous header, from the second header on).
+    ///
+    /// # Errors
+    /// [`DtmbError::BufferLength`] when `header` is not `H` samples long.
+    pub fn push_header(&mut self, header: &[Complex32]) -> Result<(), DtmbError> {
+        if self.mode.is_cyclic() {
+            self.acc += cfo_header_correlation(self.mode, header, &[])?;
+            self.headers += 1;
+        } else {
+            if self.have_prev {
+                self.acc += cfo_header_correlation(self.mode, header, &self.prev)?;
+                self.headers += 1;
+            } else if header.len() != self.prev.len() {
+                return Err(DtmbError::BufferLength {
+                    what: "CFO header",
+                    expected: self.prev.len(),
+                    got: header.len(),
+                });
+            }
+            self.prev.copy_from_slice(header);
+            self.have_prev = true;
+        }
+        Ok(())
+    }
+
+    /// The current estimate (Hz): the known offset, or `arg(Σ Z_k) f_s/(2πD)` (0 before
+    /// the first correlation).
+    pub fn estimate_hz(&self) -> f64 {
+        if let Some(f) = self.known_hz {
+            return f;
+        }
+        if self.headers == 0 {
+            return 0.0;
+        }
+        self.acc.arg() * super::pn::SAMPLE_RATE_HZ
+            / (2.0 * std::f64::consts::PI * cfo_lag_samples(self.mode) as f64)
+    }
+
+    /// Correlations summed into the estimate so far.
+    pub fn correlations(&self) -> usize {
+        self.headers
+    }
+
+    /// Turns `input` back into `out` from the current phase, advancing it by `ω` per sample.
+    fn derotate(phase: &mut f64, omega: f64, input: &[Complex32], out: &mut [Complex32]) {
+        // The phasor starts at its exact phase and advances by one sample's rotation in
+        // double precision (drift over a frame ~10⁻¹³ rad), as the channel's Doppler does.
+        let mut r = Complex64::from_polar(1.0, -*phase);
+        let step = Complex64::from_polar(1.0, -omega);
+        for (o, x) in out.iter_mut().zip(input) {
+            *o = x * Complex32::new(r.re as f32, r.im as f32);
+            r *= step;
+        }
+        *phase = (*phase + omega * input.len() as f64).rem_euclid(2.0 * std::f64::consts::PI);
+    }
+
+    /// Corrects receiver frame `i` (`frame`, `F` samples from its start) and the next
+    /// frame's header (`next_header`, `H` samples), returned in that order. The first call
+    /// adds frame `i`'s own header to the estimate and corrects it from phase 0; every call
+    /// adds the next header before correcting the body and that header with the updated
+    /// estimate (the phase runs on continuously), and the next call reuses this corrected
+    /// header as its frame's (bit for bit, so the interpolating receiver's look-ahead
+    /// estimate is reused).
+    ///
+    /// # Errors
+    /// [`DtmbError::BufferLength`] on wrong lengths.
+    pub fn correct(
+        &mut self,
+        frame: &[Complex32],
+        next_header: &[Complex32],
+    ) -> Result<(&[Complex32], &[Complex32]), DtmbError> {
+        let (hl, fl) = (self.mode.header_len(), self.mode.frame_len());
+        if frame.len() != fl || next_header.len() != hl {
+            return Err(DtmbError::BufferLength {
+                what: "CFO-corrected frame",
+                expected: fl,
+                got: frame.len(),
+            });
+        }
+        let tau = 2.0 * std::f64::consts::PI / super::pn::SAMPLE_RATE_HZ;
+        if self.started {
+            self.out.copy_within(fl.., 0);
+        } else {
+            self.push_header(&frame[..hl])?;
+            let omega = tau * self.estimate_hz();
+            Self::derotate(&mut self.phase, omega, &frame[..hl], &mut self.out[..hl]);
+            self.started = true;
+        }
+        self.push_header(next_header)?;
+        let omega = tau * self.estimate_hz();
+        let (body, next) = self.out[hl..].split_at_mut(fl - hl);
+        Self::derotate(&mut self.phase, omega, &frame[hl..], body);
+        Self::derotate(&mut self.phase, omega, next_header, next);
+        Ok((&self.out[..fl], &self.out[fl..]))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -2610,6 +3001,427 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().contains("covers 202"), "{e}");
+    }
+
+    /// Per-frame CFO correlations of `frames` frames (random 16QAM bodies, white noise at
+    /// the frame SNR `snr_db`) through the channel `h` turning at `cfo_hz`: for the cyclic
+    /// headers each frame's header alone, for PN595 each header with the previous one (the
+    /// first frame gives none).
+    fn cfo_correlations(
+        mode: PnMode,
+        h: &[Complex32],
+        cfo_hz: f64,
+        snr_db: f64,
+        frames: usize,
+        seed: u64,
+    ) -> Vec<Complex64> {
+        let groups = groups_with_cfo(h, &[], cfo_hz);
+        let mut stream =
+            ChannelStream::with_doppler(mode, CarrierMode::Multi3780, h, &groups).unwrap();
+        let energy: f64 = h.iter().map(|x| f64::from(x.norm_sqr())).sum();
+        let sigma = (mode.nominal_frame_power() * energy / 10f64.powf(snr_db / 10.0)).sqrt();
+        let mut rng = TrialRng::new(seed, 0).stream("dtmb/test/cfo");
+        let pts = Constellation::Qam16.points();
+        let hl = mode.header_len();
+        let mut hd = vec![Complex32::default(); hl];
+        let mut y = vec![Complex32::default(); mode.frame_len()];
+        let mut prev = vec![Complex32::default(); hl];
+        let mut sym = vec![Complex32::default(); BODY_LEN];
+        let mut out = Vec::with_capacity(frames);
+        for k in 0..frames {
+            for s in sym.iter_mut() {
+                *s = pts[rng.random_range(0..pts.len())];
+            }
+            mode.header_samples(
+                mode.phase_of_frame(k % mode.frames_per_superframe()),
+                &mut hd,
+            )
+            .unwrap();
+            stream.next_frame(&hd, &sym, &mut y).unwrap();
+            crate::dtmb::noise::add_awgn(&mut y, sigma as f32, &mut rng);
+            if mode.is_cyclic() || k > 0 {
+                out.push(cfo_header_correlation(mode, &y[..hl], &prev).unwrap());
+            }
+            prev.copy_from_slice(&y[..hl]);
+        }
+        out
+    }
+
+    /// `arg(z)` as a frequency (Hz) for the lag of `mode`.
+    fn cfo_of(mode: PnMode, z: Complex64) -> f64 {
+        z.arg() * crate::dtmb::pn::SAMPLE_RATE_HZ
+            / (2.0 * std::f64::consts::PI * cfo_lag_samples(mode) as f64)
+    }
+
+    /// The analytic standard deviation (Hz) of the CFO estimate from `k` correlations
+    /// (module documentation): with `γ = E_s/σ²` the header samples' SNR and `N` pairs a
+    /// correlation, `var(θ̂) = (1/(kN))(1/γ + 1/(2γ²))` for the cyclic headers (independent
+    /// frames) and `1/(k²Nγ) + 1/(2kNγ²)` for PN595 (the consecutive pairs' signal-times-
+    /// noise terms telescope to the first and last header's), `f̂ = θ̂ f_s/(2πD)`.
+    fn cfo_std_hz(mode: PnMode, gamma: f64, k: f64) -> f64 {
+        let n = cfo_pairs(mode) as f64;
+        let var = if mode.is_cyclic() {
+            (1.0 / gamma + 0.5 / (gamma * gamma)) / (k * n)
+        } else {
+            1.0 / (k * k * n * gamma) + 0.5 / (k * n * gamma * gamma)
+        };
+        var.sqrt() * crate::dtmb::pn::SAMPLE_RATE_HZ
+            / (2.0 * std::f64::consts::PI * cfo_lag_samples(mode) as f64)
+    }
+
+    /// The header samples' SNR `γ = E_s/σ²` of a one-path channel at the frame SNR
+    /// `snr_db`: `E_s` the mean power of the header's chips (measured from the header),
+    /// `σ²` the noise of the frame SNR.
+    fn header_snr(mode: PnMode, snr_db: f64) -> f64 {
+        let mut hd = vec![Complex32::default(); mode.header_len()];
+        mode.header_samples(0, &mut hd).unwrap();
+        let es = hd.iter().map(|x| f64::from(x.norm_sqr())).sum::<f64>() / hd.len() as f64;
+        es / (mode.nominal_frame_power() / 10f64.powf(snr_db / 10.0))
+    }
+
+    /// The CFO estimator's spread against its analytic variance (the repetition
+    /// estimator of Moose, "A technique for orthogonal frequency division multiplexing
+    /// frequency offset correction", IEEE Trans. Commun. 42(10), 1994; Schmidl & Cox,
+    /// IEEE Trans. Commun. 45(12), 1997, at high SNR; the noise-times-noise term
+    /// `1/(2γ²)` of the module documentation below it). One path turning at 300 Hz (inside
+    /// every mode's range), frame SNRs 15 dB (the 64QAM 0.6 threshold) and 0 dB (where
+    /// the noise-times-noise term is a quarter of the variance in PN945), 2100 frames:
+    /// the single-header (PN595: header-pair) estimates' standard deviation within 10 %
+    /// of the analytic value (the sample standard deviation of 2100 values has a relative
+    /// standard error of 1.5 %, more for PN595's overlapping pairs), and the estimates
+    /// accumulated over 21 headers ([`CfoCorrector`], 100 blocks; standard error 7 %)
+    /// within 25 % — for PN595 the accumulation's `1/k²` law, not `1/k`.
+    #[test]
+    fn the_cfo_estimate_has_its_analytic_variance() {
+        let h = [Complex32::new(1.0, 0.0)];
+        let f = 300.0;
+        for mode in PnMode::ALL {
+            for snr in [15.0, 0.0] {
+                let z = cfo_correlations(mode, &h, f, snr, 2100, 7);
+                let gamma = header_snr(mode, snr);
+                let est: Vec<f64> = z.iter().map(|&z| cfo_of(mode, z)).collect();
+                let n = est.len() as f64;
+                let mean = est.iter().sum::<f64>() / n;
+                let sd = (est.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+                let want = cfo_std_hz(mode, gamma, 1.0);
+                // Blocks of 21 headers, each estimated by a fresh corrector.
+                let hl = mode.header_len();
+                let k = if mode.is_cyclic() { 21.0 } else { 20.0 };
+                let mut blocks = Vec::new();
+                let headers = cfo_block_headers(mode, &h, f, snr, 2100, 7);
+                for b in headers.chunks_exact(21 * hl) {
+                    let mut c = CfoCorrector::new(mode);
+                    for hd in b.chunks_exact(hl) {
+                        c.push_header(hd).unwrap();
+                    }
+                    assert_eq!(c.correlations() as f64, k);
+                    blocks.push(c.estimate_hz());
+                }
+                let nb = blocks.len() as f64;
+                let bmean = blocks.iter().sum::<f64>() / nb;
+                let bsd =
+                    (blocks.iter().map(|e| (e - bmean).powi(2)).sum::<f64>() / (nb - 1.0)).sqrt();
+                let bwant = cfo_std_hz(mode, gamma, k);
+                println!(
+                    "{mode} {snr} dB (γ {gamma:.2}): one header std {sd:.3} Hz (analytic \
+                     {want:.3}), mean {mean:.3} Hz; {k} headers std {bsd:.3} Hz (analytic \
+                     {bwant:.3}), mean {bmean:.3} Hz"
+                );
+                assert!(
+                    (sd / want - 1.0).abs() < 0.10,
+                    "{mode} {snr}: {sd} vs {want}"
+                );
+                assert!(
+                    (bsd / bwant - 1.0).abs() < 0.25,
+                    "{mode} {snr}: {bsd} vs {bwant}"
+                );
+                assert!((mean - f).abs() < 4.0 * want / n.sqrt(), "{mode}: {mean}");
+            }
+        }
+    }
+
+    /// The received headers (`H` samples each, concatenated) of [`cfo_correlations`]'s
+    /// stream.
+    fn cfo_block_headers(
+        mode: PnMode,
+        h: &[Complex32],
+        cfo_hz: f64,
+        snr_db: f64,
+        frames: usize,
+        seed: u64,
+    ) -> Vec<Complex32> {
+        let groups = groups_with_cfo(h, &[], cfo_hz);
+        let mut stream =
+            ChannelStream::with_doppler(mode, CarrierMode::Multi3780, h, &groups).unwrap();
+        let energy: f64 = h.iter().map(|x| f64::from(x.norm_sqr())).sum();
+        let sigma = (mode.nominal_frame_power() * energy / 10f64.powf(snr_db / 10.0)).sqrt();
+        let mut rng = TrialRng::new(seed, 0).stream("dtmb/test/cfo-blocks");
+        let pts = Constellation::Qam16.points();
+        let hl = mode.header_len();
+        let mut hd = vec![Complex32::default(); hl];
+        let mut y = vec![Complex32::default(); mode.frame_len()];
+        let mut sym = vec![Complex32::default(); BODY_LEN];
+        let mut out = Vec::with_capacity(frames * hl);
+        for k in 0..frames {
+            for s in sym.iter_mut() {
+                *s = pts[rng.random_range(0..pts.len())];
+            }
+            mode.header_samples(
+                mode.phase_of_frame(k % mode.frames_per_superframe()),
+                &mut hd,
+            )
+            .unwrap();
+            stream.next_frame(&hd, &sym, &mut y).unwrap();
+            crate::dtmb::noise::add_awgn(&mut y, sigma as f32, &mut rng);
+            out.extend_from_slice(&y[..hl]);
+        }
+        out
+    }
+
+    /// The accumulated estimate is unbiased over the range: through the two-path channel
+    /// (echo 30 samples late, −3 dB) at 10 dB, 60 headers, offsets of −0.9, −0.5, 0,
+    /// 0.5 and 0.9 of [`cfo_range_hz`] (±6657 Hz PN945, ±13 341 Hz PN420, ±778 Hz
+    /// PN595) are found within 4 standard deviations of the analytic accumulated value
+    /// (with the two-path header's SNR, `E_s` the chips' power at unit channel energy,
+    /// plus 1 Hz for the multipath's unequal sample powers). Beyond the range the
+    /// estimate wraps: 1.1 of the range is found at `1.1 − 2 = −0.9` of it — the
+    /// ambiguity of a phase measured modulo 2π, documented, not an error.
+    #[test]
+    fn the_cfo_estimate_is_unbiased_over_its_range_and_wraps_beyond() {
+        let h = echo_30_samples();
+        let snr = 10.0;
+        for mode in PnMode::ALL {
+            let range = cfo_range_hz(mode);
+            let gamma = header_snr(mode, snr);
+            let hl = mode.header_len();
+            for (x, want) in [
+                (-0.9, -0.9),
+                (-0.5, -0.5),
+                (0.0, 0.0),
+                (0.5, 0.5),
+                (0.9, 0.9),
+                (1.1, -0.9),
+            ] {
+                let f = x * range;
+                let headers = cfo_block_headers(mode, &h, f, snr, 60, 11);
+                let mut c = CfoCorrector::new(mode);
+                for hd in headers.chunks_exact(hl) {
+                    c.push_header(hd).unwrap();
+                }
+                let sd = cfo_std_hz(mode, gamma, c.correlations() as f64);
+                let got = c.estimate_hz();
+                println!(
+                    "{mode} {f:.1} Hz ({x} of ±{range:.1}): estimated {got:.2} Hz, want \
+                     {:.2} ± {sd:.2} Hz",
+                    want * range
+                );
+                assert!(
+                    (got - want * range).abs() < 4.0 * sd + 1.0,
+                    "{mode} {f}: {got} vs {}",
+                    want * range
+                );
+            }
+        }
+    }
+
+    /// With the offset zero the channel is the one without it, bit for bit (the groups are
+    /// returned unchanged and [`measure_channel_point_with_cfo`] without correction is
+    /// [`measure_channel_point`], static and moving, every receiver); and a nonzero offset
+    /// turns the static stream by `e^{j2πf n/f_s}` (the definition of a common frequency
+    /// shift), checked sample by sample over three frames against the static stream
+    /// turned in double precision (within 10⁻⁵ of unit power, single precision). Wrong
+    /// lengths are refused.
+    #[test]
+    fn zero_cfo_is_the_channel_without_one_bit_for_bit() {
+        let paths = [
+            (0.0, Complex64::new(1.0, 0.0), 40.0),
+            (7.5, Complex64::new(0.3, 0.2), -25.0),
+        ];
+        let (h, groups) = doppler_responses(&paths).unwrap();
+        assert_eq!(groups_with_cfo(&h, &groups, 0.0), groups);
+        assert!(groups_with_cfo(&h, &[], 0.0).is_empty());
+        let cfg = ChannelBer {
+            profile: profile(Constellation::Qam16, CodeRate::R08),
+            mode: PnMode::Pn420,
+            h: &h,
+            doppler: &[],
+            csi: Csi::Estimated,
+            frames: 2,
+            seed: 4,
+        };
+        let off = Oscillator::default();
+        for csi in [Csi::Estimated, Csi::Interpolated, Csi::Ideal] {
+            for doppler in [&[][..], &groups[..]] {
+                let c = ChannelBer {
+                    csi,
+                    doppler,
+                    ..cfg.clone()
+                };
+                assert_eq!(
+                    measure_channel_point_with_cfo(&c, off, 12.0).unwrap(),
+                    measure_channel_point(&c, 12.0).unwrap()
+                );
+            }
+        }
+        let c = ChannelBer {
+            csi: Csi::Interpolated,
+            ..cfg.clone()
+        };
+        assert_eq!(
+            measure_channel_point_synced_with_cfo(&c, off, 12.0).unwrap(),
+            measure_channel_point_synced(&c, 12.0).unwrap()
+        );
+        let nan = Oscillator {
+            cfo_hz: f64::NAN,
+            correct: true,
+        };
+        let e = measure_channel_point_with_cfo(&c, nan, 12.0).unwrap_err();
+        assert!(e.to_string().contains("cfo_hz"), "{e}");
+        let short = [Complex32::default(); 10];
+        assert!(CfoCorrector::new(PnMode::Pn595)
+            .push_header(&short)
+            .is_err());
+        assert!(cfo_header_correlation(PnMode::Pn945, &short, &[]).is_err());
+        let mut k = CfoCorrector::new(PnMode::Pn945);
+        assert!(k.correct(&short, &short).is_err());
+        // A nonzero offset on the static channel.
+        let mode = PnMode::Pn420;
+        let f = 1234.5;
+        let shifted = groups_with_cfo(&h, &[], f);
+        let mut a = ChannelStream::with_carrier(mode, CarrierMode::Multi3780, &h);
+        let mut b =
+            ChannelStream::with_doppler(mode, CarrierMode::Multi3780, &h, &shifted).unwrap();
+        let mut rng = TrialRng::new(9, 0).stream("dtmb/test/cfo-stream");
+        let pts = Constellation::Qam16.points();
+        let sym: Vec<Complex32> = (0..BODY_LEN)
+            .map(|_| pts[rng.random_range(0..pts.len())])
+            .collect();
+        let mut hd = vec![Complex32::default(); mode.header_len()];
+        mode.header_samples(0, &mut hd).unwrap();
+        let fl = mode.frame_len();
+        let (mut ya, mut yb) = (
+            vec![Complex32::default(); fl],
+            vec![Complex32::default(); fl],
+        );
+        let mut worst = 0f64;
+        for k in 0..3 {
+            a.next_frame(&hd, &sym, &mut ya).unwrap();
+            b.next_frame(&hd, &sym, &mut yb).unwrap();
+            for (i, (x, y)) in ya.iter().zip(&yb).enumerate() {
+                let n = (k * fl + i) as f64;
+                let r = Complex64::from_polar(
+                    1.0,
+                    2.0 * std::f64::consts::PI * f * n / crate::dtmb::pn::SAMPLE_RATE_HZ,
+                );
+                let want = Complex64::new(f64::from(x.re), f64::from(x.im)) * r;
+                let got = Complex64::new(f64::from(y.re), f64::from(y.im));
+                worst = worst.max((got - want).norm());
+            }
+        }
+        println!("1234.5 Hz: worst difference {worst:.2e}");
+        assert!(worst < 1e-5, "{worst}");
+    }
+
+    /// What a 1 kHz offset (1.7 ppm at 600 MHz: inside the ±2.0 ppm stability grade of
+    /// TCXOs, e.g. IQD's "Specifying TCXOs" codes, where the example CFPT-123 is
+    /// ±2.5 ppm) costs 64QAM 0.6 in PN945 through one path, 10 frames a point after the
+    /// interleaver's delay (the set-up of the one-path threshold test), seed 1. Without
+    /// correction the offset is half a carrier spacing, `ε = 0.5`: the inter-carrier
+    /// interference `1 − a²` (`a = sin(πε)/(N sin(πε/N))`, 0.59 of each carrier's power)
+    /// breaks every packet even at 25 dB, for the interpolating receiver and the genie
+    /// that knows the response at each body's centre but not the offset. With the
+    /// correction the interpolating receiver's threshold (true timing; acquired timing;
+    /// the per-header estimate) lies within 0.2 dB of its threshold without an offset
+    /// (the 0.15 dB of two thresholds' Monte-Carlo noise — common payload and noise here,
+    /// so less — plus the residual: the accumulated estimate's error after the
+    /// interleaver's delay is 1.7 Hz (analytic), whose phase the estimates follow), as is the
+    /// correcting receiver's with no offset at all. PN595, whose range is ±864 Hz, the
+    /// same at 500 Hz.
+    #[test]
+    fn a_corrected_1_khz_cfo_keeps_the_threshold() {
+        let prof = profile(Constellation::Qam64, CodeRate::R06);
+        let mode = PnMode::Pn945;
+        let h = [Complex32::new(1.0, 0.0)];
+        let grid = grid_from(14.3, 9);
+        let cfg = ChannelBer {
+            profile: prof,
+            mode,
+            h: &h,
+            doppler: &[],
+            csi: Csi::Interpolated,
+            frames: 10,
+            seed: 1,
+        };
+        let on = Oscillator {
+            cfo_hz: 1000.0,
+            correct: true,
+        };
+        let off = Oscillator {
+            correct: false,
+            ..on
+        };
+        let a = mean_phasor(1000.0, BODY_LEN);
+        println!("1 kHz: ICI 1 − a² = {:.3}", 1.0 - a * a);
+        for csi in [Csi::Interpolated, Csi::Ideal] {
+            let p = measure_channel_point_with_cfo(&ChannelBer { csi, ..cfg.clone() }, off, 25.0)
+                .unwrap();
+            println!("{} uncorrected at 25 dB: {p:?}", csi.name());
+            assert!(p.packets > 0 && p.packet_errors == p.packets, "{p:?}");
+        }
+        let still = threshold(&grid, |s| measure_channel_point(&cfg, s).unwrap());
+        let zero = threshold(&grid, |s| {
+            let o = Oscillator { cfo_hz: 0.0, ..on };
+            measure_channel_point_with_cfo(&cfg, o, s).unwrap()
+        });
+        let corrected = threshold(&grid, |s| {
+            measure_channel_point_with_cfo(&cfg, on, s).unwrap()
+        });
+        let synced = threshold(&grid, |s| {
+            measure_channel_point_synced_with_cfo(&cfg, on, s)
+                .unwrap()
+                .0
+        });
+        let est = ChannelBer {
+            csi: Csi::Estimated,
+            ..cfg.clone()
+        };
+        let per_header = threshold(&grid, |s| {
+            measure_channel_point_with_cfo(&est, on, s).unwrap()
+        });
+        println!(
+            "no offset {still:.3} dB; correcting, no offset {zero:.3}; 1 kHz corrected: \
+             interpolated {corrected:.3}, acquired timing {synced:.3}, per-header \
+             {per_header:.3} dB"
+        );
+        let bound = 0.2 + 10.0 * (1.0 + SYNC_ADVANCE_SAMPLES as f64 / BODY_LEN as f64).log10();
+        assert!((zero - still).abs() < 0.2, "{zero} vs {still}");
+        assert!((corrected - still).abs() < 0.2, "{corrected} vs {still}");
+        assert!((per_header - still).abs() < 0.2, "{per_header} vs {still}");
+        assert!((synced - still).abs() < bound, "{synced} vs {still}");
+        // PN595 (range ±864 Hz): 500 Hz, from consecutive headers, same bounds; its grid
+        // shifted by the frame power as in the one-path test.
+        let m = PnMode::Pn595;
+        let cfg = ChannelBer { mode: m, ..cfg };
+        let on = Oscillator {
+            cfo_hz: 500.0,
+            correct: true,
+        };
+        let grid = grid_from(14.3 + frame_power_shift_db(m), 9);
+        let still = threshold(&grid, |s| measure_channel_point(&cfg, s).unwrap());
+        let corrected = threshold(&grid, |s| {
+            measure_channel_point_with_cfo(&cfg, on, s).unwrap()
+        });
+        let synced = threshold(&grid, |s| {
+            measure_channel_point_synced_with_cfo(&cfg, on, s)
+                .unwrap()
+                .0
+        });
+        println!(
+            "PN595: no offset {still:.3} dB; 500 Hz corrected: interpolated {corrected:.3}, \
+             acquired timing {synced:.3} dB"
+        );
+        assert!((corrected - still).abs() < 0.2, "{corrected} vs {still}");
+        assert!((synced - still).abs() < bound, "{synced} vs {still}");
     }
 
     #[test]
