@@ -3015,36 +3015,20 @@ mod tests {
         frames: usize,
         seed: u64,
     ) -> Vec<Complex64> {
-        let groups = groups_with_cfo(h, &[], cfo_hz);
-        let mut stream =
-            ChannelStream::with_doppler(mode, CarrierMode::Multi3780, h, &groups).unwrap();
-        let energy: f64 = h.iter().map(|x| f64::from(x.norm_sqr())).sum();
-        let sigma = (mode.nominal_frame_power() * energy / 10f64.powf(snr_db / 10.0)).sqrt();
-        let mut rng = TrialRng::new(seed, 0).stream("dtmb/test/cfo");
-        let pts = Constellation::Qam16.points();
         let hl = mode.header_len();
-        let mut hd = vec![Complex32::default(); hl];
-        let mut y = vec![Complex32::default(); mode.frame_len()];
-        let mut prev = vec![Complex32::default(); hl];
-        let mut sym = vec![Complex32::default(); BODY_LEN];
-        let mut out = Vec::with_capacity(frames);
-        for k in 0..frames {
-            for s in sym.iter_mut() {
-                *s = pts[rng.random_range(0..pts.len())];
-            }
-            mode.header_samples(
-                mode.phase_of_frame(k % mode.frames_per_superframe()),
-                &mut hd,
-            )
-            .unwrap();
-            stream.next_frame(&hd, &sym, &mut y).unwrap();
-            crate::dtmb::noise::add_awgn(&mut y, sigma as f32, &mut rng);
-            if mode.is_cyclic() || k > 0 {
-                out.push(cfo_header_correlation(mode, &y[..hl], &prev).unwrap());
-            }
-            prev.copy_from_slice(&y[..hl]);
-        }
-        out
+        let headers = cfo_headers(mode, h, cfo_hz, snr_db, frames, seed, "dtmb/test/cfo");
+        // The cyclic headers ignore the previous one; the first frame has none.
+        let none = vec![Complex32::default(); hl];
+        let chunks: Vec<&[Complex32]> = headers.chunks_exact(hl).collect();
+        chunks
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| mode.is_cyclic() || *k > 0)
+            .map(|(k, y)| {
+                let prev = if k > 0 { chunks[k - 1] } else { &none[..] };
+                cfo_header_correlation(mode, y, prev).unwrap()
+            })
+            .collect()
     }
 
     /// `arg(z)` as a frequency (Hz) for the lag of `mode`.
@@ -3108,7 +3092,7 @@ mod tests {
                 let hl = mode.header_len();
                 let k = if mode.is_cyclic() { 21.0 } else { 20.0 };
                 let mut blocks = Vec::new();
-                let headers = cfo_block_headers(mode, &h, f, snr, 2100, 7);
+                let headers = cfo_headers(mode, &h, f, snr, 2100, 7, "dtmb/test/cfo-blocks");
                 for b in headers.chunks_exact(21 * hl) {
                     let mut c = CfoCorrector::new(mode);
                     for hd in b.chunks_exact(hl) {
@@ -3140,22 +3124,24 @@ mod tests {
         }
     }
 
-    /// The received headers (`H` samples each, concatenated) of [`cfo_correlations`]'s
-    /// stream.
-    fn cfo_block_headers(
+    /// The received headers (`H` samples each, concatenated) of `frames` frames (random
+    /// 16QAM bodies, white noise at the frame SNR `snr_db`, drawn from the named random
+    /// `stream`) through the channel `h` turning at `cfo_hz`.
+    fn cfo_headers(
         mode: PnMode,
         h: &[Complex32],
         cfo_hz: f64,
         snr_db: f64,
         frames: usize,
         seed: u64,
+        stream_name: &str,
     ) -> Vec<Complex32> {
         let groups = groups_with_cfo(h, &[], cfo_hz);
         let mut stream =
             ChannelStream::with_doppler(mode, CarrierMode::Multi3780, h, &groups).unwrap();
         let energy: f64 = h.iter().map(|x| f64::from(x.norm_sqr())).sum();
         let sigma = (mode.nominal_frame_power() * energy / 10f64.powf(snr_db / 10.0)).sqrt();
-        let mut rng = TrialRng::new(seed, 0).stream("dtmb/test/cfo-blocks");
+        let mut rng = TrialRng::new(seed, 0).stream(stream_name);
         let pts = Constellation::Qam16.points();
         let hl = mode.header_len();
         let mut hd = vec![Complex32::default(); hl];
@@ -3203,7 +3189,7 @@ mod tests {
                 (1.1, -0.9),
             ] {
                 let f = x * range;
-                let headers = cfo_block_headers(mode, &h, f, snr, 60, 11);
+                let headers = cfo_headers(mode, &h, f, snr, 60, 11, "dtmb/test/cfo-blocks");
                 let mut c = CfoCorrector::new(mode);
                 for hd in headers.chunks_exact(hl) {
                     c.push_header(hd).unwrap();
