@@ -362,7 +362,8 @@ impl InsTightEkf {
     /// c_k = (V_k − Σ h_j Q h_jᵀ / m − β) / (Σ h_j Φ P Φᵀ h_jᵀ / m)
     /// λ_k = min(λ_max, max(1, c_k)),   P⁻ = λ_k Φ P Φᵀ + Q
     /// ```
-    /// (Zhou & Frank 1996's `tr N_k / tr M_k` for whitened scalar rows), applied before
+    /// (Zhou & Frank 1996's `tr N_k / tr M_k` for whitened scalar rows; an epoch whose
+    /// clock bias is still at its diffuse prior does not enter V), applied before
     /// the epoch's sequential updates; a scalar the eq. 24 gate removes at the
     /// un-inflated prediction is left out. Only the batch given counts: when GNSS and
     /// TC-OFDM arrive as two batches of one epoch, the first one sets the factor. Does not
@@ -431,7 +432,17 @@ impl InsTightEkf {
         if (0..N_TIGHT).any(|i| !(p[(i, i)].is_finite() && p[(i, i)] >= 0.0)) {
             return None;
         }
-        f.v = Some(v);
+        // While the clock bias is still at its diffuse prior (the filter's first epoch,
+        // σ = 1 ms·c), the innovations, whitened by the measurements' σ alone, are the
+        // receiver clock the epoch resolves, not a model mismatch: its factor is computed
+        // (c is small, M holding the same prior) but it does not seed the memory V, as
+        // Zhou & Frank's V₀ is the first innovation of a filter with a proper prior.
+        // Seeded with it, V ≈ 6·10⁵ held λ at its limit for the first 20 s of seed 004.
+        let diffuse = f.fpf[(tidx::CLOCK_BIAS, tidx::CLOCK_BIAS)]
+            > 0.25 * DIFFUSE_CLOCK_SIGMA_M * DIFFUSE_CLOCK_SIGMA_M;
+        if !diffuse {
+            f.v = Some(v);
+        }
         f.last_lambda = lambda;
         f.pending = false;
         f.fpf = p;
@@ -1119,6 +1130,51 @@ mod tests {
         assert!(aleph.abs() < 1e-8, "ℵ = {aleph}");
         assert!((rekf.state() - ekf.state()).amax() < 1e-12);
         assert!((rekf.covariance() - ekf.covariance()).amax() < 1e-12 * p.amax());
+    }
+
+    /// The first epoch of a filter whose clock bias is at its diffuse prior resolves a
+    /// 30 km receiver clock; its innovations (10⁴ σ) must not enter the fading memory V:
+    /// at the next epoch, with ranges that fit, the factor is 1. Seeded with the first
+    /// epoch (the rule before), V ≈ 10⁸ and the factor is at its limit.
+    #[test]
+    fn the_diffuse_clock_epoch_does_not_enter_the_stf_memory() {
+        let f = frame();
+        let kcfg = InsKalmanConfig {
+            kind: InsKalmanKind::Stf,
+            stf_max_fading: 10.0,
+            ..InsKalmanConfig::default()
+        };
+        let mut k = filter_at_rest(&f).with_kalman(&kcfg).unwrap();
+        let earth = crate::inertial::source::local_earth_of(&f);
+        let ms: Vec<RangeMeasurement> = (0..6)
+            .map(|j| {
+                let mut m = range(
+                    &f,
+                    System::Gps,
+                    j as f64,
+                    0.5 + 0.1 * j as f64,
+                    Vector3::zeros(),
+                );
+                m.pseudorange_m += 30_000.0;
+                m
+            })
+            .collect();
+        let mut lambdas = Vec::new();
+        for epoch in 0..2 {
+            for i in 1..=100 {
+                k.propagate(&ImuSample {
+                    t_s: (epoch * 100 + i) as f64 * 0.01,
+                    accel_mps2: Vector3::new(0.0, 0.0, earth.gravity_mps2(0.0)),
+                    gyro_rps: Vector3::zeros(),
+                });
+            }
+            lambdas.push(k.stf_inflate(ms.iter(), &f, 0.0, false).unwrap());
+            for m in &ms {
+                k.update_range(m, &f, 0.0).unwrap();
+            }
+        }
+        assert!(k.clock_bias_m > 29_990.0, "clock {}", k.clock_bias_m);
+        assert_eq!(lambdas, vec![1.0, 1.0]);
     }
 
     #[test]
