@@ -245,7 +245,37 @@ fn dtmb_ber_world_refuses_bad_input() {
     run(&["--no-doppler"], &["--no-doppler needs --world"]);
     run(&["--true-timing"], &["--true-timing needs --world"]);
     run(&["--csi", "ideal"], &["--csi needs --world"]);
+    run(&["--cfo-hz", "100"], &["--cfo-hz needs --world"]);
+    run(
+        &[
+            "--world",
+            "worlds/seed000-kehui.toml",
+            "--no-cfo-correction",
+        ],
+        &["--no-cfo-correction needs --cfo-hz"],
+    );
+    run(
+        &["--world", "worlds/seed000-kehui.toml", "--cfo-hz", "inf"],
+        &["--cfo-hz must be a finite"],
+    );
     run(&["--world", "no/such/world.toml"], &["no/such/world.toml"]);
+}
+
+/// `hybridnav dtmb ber --world worlds/seed000-kehui.toml --at-s 5` (tower D01) with
+/// `extra`, which must succeed; its standard output.
+fn kehui_ber(extra: &[&str]) -> String {
+    let mut a = vec![
+        "dtmb",
+        "ber",
+        "--world",
+        "worlds/seed000-kehui.toml",
+        "--at-s",
+        "5",
+    ];
+    a.extend_from_slice(extra);
+    let o = hybridnav(&a);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
 /// `--carriers 1` through the world's channel (the C = 1 receiver) and `--no-doppler`
@@ -255,25 +285,10 @@ fn dtmb_ber_world_refuses_bad_input() {
 fn dtmb_ber_world_single_carrier_and_static_channel() {
     let run = |extra: &[&str]| -> String {
         let mut a = vec![
-            "dtmb",
-            "ber",
-            "--world",
-            "worlds/seed000-kehui.toml",
-            "--at-s",
-            "5",
-            "--qam",
-            "16qam",
-            "--fec",
-            "0.8",
-            "--snr-db",
-            "20",
-            "--frames",
-            "2",
+            "--qam", "16qam", "--fec", "0.8", "--snr-db", "20", "--frames", "2",
         ];
         a.extend_from_slice(extra);
-        let o = hybridnav(&a);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        String::from_utf8_lossy(&o.stdout).into_owned()
+        kehui_ber(&a)
     };
     let c1 = run(&["--carriers", "1"]);
     assert!(c1.contains("C1"), "{c1}");
@@ -295,25 +310,14 @@ fn dtmb_ber_world_single_carrier_and_static_channel() {
 /// without an offset (the Monte-Carlo 0.15 dB of two thresholds plus the residual of the
 /// accumulated estimate, 1.7 Hz analytic; ber_channel's `a_corrected_1_khz_cfo_keeps_the_threshold`);
 /// left uncorrected (`--no-cfo-correction`) half a carrier spacing of offset loses every
-/// packet at 25 dB, 10 dB above the threshold. The options are refused where they mean
-/// nothing.
+/// packet at 25 dB, 10 dB above the threshold. (Where the options mean nothing they are
+/// refused: `dtmb_ber_world_refuses_bad_input`.)
 #[test]
 fn dtmb_ber_world_cfo_is_corrected_and_costs_everything_without() {
     let run = |extra: &[&str]| -> String {
-        let mut a = vec![
-            "dtmb",
-            "ber",
-            "--world",
-            "worlds/seed000-kehui.toml",
-            "--at-s",
-            "5",
-            "--frames",
-            "20",
-        ];
+        let mut a = vec!["--frames", "20"];
         a.extend_from_slice(extra);
-        let o = hybridnav(&a);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        String::from_utf8_lossy(&o.stdout).into_owned()
+        kehui_ber(&a)
     };
     let threshold = |text: &str| -> f64 {
         let line = text
@@ -364,33 +368,4 @@ fn dtmb_ber_world_cfo_is_corrected_and_costs_everything_without() {
     println!("uncorrected 1 kHz at 25 dB: {errors} of {packets} packets wrong");
     assert!(packets > 0 && errors == packets, "{body}");
     let _ = std::fs::remove_dir_all(&dir);
-    refused(
-        &["dtmb", "ber", "--snr-db", "10", "--cfo-hz", "100"],
-        &["--cfo-hz needs --world"],
-    );
-    refused(
-        &[
-            "dtmb",
-            "ber",
-            "--snr-db",
-            "10",
-            "--world",
-            "worlds/seed000-kehui.toml",
-            "--no-cfo-correction",
-        ],
-        &["--no-cfo-correction needs --cfo-hz"],
-    );
-    refused(
-        &[
-            "dtmb",
-            "ber",
-            "--snr-db",
-            "10",
-            "--world",
-            "worlds/seed000-kehui.toml",
-            "--cfo-hz",
-            "inf",
-        ],
-        &["--cfo-hz must be a finite"],
-    );
 }

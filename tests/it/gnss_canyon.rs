@@ -381,6 +381,19 @@ impl Calibration {
         (a.len(), stats(&a).3 / stats(&b).3)
     }
 
+    /// The criterion for a few satellites of `class` (the weak NLOS ones): at least `min_n`
+    /// common samples of the satellites `only` together, and their RMS ratio within
+    /// [0.5, 2].
+    fn assert_satellites_agree(&self, class: Class, only: &[u32], min_n: usize) {
+        let (n, ratio) = self.ratio_of(class, only);
+        eprintln!("{class:?} PRNs {only:?}: n {n}, RMS ratio {ratio:.2}");
+        assert!(n >= min_n, "{n} samples of PRNs {only:?}:\n{}", self.log);
+        assert!(
+            (0.5..=2.0).contains(&ratio),
+            "PRNs {only:?}: GNSS-SDR RMS / measurement RMS = {ratio:.2}"
+        );
+    }
+
     /// The criterion: `required` has at least `min_n` common samples, and it and
     /// every other class with 20 or more have RMS ratios (GNSS-SDR over the measurement
     /// level) within [0.5, 2]. GNSS-SDR's lost-lock samples, left out, must be rare: at most
@@ -759,13 +772,7 @@ fn gnss_canyon_gps_weak_nlos_errors_agree_with_gnss_sdr() {
         return;
     };
     eprintln!("canyon-gps-nlos: satellites per class {:?}", cal.satellites);
-    let (n, ratio) = cal.ratio_of(Class::Nlos, &WEAK_NLOS);
-    eprintln!("canyon-gps-nlos: G08, G10, G32: n {n}, RMS ratio {ratio:.2}");
-    assert!(n >= 20, "{n} samples of G08, G10, G32:\n{}", cal.log);
-    assert!(
-        (0.5..=2.0).contains(&ratio),
-        "G08, G10, G32: GNSS-SDR RMS / measurement RMS = {ratio:.2}"
-    );
+    cal.assert_satellites_agree(Class::Nlos, &WEAK_NLOS, 20);
     cal.assert_agrees(Class::Nlos, 20);
 }
 
@@ -865,12 +872,6 @@ fn gnss_canyon_bds_weak_nlos_errors_agree_with_gnss_sdr() {
         return;
     };
     eprintln!("canyon-bds-weak: satellites per class {:?}", cal.satellites);
-    let (n, ratio) = cal.ratio_of(Class::Nlos, &WEAK_NLOS);
-    eprintln!("canyon-bds-weak: C12, C21, C22: n {n}, RMS ratio {ratio:.2}");
-    assert!(n >= 20, "{n} samples of C12, C21, C22:\n{}", cal.log);
-    assert!(
-        (0.5..=2.0).contains(&ratio),
-        "C12, C21, C22: GNSS-SDR RMS / measurement RMS = {ratio:.2}"
-    );
+    cal.assert_satellites_agree(Class::Nlos, &WEAK_NLOS, 20);
     cal.assert_agrees(Class::Nlos, 20);
 }

@@ -1415,7 +1415,7 @@ pub fn measure_channel_point_with_cfo(
                 c.rx.set_true_response(&h_mid)?;
             }
             let (frame, next) = match c.cfo.as_mut() {
-                Some(k) => k.correct(&y_prev, &y[..hl])?,
+                Some(corr) => corr.correct(&y_prev, &y[..hl])?,
                 None => (&y_prev[..], &y[..hl]),
             };
             c.rx.receive_frame(frame, next, prev_phase, phase, &mut eq, &mut w)?;
@@ -1586,7 +1586,7 @@ pub fn measure_channel_point_synced_with_cfo(
         );
         let (frame, next) = (&hist[s0..s0 + fl], &hist[s0 + fl..s0 + fl + hl]);
         let (frame, next) = match c.cfo.as_mut() {
-            Some(k) => k.correct(frame, next)?,
+            Some(corr) => corr.correct(frame, next)?,
             None => (frame, next),
         };
         c.rx.receive_frame(frame, next, phase, next_phase, &mut eq, &mut w)?;
@@ -1733,6 +1733,26 @@ pub fn cfo_range_hz(mode: PnMode) -> f64 {
     super::pn::SAMPLE_RATE_HZ / (2.0 * cfo_lag_samples(mode) as f64)
 }
 
+/// The frequency (Hz) of a phase `theta_rad` turned over the CFO estimate's lag
+/// ([`cfo_lag_samples`]): `θ f_s/(2πD)`.
+pub fn cfo_hz_of_phase(mode: PnMode, theta_rad: f64) -> f64 {
+    theta_rad * super::pn::SAMPLE_RATE_HZ
+        / (2.0 * std::f64::consts::PI * cfo_lag_samples(mode) as f64)
+}
+
+/// A header buffer of `mode`'s length `H`, or [`DtmbError::BufferLength`] naming `what`.
+fn check_header_len(mode: PnMode, x: &[Complex32], what: &'static str) -> Result<(), DtmbError> {
+    if x.len() == mode.header_len() {
+        Ok(())
+    } else {
+        Err(DtmbError::BufferLength {
+            what,
+            expected: mode.header_len(),
+            got: x.len(),
+        })
+    }
+}
+
 /// One header's CFO correlation `Z = Σ_n r*[n] r[n + D]` over the [`cfo_pairs`] pairs
 /// (module documentation): for the cyclic headers `r` is `header` (the pairs lie inside
 /// it, `prev` is not used), for PN595 `r*[n]` is taken from `prev`, the previous frame's
@@ -1746,14 +1766,9 @@ pub fn cfo_header_correlation(
     prev: &[Complex32],
 ) -> Result<Complex64, DtmbError> {
     let hl = mode.header_len();
-    for (x, what) in [(header, "CFO header"), (prev, "previous CFO header")] {
-        if x.len() != hl && (what == "CFO header" || !mode.is_cyclic()) {
-            return Err(DtmbError::BufferLength {
-                what,
-                expected: hl,
-                got: x.len(),
-            });
-        }
+    check_header_len(mode, header, "CFO header")?;
+    if !mode.is_cyclic() {
+        check_header_len(mode, prev, "previous CFO header")?;
     }
     let c = |a: &Complex32, b: &Complex32| {
         let z = a.conj() * b;
@@ -1847,12 +1862,8 @@ impl CfoCorrector {
             if self.have_prev {
                 self.acc += cfo_header_correlation(self.mode, header, &self.prev)?;
                 self.headers += 1;
-            } else if header.len() != self.prev.len() {
-                return Err(DtmbError::BufferLength {
-                    what: "CFO header",
-                    expected: self.prev.len(),
-                    got: header.len(),
-                });
+            } else {
+                check_header_len(self.mode, header, "CFO header")?;
             }
             self.prev.copy_from_slice(header);
             self.have_prev = true;
@@ -1869,8 +1880,7 @@ impl CfoCorrector {
         if self.headers == 0 {
             return 0.0;
         }
-        self.acc.arg() * super::pn::SAMPLE_RATE_HZ
-            / (2.0 * std::f64::consts::PI * cfo_lag_samples(self.mode) as f64)
+        cfo_hz_of_phase(self.mode, self.acc.arg())
     }
 
     /// Correlations summed into the estimate so far.
@@ -1907,13 +1917,14 @@ impl CfoCorrector {
         next_header: &[Complex32],
     ) -> Result<(&[Complex32], &[Complex32]), DtmbError> {
         let (hl, fl) = (self.mode.header_len(), self.mode.frame_len());
-        if frame.len() != fl || next_header.len() != hl {
+        if frame.len() != fl {
             return Err(DtmbError::BufferLength {
                 what: "CFO-corrected frame",
                 expected: fl,
                 got: frame.len(),
             });
         }
+        check_header_len(self.mode, next_header, "CFO-corrected next header")?;
         let tau = 2.0 * std::f64::consts::PI / super::pn::SAMPLE_RATE_HZ;
         if self.started {
             self.out.copy_within(fl.., 0);
@@ -3031,12 +3042,6 @@ mod tests {
             .collect()
     }
 
-    /// `arg(z)` as a frequency (Hz) for the lag of `mode`.
-    fn cfo_of(mode: PnMode, z: Complex64) -> f64 {
-        z.arg() * crate::dtmb::pn::SAMPLE_RATE_HZ
-            / (2.0 * std::f64::consts::PI * cfo_lag_samples(mode) as f64)
-    }
-
     /// The analytic standard deviation (Hz) of the CFO estimate from `k` correlations
     /// (module documentation): with `γ = E_s/σ²` the header samples' SNR and `N` pairs a
     /// correlation, `var(θ̂) = (1/(kN))(1/γ + 1/(2γ²))` for the cyclic headers (independent
@@ -3049,8 +3054,7 @@ mod tests {
         } else {
             1.0 / (k * k * n * gamma) + 0.5 / (k * n * gamma * gamma)
         };
-        var.sqrt() * crate::dtmb::pn::SAMPLE_RATE_HZ
-            / (2.0 * std::f64::consts::PI * cfo_lag_samples(mode) as f64)
+        cfo_hz_of_phase(mode, var.sqrt())
     }
 
     /// The header samples' SNR `γ = E_s/σ²` of a one-path channel at the frame SNR
@@ -3083,7 +3087,7 @@ mod tests {
             for snr in [15.0, 0.0] {
                 let z = cfo_correlations(mode, &h, f, snr, 2100, 7);
                 let gamma = header_snr(mode, snr);
-                let est: Vec<f64> = z.iter().map(|&z| cfo_of(mode, z)).collect();
+                let est: Vec<f64> = z.iter().map(|&z| cfo_hz_of_phase(mode, z.arg())).collect();
                 let n = est.len() as f64;
                 let mean = est.iter().sum::<f64>() / n;
                 let sd = (est.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();

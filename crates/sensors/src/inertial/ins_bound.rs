@@ -235,8 +235,8 @@ impl InsBound {
     /// oscillation, not white noise; as noise white at the fix rate it is the model the
     /// estimators run, so the bound stays that of their model.
     pub fn with_velocity_noise(mut self, sigma_mps: [f64; 2]) -> Self {
-        let [h, v] = sigma_mps;
-        self.vel_noise_enu_m2ps2 = Matrix3::from_diagonal(&Vector3::new(h * h, h * h, v * v));
+        self.vel_noise_enu_m2ps2 =
+            Matrix3::from_diagonal(&super::velocity_noise_var_enu(sigma_mps));
         self
     }
 
@@ -652,8 +652,7 @@ mod tests {
             let mut info = EpochInfo::zeros();
             bound.add_epoch_information(&mut info, &at, &Vector3::zeros(), &ranges, rates);
             // The fix's covariance, from the epoch's information without the noise.
-            let fix_cov = BoundCoupling::Loose;
-            let plain = InsBound::new(&c, 0.03, fix_cov, earth, *frame.rotation());
+            let plain = InsBound::new(&c, 0.03, BoundCoupling::Loose, earth, *frame.rotation());
             let k6 = plain
                 .information(&info)
                 .fixed_view::<6, 6>(0, 0)

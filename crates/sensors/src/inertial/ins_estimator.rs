@@ -14,7 +14,7 @@ use super::ins_family::{Cov6, InsFamilyFilter, InsKalmanConfig, InsKalmanKind};
 use super::ins_tight::{InsTightEkf, TightClockConfig};
 use super::source::local_earth_of;
 use super::strapdown::NavState;
-use super::LocalEarth;
+use super::{velocity_noise_var_enu, LocalEarth};
 use crate::core::config::check_range;
 use crate::core::{ConfigIssue, EnuFrame, GpsTime, System};
 use crate::fusion::wls::{self, WlsOptions};
@@ -742,8 +742,9 @@ impl InsEstimator {
                 _ => out.rejected += fix.n,
             },
             InsCore::Builtin(kf) => {
-                let [nh, nv] = self.cfg.fix_velocity_noise_mps;
-                let extra = Matrix3::from_diagonal(&Vector3::new(nh * nh, nh * nh, nv * nv));
+                let extra = Matrix3::from_diagonal(&velocity_noise_var_enu(
+                    self.cfg.fix_velocity_noise_mps,
+                ));
                 let r = match &fix.vel {
                     Some((v, vc)) => {
                         kf.update_position_velocity(&pos, &fix.pos_cov_m2, v, &(vc + extra))
@@ -785,9 +786,9 @@ impl InsEstimator {
                     // No velocity: the fix is only remembered for the next difference.
                     _ => return,
                 };
-                let [nh, nv] = self.cfg.fix_velocity_noise_mps;
-                for (i, n) in [nh, nh, nv].iter().enumerate() {
-                    r[(3 + i, 3 + i)] += n * n;
+                let var = velocity_noise_var_enu(self.cfg.fix_velocity_noise_mps);
+                for i in 0..3 {
+                    r[(3 + i, 3 + i)] += var[i];
                 }
                 let rep = kf.update(&pos, &vel, &r);
                 // Counted per component of the difference (eq. 17), which the gates act on.

@@ -284,8 +284,7 @@ impl InsTightEkf {
     /// `σ_ρ̇² + σ_h² (u_e² + u_n²) + σ_v² u_u²`: the projection of the velocity noise
     /// `diag(σ_h², σ_h², σ_v²)` the loose filter adds to a fix velocity's covariance.
     pub fn with_velocity_noise(mut self, sigma_mps: [f64; 2]) -> Self {
-        let [h, v] = sigma_mps;
-        self.rate_velocity_var_enu = Vector3::new(h * h, h * h, v * v);
+        self.rate_velocity_var_enu = super::velocity_noise_var_enu(sigma_mps);
         self
     }
 
@@ -1132,6 +1131,36 @@ mod tests {
         assert!((rekf.covariance() - ekf.covariance()).amax() < 1e-12 * p.amax());
     }
 
+    /// Six GPS ranges of [`range`] from the origin, each `offset_m` long (a common clock
+    /// or position error).
+    fn offset_ranges(f: &EnuFrame, offset_m: f64) -> Vec<RangeMeasurement> {
+        (0..6)
+            .map(|j| {
+                let mut m = range(
+                    f,
+                    System::Gps,
+                    j as f64,
+                    0.5 + 0.1 * j as f64,
+                    Vector3::zeros(),
+                );
+                m.pseudorange_m += offset_m;
+                m
+            })
+            .collect()
+    }
+
+    /// One second of a perfect IMU at rest (100 samples) from `t0_s`.
+    fn rest_one_second(k: &mut InsTightEkf, f: &EnuFrame, t0_s: f64) {
+        let earth = crate::inertial::source::local_earth_of(f);
+        for i in 1..=100 {
+            k.propagate(&ImuSample {
+                t_s: t0_s + i as f64 * 0.01,
+                accel_mps2: Vector3::new(0.0, 0.0, earth.gravity_mps2(0.0)),
+                gyro_rps: Vector3::zeros(),
+            });
+        }
+    }
+
     /// The first epoch of a filter whose clock bias is at its diffuse prior resolves a
     /// 30 km receiver clock; its innovations (10⁴ σ) must not enter the fading memory V:
     /// at the next epoch, with ranges that fit, the factor is 1. Seeded with the first
@@ -1145,29 +1174,10 @@ mod tests {
             ..InsKalmanConfig::default()
         };
         let mut k = filter_at_rest(&f).with_kalman(&kcfg).unwrap();
-        let earth = crate::inertial::source::local_earth_of(&f);
-        let ms: Vec<RangeMeasurement> = (0..6)
-            .map(|j| {
-                let mut m = range(
-                    &f,
-                    System::Gps,
-                    j as f64,
-                    0.5 + 0.1 * j as f64,
-                    Vector3::zeros(),
-                );
-                m.pseudorange_m += 30_000.0;
-                m
-            })
-            .collect();
+        let ms = offset_ranges(&f, 30_000.0);
         let mut lambdas = Vec::new();
         for epoch in 0..2 {
-            for i in 1..=100 {
-                k.propagate(&ImuSample {
-                    t_s: (epoch * 100 + i) as f64 * 0.01,
-                    accel_mps2: Vector3::new(0.0, 0.0, earth.gravity_mps2(0.0)),
-                    gyro_rps: Vector3::zeros(),
-                });
-            }
+            rest_one_second(&mut k, &f, f64::from(epoch));
             lambdas.push(k.stf_inflate(ms.iter(), &f, 0.0, false).unwrap());
             for m in &ms {
                 k.update_range(m, &f, 0.0).unwrap();
@@ -1193,30 +1203,11 @@ mod tests {
         k.p[(tidx::CLOCK_BIAS, tidx::CLOCK_BIAS)] = 1.0;
         k.p[(tidx::CLOCK_DRIFT, tidx::CLOCK_DRIFT)] = 0.01;
         let mut k = k.with_kalman(&kcfg).unwrap();
-        let earth = crate::inertial::source::local_earth_of(&f);
-        for i in 1..=100 {
-            k.propagate(&ImuSample {
-                t_s: i as f64 * 0.01,
-                accel_mps2: Vector3::new(0.0, 0.0, earth.gravity_mps2(0.0)),
-                gyro_rps: Vector3::zeros(),
-            });
-        }
+        rest_one_second(&mut k, &f, 0.0);
         let before = *k.covariance();
         let fd = k.fading.as_ref().unwrap();
         let want = fd.fpf * 3.0 + fd.q;
-        let ms: Vec<RangeMeasurement> = (0..6)
-            .map(|j| {
-                let mut m = range(
-                    &f,
-                    System::Gps,
-                    j as f64,
-                    0.5 + 0.1 * j as f64,
-                    Vector3::zeros(),
-                );
-                m.pseudorange_m += 40.0;
-                m
-            })
-            .collect();
+        let ms = offset_ranges(&f, 40.0);
         let lambda = k.stf_inflate(ms.iter(), &f, 0.0, false);
         assert_eq!(lambda, Some(3.0));
         assert!((k.covariance() - want).amax() < 1e-9 * want.amax());

@@ -139,6 +139,14 @@ pub(crate) fn skew(v: &Vector3<f64>) -> nalgebra::Matrix3<f64> {
     nalgebra::Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
 }
 
+/// The ENU variances `[σ_h², σ_h², σ_v²]` (m²/s²) of velocity noise given as
+/// `[σ_h, σ_v]` (m/s): what a velocity measurement does not describe of the IMU's motion
+/// (a walker's gait, `fix_velocity_noise_mps` of [`ins_estimator::InsFilterConfig`]).
+pub fn velocity_noise_var_enu(sigma_mps: [f64; 2]) -> Vector3<f64> {
+    let [h, v] = sigma_mps;
+    Vector3::new(h * h, h * h, v * v)
+}
+
 /// Heading from north, clockwise, in [0, 2π), of the body forward axis of `q_nb`.
 pub fn heading_of_attitude(q_nb: &nalgebra::UnitQuaternion<f64>) -> f64 {
     let x = q_nb * Vector3::x();
