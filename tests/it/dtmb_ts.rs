@@ -458,6 +458,28 @@ fn dtmb_ts_a_bad_payload_is_refused_with_its_byte_offset() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The Kehui Road world in `dir` with its tower D01 carrying `dir/pay.ts` as 16QAM 0.8
+/// (`qam`, `fec`, `payload` in its `[[transmitter]]`) and `sensors_dtmb` (lines of
+/// `[sensors.dtmb]` keys) added to its `[sensors.dtmb]` table, written as `dir/name`.
+fn kehui_world_with_payload(dir: &Path, name: &str, sensors_dtmb: &str) -> PathBuf {
+    let text =
+        std::fs::read_to_string(crate::common::repo().join("worlds/seed000-kehui.toml")).unwrap();
+    let text = text
+        .replace(
+            "pn_mode = \"pn945\"\n",
+            "pn_mode = \"pn945\"\nqam = \"16qam\"\nfec = \"0.8\"\npayload = \"pay.ts\"\n",
+        )
+        .replace(
+            "[sensors.dtmb]\n",
+            &format!("[sensors.dtmb]\n{sensors_dtmb}"),
+        );
+    assert!(text.contains("payload = \"pay.ts\""));
+    assert!(text.contains(&format!("[sensors.dtmb]\n{sensors_dtmb}")));
+    let world = dir.join(name);
+    std::fs::write(&world, text).unwrap();
+    world
+}
+
 /// A world's tower carrying a programme: the Kehui Road world's D01 with `qam = "16qam"`,
 /// `fec = "0.8"` and `payload = "pay.ts"` in its `[[transmitter]]`, recorded by `dtmb iq
 /// --world --fec 0.6 --interleaver 240` (the command line replaces the table's code rate
@@ -474,15 +496,7 @@ fn dtmb_ts_a_world_tower_carries_its_payload_through_the_scene() {
     let dir = tmp_dir("ts-world");
     let payload = random_ts(400, 11);
     std::fs::write(dir.join("pay.ts"), &payload).unwrap();
-    let text =
-        std::fs::read_to_string(crate::common::repo().join("worlds/seed000-kehui.toml")).unwrap();
-    let text = text.replace(
-        "pn_mode = \"pn945\"\n",
-        "pn_mode = \"pn945\"\nqam = \"16qam\"\nfec = \"0.8\"\npayload = \"pay.ts\"\n",
-    );
-    assert!(text.contains("payload = \"pay.ts\""));
-    let world = dir.join("kehui.toml");
-    std::fs::write(&world, text).unwrap();
+    let world = kehui_world_with_payload(&dir, "kehui.toml", "");
     let base = dir.join("rec");
     let o = hybridnav(&[
         "dtmb",
@@ -534,6 +548,157 @@ fn dtmb_ts_a_world_tower_carries_its_payload_through_the_scene() {
         .expect("the first decoded packet is one of the payload's");
     assert!(start <= 2 * 6, "starts at packet {start}");
     assert_eq!(&got[..], &payload[start * 188..start * 188 + got.len()]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The receiver's oscillator as an independent receiver measures it. The Kehui Road
+/// world's D01 carrying 16QAM 0.6 M = 240 (as above) is recorded by `dtmb iq --world` with
+/// `[sensors.dtmb] rx_oscillator_ppm` = 0, +2 and −10 (a ±2 ppm TCXO is the common
+/// grade, IQD "Specifying TCXOs", stability code G; 10 ppm a plain crystal). A receiver
+/// whose oscillator runs fast by ε mixes down with `f_c(1 + ε)` and samples at
+/// `f_s(1 + ε)`, so the recording carries a carrier offset `−ε f_c` (−964 Hz at 2 ppm on
+/// Kehui's 482 MHz) and frames that arrive `ε N` samples later each frame (N = 4725 for
+/// PN945: 0.00945 samples at 2 ppm; dtmb-sdr reports that as a slope of −ε N). dtmb-sdr (`--pn-schedule-tracking`, its bounded clock
+/// fit) must decode the payload bit-exact at every offset, and its own estimates must
+/// agree with the world's:
+///
+/// - its carrier offset (coarse plus residual) less that of the 0 ppm recording, which
+///   holds the platform's Doppler, within 1 Hz of `−ε f_c` (measured 2026-12-05: −964.0,
+///   +4820.0 Hz, both within 0.05 Hz; its residual fit itself moves by ≈ 1 Hz);
+/// - its header-phase slope within 15 % of `−ε N` plus the Doppler's delay rate
+///   (measured: −0.0105 against −0.0095 samples a frame at +2 ppm, −0.0474 against
+///   −0.0473 at +10 ppm, +0.0096 against +0.0094 at −2 ppm: the fit's scatter on this
+///   multipath channel is up to 11 %).
+///
+/// A wrong sign of either offset, or the two offsets not from one oscillator, fails.
+/// 400 frames: dtmb-sdr's clock fit needs about 200 header observations (with 190
+/// frames it does not lock at 2 ppm and decodes nothing).
+#[test]
+fn dtmb_ts_a_world_receivers_oscillator_offset_is_what_dtmb_sdr_measures() {
+    if dtmb_sdr_bin().is_none() {
+        return;
+    }
+    let dir = tmp_dir("ts-world-osc");
+    let payload = random_ts(400, 13);
+    std::fs::write(dir.join("pay.ts"), &payload).unwrap();
+    let frame_samples = 4725.0;
+    let carrier_hz = 482.0e6;
+    // (ppm, carrier offset, header-phase slope in samples a frame) as dtmb-sdr reports them.
+    let mut measured: Vec<(f64, f64, f64)> = Vec::new();
+    for ppm in [0.0, 2.0, -10.0] {
+        let world = kehui_world_with_payload(
+            &dir,
+            &format!("kehui{ppm}.toml"),
+            &format!("rx_oscillator_ppm = {ppm:?}\n"),
+        );
+        let base = dir.join(format!("rec{ppm}"));
+        let o = hybridnav(&[
+            "dtmb",
+            "iq",
+            "--world",
+            world.to_str().unwrap(),
+            "--from-s",
+            "5",
+            "--frames",
+            "400",
+            "--fec",
+            "0.6",
+            "--interleaver",
+            "240",
+            "--out",
+            base.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let meta = std::fs::read_to_string(format!("{}.sigmf-meta", base.display())).unwrap();
+        assert!(
+            meta.contains("\"core:frequency\": 482000000.0"),
+            "carrier: {meta:.400}"
+        );
+        let out_ts = dir.join(format!("out{ppm}.ts"));
+        let o = Command::new("dtmb-decode")
+            .args([
+                "--input",
+                &format!("{}.sigmf-data", base.display()),
+                "--input-format",
+                "cf32",
+                "--input-rate",
+                "7560000",
+                "--pn-mode",
+                "pn945",
+                "--system-info-index",
+                "13",
+                "--pn-schedule-tracking",
+                "--pn-schedule-max-clock-ppm",
+                "20",
+                "--output",
+                out_ts.to_str().unwrap(),
+                "--error-policy",
+                "continue",
+                "--workers",
+                "2",
+            ])
+            .output()
+            .unwrap();
+        let got = std::fs::read(&out_ts).unwrap_or_default();
+        // 400 frames less the delay (170) and the last, 6 packets a frame: the payload's
+        // 400 packets (less those of a frame begun before the recording), then nulls.
+        assert!(
+            got.len() >= 1300 * 188,
+            "{ppm} ppm: {} packets: {}",
+            got.len() / 188,
+            tail(&o.stderr)
+        );
+        let start = payload
+            .chunks(188)
+            .position(|p| p == &got[..188])
+            .unwrap_or_else(|| panic!("{ppm} ppm: the first packet is not the payload's"));
+        assert!(start <= 2 * 6, "{ppm} ppm: starts at packet {start}");
+        let rest = payload.len() - start * 188;
+        assert_eq!(&got[..rest], &payload[start * 188..], "{ppm} ppm");
+        for (k, p) in got[rest..].chunks(188).enumerate() {
+            let pid = (u16::from(p[1] & 0x1f) << 8) | u16::from(p[2]);
+            assert!(
+                p[0] == 0x47 && pid == 0x1fff,
+                "{ppm} ppm: packet {k} after the payload is not null"
+            );
+        }
+        let log =
+            String::from_utf8_lossy(&o.stderr).into_owned() + &String::from_utf8_lossy(&o.stdout);
+        let value = |key: &str| -> f64 {
+            log.lines()
+                .find_map(|l| l.strip_prefix(&format!("{key}=")))
+                .and_then(|v| v.trim().parse().ok())
+                .unwrap_or_else(|| panic!("{ppm} ppm: dtmb-decode reported no {key}"))
+        };
+        assert!(
+            log.lines().any(|l| l.trim() == "pn_schedule_locked=true"),
+            "{ppm} ppm: dtmb-sdr's clock fit did not lock: {}",
+            tail(&o.stderr)
+        );
+        let cfo_hz = value("coarse_cfo_hz") + value("residual_cfo_hz");
+        let slope = value("pn_schedule_phase_slope_samples_per_frame");
+        eprintln!("{ppm} ppm: dtmb-sdr carrier offset {cfo_hz:.2} Hz, header slope {slope:.5}");
+        measured.push((ppm, cfo_hz, slope));
+    }
+    let (_, cfo0_hz, _) = measured[0];
+    // dtmb-sdr's slope is negative when the frames arrive later each frame. The platform's
+    // Doppler f_D (the 0 ppm recording's offset) is a range rate −f_D λ, a delay growing
+    // by −f_D/f_c of each frame's N samples, so it adds f_D/f_c · N to the slope.
+    let doppler_slope = cfo0_hz / carrier_hz * frame_samples;
+    for &(ppm, cfo_hz, slope) in &measured[1..] {
+        let eps = ppm * 1e-6;
+        let want_hz = -eps * carrier_hz;
+        assert!(
+            (cfo_hz - cfo0_hz - want_hz).abs() < 1.0,
+            "{ppm} ppm: carrier offset {:.2} Hz over the 0 ppm recording's, want {want_hz:.2}",
+            cfo_hz - cfo0_hz
+        );
+        let want_slope = -eps * frame_samples + doppler_slope;
+        assert!(
+            (slope - want_slope).abs() < 0.15 * (eps * frame_samples).abs(),
+            "{ppm} ppm: header slope {slope:.5} samples a frame, want {want_slope:.5}"
+        );
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 
