@@ -15,7 +15,7 @@ use hybridnav::dtmb::frame::CarrierMode;
 use hybridnav::dtmb::ldpc::CodeRate;
 use hybridnav::dtmb::mapping::Constellation;
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Command, Output};
 
 /// Frames decodable after the de-interleaver in every recording.
 const DECODED_FRAMES: usize = 15;
@@ -42,6 +42,36 @@ fn dtmb_sdr_bin() -> Option<PathBuf> {
             None
         }
     }
+}
+
+/// dtmb-sdr's complete receiver on a cf32 recording at 7.56 Msps (`--pn-mode pn`,
+/// `--system-info-index si`, then `extra`), writing the transport stream to `out` and
+/// going on past undecodable frames; its output (the log is on stderr and stdout).
+fn dtmb_decode(input: &str, pn: &str, si: &str, extra: &[&str], out: &str) -> Output {
+    Command::new("dtmb-decode")
+        .args([
+            "--input",
+            input,
+            "--input-format",
+            "cf32",
+            "--input-rate",
+            "7560000",
+            "--pn-mode",
+            pn,
+            "--system-info-index",
+            si,
+        ])
+        .args(extra)
+        .args([
+            "--output",
+            out,
+            "--error-policy",
+            "continue",
+            "--workers",
+            "2",
+        ])
+        .output()
+        .expect("dtmb-decode runs (its presence was checked)")
 }
 
 /// A random transport stream of `packets` packets on PID 0x100 with a continuous
@@ -138,29 +168,13 @@ fn check(
     } else {
         "c3780"
     };
-    let o = Command::new("dtmb-decode")
-        .args([
-            "--input",
-            &data,
-            "--input-format",
-            "cf32",
-            "--input-rate",
-            "7560000",
-            "--pn-mode",
-            case.pn,
-            "--system-info-index",
-            &p.si_index().to_string(),
-            "--frame-body-mode",
-            body_mode,
-            "--output",
-            &out_ts,
-            "--error-policy",
-            "continue",
-            "--workers",
-            "2",
-        ])
-        .output()
-        .map_err(|e| e.to_string())?;
+    let o = dtmb_decode(
+        &data,
+        case.pn,
+        &p.si_index().to_string(),
+        &["--frame-body-mode", body_mode],
+        &out_ts,
+    );
     let got = std::fs::read(&out_ts).unwrap_or_default();
     let n = got.len() / 188;
     // Whole FEC groups of the decodable frames (32QAM and 4QAM-NR groups span two).
@@ -347,27 +361,13 @@ fn dtmb_ts_a_short_payload_is_followed_by_null_packets() {
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let out_ts = dir.join("out.ts");
-    let o = Command::new("dtmb-decode")
-        .args([
-            "--input",
-            &format!("{}.sigmf-data", base.display()),
-            "--input-format",
-            "cf32",
-            "--input-rate",
-            "7560000",
-            "--pn-mode",
-            "pn945",
-            "--system-info-index",
-            "15",
-            "--output",
-            out_ts.to_str().unwrap(),
-            "--error-policy",
-            "continue",
-            "--workers",
-            "2",
-        ])
-        .output()
-        .unwrap();
+    let o = dtmb_decode(
+        &format!("{}.sigmf-data", base.display()),
+        "pn945",
+        "15",
+        &[],
+        out_ts.to_str().unwrap(),
+    );
     let got = std::fs::read(&out_ts).unwrap_or_default();
     assert!(
         got.len() > payload.len() + 10 * 188,
@@ -516,27 +516,13 @@ fn dtmb_ts_a_world_tower_carries_its_payload_through_the_scene() {
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let out_ts = dir.join("out.ts");
-    let o = Command::new("dtmb-decode")
-        .args([
-            "--input",
-            &format!("{}.sigmf-data", base.display()),
-            "--input-format",
-            "cf32",
-            "--input-rate",
-            "7560000",
-            "--pn-mode",
-            "pn945",
-            "--system-info-index",
-            "13",
-            "--output",
-            out_ts.to_str().unwrap(),
-            "--error-policy",
-            "continue",
-            "--workers",
-            "2",
-        ])
-        .output()
-        .unwrap();
+    let o = dtmb_decode(
+        &format!("{}.sigmf-data", base.display()),
+        "pn945",
+        "13",
+        &[],
+        out_ts.to_str().unwrap(),
+    );
     let got = std::fs::read(&out_ts).unwrap_or_default();
     let n = got.len() / 188;
     // 190 frames less the delay (170) and the last: 19 frames of 6 packets, the first of
@@ -615,30 +601,17 @@ fn dtmb_ts_a_world_receivers_oscillator_offset_is_what_dtmb_sdr_measures() {
             "carrier: {meta:.400}"
         );
         let out_ts = dir.join(format!("out{ppm}.ts"));
-        let o = Command::new("dtmb-decode")
-            .args([
-                "--input",
-                &format!("{}.sigmf-data", base.display()),
-                "--input-format",
-                "cf32",
-                "--input-rate",
-                "7560000",
-                "--pn-mode",
-                "pn945",
-                "--system-info-index",
-                "13",
+        let o = dtmb_decode(
+            &format!("{}.sigmf-data", base.display()),
+            "pn945",
+            "13",
+            &[
                 "--pn-schedule-tracking",
                 "--pn-schedule-max-clock-ppm",
                 "20",
-                "--output",
-                out_ts.to_str().unwrap(),
-                "--error-policy",
-                "continue",
-                "--workers",
-                "2",
-            ])
-            .output()
-            .unwrap();
+            ],
+            out_ts.to_str().unwrap(),
+        );
         let got = std::fs::read(&out_ts).unwrap_or_default();
         // 400 frames less the delay (170) and the last, 6 packets a frame: the payload's
         // 400 packets (less those of a frame begun before the recording), then nulls.
@@ -791,27 +764,13 @@ fn dtmb_ts_64qam_0_6_threshold_agrees_with_dtmb_sdr() {
         ]);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         let out_ts = dir.join(format!("out-{snr}.ts"));
-        let o = Command::new("dtmb-decode")
-            .args([
-                "--input",
-                &format!("{}.sigmf-data", base.display()),
-                "--input-format",
-                "cf32",
-                "--input-rate",
-                "7560000",
-                "--pn-mode",
-                "pn945",
-                "--system-info-index",
-                "21",
-                "--output",
-                out_ts.to_str().unwrap(),
-                "--error-policy",
-                "continue",
-                "--workers",
-                "2",
-            ])
-            .output()
-            .unwrap();
+        let o = dtmb_decode(
+            &format!("{}.sigmf-data", base.display()),
+            "pn945",
+            "21",
+            &[],
+            out_ts.to_str().unwrap(),
+        );
         let got = std::fs::read(&out_ts).unwrap_or_default();
         let sent: std::collections::HashSet<&[u8]> = payload.chunks(188).collect();
         let good = got.chunks(188).filter(|p| sent.contains(p)).count();
