@@ -288,6 +288,11 @@ pub enum DtmbCommand {
         /// the world's [montecarlo] seed; without: default 1).
         #[arg(long)]
         seed: Option<u64>,
+        /// The receiver oscillator's error in ppm (|ppm| ≤ 100): the recording carries
+        /// its carrier offset −ppm·f_c and sampling-clock offset (default 0; with --world
+        /// the world's [sensors.dtmb] rx_oscillator_ppm sets it).
+        #[arg(long, allow_hyphen_values = true, value_name = "PPM")]
+        oscillator_ppm: Option<f64>,
         /// Output base path (without the .sigmf-data / .sigmf-meta suffix).
         #[arg(long)]
         out: PathBuf,
@@ -503,6 +508,7 @@ pub fn run(cli: Cli) -> Result<()> {
             oversampling,
             channel,
             seed,
+            oscillator_ppm,
             out,
             profile,
         }) => cmd_dtmb_iq(DtmbIqArgs {
@@ -517,6 +523,7 @@ pub fn run(cli: Cli) -> Result<()> {
             oversampling,
             channel,
             seed,
+            oscillator_ppm,
             out,
             profile,
         }),
@@ -867,6 +874,7 @@ struct DtmbIqArgs {
     oversampling: usize,
     channel: u32,
     seed: Option<u64>,
+    oscillator_ppm: Option<f64>,
     out: PathBuf,
     profile: dtmb::ProfileArgs,
 }
@@ -895,6 +903,12 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
         }
         if a.oversampling != 1 {
             bail!("--oversampling is not supported with --world (7.56 Msps only)");
+        }
+        if a.oscillator_ppm.is_some() {
+            bail!(
+                "--oscillator-ppm cannot be given with --world: the world's [sensors.dtmb] \
+                 rx_oscillator_ppm sets the receiver's oscillator"
+            );
         }
         if a.frames == 0 {
             bail!("--frames must be at least 1");
@@ -965,30 +979,32 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
         bail!("--snr-db must be a finite number of dB, got {snr_db}");
     }
     let center_hz = crate::dtmb::uhf_channel_center_hz(a.channel)?;
+    let ppm = a.oscillator_ppm.unwrap_or(0.0);
+    if !(ppm.is_finite() && ppm.abs() <= 100.0) {
+        bail!("--oscillator-ppm must be a finite error of at most 100 ppm, got {ppm}");
+    }
     // Refuse bad data-layer options before creating anything.
     drop(data);
     mkdir()?;
     let rate_hz = SAMPLE_RATE_HZ * a.oversampling as f64;
     let profile = &a.profile;
-    let samples = crate::dtmb::sigmf::write_iq_sigmf(
-        out,
-        format,
-        center_hz,
+    let rec = crate::dtmb::sigmf::AwgnRecording::new(
         mode,
         a.frames,
         snr_db,
         a.oversampling,
         a.seed.unwrap_or(1),
-        &|| {
-            crate::dtmb::data_layer::data_layer_from_options(
-                profile.payload.as_deref(),
-                profile.qam.as_deref(),
-                profile.fec.as_deref(),
-                profile.interleaver,
-                profile.carriers,
-            )
-        },
-    )?;
+    )
+    .with_oscillator(ppm, center_hz);
+    let samples = crate::dtmb::sigmf::write_iq_sigmf(out, format, &rec, &|| {
+        crate::dtmb::data_layer::data_layer_from_options(
+            profile.payload.as_deref(),
+            profile.qam.as_deref(),
+            profile.fec.as_deref(),
+            profile.interleaver,
+            profile.carriers,
+        )
+    })?;
     eprintln!(
         "wrote {} samples ({} frames at {:.2} Msps, {:.0} MHz) to {}.sigmf-data and .sigmf-meta",
         samples,

@@ -500,13 +500,120 @@ pub fn generate_iq_with(
     data: Option<super::data_layer::DataLayer>,
 ) -> Result<(Vec<Complex32>, Vec<Annotation>), DtmbError> {
     let profile = data.as_ref().map(|d| *d.profile());
+    let rec = AwgnRecording::new(mode, frames, snr_db, oversampling, seed);
     let mut samples = Vec::new();
-    stream_iq(mode, frames, snr_db, oversampling, seed, data, &mut |b| {
+    stream_iq(&rec, data, &mut |b| {
         samples.extend_from_slice(b);
         Ok(())
     })?;
-    let annotations = iq_annotations(mode, frames, oversampling, profile.as_ref()).collect();
+    let annotations = iq_annotations(&rec, profile.as_ref()).collect();
     Ok((samples, annotations))
+}
+
+/// What [`stream_iq`] records: `frames` frames of `mode` through white noise at `snr_db`
+/// over the 7.56 MHz band, `oversampling` samples a symbol, the named random streams of
+/// `seed`, heard by a receiver whose oscillator is off by `rx_oscillator_ppm`.
+///
+/// **The receiver's oscillator.** One oscillator error `ε = rx_oscillator_ppm·10⁻⁶`
+/// drives both the mixer and the sampling clock of a receiver: it mixes down with
+/// `f_c(1 + ε)` and samples at `f_s(1 + ε)`. The recording then carries the carrier
+/// offset `Δf = −ε f_c` and takes transmitter sample `m` at receiver sample `m(1 + ε)`
+/// ([`ChannelConfig::from_oscillators`] with a perfect transmitter, the channel's
+/// `x(n/(1 + ε))`), so frame `k` starts at receiver sample `k N (1 + ε)`: `ε N`
+/// samples later each frame (Speth, Fechtel, Fock & Meyr, "Optimum receiver design for
+/// wireless broad-band systems using OFDM — Part I", IEEE Trans. Commun. 47(11), 1999,
+/// §III: the carrier and sampling offsets of one oscillator). A ±2 ppm TCXO is the
+/// common grade (IQD, "Specifying TCXOs", stability code G): −964 Hz and 0.0095 samples
+/// a PN945 frame at 482 MHz. With `ε = 0` the recording is the one without an
+/// oscillator, sample for sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AwgnRecording {
+    /// Frame header mode.
+    pub mode: PnMode,
+    /// Number of frames.
+    pub frames: usize,
+    /// SNR over the 7.56 MHz band (dB).
+    pub snr_db: f64,
+    /// Output samples a symbol (SRRC shaping when > 1).
+    pub oversampling: usize,
+    /// Seed of the named streams `dtmb/payload` and `dtmb/noise`.
+    pub seed: u64,
+    /// The receiver oscillator's error ε in ppm (|ε| ≤ 100).
+    pub rx_oscillator_ppm: f64,
+    /// The carrier the recording is centred on (Hz), which the oscillator's carrier
+    /// offset `−ε f_c` is taken at.
+    pub center_freq_hz: f64,
+}
+
+impl AwgnRecording {
+    /// A recording with a perfect receiver oscillator (the carrier is then irrelevant).
+    pub fn new(mode: PnMode, frames: usize, snr_db: f64, oversampling: usize, seed: u64) -> Self {
+        Self {
+            mode,
+            frames,
+            snr_db,
+            oversampling,
+            seed,
+            rx_oscillator_ppm: 0.0,
+            center_freq_hz: 0.0,
+        }
+    }
+
+    /// The same recording heard through an oscillator `ppm` off, at carrier `center_freq_hz`.
+    pub fn with_oscillator(self, ppm: f64, center_freq_hz: f64) -> Self {
+        Self {
+            rx_oscillator_ppm: ppm,
+            center_freq_hz,
+            ..self
+        }
+    }
+
+    /// The (fractional) receiver sample at which frame `k` starts, before oversampling.
+    pub fn frame_start_sample(&self, k: usize) -> f64 {
+        (k * self.mode.frame_len()) as f64 * (1.0 + self.rx_oscillator_ppm * 1e-6)
+    }
+
+    /// The recording's length in output samples: `frames · N · L`, as without an offset
+    /// (the receiver records for as many of its own sample periods).
+    pub fn samples(&self) -> u64 {
+        (self.frames * self.mode.frame_len() * self.oversampling) as u64
+    }
+
+    fn validate(&self) -> Result<(), DtmbError> {
+        let (frames, snr_db, oversampling) = (self.frames, self.snr_db, self.oversampling);
+        if frames == 0 || frames > MAX_IQ_FRAMES {
+            return Err(DtmbError::InvalidParameter {
+                name: "frames",
+                reason: format!("must lie in 1..={MAX_IQ_FRAMES}, got {frames}"),
+            });
+        }
+        if !snr_db.is_finite() {
+            return Err(DtmbError::InvalidParameter {
+                name: "snr_db",
+                reason: format!("must be finite, got {snr_db}"),
+            });
+        }
+        if !(1..=16).contains(&oversampling) {
+            return Err(DtmbError::InvalidParameter {
+                name: "oversampling",
+                reason: format!("must lie in 1..=16, got {oversampling}"),
+            });
+        }
+        let (ppm, f_c) = (self.rx_oscillator_ppm, self.center_freq_hz);
+        if !(ppm.is_finite() && ppm.abs() <= 100.0) {
+            return Err(DtmbError::InvalidParameter {
+                name: "rx_oscillator_ppm",
+                reason: format!("must be a finite error of at most 100 ppm, got {ppm}"),
+            });
+        }
+        if ppm != 0.0 && !(f_c.is_finite() && f_c > 0.0) {
+            return Err(DtmbError::InvalidParameter {
+                name: "center_freq_hz",
+                reason: format!("an oscillator offset needs the carrier, got {f_c} Hz"),
+            });
+        }
+        Ok(())
+    }
 }
 
 /// Most frames [`stream_iq`] makes: 10⁶ frames, 555 to 625 s of signal (≤ 38 GB of
@@ -514,42 +621,23 @@ pub fn generate_iq_with(
 /// flat.
 pub const MAX_IQ_FRAMES: usize = 1_000_000;
 
-/// The samples of [`generate_iq_with`] handed to `sink` frame by frame (with
-/// oversampling, `N · L` output samples a call, the filter's delay removed), in order, so
-/// memory stays flat whatever the length. The frame `k` starts at output sample
-/// `k · N · L`, as in the in-memory form, and the samples are bit-identical to it.
+/// The samples of `rec` (as [`generate_iq_with`] makes them) handed to `sink` frame by
+/// frame (with oversampling, `N · L` output samples a call, the filter's delay removed),
+/// in order, so memory stays flat whatever the length. The frame `k` starts at output
+/// sample `k · N · L` (`k N (1 + ε) L` through an oscillator off by `ε`), as in the
+/// in-memory form, and the samples are bit-identical to it.
 ///
 /// # Errors
 /// As [`generate_iq_with`] (at most [`MAX_IQ_FRAMES`] frames), and the first error of
 /// `sink`, which stops the stream.
 pub fn stream_iq(
-    mode: PnMode,
-    frames: usize,
-    snr_db: f64,
-    oversampling: usize,
-    seed: u64,
+    rec: &AwgnRecording,
     data: Option<super::data_layer::DataLayer>,
     sink: &mut dyn FnMut(&[Complex32]) -> Result<(), DtmbError>,
 ) -> Result<(), DtmbError> {
-    if frames == 0 || frames > MAX_IQ_FRAMES {
-        return Err(DtmbError::InvalidParameter {
-            name: "frames",
-            reason: format!("must lie in 1..={MAX_IQ_FRAMES}, got {frames}"),
-        });
-    }
-    if !snr_db.is_finite() {
-        return Err(DtmbError::InvalidParameter {
-            name: "snr_db",
-            reason: format!("must be finite, got {snr_db}"),
-        });
-    }
-    if !(1..=16).contains(&oversampling) {
-        return Err(DtmbError::InvalidParameter {
-            name: "oversampling",
-            reason: format!("must lie in 1..=16, got {oversampling}"),
-        });
-    }
-    let streams = TrialRng::new(seed, 0);
+    rec.validate()?;
+    let (mode, frames, snr_db, oversampling) = (rec.mode, rec.frames, rec.snr_db, rec.oversampling);
+    let streams = TrialRng::new(rec.seed, 0);
     let cfg = TxConfig {
         schedule: FrameSchedule {
             mode,
@@ -567,12 +655,14 @@ pub fn stream_iq(
         None => Transmitter::new(cfg, &mut streams.stream("dtmb/payload")),
     };
     let n = mode.frame_len();
-    let ch_cfg = ChannelConfig {
-        paths: vec![ChannelPath::new(0.0, 1.0, 0.0, 0.0)],
-        cfo_hz: 0.0,
-        sfo_ppm: 0.0,
-        snr_db: Some(snr_db),
-    };
+    // A perfect transmitter and the receiver's oscillator (zero: no offset at all).
+    let ch_cfg = ChannelConfig::from_oscillators(
+        vec![ChannelPath::new(0.0, 1.0, 0.0, 0.0)],
+        0.0,
+        rec.rx_oscillator_ppm,
+        rec.center_freq_hz,
+        Some(snr_db),
+    );
     let mut ch = Channel::new(ch_cfg, mode, n)?;
     let mut noise = streams.stream("dtmb/noise");
     let mut block = vec![Complex32::default(); n];
@@ -627,17 +717,19 @@ pub fn stream_iq(
 
 /// The annotations of [`stream_iq`]'s recording, one per frame, made on demand:
 /// `frame k PNxxx phase p` (and the profile's name with a data layer), starting at
-/// sample `k · N · L`.
+/// sample `k · N · L` (the nearest to `k N (1 + ε) L` through an oscillator off by `ε`).
 pub fn iq_annotations<'a>(
-    mode: PnMode,
-    frames: usize,
-    oversampling: usize,
+    rec: &AwgnRecording,
     profile: Option<&'a super::data_layer::Profile>,
 ) -> impl Iterator<Item = Annotation> + 'a {
-    let n = mode.frame_len();
-    (0..frames).map(move |k| Annotation {
-        sample_start: (k * n * oversampling) as u64,
-        sample_count: (n * oversampling) as u64,
+    let rec = *rec;
+    let (mode, l) = (rec.mode, rec.oversampling as f64);
+    // Through an oscillator off by ε the frames start at fractional receiver samples;
+    // each annotation starts at the nearest one and runs to the next frame's.
+    let start = move |k: usize| (rec.frame_start_sample(k) * l).round() as u64;
+    (0..rec.frames).map(move |k| Annotation {
+        sample_start: start(k),
+        sample_count: start(k + 1) - start(k),
         label: match profile {
             Some(p) => format!(
                 "frame {k} {} phase {} {}",
@@ -650,43 +742,31 @@ pub fn iq_annotations<'a>(
     })
 }
 
-/// Writes [`generate_iq_with`]'s recording as SigMF (`BASE.sigmf-data`, `.sigmf-meta`)
-/// frame by frame, with flat memory: the output is byte-identical to
-/// [`write_sigmf`] of the in-memory recording. `data` makes the data layer (or `None`
-/// for random bodies); a `ci8` recording is generated twice, first for its peak (the
-/// scale) and then for the file, the same samples both times (named random streams).
-/// Returns the number of samples written.
+/// Writes the recording `rec` (as [`generate_iq_with`] makes it) as SigMF
+/// (`BASE.sigmf-data`, `.sigmf-meta`, centred on `rec.center_freq_hz`) frame by frame,
+/// with flat memory: the output is byte-identical to [`write_sigmf`] of the in-memory
+/// recording. `data` makes the data layer (or `None` for random bodies); a `ci8`
+/// recording is generated twice, first for its peak (the scale) and then for the file,
+/// the same samples both times (named random streams). An oscillator error is recorded
+/// under `hybridnav:rx_oscillator_ppm`. Returns the number of samples written.
 ///
 /// # Errors
 /// As [`stream_iq`] and [`SigmfWriter`]; the data layer's errors from `data`.
-#[allow(clippy::too_many_arguments)]
 pub fn write_iq_sigmf(
     base: &Path,
     format: SampleFormat,
-    center_freq_hz: f64,
-    mode: PnMode,
-    frames: usize,
-    snr_db: f64,
-    oversampling: usize,
-    seed: u64,
+    rec: &AwgnRecording,
     data: &dyn Fn() -> Result<Option<super::data_layer::DataLayer>, DtmbError>,
 ) -> Result<u64, DtmbError> {
+    rec.validate()?;
     let peak = match format {
         SampleFormat::Cf32 => 0.0,
         SampleFormat::Ci8 => {
             let mut peak = 0.0f32;
-            stream_iq(
-                mode,
-                frames,
-                snr_db,
-                oversampling,
-                seed,
-                data()?,
-                &mut |b| {
-                    peak = peak.max(peak_component(b));
-                    Ok(())
-                },
-            )?;
+            stream_iq(rec, data()?, &mut |b| {
+                peak = peak.max(peak_component(b));
+                Ok(())
+            })?;
             peak
         }
     };
@@ -695,19 +775,21 @@ pub fn write_iq_sigmf(
     let mut w = SigmfWriter::create(
         base,
         format,
-        iq_sample_rate_hz(oversampling),
-        center_freq_hz,
+        iq_sample_rate_hz(rec.oversampling),
+        rec.center_freq_hz,
         peak,
     )?;
-    stream_iq(mode, frames, snr_db, oversampling, seed, layer, &mut |b| {
-        w.write(b)
-    })?;
+    stream_iq(rec, layer, &mut |b| w.write(b))?;
     let written = w.samples_written();
-    w.finish(
-        iq_annotations(mode, frames, oversampling, profile.as_ref()),
-        &[],
-        &Map::new(),
-    )?;
+    // The oscillator's error is part of what was recorded; a perfect one is not named.
+    let mut global = Map::new();
+    if rec.rx_oscillator_ppm != 0.0 {
+        global.insert(
+            "hybridnav:rx_oscillator_ppm".into(),
+            json!(rec.rx_oscillator_ppm),
+        );
+    }
+    w.finish(iq_annotations(rec, profile.as_ref()), &[], &global)?;
     Ok(written)
 }
 

@@ -669,6 +669,16 @@ fn global_extra(
     g.insert("hybridnav:seed".into(), json!(req.seed));
     g.insert("hybridnav:tower".into(), json!(t.id));
     g.insert("hybridnav:towers".into(), json!(tower_ids));
+    // The receiver oscillator's error, as `dtmb iq` without a world records it.
+    let ppm = world
+        .file
+        .sensors
+        .dtmb
+        .as_ref()
+        .map_or(0.0, |d| d.rx_oscillator_ppm);
+    if ppm != 0.0 {
+        g.insert("hybridnav:rx_oscillator_ppm".into(), json!(ppm));
+    }
     if let Some(net) = &t.spec.sfn {
         g.insert("hybridnav:sfn".into(), json!(net));
     }
