@@ -193,6 +193,64 @@
 //! is a slow rotation the estimates follow. The genie knows `f_o`: it turns the stream
 //! back by `2π f_o n/f_s` from the first frame's start and knows the response without it.
 //!
+//! **Sampling-clock offset** ([`Oscillator::sfo_ppm`], [`Oscillator::from_ppm`],
+//! [`measure_channel_point_clocked`], [`TimingTracker`]). A receiver derives its local
+//! oscillator and its sample clock from one reference (as SDRs do): an error `ε`
+//! (ppm·10⁻⁶) gives the CFO `Δf = −ε f_c` and samples at `f_s(1 + ε)` (the convention of
+//! [`super::multipath::ChannelConfig::from_oscillators`] with a perfect transmitter, and of
+//! the world key `sensors.dtmb.rx_oscillator_ppm` in `dtmb iq --world`). Receiver sample
+//! `n` is taken at `t_n = n/(f_s(1 + ε))`:
+//!
+//! ```text
+//! y[n] = Σ_p g_p e^{j2π(f_p + Δf) t_n} x(n/(1 + ε) − τ_p) + w[n],
+//! ```
+//!
+//! [`super::channel`]'s model, used as it is: every nonzero tap `h_g[m]` of every Doppler
+//! group becomes a path of delay `m` samples (a response on the 7.56 Msps grid is
+//! `Σ_m h[m] δ(n − m)`, whose waveform through the kernel is `Σ_m h[m] x(u − m)`), and the
+//! data layer's frames are read from a source that makes them as the channel asks
+//! (`ClockedLink`; the noise is the chain's, as without the offset). Transmitter sample `m`
+//! reaches receiver sample `m(1 + ε)`: frame `k` starts at `kF(1 + ε)`, so the frame
+//! timing drifts by **`+εF` samples a frame** (+0.00945 in PN945 at +2 ppm, 0.0084 PN420,
+//! 0.00875 PN595) and by `εN` = 0.0076 samples over a body. Within an OFDM symbol the
+//! drift turns carrier `k` by `2πkδ/N` (a phase slope, which the channel estimates follow:
+//! the interpolated one has the headers on both sides of the body) and leaves
+//! `(π²/3)(εk)²` of its power as inter-carrier interference (Pollet, Spruyt, Moeneclaey,
+//! "The BER performance of OFDM systems using non-synchronized sampling", Globecom 1994;
+//! Speth, Fechtel, Fock, Meyr, "Optimum receiver design for wireless broad-band systems
+//! using OFDM — Part I", IEEE Trans. Commun. 47(11), 1999): below −45 dB at the band edge
+//! (`k` = 1890) at 2 ppm. What matters is the timing's drift across frames: a receiver
+//! that holds its frame start sees the response move through the estimate's window. With
+//! the acquisition's advance the first path sits `K` = 16 lags in; the response is lost
+//! once it has moved `K + ½` samples earlier (`ε < 0`: after `(K + ½)/|εF|` frames, 1746
+//! frames = 1.09 s at −2 ppm in PN945) or past the guard's `G + 1 − L − K` lags later
+//! (200 samples in PN945 for a one-path response, 21 000 frames at +2 ppm). With `ε = 0`
+//! nothing of this is built: the stream is the one without it, bit for bit. The genie
+//! knows the clock, so its stream has no sampling-clock offset (an exact resampling).
+//!
+//! *Tracker* ([`TimingTracker`]). Each frame's response in use (the kept taps, for the
+//! interpolating receiver at the body's centre) is compared with the first frame's: with
+//! `X_k`, `R_k` their `P`-point DFTs and `C_k = X_k R_k*`, a delay `δ` is the phase ramp
+//! `C_k = |R_k|² e^{−j2πk'δ/P}` across the signed bins `k'`, estimated as
+//! `δ̂ = −(P/2π) arg Σ_{k'} C_{k'} C*_{k'−1}` — the weighted phase-difference estimator
+//! of a tone's frequency (Kay, "A fast and accurate single frequency estimator", IEEE
+//! Trans. ASSP 37(12), 1989) applied across frequency — over the bins `|k'| ≤ 0.44 P`,
+//! where the waveform's kernel is flat ([`TRACK_BAND`]; in its transition band the kernel
+//! and its alias overlap, a fractional delay is not a linear phase there, and with every
+//! bin the drift estimate was biased by 1.6·10⁻⁴ samples a frame in PN420, four standard
+//! errors). The receiver moves its next frame's start by `round(δ̂)` whole samples (the
+//! estimate absorbs the fraction), the CFO corrector continuing its phase across the move
+//! ([`CfoCorrector::shift`]). The drift is the least-squares slope of
+//! `T_j = (moves so far) + δ̂_j` over the frame index `j`, its standard error from the
+//! fit's residuals. Without tracking (`track_timing = false`) the drift is measured and
+//! the frame start held. The true-timing receiver with a clock offset starts its frames
+//! `K` samples early as the acquiring one does: the drift moves the response off the
+//! sample grid, and a path between samples spreads over the kernel's 32 taps, half of them
+//! before it. That spread is also what the clock costs a tracked receiver: an off-grid
+//! path keeps up to 32 taps, each adding its estimation noise (`10 log10(1 + n/(Pρ))`
+//! above), where a path on the grid keeps one; the drift visits every fraction of a
+//! sample.
+//!
 //! **Synchronisation** ([`measure_channel_point_synced`]). The estimating receiver starts
 //! listening at a random sample of the first frame and acquires the frame start and the
 //! frame number from the PN headers with hybridnav's frame synchroniser
@@ -203,7 +261,8 @@
 //! the response of a path begins up to `K` samples before it (the kernel's support), so
 //! the whole response stays causal in the estimate's window, at the price of `K` lags of
 //! the delay spread covered and `10 log10(1 + K/N)` = 0.018 dB of reconstruction noise.
-//! The timing is held: the channel's delays do not drift here. The frame sync acquires
+//! The timing is then held (the channel's delays do not drift), or followed by the
+//! [`TimingTracker`] when the sample clock is off. The frame sync acquires
 //! through a CFO uncorrected (1 kHz turns a PN945 header by 0.79 rad); the frames at the
 //! acquired timing are then corrected as above. The genie keeps the true timing.
 //!
