@@ -1468,11 +1468,15 @@ pub fn measure_channel_point(cfg: &ChannelBer<'_>, snr_db: f64) -> Result<BerPoi
 /// [`measure_channel_point`] with the receiver's oscillator `osc`: the stream carries its
 /// CFO on every path ([`groups_with_cfo`]) and, with `osc.correct`, the receiver corrects
 /// it before the channel estimate ([`CfoCorrector`]; the genie with the true offset,
-/// phase 0 at the first frame's start, and the true response without it). With
-/// `Oscillator::default()` this is [`measure_channel_point`].
+/// phase 0 at the first frame's start, and the true response without it). With a
+/// sampling-clock offset or timing tracking the estimating receivers run
+/// [`measure_channel_point_clocked`] from the true start of frame 0 (the genie's stream has
+/// no clock offset: it knows the clock). With `Oscillator::default()` this is
+/// [`measure_channel_point`].
 ///
 /// # Errors
-/// As [`measure_channel_point`], and a non-finite CFO.
+/// As [`measure_channel_point`], a non-finite CFO and an oscillator error beyond
+/// ±100 ppm.
 pub fn measure_channel_point_with_cfo(
     cfg: &ChannelBer<'_>,
     osc: Oscillator,
@@ -1586,10 +1590,14 @@ pub fn measure_channel_point_synced(
 /// [`measure_channel_point_synced`] with the receiver's oscillator `osc`
 /// ([`measure_channel_point_with_cfo`]): the frame synchroniser acquires through the
 /// offset (uncorrected), then every frame at the acquired timing is corrected by the
-/// [`CfoCorrector`] before the channel estimate when `osc.correct`.
+/// [`CfoCorrector`] before the channel estimate when `osc.correct`. With a sampling-clock
+/// offset (`osc.sfo_ppm`) the stream drifts and, with `osc.track_timing`, the
+/// [`TimingTracker`] follows it ([`measure_channel_point_clocked`], which also returns the
+/// measured drift).
 ///
 /// # Errors
-/// As [`measure_channel_point_synced`], and a non-finite CFO.
+/// As [`measure_channel_point_synced`], a non-finite CFO and an oscillator error beyond
+/// ±100 ppm.
 pub fn measure_channel_point_synced_with_cfo(
     cfg: &ChannelBer<'_>,
     osc: Oscillator,
