@@ -318,7 +318,7 @@ fn ber_world(a: &BerArgs) -> Result<()> {
             .map_err(|e| anyhow::anyhow!("{e} (from {ppm_from})"))?,
     };
     if a.no_cfo_correction {
-        if osc.cfo_hz == 0.0 {
+        if a.cfo_hz.is_none() && osc.cfo_hz == 0.0 {
             anyhow::bail!(
                 "--no-cfo-correction needs a carrier offset: --cfo-hz, --oscillator-ppm or \
                  the world's sensors.dtmb.rx_oscillator_ppm (without one there is no offset)"
@@ -411,7 +411,7 @@ fn ber_world(a: &BerArgs) -> Result<()> {
             }
         );
     }
-    if osc.cfo_hz != 0.0 {
+    if a.cfo_hz.is_some() || osc.cfo_hz != 0.0 {
         let f = osc.cfo_hz;
         let range = cfo_range_hz(ch.mode);
         println!(
