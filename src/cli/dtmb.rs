@@ -60,6 +60,8 @@ pub struct BerArgs {
     pub true_timing: bool,
     pub cfo_hz: Option<f64>,
     pub no_cfo_correction: bool,
+    pub oscillator_ppm: Option<f64>,
+    pub no_timing_tracking: bool,
 }
 
 /// The data-layer profile of `dtmb ber` from its options (each `None` takes the default:
@@ -183,6 +185,8 @@ pub fn ber(a: &BerArgs) -> Result<()> {
         (a.true_timing, "--true-timing"),
         (a.cfo_hz.is_some(), "--cfo-hz"),
         (a.no_cfo_correction, "--no-cfo-correction"),
+        (a.oscillator_ppm.is_some(), "--oscillator-ppm"),
+        (a.no_timing_tracking, "--no-timing-tracking"),
     ] {
         if given {
             anyhow::bail!("{what} needs --world (without it the channel is white noise)");
@@ -223,8 +227,9 @@ pub fn ber(a: &BerArgs) -> Result<()> {
 fn ber_world(a: &BerArgs) -> Result<()> {
     use crate::dtmb::ber::parse_snr_range;
     use crate::dtmb::ber_channel::{
-        cfo_range_hz, doppler_responses, frequency_response, measure_channel_point_synced_with_cfo,
-        measure_channel_point_with_cfo, ChannelBer, Csi, Oscillator, SYNC_ADVANCE_SAMPLES,
+        cfo_range_hz, doppler_responses, frequency_response, measure_channel_point_clocked,
+        measure_channel_point_synced_with_cfo, measure_channel_point_with_cfo, ChannelBer, Csi,
+        Oscillator, SYNC_ADVANCE_SAMPLES,
     };
     use crate::dtmb::pn::PnMode;
     use crate::world::dtmb_iq::{tower_channel_at, DataLayerOverride, WorldIqRequest};
@@ -234,16 +239,23 @@ fn ber_world(a: &BerArgs) -> Result<()> {
         s => vec![s.parse()?],
     };
     let grid = parse_snr_range(&a.snr_db)?;
-    if a.no_cfo_correction && a.cfo_hz.is_none() {
-        anyhow::bail!("--no-cfo-correction needs --cfo-hz (without it there is no offset)");
+    if a.cfo_hz.is_some() && a.oscillator_ppm.is_some() {
+        anyhow::bail!(
+            "--cfo-hz (a pure carrier offset) and --oscillator-ppm (the oscillator: carrier \
+             offset and sample clock) are alternatives: give one"
+        );
     }
     if a.cfo_hz.is_some_and(|f| !f.is_finite()) {
         anyhow::bail!("--cfo-hz must be a finite frequency in Hz");
     }
-    let osc = Oscillator {
-        cfo_hz: a.cfo_hz.unwrap_or(0.0),
-        correct: a.cfo_hz.is_some() && !a.no_cfo_correction,
-    };
+    if let Some(p) = a.oscillator_ppm {
+        if !(p.is_finite() && p.abs() <= Oscillator::MAX_PPM) {
+            anyhow::bail!(
+                "--oscillator-ppm must be a finite oscillator error within ±{} ppm, got {p}",
+                Oscillator::MAX_PPM
+            );
+        }
+    }
     let w = super::load_world(path).map_err(|e| anyhow::anyhow!("{e}"))?;
     let seed = a.seed.unwrap_or(w.file.montecarlo.seed);
     let req = WorldIqRequest {
@@ -286,6 +298,43 @@ fn ber_world(a: &BerArgs) -> Result<()> {
         ch.carriers,
     )
     .with_context(|| format!("tower {}'s data layer", ch.tower))?;
+    // The receiver's oscillator: --cfo-hz (a pure carrier offset), else --oscillator-ppm,
+    // else the world's sensors.dtmb.rx_oscillator_ppm (carrier offset and sample clock).
+    let (ppm, ppm_from) = match (a.cfo_hz, a.oscillator_ppm) {
+        (Some(_), _) => (0.0, ""),
+        (None, Some(p)) => (p, "--oscillator-ppm"),
+        (None, None) => (
+            ch.rx_oscillator_ppm,
+            "the world's sensors.dtmb.rx_oscillator_ppm",
+        ),
+    };
+    let mut osc = match a.cfo_hz {
+        Some(f) => Oscillator {
+            cfo_hz: f,
+            correct: true,
+            ..Oscillator::default()
+        },
+        None => Oscillator::from_ppm(ppm, ch.freq_hz)
+            .map_err(|e| anyhow::anyhow!("{e} (from {ppm_from})"))?,
+    };
+    if a.no_cfo_correction {
+        if a.cfo_hz.is_none() && osc.cfo_hz == 0.0 {
+            anyhow::bail!(
+                "--no-cfo-correction needs a carrier offset: --cfo-hz, --oscillator-ppm or \
+                 the world's sensors.dtmb.rx_oscillator_ppm (without one there is no offset)"
+            );
+        }
+        osc.correct = false;
+    }
+    if a.no_timing_tracking {
+        if osc.sfo_ppm == 0.0 {
+            anyhow::bail!(
+                "--no-timing-tracking needs an oscillator error: --oscillator-ppm or the \
+                 world's sensors.dtmb.rx_oscillator_ppm (--cfo-hz has no sample-clock offset)"
+            );
+        }
+        osc.track_timing = false;
+    }
     let with_doppler: Vec<(f64, num_complex::Complex64, f64)> = ch
         .paths
         .iter()
@@ -346,20 +395,42 @@ fn ber_world(a: &BerArgs) -> Result<()> {
             )
         }
     );
-    if let Some(f) = a.cfo_hz {
+    if osc.sfo_ppm != 0.0 {
         println!(
-            "# receiver CFO {f:.1} Hz ({:.3} ppm at {:.0} MHz) on every path: {}",
+            "# receiver oscillator {:+.3} ppm (from {ppm_from}): the CFO below and a sample \
+             clock of f_s(1 + ε), ε = {:.3e}, the frame timing drifting {:+.5} samples a \
+             frame; {}",
+            osc.sfo_ppm,
+            osc.sfo_ppm * 1e-6,
+            osc.sfo_ppm * 1e-6 * ch.mode.frame_len() as f64,
+            if osc.track_timing {
+                "tracked from the PN headers' channel estimates by the estimating receivers \
+                 (the genie's stream has no clock offset: it knows the clock)"
+            } else {
+                "held at the starting timing (--no-timing-tracking)"
+            }
+        );
+    }
+    if a.cfo_hz.is_some() || osc.cfo_hz != 0.0 {
+        let f = osc.cfo_hz;
+        let range = cfo_range_hz(ch.mode);
+        println!(
+            "# receiver CFO {f:.1} Hz ({:.3} ppm at {:.0} MHz) on every path: {}{}",
             f / ch.freq_hz * 1e6,
             ch.freq_hz * 1e-6,
             if osc.correct {
                 format!(
                     "estimated from the PN headers and corrected (unambiguous within \
-                     ±{:.0} Hz in {}), known to the genie",
-                    cfo_range_hz(ch.mode),
+                     ±{range:.0} Hz in {}), known to the genie",
                     ch.mode.name()
                 )
             } else {
                 "not corrected (--no-cfo-correction)".to_string()
+            },
+            if osc.correct && f.abs() > range {
+                " — beyond the range: the estimate wraps and the correction fails"
+            } else {
+                ""
             }
         );
     }
@@ -384,9 +455,25 @@ fn ber_world(a: &BerArgs) -> Result<()> {
             seed,
         };
         let synced = csi != Csi::Ideal && !a.true_timing;
+        let clocked = csi != Csi::Ideal && osc.sfo_ppm != 0.0;
         let mut acquired = Vec::new();
+        let mut tracks = Vec::new();
         let (points, _, per) = run_curve(&grid, |snr| {
-            if synced {
+            if clocked {
+                let r = measure_channel_point_clocked(&cfg, osc, snr, synced).map_err(|e| {
+                    anyhow::anyhow!(
+                        "{e}{}",
+                        if synced {
+                            " (--true-timing gives the estimating receiver the true frame start)"
+                        } else {
+                            ""
+                        }
+                    )
+                })?;
+                acquired.extend(r.acquisition);
+                tracks.push(r.timing);
+                Ok(r.point)
+            } else if synced {
                 let (p, acq) =
                     measure_channel_point_synced_with_cfo(&cfg, osc, snr).map_err(|e| {
                         anyhow::anyhow!(
@@ -414,6 +501,19 @@ fn ber_world(a: &BerArgs) -> Result<()> {
                  {} points; frame number wrong at {wrong}",
                 csi.name(),
                 acquired.len(),
+            );
+        }
+        if let Some(t) = tracks.last() {
+            // The drift the receiver measured at the grid's last (highest-SNR) point.
+            println!(
+                "# CSI {}: frame timing drift measured {:+.5} ± {:.1e} samples a frame over {} \
+                 frames (the clock's +ε·F {:+.5}); frame start moved {} samples",
+                csi.name(),
+                t.drift_samples_per_frame,
+                t.drift_std,
+                t.frames,
+                osc.sfo_ppm * 1e-6 * ch.mode.frame_len() as f64,
+                t.shifted_samples
             );
         }
         if let Some(t) = per {

@@ -236,16 +236,31 @@ pub enum DtmbCommand {
         /// found; the genie always has the true timing.
         #[arg(long)]
         true_timing: bool,
-        /// With --world: the receiver's carrier-frequency offset in Hz (its local
-        /// oscillator's error, e.g. 1000 = 1.7 ppm at 600 MHz), added to every path's
-        /// Doppler shift. The estimating receivers then estimate it from the PN headers and
-        /// correct it (the genie knows it) unless --no-cfo-correction. Without the option:
-        /// no offset and no correction.
+        /// With --world: a pure carrier-frequency offset in Hz (e.g. 1000 = 1.7 ppm at
+        /// 600 MHz), added to every path's Doppler shift, with no sampling-clock offset;
+        /// it replaces the world's oscillator (sensors.dtmb.rx_oscillator_ppm) and
+        /// excludes --oscillator-ppm. The estimating receivers estimate it from the PN
+        /// headers and correct it (the genie knows it) unless --no-cfo-correction.
         #[arg(long, allow_hyphen_values = true, value_name = "HZ")]
         cfo_hz: Option<f64>,
-        /// With --cfo-hz: leave the offset uncorrected (to see what it costs).
+        /// With --world: the receiver's oscillator error in ppm (|ppm| ≤ 100), overriding
+        /// the world's sensors.dtmb.rx_oscillator_ppm (which applies by default, as in
+        /// `dtmb iq --world`). One reference drives the local oscillator and the sample
+        /// clock: a CFO of −ppm·10⁻⁶ times the tower's carrier (estimated and corrected
+        /// unless --no-cfo-correction) and a sample clock of f_s(1 + ppm·10⁻⁶), whose frame
+        /// timing drift (+ppm·10⁻⁶ × the frame length a frame) the estimating receivers
+        /// track from the PN headers unless --no-timing-tracking. 0: no offset.
+        #[arg(long, allow_hyphen_values = true, value_name = "PPM")]
+        oscillator_ppm: Option<f64>,
+        /// With a CFO (--cfo-hz, or an oscillator error): leave it uncorrected (to see
+        /// what it costs).
         #[arg(long)]
         no_cfo_correction: bool,
+        /// With an oscillator error (--oscillator-ppm or the world key): hold the frame
+        /// timing the receiver started with instead of tracking the sample clock's drift
+        /// (to see what it costs once the drift leaves the PN guard).
+        #[arg(long)]
+        no_timing_tracking: bool,
     },
     /// Write DTMB baseband frames through white noise as a SigMF recording
     /// (BASE.sigmf-data and BASE.sigmf-meta, with an annotation per frame); with --world,
@@ -476,6 +491,8 @@ pub fn run(cli: Cli) -> Result<()> {
             true_timing,
             cfo_hz,
             no_cfo_correction,
+            oscillator_ppm,
+            no_timing_tracking,
         }) => dtmb::ber(&dtmb::BerArgs {
             qam,
             fec,
@@ -495,6 +512,8 @@ pub fn run(cli: Cli) -> Result<()> {
             true_timing,
             cfo_hz,
             no_cfo_correction,
+            oscillator_ppm,
+            no_timing_tracking,
         }),
         Command::Dtmb(DtmbCommand::Iq {
             mode,

@@ -252,8 +252,47 @@ fn dtmb_ber_world_refuses_bad_input() {
             "worlds/seed000-kehui.toml",
             "--no-cfo-correction",
         ],
-        &["--no-cfo-correction needs --cfo-hz"],
+        &["--no-cfo-correction needs a carrier offset"],
     );
+    run(
+        &["--oscillator-ppm", "2"],
+        &["--oscillator-ppm needs --world"],
+    );
+    run(
+        &["--no-timing-tracking"],
+        &["--no-timing-tracking needs --world"],
+    );
+    for bad in ["nan", "inf", "150", "-100.5"] {
+        run(
+            &[
+                "--world",
+                "worlds/seed000-kehui.toml",
+                "--oscillator-ppm",
+                bad,
+            ],
+            &["--oscillator-ppm must be a finite oscillator error within ±100 ppm"],
+        );
+    }
+    run(
+        &[
+            "--world",
+            "worlds/seed000-kehui.toml",
+            "--cfo-hz",
+            "100",
+            "--oscillator-ppm",
+            "1",
+        ],
+        &["--cfo-hz", "--oscillator-ppm", "are alternatives"],
+    );
+    for extra in [&[][..], &["--cfo-hz", "100"][..]] {
+        let mut a = vec![
+            "--world",
+            "worlds/seed000-kehui.toml",
+            "--no-timing-tracking",
+        ];
+        a.extend_from_slice(extra);
+        run(&a, &["--no-timing-tracking needs an oscillator error"]);
+    }
     run(
         &["--world", "worlds/seed000-kehui.toml", "--cfo-hz", "inf"],
         &["--cfo-hz must be a finite"],
@@ -367,5 +406,112 @@ fn dtmb_ber_world_cfo_is_corrected_and_costs_everything_without() {
     );
     println!("uncorrected 1 kHz at 25 dB: {errors} of {packets} packets wrong");
     assert!(packets > 0 && errors == packets, "{body}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The receiver's oscillator from the world file: `sensors.dtmb.rx_oscillator_ppm`
+/// (which `dtmb iq --world` records with) applies to `dtmb ber --world` as
+/// `--oscillator-ppm` does. The Kehui world with the key set to −2 ppm gives the CSV of
+/// the world without it and `--oscillator-ppm -2`, byte for byte (tower D01 at 5 s,
+/// PN945 at 482 MHz: a CFO of +964 Hz, corrected, and the sample clock
+/// `f_s(1 − 2·10⁻⁶)`, tracked; both receivers, the genie's stream without the clock
+/// offset), and says where the error came from. The interpolating receiver's timing
+/// tracker measures the drift `εF` = −0.00945 samples a frame within four of its standard
+/// errors. The command line overrides the key: `--oscillator-ppm 0` on the keyed world
+/// is the world without an offset, byte for byte, and so is `--cfo-hz` (a pure carrier
+/// offset) the same option on the world without the key. A key beyond ±100 ppm is refused
+/// by the world file's validation.
+#[test]
+fn dtmb_ber_world_oscillator_key_is_the_command_line_option() {
+    let dir = tmp_dir("ber-oscillator");
+    let text = std::fs::read_to_string(repo().join("worlds/seed000-kehui.toml")).unwrap();
+    let keyed_with = |ppm: &str| {
+        let t = text.replacen(
+            "[sensors.dtmb]\n",
+            &format!("[sensors.dtmb]\nrx_oscillator_ppm = {ppm}\n"),
+            1,
+        );
+        assert_ne!(t, text, "the world has a [sensors.dtmb] section");
+        t
+    };
+    let keyed = dir.join("kehui-oscillator.toml");
+    std::fs::write(&keyed, keyed_with("-2.0")).unwrap();
+    let keyed = keyed.to_str().unwrap().to_string();
+    let plain = "worlds/seed000-kehui.toml";
+    let mut n = 0;
+    let mut run = |world: &str, extra: &[&str]| -> (String, String) {
+        n += 1;
+        let csv = dir.join(format!("ber{n}.csv"));
+        let mut a = vec![
+            "dtmb",
+            "ber",
+            "--world",
+            world,
+            "--at-s",
+            "5",
+            "--frames",
+            "20",
+            "--snr-db",
+            "15:16:1",
+            "--csi",
+            "both",
+            "--out",
+            csv.to_str().unwrap(),
+        ];
+        a.extend_from_slice(extra);
+        let o = hybridnav(&a);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        (
+            String::from_utf8_lossy(&o.stdout).into_owned(),
+            std::fs::read_to_string(&csv).unwrap(),
+        )
+    };
+    let (key_text, key_csv) = run(&keyed, &[]);
+    let (opt_text, opt_csv) = run(plain, &["--oscillator-ppm", "-2"]);
+    assert_eq!(key_csv, opt_csv);
+    assert!(
+        key_text.contains(
+            "receiver oscillator -2.000 ppm (from the world's sensors.dtmb.rx_oscillator_ppm)"
+        ) && key_text.contains("receiver CFO 964.0 Hz"),
+        "{key_text}"
+    );
+    assert!(
+        opt_text.contains("receiver oscillator -2.000 ppm (from --oscillator-ppm)"),
+        "{opt_text}"
+    );
+    // "# CSI interpolated: frame timing drift measured D ± S samples a frame …".
+    let line = key_text
+        .lines()
+        .find(|l| l.starts_with("# CSI interpolated: frame timing drift measured"))
+        .unwrap_or_else(|| panic!("no drift in {key_text}"));
+    let words: Vec<&str> = line.split_whitespace().collect();
+    let at = words.iter().position(|w| *w == "measured").unwrap();
+    let (drift, sd): (f64, f64) = (
+        words[at + 1].parse().unwrap(),
+        words[at + 3].parse().unwrap(),
+    );
+    let want = -2e-6 * 4725.0;
+    println!("{line}");
+    assert!((drift - want).abs() < 4.0 * sd, "{drift} ± {sd} vs {want}");
+    let (_, still_csv) = run(plain, &[]);
+    let (_, zero_csv) = run(&keyed, &["--oscillator-ppm", "0"]);
+    assert_eq!(zero_csv, still_csv);
+    assert_ne!(key_csv, still_csv);
+    let (cfo_text, cfo_csv) = run(&keyed, &["--cfo-hz", "964"]);
+    assert!(!cfo_text.contains("receiver oscillator"), "{cfo_text}");
+    assert_eq!(cfo_csv, run(plain, &["--cfo-hz", "964"]).1);
+    let bad = dir.join("kehui-bad-oscillator.toml");
+    std::fs::write(&bad, keyed_with("150.0")).unwrap();
+    refused(
+        &[
+            "dtmb",
+            "ber",
+            "--world",
+            bad.to_str().unwrap(),
+            "--snr-db",
+            "10",
+        ],
+        &["rx_oscillator_ppm", "within ±100 ppm"],
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -160,8 +160,9 @@ pub struct DtmbSensorConfig {
     /// Log-normal shadowing (σ 0 disables it), default σ 4 dB, 37 m.
     #[serde(default)]
     pub shadowing: ShadowingConfig,
-    /// Receiver oscillator error (ppm) giving the CFO and SFO of the signal level and the
-    /// static CFO of the TPS ranging, default 0.
+    /// Receiver oscillator error (ppm) giving the CFO and SFO of the signal level (and of
+    /// `dtmb iq --world` and `dtmb ber --world`, unless its `--oscillator-ppm` or
+    /// `--cfo-hz` replaces it) and the static CFO of the TPS ranging, default 0.
     #[serde(default)]
     pub rx_oscillator_ppm: f64,
     /// A floor under the σ the receiver reports (m), default 3: the receiver's error

@@ -469,6 +469,11 @@ pub struct TowerChannel {
     /// instant, as a recording applies it (the scene's per-path Dopplers, or without a
     /// scene the direct path's for every path).
     pub dopplers_hz: Vec<f64>,
+    /// The receiver's oscillator error (ppm), the world's
+    /// `sensors.dtmb.rx_oscillator_ppm` (0 without the section): with one reference for
+    /// the local oscillator and the sample clock, a CFO of `−ppm·10⁻⁶ f_c` and a sample
+    /// clock of `f_s(1 + ppm·10⁻⁶)`, as `dtmb iq --world` records.
+    pub rx_oscillator_ppm: f64,
     /// The data layer's options of the tower's `[[transmitter]]`, each replaced by the
     /// request's (`qam`, `fec`, `interleaver`, `carriers`).
     pub qam: Option<String>,
@@ -492,6 +497,7 @@ pub fn tower_channel_at(world: &World, req: &WorldIqRequest) -> Result<TowerChan
         specs,
         me,
         mut link,
+        rx_ppm,
         ..
     } = link_setup(world, req, t, &group)?;
     let t_s = req.from_s + 0.5 * mode.frame_duration_s();
@@ -520,6 +526,7 @@ pub fn tower_channel_at(world: &World, req: &WorldIqRequest) -> Result<TowerChan
         },
         paths: l.taps.iter().map(|&(d, g, _)| (d, g)).collect(),
         dopplers_hz: l.taps.iter().map(|&(_, _, f)| f).collect(),
+        rx_oscillator_ppm: rx_ppm,
         qam: o.qam.clone().or_else(|| t.spec.qam.clone()),
         fec: o.fec.clone().or_else(|| t.spec.fec.clone()),
         interleaver: o.interleaver.or(t.spec.interleaver),
