@@ -305,7 +305,7 @@ pub enum DtmbCommand {
         seed: Option<u64>,
         /// The receiver oscillator's error in ppm (|ppm| ≤ 100): the recording carries
         /// its carrier offset −ppm·f_c and sampling-clock offset (default 0; with --world
-        /// the world's [sensors.dtmb] rx_oscillator_ppm sets it).
+        /// it replaces the world's [sensors.dtmb] rx_oscillator_ppm, as in dtmb ber).
         #[arg(long, allow_hyphen_values = true, value_name = "PPM")]
         oscillator_ppm: Option<f64>,
         /// Output base path (without the .sigmf-data / .sigmf-meta suffix).
@@ -916,6 +916,10 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
     };
     // Bad data-layer options are refused before anything is created.
     let data = a.profile.data_layer()?;
+    let ppm = a.oscillator_ppm.unwrap_or(0.0);
+    if !(ppm.is_finite() && ppm.abs() <= 100.0) {
+        bail!("--oscillator-ppm must be a finite error of at most 100 ppm, got {ppm}");
+    }
     if let Some(path) = &a.world {
         if a.snr_db.is_some() {
             bail!("--snr-db cannot be given with --world: the world's link budget sets the SNR");
@@ -923,16 +927,18 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
         if a.oversampling != 1 {
             bail!("--oversampling is not supported with --world (7.56 Msps only)");
         }
-        if a.oscillator_ppm.is_some() {
-            bail!(
-                "--oscillator-ppm cannot be given with --world: the world's [sensors.dtmb] \
-                 rx_oscillator_ppm sets the receiver's oscillator"
-            );
-        }
         if a.frames == 0 {
             bail!("--frames must be at least 1");
         }
-        let w = load_world(path).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let mut w = load_world(path).map_err(|e| anyhow::anyhow!("{e}"))?;
+        // The command line's oscillator replaces the world's, as `dtmb ber --world` does.
+        if let Some(p) = a.oscillator_ppm {
+            w.file
+                .sensors
+                .dtmb
+                .get_or_insert_with(Default::default)
+                .rx_oscillator_ppm = p;
+        }
         let req = crate::world::dtmb_iq::WorldIqRequest {
             tower: a.tower.clone(),
             from_s: a.from_s,
@@ -998,10 +1004,6 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
         bail!("--snr-db must be a finite number of dB, got {snr_db}");
     }
     let center_hz = crate::dtmb::uhf_channel_center_hz(a.channel)?;
-    let ppm = a.oscillator_ppm.unwrap_or(0.0);
-    if !(ppm.is_finite() && ppm.abs() <= 100.0) {
-        bail!("--oscillator-ppm must be a finite error of at most 100 ppm, got {ppm}");
-    }
     // Refuse bad data-layer options before creating anything.
     drop(data);
     mkdir()?;

@@ -708,8 +708,9 @@ fn assert_oscillator_measured(ppm: f64, carrier_hz: f64, cfo_hz: f64, slope: f64
 /// the model's (no Doppler here: carrier offset `−ε f_c`, slope `−ε N`; measured
 /// 2026-12-05: −964.00 Hz and −0.01073, +4820.05 Hz and +0.04721). The annotations follow
 /// the frames: frame k starts at the sample nearest `k N (1 + ε)`, and the metadata
-/// names the oscillator. A value past 100 ppm, or the option with `--world` (whose
-/// `[sensors.dtmb] rx_oscillator_ppm` sets it), is refused before anything is written.
+/// names the oscillator. A value past 100 ppm or NaN is refused before anything is
+/// written; with `--world` the option replaces `[sensors.dtmb] rx_oscillator_ppm` (the
+/// same samples as a world with the key), as in `dtmb ber --world`.
 #[test]
 fn dtmb_ts_an_oscillator_offset_in_white_noise_is_what_dtmb_sdr_measures() {
     if dtmb_sdr_bin().is_none() {
@@ -796,25 +797,41 @@ fn dtmb_ts_an_oscillator_offset_in_white_noise_is_what_dtmb_sdr_measures() {
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(!o.status.success() && err.contains(says), "{bad}: {err}");
     }
-    let world = crate::common::repo().join("worlds/seed000-kehui.toml");
-    let o = hybridnav(&[
-        "dtmb",
-        "iq",
-        "--world",
-        world.to_str().unwrap(),
-        "--frames",
-        "2",
-        "--oscillator-ppm",
-        "2",
-        "--out",
-        dir.join("bad").to_str().unwrap(),
-    ]);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        !o.status.success() && err.contains("rx_oscillator_ppm"),
-        "{err}"
-    );
     assert!(!dir.join("bad.sigmf-data").exists());
+    // With --world the option replaces the world's key: the same samples as a world with
+    // `rx_oscillator_ppm = 2.0`, and the metadata names it.
+    let keyed = kehui_world_with_payload(&dir, "keyed.toml", "rx_oscillator_ppm = 2.0\n");
+    let plain = kehui_world_with_payload(&dir, "plain.toml", "");
+    for (world, extra, out) in [(&keyed, None, "w-key"), (&plain, Some("2"), "w-opt")] {
+        let mut args = vec![
+            "dtmb",
+            "iq",
+            "--world",
+            world.to_str().unwrap(),
+            "--from-s",
+            "5",
+            "--frames",
+            "3",
+        ];
+        if let Some(p) = extra {
+            args.extend(["--oscillator-ppm", p]);
+        }
+        let base = dir.join(out);
+        args.extend(["--out", base.to_str().unwrap()]);
+        let o = hybridnav(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let meta = std::fs::read_to_string(format!("{}.sigmf-meta", base.display())).unwrap();
+        assert!(
+            meta.contains("\"hybridnav:rx_oscillator_ppm\": 2.0"),
+            "{out}"
+        );
+    }
+    let data = |b: &str| std::fs::read(dir.join(format!("{b}.sigmf-data"))).unwrap();
+    assert_eq!(
+        data("w-key"),
+        data("w-opt"),
+        "--oscillator-ppm 2 is the world key"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
