@@ -603,11 +603,7 @@ fn dtmb_ts_a_world_receivers_oscillator_offset_is_what_dtmb_sdr_measures() {
             &format!("{}.sigmf-data", base.display()),
             "pn945",
             "13",
-            &[
-                "--pn-schedule-tracking",
-                "--pn-schedule-max-clock-ppm",
-                "20",
-            ],
+            CLOCK_FIT,
             out_ts.to_str().unwrap(),
         );
         let got = std::fs::read(&out_ts).unwrap_or_default();
@@ -651,6 +647,13 @@ fn dtmb_ts_a_world_receivers_oscillator_offset_is_what_dtmb_sdr_measures() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// dtmb-sdr's bounded clock fit, which a recording through an oscillator off by ppm needs.
+const CLOCK_FIT: &[&str] = &[
+    "--pn-schedule-tracking",
+    "--pn-schedule-max-clock-ppm",
+    "20",
+];
 
 /// A PN945 frame's samples.
 const PN945_FRAME_SAMPLES: f64 = 4725.0;
@@ -763,11 +766,7 @@ fn dtmb_ts_an_oscillator_offset_in_white_noise_is_what_dtmb_sdr_measures() {
             &format!("{}.sigmf-data", base.display()),
             "pn945",
             "21",
-            &[
-                "--pn-schedule-tracking",
-                "--pn-schedule-max-clock-ppm",
-                "20",
-            ],
+            CLOCK_FIT,
             out_ts.to_str().unwrap(),
         );
         let got = std::fs::read(&out_ts).unwrap_or_default();
