@@ -249,7 +249,7 @@ fn ber_world(a: &BerArgs) -> Result<()> {
         anyhow::bail!("--cfo-hz must be a finite frequency in Hz");
     }
     if let Some(p) = a.oscillator_ppm {
-        if !(p.is_finite() && p.abs() <= Oscillator::MAX_PPM) {
+        if !crate::dtmb::multipath::rx_oscillator_ppm_valid(p) {
             anyhow::bail!(
                 "--oscillator-ppm must be a finite oscillator error within ±{} ppm, got {p}",
                 Oscillator::MAX_PPM

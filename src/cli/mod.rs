@@ -917,7 +917,7 @@ fn cmd_dtmb_iq(a: DtmbIqArgs) -> Result<()> {
     // Bad data-layer options are refused before anything is created.
     let data = a.profile.data_layer()?;
     let ppm = a.oscillator_ppm.unwrap_or(0.0);
-    if !(ppm.is_finite() && ppm.abs() <= 100.0) {
+    if !crate::dtmb::multipath::rx_oscillator_ppm_valid(ppm) {
         bail!("--oscillator-ppm must be a finite error of at most 100 ppm, got {ppm}");
     }
     if let Some(path) = &a.world {

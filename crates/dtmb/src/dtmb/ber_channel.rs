@@ -1880,7 +1880,7 @@ pub struct Oscillator {
 impl Oscillator {
     /// The largest oscillator error accepted (ppm), as the world key
     /// `sensors.dtmb.rx_oscillator_ppm` enforces.
-    pub const MAX_PPM: f64 = 100.0;
+    pub const MAX_PPM: f64 = super::multipath::MAX_RX_OSCILLATOR_PPM;
 
     /// A receiver whose one oscillator (local oscillator and sample clock from one
     /// reference, as SDRs derive them) is off by `ppm`, receiving a carrier at
@@ -1915,7 +1915,7 @@ impl Oscillator {
 
 /// An oscillator error in ppm: finite and within ±[`Oscillator::MAX_PPM`].
 fn check_ppm(ppm: f64) -> Result<(), DtmbError> {
-    if ppm.is_finite() && ppm.abs() <= Oscillator::MAX_PPM {
+    if super::multipath::rx_oscillator_ppm_valid(ppm) {
         Ok(())
     } else {
         Err(DtmbError::InvalidParameter {

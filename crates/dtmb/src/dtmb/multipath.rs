@@ -39,6 +39,18 @@ pub struct ChannelConfig {
     pub snr_db: Option<f64>,
 }
 
+/// The largest receiver oscillator error accepted anywhere a receiver's oscillator is
+/// given (ppm): the world key `sensors.dtmb.rx_oscillator_ppm`, `dtmb iq` and `dtmb ber`.
+/// A crystal without temperature compensation is specified to some tens of ppm; beyond
+/// 100 ppm the frame sync would need a coarse frequency search first.
+pub const MAX_RX_OSCILLATOR_PPM: f64 = 100.0;
+
+/// Whether `ppm` is a receiver oscillator error those accept: finite and within
+/// ±[`MAX_RX_OSCILLATOR_PPM`].
+pub fn rx_oscillator_ppm_valid(ppm: f64) -> bool {
+    ppm.is_finite() && ppm.abs() <= MAX_RX_OSCILLATOR_PPM
+}
+
 impl ChannelConfig {
     /// A configuration whose CFO and SFO come from the oscillators: the receiver derives
     /// its local oscillator and sample clock from one reference (as SDRs do), so a

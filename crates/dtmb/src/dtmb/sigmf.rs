@@ -600,7 +600,7 @@ impl AwgnRecording {
             });
         }
         let (ppm, f_c) = (self.rx_oscillator_ppm, self.center_freq_hz);
-        if !(ppm.is_finite() && ppm.abs() <= 100.0) {
+        if !crate::dtmb::multipath::rx_oscillator_ppm_valid(ppm) {
             return Err(DtmbError::InvalidParameter {
                 name: "rx_oscillator_ppm",
                 reason: format!("must be a finite error of at most 100 ppm, got {ppm}"),
@@ -676,7 +676,7 @@ pub fn stream_iq(
         let delay = f.delay_samples();
         Some((f, delay, vec![Complex32::default(); n * oversampling]))
     };
-    let wanted = (frames * n * oversampling) as u64;
+    let wanted = rec.samples();
     let mut emitted = 0u64;
     let mut to_skip = shaping.as_ref().map_or(0, |s| s.1);
     let mut emit = |out: &[Complex32],

@@ -271,7 +271,7 @@ impl DtmbSensorConfig {
         )?;
         check(
             "rx_oscillator_ppm",
-            self.rx_oscillator_ppm.is_finite() && self.rx_oscillator_ppm.abs() <= 100.0,
+            super::multipath::rx_oscillator_ppm_valid(self.rx_oscillator_ppm),
             || {
                 format!(
                     "expected an oscillator error within ±100 ppm, got {}",
