@@ -858,19 +858,31 @@ fn bds_conf_weak(data: &str, rate: f64, out: &str, prns: &[u64]) -> String {
 /// n = 117, ratio 1.03, each time; C12 acquired in each, held in the second only (n = 34,
 /// 9.32 m against 8.84 m; the three together 1.03); LOS + multipath 1.09–1.10. GNSS-SDR
 /// takes 9–15 min here (every channel searching, on two cores shared at a load of 10–13).
+///
+/// GNSS-SDR's run on the same recording is not repeatable at these C/N0: in one CI dry run
+/// of eight (2026-12-05) it acquired C21 and locked its secondary code but never decoded
+/// its message, so C21 had no observables (n = 0; C09 and C11 as always). When none of
+/// the three has 20 common samples, the test runs GNSS-SDR once more (the same trial,
+/// recorded again into its own directory: the same samples) and asserts on that run; the
+/// criteria are unchanged.
 #[test]
 fn gnss_canyon_bds_weak_nlos_errors_agree_with_gnss_sdr() {
     const WEAK_NLOS: [u32; 3] = [12, 21, 22];
-    let Some(cal) = calibrate(
-        "canyon-bds-weak",
-        CANYON_1500,
-        BDS_B1I,
-        150,
-        4.2e6,
-        bds_conf_weak,
-    ) else {
+    let run = |name: &str| calibrate(name, CANYON_1500, BDS_B1I, 150, 4.2e6, bds_conf_weak);
+    let Some(mut cal) = run("canyon-bds-weak") else {
         return;
     };
+    if cal.ratio_of(Class::Nlos, &WEAK_NLOS).0 < 20 {
+        eprintln!(
+            "canyon-bds-weak: GNSS-SDR gave no observables of PRNs {WEAK_NLOS:?} \
+             (satellites per class {:?}); running it once more",
+            cal.satellites
+        );
+        let Some(again) = run("canyon-bds-weak-2") else {
+            return;
+        };
+        cal = again;
+    }
     eprintln!("canyon-bds-weak: satellites per class {:?}", cal.satellites);
     cal.assert_satellites_agree(Class::Nlos, &WEAK_NLOS, 20);
     cal.assert_agrees(Class::Nlos, 20);
