@@ -76,10 +76,10 @@ fn family(n: usize) -> [ParticleFilter<4>; 4] {
     ]
 }
 
-/// No member of the family allocates in an epoch (predict, weight by ranges, resample
-/// with or without the kernel, moments) once built: SIR, regularised, Rao-Blackwellised,
-/// Gaussian (its prediction factors the cloud's covariance and redraws it) and
-/// marginalised.
+/// No member of the family allocates in an epoch (predict, the linearised proposal,
+/// weight by ranges, resample with or without the kernel, moments) once built: SIR,
+/// regularised, Rao-Blackwellised, Gaussian (its prediction factors the cloud's covariance
+/// and redraws it; its linearised update factors the EKF update) and marginalised.
 #[test]
 fn no_particle_filter_allocates_per_epoch() {
     let layout = StateLayout {
@@ -127,6 +127,10 @@ fn no_particle_filter_allocates_per_epoch() {
                     (r.emitter_pos_m - truth).norm() + 50.0 + 5.0 * n,
                 );
             }
+            // The linearised proposal (the Gaussian filter's from its kept prediction),
+            // then the bootstrap weights on the same ranges.
+            let q = hybridnav::fusion::models::ProcessModel::q(&model, &pf.mean(), 1.0);
+            pf.update_linearised(&q, &lik, rng).unwrap();
             pf.update_ranges(&lik, rng);
             pf.resample(rng);
             pf.resample_regularised(rng);
@@ -332,8 +336,9 @@ fn bad_particle_filter_input_is_refused_with_its_place_and_range() {
             "filter",
             "runs on a paper process model",
         ),
-        // The Gaussian PF takes the family's checks: its particle count, its model, and
-        // no linearised proposal (it draws from its exact prediction).
+        // The Gaussian PF takes the family's checks: its particle count and its model;
+        // the marginalised PF takes no linearised proposal (it draws from its exact
+        // prediction).
         (
             "name = \"GPF-100\"\nfilter = \"gpf\"\noptions = { particles = 100 }",
             "name = \"GPF-100\"\nfilter = \"gpf\"\noptions = { particles = 0 }",
@@ -341,10 +346,10 @@ fn bad_particle_filter_input_is_refused_with_its_place_and_range() {
             "expected 2 to 1 000 000",
         ),
         (
-            "filter = \"gpf\"\noptions = { particles = 500 }",
-            "filter = \"gpf\"\noptions = { particles = 500, pf_proposal = \"linearised\" }",
-            ":171:10:",
-            "the marginalised and Gaussian filters draw from their exact predictions",
+            "filter = \"mpf\"\noptions = { particles = 100, neff_threshold = 0.5 }",
+            "filter = \"mpf\"\noptions = { particles = 100, neff_threshold = 0.5, pf_proposal = \"linearised\" }",
+            "filter",
+            "the marginalised filter draws from its exact prediction",
         ),
         (
             "filter = \"gpf\"\noptions = { particles = 500",

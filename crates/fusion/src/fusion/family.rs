@@ -176,9 +176,12 @@ pub struct FamilyConfig {
     /// process noise collapses a bootstrap filter's weights onto one particle.
     pub pf_use_rates: bool,
     /// PF on the paper models: the proposal particles are drawn from — `"prior"` (the
-    /// process model, the bootstrap filter; default) or `"linearised"` (the process noise
-    /// conditioned on the epoch's ranges linearised at the predicted mean,
-    /// [`crate::fusion::particle::ParticleFilter::update_linearised`]).
+    /// process model, the bootstrap filter; default) or `"linearised"` (for the
+    /// resampling filters, the process noise conditioned on the epoch's ranges linearised
+    /// at the predicted mean; for the Gaussian PF, the EKF update of its predicted
+    /// Gaussian, the importance function of Kotecha & Djurić 2003 §III-B;
+    /// [`crate::fusion::particle::ParticleFilter::update_linearised`]). Not for the
+    /// marginalised PF.
     pub pf_proposal: ProposalKind,
     /// The regularised and Rao-Blackwellised PF on the paper models: the kernel after a
     /// resampling is `"liu_west"` (shrunk towards the mean so that the cloud's covariance

@@ -462,8 +462,9 @@ pub struct PaperEstimator<P, const NM: usize, const N: usize> {
     /// Set by a reset: the next epoch restarts the filter from a least-squares fix of its
     /// ranges when they determine one.
     recover: bool,
-    /// A particle filter with the linearised proposal: the epoch's prediction only moves
-    /// the cloud by `f`, and the update draws the process noise.
+    /// A particle filter with the linearised proposal: a resampling filter's prediction
+    /// only moves the cloud by `f`, and the update draws the process noise; the Gaussian
+    /// filter predicts its moments as always and draws from their linearised update.
     linearised: bool,
 }
 
@@ -632,13 +633,13 @@ where
         }
         let mut rng = ctx.rng.stream(&format!("estimator/{name}/paper"));
         if let PaperFilter::Pf {
-            variant: PfVariant::Marginalised | PfVariant::Gaussian,
+            variant: PfVariant::Marginalised,
             linearised: true,
             ..
         } = filter
         {
             return Err(
-                "options.pf_proposal = \"linearised\" is for filter = \"pf\", \"sir\" or \"rbpf\": the marginalised and Gaussian filters draw from their exact predictions".into(),
+                "options.pf_proposal = \"linearised\" is for filter = \"pf\", \"sir\", \"rbpf\" or \"gpf\": the marginalised filter draws from its exact prediction".into(),
             );
         }
         let core = Core::new(filter, layout.pos, x0, p0, &mut rng)?;
@@ -1003,7 +1004,9 @@ where
             Core::Sigma(f) => f.predict(&self.model, dt).is_ok(),
             Core::Stf(f, fading) => fading.predict(f, &self.model, dt).is_ok(),
             Core::Rekf(f) => f.predict(&self.model, dt).is_ok(),
-            Core::Pf(p) if self.linearised => p.propagate(&self.model, dt).is_ok(),
+            Core::Pf(p) if self.linearised && p.variant() != PfVariant::Gaussian => {
+                p.propagate(&self.model, dt).is_ok()
+            }
             Core::Pf(p) => p.predict(&self.model, dt, &mut self.rng).is_ok(),
         };
         if !predicted {
@@ -1043,7 +1046,7 @@ where
                         .all(|(r, _)| ready_before[r.system.index()]);
                     if known {
                         let (x, mut cov) = (p.mean(), p.covariance());
-                        if self.linearised {
+                        if self.linearised && p.variant() != PfVariant::Gaussian {
                             // The cloud has moved by f only; the prediction adds Q.
                             cov += self.model.q(&x, dt);
                         }

@@ -326,6 +326,10 @@ pub struct ParticleFilter<const N: usize> {
     rb: Option<RbClocks>,
     mm: Option<MarginalMotion<N>>,
     kernel: KernelPlacement,
+    /// The Gaussian filter's exact predicted moments `(μ̄, Σ̄)`, kept from
+    /// [`Self::predict`] for a linearised importance function
+    /// ([`Self::update_linearised`]) until the cloud is weighted or changed from outside.
+    predicted: Option<(SVector<f64, N>, SMatrix<f64, N, N>)>,
 }
 
 impl<const N: usize> ParticleFilter<N> {
@@ -354,6 +358,7 @@ impl<const N: usize> ParticleFilter<N> {
             rb: None,
             mm: None,
             kernel: KernelPlacement::Shrunk,
+            predicted: None,
         })
     }
 
@@ -525,8 +530,10 @@ impl<const N: usize> ParticleFilter<N> {
         &self.buf
     }
 
-    /// The particles, writable.
+    /// The particles, writable. A Gaussian filter's kept prediction is dropped: its
+    /// next linearised update takes the moments of the cloud as changed.
     pub fn particles_mut(&mut self) -> &mut ParticleBuffer<N> {
+        self.predicted = None;
         &mut self.buf
     }
 
@@ -546,6 +553,7 @@ impl<const N: usize> ParticleFilter<N> {
         if !mean.iter().all(|v| v.is_finite()) {
             return Err(ParticleError::NonFinite);
         }
+        self.predicted = None;
         if let Some(mm) = &self.mm {
             // The positions from their marginal, the motion states' Kalman means from
             // their conditional given each particle's positions.
@@ -655,6 +663,7 @@ impl<const N: usize> ParticleFilter<N> {
             self.buf.set(i, &(mu + g * w));
         }
         self.buf.weights.fill(1.0 / self.buf.n as f64);
+        self.predicted = Some((mu, sigma));
         Ok(())
     }
 
@@ -799,39 +808,22 @@ impl<const N: usize> ParticleFilter<N> {
             pf.add_noise(&q, rng)?;
             Ok(pf.update_ranges(lik, rng))
         };
-        if self.mm.is_some() || self.variant == PfVariant::Gaussian {
+        if self.mm.is_some() {
             return Err(ParticleError::InvalidParameter(
-                "the linearised proposal is for the resampling filters, not the marginalised or Gaussian one"
+                "the linearised proposal is for the resampling and Gaussian filters, not the marginalised one"
                     .into(),
             ));
         }
         if self.rb.is_some() || m == 0 || m > MAX_PROPOSAL_ROWS {
             return bootstrap(self, rng);
         }
-        let mean = self.mean();
-        type Rows<const N: usize> = SMatrix<f64, MAX_PROPOSAL_ROWS, N>;
-        let pos = |x: &SVector<f64, N>| {
-            Vector3::from_fn(|a, _| lik.pos_col[a].filter(|&k| k < N).map_or(0.0, |k| x[k]))
-        };
-        let p_mean = pos(&mean);
-        let mut h = Rows::<N>::zeros();
-        for (j, r) in lik.rows.iter().enumerate() {
-            let d = p_mean - Vector3::from(r.e);
-            let dist = d.norm();
-            if dist.is_nan() || dist <= 0.0 {
-                return bootstrap(self, rng);
-            }
-            for a in 0..3 {
-                if let Some(k) = lik.pos_col[a].filter(|&k| k < N) {
-                    h[(j, k)] = d[a] / dist;
-                }
-            }
-            for k in [r.clock_col, r.isb_col].into_iter().flatten() {
-                if k < N {
-                    h[(j, k)] += 1.0;
-                }
-            }
+        if self.variant == PfVariant::Gaussian {
+            return self.update_gaussian_linearised(lik, rng);
         }
+        let mean = self.mean();
+        let Some(h) = range_linearisation::<N>(lik, &mean) else {
+            return bootstrap(self, rng);
+        };
         let mut s = h * q * h.transpose();
         for (j, r) in lik.rows.iter().enumerate() {
             s[(j, j)] += -0.5 / r.neg_half_inv_var;
@@ -850,17 +842,7 @@ impl<const N: usize> ParticleFilter<N> {
         let noisy = g.iter().any(|v| *v != 0.0);
         for i in 0..self.buf.n {
             let x = self.buf.get(i);
-            let p = pos(&x);
-            let mut nu = SVector::<f64, MAX_PROPOSAL_ROWS>::zeros();
-            for (j, r) in lik.rows.iter().enumerate() {
-                let mut pred = (Vector3::from(r.e) - p).norm();
-                for k in [r.clock_col, r.isb_col].into_iter().flatten() {
-                    if k < N {
-                        pred += x[k];
-                    }
-                }
-                nu[j] = r.z_m - pred;
-            }
+            let nu = range_residuals(lik, &x);
             let mut y = x + gain * nu;
             if noisy {
                 let w = SVector::<f64, N>::from_fn(|_, _| rng.sample(StandardNormal));
@@ -872,6 +854,74 @@ impl<const N: usize> ParticleFilter<N> {
             self.buf.set(i, &y);
             self.buf.log_lik[i] = -0.5 * nu.dot(&(s_inv * nu));
         }
+        Ok(self.finish_update(rng))
+    }
+
+    /// The Gaussian filter's measurement update with the linearised importance function
+    /// (Kotecha & Djurić 2003, §III-B, who name the EKF's update of the predicted Gaussian
+    /// as one choice of importance function): with the ranges linearised at the predicted
+    /// mean, `h(x) ≈ h(μ̄) + H (x − μ̄)`,
+    ///
+    /// ```text
+    /// S = H Σ̄ Hᵀ + R,   K = Σ̄ Hᵀ S⁻¹
+    /// π = N(μ̄ + K (z − h(μ̄)),  (I − K H) Σ̄ (I − K H)ᵀ + K R Kᵀ)
+    /// x_i ~ π,   w_i ∝ p(z | x_i) N(x_i; μ̄, Σ̄) / π(x_i) = p(z | x_i) / p_lin(z | x_i) · const
+    /// ```
+    ///
+    /// The last identity holds because `N(x; μ̄, Σ̄) p_lin(z | x) = π(x) N(z; h(μ̄), S)` for
+    /// the linearised likelihood `p_lin(z | x) = N(z; h(μ̄) + H (x − μ̄), R)`: the weights
+    /// then need no density of the (often singular) `Σ̄`, and they are uniform when the
+    /// ranges are linear, so every particle counts. `(μ̄, Σ̄)` are the exact predicted
+    /// moments kept by [`Self::predict`], or the weighted cloud's moments when the cloud
+    /// was changed or weighted since.
+    fn update_gaussian_linearised<R: Rng + ?Sized>(
+        &mut self,
+        lik: &PseudorangeLikelihood,
+        rng: &mut R,
+    ) -> Result<PfUpdate, ParticleError> {
+        let (mu, sigma) = match self.predicted.take() {
+            Some(pred) => pred,
+            None => (self.mean(), self.sample_covariance()),
+        };
+        let m = lik.rows.len();
+        let Some(h) = range_linearisation::<N>(lik, &mu) else {
+            return Ok(self.update_ranges(lik, rng));
+        };
+        let mut r = SMatrix::<f64, MAX_PROPOSAL_ROWS, MAX_PROPOSAL_ROWS>::zeros();
+        for (j, row) in lik.rows.iter().enumerate() {
+            r[(j, j)] = -0.5 / row.neg_half_inv_var;
+        }
+        let mut s = h * sigma * h.transpose() + r;
+        // The unused rows are an identity block, so that S stays invertible.
+        for j in m..MAX_PROPOSAL_ROWS {
+            s[(j, j)] = 1.0;
+        }
+        let Some(chol) = s.cholesky() else {
+            return Ok(self.update_ranges(lik, rng));
+        };
+        let gain = sigma * h.transpose() * chol.inverse();
+        let nu0 = range_residuals(lik, &mu);
+        let mean = mu + gain * nu0;
+        let i_kh = SMatrix::<f64, N, N>::identity() - gain * h;
+        let cov = i_kh * sigma * i_kh.transpose() + gain * r * gain.transpose();
+        let g = psd_factor(&((cov + cov.transpose()) * 0.5))?;
+        if !mean.iter().all(|v| v.is_finite()) {
+            return Err(ParticleError::NonFinite);
+        }
+        for i in 0..self.buf.n {
+            let w = SVector::<f64, N>::from_fn(|_, _| rng.sample(StandardNormal));
+            let x = mean + g * w;
+            self.buf.set(i, &x);
+            // log p(z | x) − log p_lin(z | x): the exact residual against the linear one.
+            let nu = range_residuals(lik, &x);
+            let nu_lin = nu0 - h * (x - mu);
+            let mut log_w = 0.0;
+            for (j, row) in lik.rows.iter().enumerate() {
+                log_w += row.neg_half_inv_var * (nu[j] * nu[j] - nu_lin[j] * nu_lin[j]);
+            }
+            self.buf.log_lik[i] = log_w;
+        }
+        self.buf.weights.fill(1.0 / self.buf.n as f64);
         Ok(self.finish_update(rng))
     }
 
@@ -894,6 +944,7 @@ impl<const N: usize> ParticleFilter<N> {
     }
 
     fn finish_update<R: Rng + ?Sized>(&mut self, rng: &mut R) -> PfUpdate {
+        self.predicted = None;
         let b = &mut self.buf;
         let max = b
             .log_lik
@@ -1273,6 +1324,62 @@ fn clock_residual_sums(
         b[i] += w * res * res;
     }
 }
+
+/// The rows of `H` (unit line of sight and clock columns) of an epoch's ranges at state
+/// `x`; the unused rows are zero. `None` when the state sits on an emitter or is not
+/// finite.
+fn range_linearisation<const N: usize>(
+    lik: &PseudorangeLikelihood,
+    x: &SVector<f64, N>,
+) -> Option<ProposalRows<N>> {
+    let p = position(lik, x);
+    let mut h = ProposalRows::<N>::zeros();
+    for (j, r) in lik.rows.iter().enumerate().take(MAX_PROPOSAL_ROWS) {
+        let d = p - Vector3::from(r.e);
+        let dist = d.norm();
+        if dist.is_nan() || dist <= 0.0 {
+            return None;
+        }
+        for a in 0..3 {
+            if let Some(k) = lik.pos_col[a].filter(|&k| k < N) {
+                h[(j, k)] = d[a] / dist;
+            }
+        }
+        for k in [r.clock_col, r.isb_col].into_iter().flatten() {
+            if k < N {
+                h[(j, k)] += 1.0;
+            }
+        }
+    }
+    Some(h)
+}
+
+/// The residuals `z − h(x)` of an epoch's ranges at state `x` (the unused rows zero).
+fn range_residuals<const N: usize>(
+    lik: &PseudorangeLikelihood,
+    x: &SVector<f64, N>,
+) -> SVector<f64, MAX_PROPOSAL_ROWS> {
+    let p = position(lik, x);
+    let mut nu = SVector::<f64, MAX_PROPOSAL_ROWS>::zeros();
+    for (j, r) in lik.rows.iter().enumerate().take(MAX_PROPOSAL_ROWS) {
+        let mut pred = (Vector3::from(r.e) - p).norm();
+        for k in [r.clock_col, r.isb_col].into_iter().flatten() {
+            if k < N {
+                pred += x[k];
+            }
+        }
+        nu[j] = r.z_m - pred;
+    }
+    nu
+}
+
+/// The position of state `x` under the likelihood's columns (a missing one is 0).
+fn position<const N: usize>(lik: &PseudorangeLikelihood, x: &SVector<f64, N>) -> Vector3<f64> {
+    Vector3::from_fn(|a, _| lik.pos_col[a].filter(|&k| k < N).map_or(0.0, |k| x[k]))
+}
+
+/// `H` of the linearised proposals: one row per range, up to [`MAX_PROPOSAL_ROWS`].
+type ProposalRows<const N: usize> = SMatrix<f64, MAX_PROPOSAL_ROWS, N>;
 
 /// A factor `G` with `G Gᵀ = Q` for a positive semi-definite `Q`: Cholesky when it
 /// exists, else the symmetric eigen-decomposition `V √D` (a model such as seed 001's,
@@ -2140,5 +2247,144 @@ mod tests {
                 .iter()
                 .all(|p| (p - pos.x).abs() < 1e-9));
         }
+    }
+
+    /// The Gaussian filter with the linearised importance function on the known-position
+    /// clock: the ranges are linear in the clock, so the importance function is the exact
+    /// posterior, every weight stays 1/N (N_eff = N to rounding), and the cloud's clock
+    /// mean and variance follow the textbook Kalman filter with the tolerances of the
+    /// test above at N_eff = N.
+    #[test]
+    fn linearised_gaussian_filter_follows_the_kalman_filter_with_uniform_weights() {
+        let mut truth =
+            KnownPositionClock::new(TrialRng::new(6, 5).stream("test/gpf-lin-clock/noise"));
+        let pos = truth.pos;
+        let n = 20_000;
+        let mut pf = ParticleFilter::new(
+            ParticleBuffer::<4>::new(n).unwrap(),
+            Resampling::Systematic,
+            0.5,
+        )
+        .unwrap()
+        .gaussian();
+        let mut rng = TrialRng::new(6, 4).stream("test/gpf-lin-clock");
+        let (x0, p0) = truth.prior();
+        pf.init_gaussian(&x0, &p0, &mut rng).unwrap();
+        let mut lik = PseudorangeLikelihood::with_capacity(3);
+        for epoch in 1..=10 {
+            let z = truth.epoch(epoch);
+            pf.predict(&truth.process, 1.0, &mut rng).unwrap();
+            lik.set(&truth.ranges, &z);
+            let q = ProcessModel::<4>::q(&truth.process, &x0, 1.0);
+            let up = pf.update_linearised(&q, &lik, &mut rng).unwrap();
+            assert!(!up.degenerate && !up.resampled);
+            assert!(
+                (up.n_eff / n as f64 - 1.0).abs() < 1e-9,
+                "{epoch}: N_eff {}",
+                up.n_eff
+            );
+            let (km, kv) = truth.kalman();
+            let (mean, var) = (pf.mean()[3], pf.covariance()[(3, 3)]);
+            let k = epoch as f64;
+            let tol_mean = 4.0 * (k * kv / n as f64).sqrt();
+            let tol_var = 4.0 * (2.0 * k / n as f64).sqrt();
+            assert!(
+                (mean - km).abs() < tol_mean,
+                "{epoch}: {mean} vs {km} ({tol_mean})"
+            );
+            assert!(
+                (var / kv - 1.0).abs() < tol_var,
+                "{epoch}: {var} vs {kv} ({tol_var})"
+            );
+            assert!(pf
+                .particles()
+                .column(1)
+                .iter()
+                .all(|p| (p - pos.y).abs() < 1e-9));
+        }
+    }
+
+    /// Where the linearisation is poor (an emitter 150 m from a prior of σ 30 m), the
+    /// weights `p(z | x) / p_lin(z | x)` carry the importance function to the exact
+    /// posterior: the weighted mean equals the posterior mean computed independently by
+    /// importance sampling from the prior, while the importance function's own mean (the
+    /// EKF update, i.e. the cloud without the weights) is far from it.
+    #[test]
+    fn linearised_gaussian_weights_correct_a_poor_linearisation() {
+        let layout = StateLayout {
+            pos: [Some(0), Some(1), Some(2)],
+            vel: [None; 3],
+            clock: [Some(3); System::COUNT],
+            isb: [None; System::COUNT],
+            drift: None,
+        };
+        let row = |x: f64, y: f64, sigma_m: f64| RangeRow {
+            emitter_pos_m: Vector3::new(x, y, 0.0),
+            emitter_vel_mps: Vector3::zeros(),
+            system: System::Dtmb,
+            sigma_m,
+            sigma_rate_mps: 1.0,
+        };
+        // A far emitter fixes x; the near one, 133 m from the truth, gives y through a
+        // circle that the line x = 30 m meets at y = 20 m and at y = 280 m, the second
+        // 9 prior σ out: one mode. Linearised at the prior mean the near range puts y at
+        // 16.6 m, a proposal about half a posterior σ off, which importance weights can
+        // carry to the posterior.
+        let ranges =
+            Pseudoranges::<4, 2>::new(layout, [row(-3000.0, 0.0, 5.0), row(0.0, 150.0, 5.0)])
+                .unwrap();
+        // The truth at (30, 20, 0), clock known (0) and the prior N(0, 30² I) in the plane.
+        let truth = Vector3::new(30.0, 20.0, 0.0);
+        let z = SVector::<f64, 2>::from_fn(|j, _| (ranges.rows()[j].emitter_pos_m - truth).norm());
+        let x0 = SVector::<f64, 4>::zeros();
+        let p0 =
+            SMatrix::<f64, 4, 4>::from_diagonal(&SVector::<f64, 4>::new(900.0, 900.0, 0.0, 0.0));
+        let mut lik = PseudorangeLikelihood::with_capacity(2);
+        lik.set(&ranges, &z);
+        let n = 400_000;
+        let new_pf = |gaussian: bool| {
+            let pf = ParticleFilter::new(
+                ParticleBuffer::<4>::new(n).unwrap(),
+                Resampling::Systematic,
+                0.0,
+            )
+            .unwrap();
+            if gaussian {
+                pf.gaussian()
+            } else {
+                pf
+            }
+        };
+        // The exact posterior mean: prior draws weighted by the likelihood (no resampling).
+        let mut exact = new_pf(false);
+        let mut rng = TrialRng::new(7, 0).stream("test/gpf-lin-exact");
+        exact.init_gaussian(&x0, &p0, &mut rng).unwrap();
+        let up = exact.update_ranges(&lik, &mut rng);
+        let se = (exact.covariance()[(0, 0)] / up.n_eff).sqrt();
+        let exact_mean = exact.mean();
+        // The linearised Gaussian filter: one epoch from the same prior.
+        let mut pf = new_pf(true);
+        let mut rng = TrialRng::new(7, 1).stream("test/gpf-lin");
+        pf.init_gaussian(&x0, &p0, &mut rng).unwrap();
+        let q = SMatrix::<f64, 4, 4>::zeros();
+        let up_lin = pf.update_linearised(&q, &lik, &mut rng).unwrap();
+        let weighted = pf.mean();
+        let b = pf.particles();
+        let unweighted = Vector3::from_fn(|a, _| b.column(a).iter().sum::<f64>() / n as f64);
+        let tol = 4.0 * se + 4.0 * (pf.covariance()[(0, 0)] / up_lin.n_eff).sqrt();
+        for a in 0..2 {
+            assert!(
+                (weighted[a] - exact_mean[a]).abs() < tol,
+                "axis {a}: weighted {} vs exact {} (tolerance {tol})",
+                weighted[a],
+                exact_mean[a]
+            );
+        }
+        let off = (unweighted - Vector3::new(exact_mean[0], exact_mean[1], 0.0)).norm();
+        assert!(
+            off > 10.0 * tol,
+            "the linearisation is not poor here: {off} m"
+        );
+        assert!(up_lin.n_eff < 0.9 * n as f64 && up_lin.n_eff > 0.01 * n as f64);
     }
 }
