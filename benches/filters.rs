@@ -242,6 +242,16 @@ fn bench_pf(c: &mut Criterion) {
                 black_box(gpf.update_ranges(&lik, &mut rng))
             })
         });
+        // The same with the linearised importance function: the update factors the EKF
+        // update of the kept prediction, redraws every particle from it and weights each
+        // by the exact over the linearised likelihood.
+        let q = ProcessModel::<4>::q(&RandomWalk, &truth, 1.0);
+        group.bench_function(format!("gaussian linearised epoch N={n}"), |b| {
+            b.iter(|| {
+                gpf.predict(&RandomWalk, 1.0, &mut rng).expect("valid");
+                black_box(gpf.update_linearised(&q, &lik, &mut rng).expect("valid"))
+            })
+        });
         // The marginalised PF on a 3-D constant-velocity state (no clock): the positions
         // sampled, the velocities carried by the per-particle Kalman filters, so each
         // epoch adds the joint factorisation and the conditional update of the means.

@@ -179,7 +179,7 @@ pub struct FamilyConfig {
     /// process model, the bootstrap filter; default) or `"linearised"` (for the
     /// resampling filters, the process noise conditioned on the epoch's ranges linearised
     /// at the predicted mean; for the Gaussian PF, the EKF update of its predicted
-    /// Gaussian, the importance function of Kotecha & Djurić 2003 §III-B;
+    /// Gaussian as the GPF's importance function;
     /// [`crate::fusion::particle::ParticleFilter::update_linearised`]). Not for the
     /// marginalised PF.
     pub pf_proposal: ProposalKind,

@@ -857,10 +857,12 @@ impl<const N: usize> ParticleFilter<N> {
         Ok(self.finish_update(rng))
     }
 
-    /// The Gaussian filter's measurement update with the linearised importance function
-    /// (Kotecha & Djurić 2003, §III-B, who name the EKF's update of the predicted Gaussian
-    /// as one choice of importance function): with the ranges linearised at the predicted
-    /// mean, `h(x) ≈ h(μ̄) + H (x − μ̄)`,
+    /// The Gaussian filter's measurement update with the linearised importance function:
+    /// Kotecha & Djurić's GPF leaves the importance function `π` free (their examples draw
+    /// from the prediction); this one is the EKF update of the predicted Gaussian, the
+    /// local linearisation of the optimal importance function (Doucet, Godsill & Andrieu
+    /// 2000, §II.D.2) applied to the GPF's Gaussian. With the ranges linearised at the
+    /// predicted mean, `h(x) ≈ h(μ̄) + H (x − μ̄)`,
     ///
     /// ```text
     /// S = H Σ̄ Hᵀ + R,   K = Σ̄ Hᵀ S⁻¹
