@@ -352,6 +352,12 @@ fn bad_particle_filter_input_is_refused_with_its_place_and_range() {
             "the marginalised filter draws from its exact prediction",
         ),
         (
+            "name = \"GPF-100\"\nfilter = \"gpf\"\noptions = { particles = 100 }",
+            "name = \"GPF-100\"\nfilter = \"gpf\"\noptions = { particles = 100, gpf_covariance = \"biased\" }",
+            ":166:",
+            "expected `weighted` or `unbiased`",
+        ),
+        (
             "filter = \"gpf\"\noptions = { particles = 500",
             "filter = \"gpf\"\nprocess = { model = \"pva_clock\" }\noptions = { particles = 500",
             ":171:10:",

@@ -117,6 +117,30 @@ pub enum KernelKind {
     Musso,
 }
 
+/// How the Gaussian particle filter estimates its covariance from the weighted cloud
+/// (`[estimator.options] gpf_covariance`,
+/// [`crate::fusion::particle::CovarianceEstimate`]).
+#[derive(
+    Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum GpfCovarianceKind {
+    /// `Σ w_i (x_i − μ)(x_i − μ)ᵀ`, as Kotecha & Djurić write it.
+    Weighted,
+    /// The same divided by `1 − Σ w_i²`: the unbiased estimator for normalised weights.
+    Unbiased,
+}
+
+impl GpfCovarianceKind {
+    /// The particle filter's estimator of this name.
+    pub fn estimate(self) -> crate::fusion::particle::CovarianceEstimate {
+        match self {
+            GpfCovarianceKind::Weighted => crate::fusion::particle::CovarianceEstimate::Weighted,
+            GpfCovarianceKind::Unbiased => crate::fusion::particle::CovarianceEstimate::Unbiased,
+        }
+    }
+}
+
 impl KernelKind {
     /// The particle filter's placement of this name.
     pub fn placement(self) -> crate::fusion::particle::KernelPlacement {
@@ -188,6 +212,13 @@ pub struct FamilyConfig {
     /// is kept; default) or `"musso"` (added as it is: the cloud inflates by `h_opt²` of
     /// its covariance at each resampling, as the regularised PF was defined).
     pub pf_kernel: KernelKind,
+    /// The Gaussian PF (`filter = "gpf"`; the other members carry no moment estimate and
+    /// ignore it): the covariance of its Gaussian is the weighted cloud's,
+    /// `Σ w_i (x_i − μ)(x_i − μ)ᵀ` (`"weighted"`, Kotecha & Djurić 2003; default), or that
+    /// divided by `1 − Σ w_i²` (`"unbiased"`). The first has expectation `(1 − Σ w_i²) Σ`;
+    /// fed back through the recursion, the deficit compounds on states without process
+    /// noise, `(1 − 1/N)^k` after k epochs of uniform weights.
+    pub gpf_covariance: GpfCovarianceKind,
     /// A position 1-σ (m, from the trace of the position covariance) beyond which the
     /// filter is declared diverged and reset. Default 100 km.
     pub divergence_pos_sigma_m: f64,
@@ -216,6 +247,7 @@ impl Default for FamilyConfig {
             pf_use_rates: false,
             pf_proposal: ProposalKind::Prior,
             pf_kernel: KernelKind::LiuWest,
+            gpf_covariance: GpfCovarianceKind::Weighted,
             divergence_pos_sigma_m: 1e5,
             divergence_residual_nis: 400.0,
         }

@@ -76,7 +76,8 @@ use crate::fusion::models::{
     PlaneTurning, ProcessModel, Pseudoranges, RangeRow, Singer5, StateLayout,
 };
 use crate::fusion::particle::{
-    KernelPlacement, ParticleBuffer, ParticleFilter, PfVariant, PseudorangeLikelihood, Resampling,
+    CovarianceEstimate, KernelPlacement, ParticleBuffer, ParticleFilter, PfVariant,
+    PseudorangeLikelihood, Resampling,
 };
 use crate::fusion::preprocess::FrontEnd;
 use crate::fusion::selection::ModeSelection;
@@ -247,6 +248,8 @@ pub enum PaperFilter {
         linearised: bool,
         /// Where the regularisation kernel goes after a resampling.
         kernel: KernelPlacement,
+        /// How the Gaussian PF estimates its covariance.
+        covariance: CovarianceEstimate,
     },
 }
 
@@ -372,12 +375,14 @@ impl<const N: usize> Core<N> {
                 neff_threshold,
                 variant,
                 kernel,
+                covariance,
                 ..
             } => {
                 let buf = ParticleBuffer::<N>::new(particles).map_err(|e| e.to_string())?;
                 let pf = ParticleFilter::new(buf, resampling, neff_threshold)
                     .map_err(|e| e.to_string())?
-                    .with_kernel(kernel);
+                    .with_kernel(kernel)
+                    .with_covariance_estimate(covariance);
                 let mut pf = match variant {
                     PfVariant::Sir => pf,
                     PfVariant::Regularised => pf.regularised(),
