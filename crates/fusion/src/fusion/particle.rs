@@ -1652,14 +1652,19 @@ mod tests {
     use crate::fusion::models::{RangeRow, StateLayout};
     use nalgebra::Vector3;
 
-    fn model() -> Pseudoranges<4, 3> {
-        let layout = StateLayout {
+    /// Position in columns 0–2 and one clock, shared by every system, in column 3.
+    fn position_clock_layout() -> StateLayout {
+        StateLayout {
             pos: [Some(0), Some(1), Some(2)],
             vel: [None; 3],
             clock: [Some(3); System::COUNT],
             isb: [None; System::COUNT],
             drift: None,
-        };
+        }
+    }
+
+    fn model() -> Pseudoranges<4, 3> {
+        let layout = position_clock_layout();
         let row = |x: f64, y: f64| RangeRow {
             emitter_pos_m: Vector3::new(x, y, 500.0),
             emitter_vel_mps: Vector3::zeros(),
@@ -1916,6 +1921,25 @@ mod tests {
         /// The Kalman filter's clock mean and variance.
         fn kalman(&self) -> (f64, f64) {
             (self.kf.state()[0], self.kf.covariance()[(0, 0)])
+        }
+
+        /// Asserts that a Gaussian filter's clock mean and variance at `epoch` (1-based)
+        /// follow the Kalman filter's: within `4√(k P / N_eff)` and `4√(2k / N_eff)`, the
+        /// Monte Carlo error of k successive moment estimates from `n_eff` samples.
+        fn assert_followed(&self, epoch: usize, pf: &ParticleFilter<4>, n_eff: f64) {
+            let (km, kv) = self.kalman();
+            let (mean, var) = (pf.mean()[3], pf.covariance()[(3, 3)]);
+            let k = epoch as f64;
+            let tol_mean = 4.0 * (k * kv / n_eff).sqrt();
+            let tol_var = 4.0 * (2.0 * k / n_eff).sqrt();
+            assert!(
+                (mean - km).abs() < tol_mean,
+                "{epoch}: {mean} vs {km} ({tol_mean})"
+            );
+            assert!(
+                (var / kv - 1.0).abs() < tol_var,
+                "{epoch}: {var} vs {kv} ({tol_var})"
+            );
         }
     }
 
@@ -2255,48 +2279,7 @@ mod tests {
     /// the column-wise pseudorange likelihood, with the tolerance of the test above.
     #[test]
     fn gaussian_filter_follows_the_kalman_filter_with_a_singular_covariance() {
-        let mut truth = KnownPositionClock::new(TrialRng::new(6, 3).stream("test/gpf-clock/noise"));
-        let pos = truth.pos;
-        let n = 20_000;
-        let mut pf = ParticleFilter::new(
-            ParticleBuffer::<4>::new(n).unwrap(),
-            Resampling::Systematic,
-            0.5,
-        )
-        .unwrap()
-        .gaussian();
-        let mut rng = TrialRng::new(6, 2).stream("test/gpf-clock");
-        let (x0, p0) = truth.prior();
-        pf.init_gaussian(&x0, &p0, &mut rng).unwrap();
-        let mut lik = PseudorangeLikelihood::with_capacity(3);
-        let mut n_eff_min = f64::INFINITY;
-        for epoch in 1..=10 {
-            let z = truth.epoch(epoch);
-            pf.predict(&truth.process, 1.0, &mut rng).unwrap();
-            lik.set(&truth.ranges, &z);
-            let up = pf.update_ranges(&lik, &mut rng);
-            assert!(!up.degenerate && !up.resampled);
-            n_eff_min = n_eff_min.min(up.n_eff);
-            let (km, kv) = truth.kalman();
-            let (mean, var) = (pf.mean()[3], pf.covariance()[(3, 3)]);
-            let k = epoch as f64;
-            let tol_mean = 4.0 * (k * kv / n_eff_min).sqrt();
-            let tol_var = 4.0 * (2.0 * k / n_eff_min).sqrt();
-            assert!(
-                (mean - km).abs() < tol_mean,
-                "{epoch}: {mean} vs {km} ({tol_mean})"
-            );
-            assert!(
-                (var / kv - 1.0).abs() < tol_var,
-                "{epoch}: {var} vs {kv} ({tol_var})"
-            );
-            // The known position stays known: no particle moved off it.
-            assert!(pf
-                .particles()
-                .column(0)
-                .iter()
-                .all(|p| (p - pos.x).abs() < 1e-9));
-        }
+        gaussian_filter_on_the_known_position_clock(false);
     }
 
     /// The Gaussian filter with the linearised importance function on the known-position
@@ -2306,8 +2289,20 @@ mod tests {
     /// test above at N_eff = N.
     #[test]
     fn linearised_gaussian_filter_follows_the_kalman_filter_with_uniform_weights() {
-        let mut truth =
-            KnownPositionClock::new(TrialRng::new(6, 5).stream("test/gpf-lin-clock/noise"));
+        gaussian_filter_on_the_known_position_clock(true);
+    }
+
+    /// Ten epochs of a 20 000-particle Gaussian filter on [`KnownPositionClock`], weighted
+    /// by the column-wise likelihood or drawn from the linearised importance function.
+    fn gaussian_filter_on_the_known_position_clock(linearised: bool) {
+        let name = if linearised {
+            "gpf-lin-clock"
+        } else {
+            "gpf-clock"
+        };
+        let mut truth = KnownPositionClock::new(
+            TrialRng::new(6, if linearised { 5 } else { 3 }).stream(&format!("test/{name}/noise")),
+        );
         let pos = truth.pos;
         let n = 20_000;
         let mut pf = ParticleFilter::new(
@@ -2317,40 +2312,39 @@ mod tests {
         )
         .unwrap()
         .gaussian();
-        let mut rng = TrialRng::new(6, 4).stream("test/gpf-lin-clock");
+        let mut rng =
+            TrialRng::new(6, if linearised { 4 } else { 2 }).stream(&format!("test/{name}"));
         let (x0, p0) = truth.prior();
         pf.init_gaussian(&x0, &p0, &mut rng).unwrap();
         let mut lik = PseudorangeLikelihood::with_capacity(3);
+        let mut n_eff_min = f64::INFINITY;
         for epoch in 1..=10 {
             let z = truth.epoch(epoch);
             pf.predict(&truth.process, 1.0, &mut rng).unwrap();
             lik.set(&truth.ranges, &z);
-            let q = ProcessModel::<4>::q(&truth.process, &x0, 1.0);
-            let up = pf.update_linearised(&q, &lik, &mut rng).unwrap();
+            let up = if linearised {
+                let q = ProcessModel::<4>::q(&truth.process, &x0, 1.0);
+                let up = pf.update_linearised(&q, &lik, &mut rng).unwrap();
+                assert!(
+                    (up.n_eff / n as f64 - 1.0).abs() < 1e-9,
+                    "{epoch}: N_eff {}",
+                    up.n_eff
+                );
+                up
+            } else {
+                pf.update_ranges(&lik, &mut rng)
+            };
             assert!(!up.degenerate && !up.resampled);
-            assert!(
-                (up.n_eff / n as f64 - 1.0).abs() < 1e-9,
-                "{epoch}: N_eff {}",
-                up.n_eff
-            );
-            let (km, kv) = truth.kalman();
-            let (mean, var) = (pf.mean()[3], pf.covariance()[(3, 3)]);
-            let k = epoch as f64;
-            let tol_mean = 4.0 * (k * kv / n as f64).sqrt();
-            let tol_var = 4.0 * (2.0 * k / n as f64).sqrt();
-            assert!(
-                (mean - km).abs() < tol_mean,
-                "{epoch}: {mean} vs {km} ({tol_mean})"
-            );
-            assert!(
-                (var / kv - 1.0).abs() < tol_var,
-                "{epoch}: {var} vs {kv} ({tol_var})"
-            );
-            assert!(pf
-                .particles()
-                .column(1)
-                .iter()
-                .all(|p| (p - pos.y).abs() < 1e-9));
+            n_eff_min = n_eff_min.min(up.n_eff);
+            truth.assert_followed(epoch, &pf, n_eff_min);
+            // The known position stays known: no particle moved off it.
+            for (k, p) in pos.iter().enumerate() {
+                assert!(pf
+                    .particles()
+                    .column(k)
+                    .iter()
+                    .all(|x| (x - p).abs() < 1e-9));
+            }
         }
     }
 
@@ -2361,13 +2355,7 @@ mod tests {
     /// EKF update, i.e. the cloud without the weights) is far from it.
     #[test]
     fn linearised_gaussian_weights_correct_a_poor_linearisation() {
-        let layout = StateLayout {
-            pos: [Some(0), Some(1), Some(2)],
-            vel: [None; 3],
-            clock: [Some(3); System::COUNT],
-            isb: [None; System::COUNT],
-            drift: None,
-        };
+        let layout = position_clock_layout();
         let row = |x: f64, y: f64, sigma_m: f64| RangeRow {
             emitter_pos_m: Vector3::new(x, y, 0.0),
             emitter_vel_mps: Vector3::zeros(),
