@@ -445,7 +445,9 @@ fn a_run_reports_the_worlds_bound_in_its_summary_and_report() {
 /// PF with the unbiased covariance at 20 particles within 1.3× (1.25×).
 #[test]
 fn the_few_particle_goals_hold_on_the_paper_worlds() {
-    let cases: [(&str, &str, &[(&str, f64)]); 2] = [
+    // (world file, trials, [(row, largest RMSE / PCRLB)]).
+    type Case<'a> = (&'a str, &'a str, &'a [(&'a str, f64)]);
+    let cases: [Case; 2] = [
         (
             "seed003-seamless.toml",
             "20",
