@@ -16,6 +16,15 @@
 //! filter of Kotecha & Djurić (2003), which never resamples and carries the posterior as
 //! the Gaussian of the weighted cloud's moments ([`ParticleFilter::gaussian`]).
 //!
+//! Each member can draw from the prior (the bootstrap filter above) or from a proposal
+//! linearised on the epoch's ranges ([`ParticleFilter::update_linearised`]): the resampling
+//! filters condition their process noise, and after a resampling the regularised filter's
+//! kernel, on the ranges (Doucet, Godsill & Andrieu 2000, §II.D.2); the Gaussian filter
+//! draws from the EKF update of its predicted Gaussian and weights each particle by the
+//! exact over the linearised likelihood. With few particles on the papers' models, whose
+//! positions have little or no process noise, this is what keeps the weights from
+//! collapsing (docs/reproductions.md, seeds 001 and 003).
+//!
 //! # Layout and speed
 //!
 //! The particles live in a [`ParticleBuffer`] the caller builds once (and can take back
