@@ -112,7 +112,7 @@ pub enum PfVariant {
     /// dynamics linearly and the ranges not at all, are carried by a Kalman filter per
     /// particle, as are the clocks (see [`ParticleFilter::marginalised`]).
     Marginalised,
-    /// The Gaussian particle filter (Kotecha & Djurić 2003, see [`Self::gaussian`]): no
+    /// The Gaussian particle filter (Kotecha & Djurić 2003, see [`ParticleFilter::gaussian`]): no
     /// resampling; the posterior is the Gaussian of the weighted cloud's moments, and
     /// each prediction redraws the cloud from the predicted Gaussian.
     Gaussian,
@@ -320,7 +320,7 @@ impl<const N: usize> JointFactor<N> {
 }
 
 /// The most ranges an epoch may have for the linearised proposal
-/// ([`ParticleFilter::predict_update_linearised`]); beyond, the bootstrap epoch runs.
+/// ([`ParticleFilter::update_linearised`]); beyond, the bootstrap epoch runs.
 pub const MAX_PROPOSAL_ROWS: usize = 12;
 
 /// How the Gaussian particle filter estimates the covariance of its Gaussian from the
@@ -423,7 +423,7 @@ impl<const N: usize> ParticleFilter<N> {
     /// (importance function = the predicted Gaussian) happens at the end of
     /// [`Self::predict`], so [`Self::update_ranges`] and [`Self::update`] only weight the
     /// cloud: several updates in one epoch multiply the weights, which is the joint
-    /// update. `Σ̄` is factored by the zero-pivot-tolerant Cholesky ([`psd_factor`]), as
+    /// update. `Σ̄` is factored by the zero-pivot-tolerant Cholesky (`psd_factor`), as
     /// the singular covariances of these models need (seed 001's noise-free x axis,
     /// seed 003's noise-free positions, known clocks).
     ///
@@ -500,7 +500,7 @@ impl<const N: usize> ParticleFilter<N> {
     /// s_i ← μ_i,s + L_ss ε_i,   m_i ← μ_i,l + L_ls ε_i,   P ← L_ll L_llᵀ
     /// ```
     ///
-    /// (`Σ = L Lᵀ` over `[s, l]`, see [`JointFactor`]): the new positions are drawn from
+    /// (`Σ = L Lᵀ` over `[s, l]`, see `JointFactor`): the new positions are drawn from
     /// their marginal prediction, which carries the velocity's uncertainty, and the
     /// velocity's Kalman filter is conditioned on them — Schön et al.'s time update, with
     /// the correlation of the position and velocity noises handled by the joint factor
