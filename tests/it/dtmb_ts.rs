@@ -46,9 +46,10 @@ fn dtmb_sdr_bin() -> Option<PathBuf> {
 
 /// dtmb-sdr's complete receiver on a cf32 recording at 7.56 Msps (`--pn-mode pn`,
 /// `--system-info-index si`, then `extra`), writing the transport stream to `out` and
-/// going on past undecodable frames; its output (the log is on stderr and stdout).
-fn dtmb_decode(input: &str, pn: &str, si: &str, extra: &[&str], out: &str) -> Output {
-    Command::new("dtmb-decode")
+/// going on past undecodable frames; its output (the log is on stderr and stdout) and
+/// the transport stream it wrote.
+fn dtmb_decode(input: &str, pn: &str, si: &str, extra: &[&str], out: &str) -> (Output, Vec<u8>) {
+    let o = Command::new("dtmb-decode")
         .args([
             "--input",
             input,
@@ -71,7 +72,9 @@ fn dtmb_decode(input: &str, pn: &str, si: &str, extra: &[&str], out: &str) -> Ou
             "2",
         ])
         .output()
-        .expect("dtmb-decode runs (its presence was checked)")
+        .expect("dtmb-decode runs (its presence was checked)");
+    // A decoder that wrote nothing gave back no packets.
+    (o, std::fs::read(out).unwrap_or_default())
 }
 
 /// A random transport stream of `packets` packets on PID 0x100 with a continuous
@@ -168,14 +171,13 @@ fn check(
     } else {
         "c3780"
     };
-    let o = dtmb_decode(
+    let (o, got) = dtmb_decode(
         &data,
         case.pn,
         &p.si_index().to_string(),
         &["--frame-body-mode", body_mode],
         &out_ts,
     );
-    let got = std::fs::read(&out_ts).unwrap_or_default();
     let n = got.len() / 188;
     // Whole FEC groups of the decodable frames (32QAM and 4QAM-NR groups span two).
     let groups = DECODED_FRAMES / p.frames_per_group();
@@ -361,14 +363,13 @@ fn dtmb_ts_a_short_payload_is_followed_by_null_packets() {
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let out_ts = dir.join("out.ts");
-    let o = dtmb_decode(
+    let (o, got) = dtmb_decode(
         &format!("{}.sigmf-data", base.display()),
         "pn945",
         "15",
         &[],
         out_ts.to_str().unwrap(),
     );
-    let got = std::fs::read(&out_ts).unwrap_or_default();
     assert!(
         got.len() > payload.len() + 10 * 188,
         "{} bytes: {}",
@@ -516,14 +517,13 @@ fn dtmb_ts_a_world_tower_carries_its_payload_through_the_scene() {
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let out_ts = dir.join("out.ts");
-    let o = dtmb_decode(
+    let (o, got) = dtmb_decode(
         &format!("{}.sigmf-data", base.display()),
         "pn945",
         "13",
         &[],
         out_ts.to_str().unwrap(),
     );
-    let got = std::fs::read(&out_ts).unwrap_or_default();
     let n = got.len() / 188;
     // 190 frames less the delay (170) and the last: 19 frames of 6 packets, the first of
     // which may precede the recording.
@@ -599,14 +599,13 @@ fn dtmb_ts_a_world_receivers_oscillator_offset_is_what_dtmb_sdr_measures() {
             "carrier: {meta:.400}"
         );
         let out_ts = dir.join(format!("out{ppm}.ts"));
-        let o = dtmb_decode(
+        let (o, got) = dtmb_decode(
             &format!("{}.sigmf-data", base.display()),
             "pn945",
             "13",
             CLOCK_FIT,
             out_ts.to_str().unwrap(),
         );
-        let got = std::fs::read(&out_ts).unwrap_or_default();
         // 400 frames less the delay (170) and the last, 6 packets a frame: the payload's
         // 400 packets (less those of a frame begun before the recording), then nulls.
         assert!(
@@ -762,14 +761,13 @@ fn dtmb_ts_an_oscillator_offset_in_white_noise_is_what_dtmb_sdr_measures() {
             );
         }
         let out_ts = dir.join(format!("out{ppm}.ts"));
-        let o = dtmb_decode(
+        let (o, got) = dtmb_decode(
             &format!("{}.sigmf-data", base.display()),
             "pn945",
             "21",
             CLOCK_FIT,
             out_ts.to_str().unwrap(),
         );
-        let got = std::fs::read(&out_ts).unwrap_or_default();
         assert!(
             got.len() >= payload.len(),
             "{ppm} ppm: {} packets: {}",
@@ -923,14 +921,13 @@ fn dtmb_ts_64qam_0_6_threshold_agrees_with_dtmb_sdr() {
         ]);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         let out_ts = dir.join(format!("out-{snr}.ts"));
-        let o = dtmb_decode(
+        let (o, got) = dtmb_decode(
             &format!("{}.sigmf-data", base.display()),
             "pn945",
             "21",
             &[],
             out_ts.to_str().unwrap(),
         );
-        let got = std::fs::read(&out_ts).unwrap_or_default();
         let sent: std::collections::HashSet<&[u8]> = payload.chunks(188).collect();
         let good = got.chunks(188).filter(|p| sent.contains(p)).count();
         let wrong = got.len() / 188 - good;

@@ -358,8 +358,6 @@ pub struct ParticleFilter<const N: usize> {
     /// [`Self::propagate`]), which the next proposal conditions on the epoch's ranges
     /// together with `Q` instead of jittering the resampled cloud blindly.
     deferred_kernel: Option<SMatrix<f64, N, N>>,
-    /// Set while [`Self::update_linearised`] weights and resamples the cloud.
-    linearised_epoch: bool,
 }
 
 impl<const N: usize> ParticleFilter<N> {
@@ -391,7 +389,6 @@ impl<const N: usize> ParticleFilter<N> {
             predicted: None,
             covariance: CovarianceEstimate::Weighted,
             deferred_kernel: None,
-            linearised_epoch: false,
         })
     }
 
@@ -771,7 +768,7 @@ impl<const N: usize> ParticleFilter<N> {
             let x = self.buf.get(i);
             self.buf.log_lik[i] = model.log_likelihood(&x, z);
         }
-        self.finish_update(rng)
+        self.finish_update(rng, false)
     }
 
     /// Weights the particles by a column-wise likelihood (the fast path), then resamples
@@ -783,7 +780,7 @@ impl<const N: usize> ParticleFilter<N> {
     ) -> PfUpdate {
         self.buf.log_lik.fill(0.0);
         lik.add_log_likelihood(&self.buf.cols, &mut self.buf.log_lik);
-        self.finish_update(rng)
+        self.finish_update(rng, false)
     }
 
     /// Moves every particle by the noise-free model `f` over `dt_s` (the first half of an
@@ -914,10 +911,7 @@ impl<const N: usize> ParticleFilter<N> {
             self.buf.set(i, &y);
             self.buf.log_lik[i] = -0.5 * nu.dot(&(s_inv * nu));
         }
-        self.linearised_epoch = true;
-        let up = self.finish_update(rng);
-        self.linearised_epoch = false;
-        Ok(up)
+        Ok(self.finish_update(rng, true))
     }
 
     /// The Gaussian filter's measurement update with the linearised importance function:
@@ -987,7 +981,7 @@ impl<const N: usize> ParticleFilter<N> {
             self.buf.log_lik[i] = log_w;
         }
         self.buf.weights.fill(1.0 / self.buf.n as f64);
-        Ok(self.finish_update(rng))
+        Ok(self.finish_update(rng, false))
     }
 
     /// Weights the particles by an epoch's pseudoranges: the column-wise likelihood, or
@@ -1005,10 +999,14 @@ impl<const N: usize> ParticleFilter<N> {
                 SoaLikelihood::<N>::add_log_likelihood(lik, &self.buf.cols, &mut self.buf.log_lik)
             }
         }
-        self.finish_update(rng)
+        self.finish_update(rng, false)
     }
 
-    fn finish_update<R: Rng + ?Sized>(&mut self, rng: &mut R) -> PfUpdate {
+    /// Normalises the weights by the log-likelihoods just formed and resamples when
+    /// `N_eff` falls below the threshold; `defer_kernel` (a linearised epoch) leaves the
+    /// regularised filter's kernel to the next proposal
+    /// ([`Self::resample_deferring_kernel`]).
+    fn finish_update<R: Rng + ?Sized>(&mut self, rng: &mut R, defer_kernel: bool) -> PfUpdate {
         self.predicted = None;
         let b = &mut self.buf;
         let max = b
@@ -1050,9 +1048,7 @@ impl<const N: usize> ParticleFilter<N> {
                 PfVariant::Sir | PfVariant::Marginalised | PfVariant::Gaussian => {
                     self.resample(rng)
                 }
-                PfVariant::Regularised if self.linearised_epoch => {
-                    self.resample_deferring_kernel(rng)
-                }
+                PfVariant::Regularised if defer_kernel => self.resample_deferring_kernel(rng),
                 PfVariant::Regularised | PfVariant::RaoBlackwellised => {
                     self.resample_regularised(rng)
                 }
