@@ -442,7 +442,9 @@ fn a_run_reports_the_worlds_bound_in_its_summary_and_report() {
 /// no reset. Seed 003: the Gaussian PF with the linearised importance function at 100
 /// particles within 1.5× (measured 1.13×), at 500 within 1.2× (1.00×), and the regularised
 /// and Rao-Blackwellised PF at 500 within 1.2× (1.08×, 1.04×); seed 001: the same Gaussian
-/// PF with the unbiased covariance at 20 particles within 1.3× (1.25×).
+/// PF with the unbiased covariance at 20 particles within 1.3× (1.25×), and the
+/// regularised PF with the linearised proposal, Musso et al.'s kernel and the paper's
+/// resampling test (θ = 1) at 20 particles within 1.3× (1.22×).
 #[test]
 fn the_few_particle_goals_hold_on_the_paper_worlds() {
     // (world file, trials, [(row, largest RMSE / PCRLB)]).
@@ -458,7 +460,14 @@ fn the_few_particle_goals_hold_on_the_paper_worlds() {
                 ("RBPF-500", 1.2),
             ],
         ),
-        ("seed001-pf2d.toml", "200", &[("GPF-20-lin-unbiased", 1.3)]),
+        (
+            "seed001-pf2d.toml",
+            "200",
+            &[
+                ("GPF-20-lin-unbiased", 1.3),
+                ("RPF-20-lin-Musso-theta1", 1.3),
+            ],
+        ),
     ];
     for (file, trials, rows) in cases {
         let out = crate::common::tmp_dir(&format!("pf-goals-{file}"));

@@ -1272,13 +1272,21 @@ impl<const N: usize> ParticleFilter<N> {
     /// The covariance of the estimate: the cloud's weighted covariance (the Gaussian
     /// filter's by its estimator), plus, for a
     /// Rao-Blackwellised clock, its Kalman variance (law of total variance); a clock
-    /// still under a flat prior contributes only its spread.
+    /// still under a flat prior contributes only its spread. A regularised filter whose
+    /// kernel is pending ([`Self::resample_deferring_kernel`]) stands for the kernel
+    /// density `Σ w_i N(x_i, h² D Dᵀ)`, whose covariance is the cloud's plus the kernel's:
+    /// the one its cloud has once the kernel is drawn, and the one the same filter
+    /// reports when it jitters at once (Musso, Oudjane & Le Gland 2001, the regularised
+    /// empirical density).
     pub fn covariance(&self) -> SMatrix<f64, N, N> {
         let mut p = if self.variant == PfVariant::Gaussian {
             self.gaussian_covariance()
         } else {
             self.sample_covariance()
         };
+        if let Some(k) = &self.deferred_kernel {
+            p += k;
+        }
         if let Some(mm) = &self.mm {
             p += mm.p;
         }
@@ -2589,7 +2597,9 @@ mod tests {
         let h2 = (4.0 / (n as f64 * 10.0)).powf(2.0 / 12.0);
         let kernel = pf.deferred_kernel.expect("a kernel is kept");
         assert!((kernel - c0 * h2).amax() < 1e-9 * c0.amax());
+        // The pending kernel is part of the estimate's covariance.
         let c1 = pf.covariance();
+        assert!((c1 - pf.sample_covariance() - kernel).amax() < 1e-9 * c0.amax());
         pf.propagate(&Drift8, 2.0).unwrap();
         let f = Drift8.jacobian(&mean, 2.0);
         let moved = pf.deferred_kernel.expect("still kept");
@@ -2613,12 +2623,14 @@ mod tests {
             .unwrap();
         assert!(!up.resampled);
         assert!(pf.deferred_kernel.is_none(), "the kernel is drawn once");
+        // Drawn, the kernel leaves the covariance where the pending one had put it: the
+        // cloud grew by one kernel.
         let c2 = pf.covariance();
         for k in 0..8 {
-            let grown = (c2[(k, k)] - c1[(k, k)]) / moved[(k, k)];
+            let change = (c2[(k, k)] - c1[(k, k)]) / moved[(k, k)];
             assert!(
-                (grown - 1.0).abs() < 0.25,
-                "component {k}: grew by {grown} kernels"
+                change.abs() < 0.25,
+                "component {k}: the drawn kernel moved the covariance by {change} kernels"
             );
         }
     }
