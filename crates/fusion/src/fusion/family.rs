@@ -202,7 +202,8 @@ pub struct FamilyConfig {
     /// PF on the paper models: the proposal particles are drawn from — `"prior"` (the
     /// process model, the bootstrap filter; default) or `"linearised"` (for the
     /// resampling filters, the process noise conditioned on the epoch's ranges linearised
-    /// at the predicted mean; for the Gaussian PF, the EKF update of its predicted
+    /// at the predicted mean, with a Rao-Blackwellised filter's clocks integrated out;
+    /// for the Gaussian PF, the EKF update of its predicted
     /// Gaussian as the GPF's importance function;
     /// [`crate::fusion::particle::ParticleFilter::update_linearised`]). Not for the
     /// marginalised PF.

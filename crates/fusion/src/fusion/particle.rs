@@ -19,7 +19,8 @@
 //! Each member can draw from the prior (the bootstrap filter above) or from a proposal
 //! linearised on the epoch's ranges ([`ParticleFilter::update_linearised`]): the resampling
 //! filters condition their process noise, and after a resampling the regularised filter's
-//! kernel, on the ranges (Doucet, Godsill & Andrieu 2000, §II.D.2); the Gaussian filter
+//! kernel, on the ranges (Doucet, Godsill & Andrieu 2000, §II.D.2), the Rao-Blackwellised
+//! one with its Kalman-carried clocks integrated out; the Gaussian filter
 //! draws from the EKF update of its predicted Gaussian and weights each particle by the
 //! exact over the linearised likelihood. With few particles on the papers' models, whose
 //! positions have little or no process noise, this is what keeps the weights from
@@ -844,9 +845,20 @@ impl<const N: usize> ParticleFilter<N> {
     /// i.e. each particle is drawn from the process noise already conditioned on this
     /// epoch's ranges, and weighted by the predictive likelihood of its parent, which is
     /// far flatter than the likelihood itself: few particles then keep a useful N_eff when
-    /// the likelihood is peaked against the process noise. Falls back to the bootstrap
-    /// epoch ([`Self::predict`] and [`Self::update_ranges`]) for a Rao-Blackwellised
-    /// filter or more than [`MAX_PROPOSAL_ROWS`] ranges. The epoch is split in two: the
+    /// the likelihood is peaked against the process noise.
+    ///
+    /// A Rao-Blackwellised filter integrates its Kalman-carried clocks `c ~ N(c̄_i, P_c)`
+    /// out of the proposal: with `E` the ranges' clock columns, `ν_i` taken at the
+    /// particle's clock mean `c̄_i` and `S = H Q Hᵀ + E P_c Eᵀ + R`, the sampled states are
+    /// drawn as above (the gain reaches them only, `Q` being zero on the clocks); each
+    /// particle's clock filter is then updated at its new position, and its marginal
+    /// likelihood, already in the predictive weight, is not applied twice. This is the
+    /// exact optimal proposal of the linear-Gaussian case, the sampled states' marginal
+    /// then the clocks' conditional. Under a clock's flat prior (no range of its system
+    /// seen yet) the predictive density is improper and the epoch is a bootstrap one.
+    ///
+    /// Falls back to the bootstrap epoch ([`Self::predict`] and [`Self::update_ranges`])
+    /// for more than [`MAX_PROPOSAL_ROWS`] ranges. The epoch is split in two: the
     /// caller first moves the cloud by the noise-free model ([`Self::propagate`]), then
     /// calls this with the interval's `Q`.
     ///
@@ -859,19 +871,28 @@ impl<const N: usize> ParticleFilter<N> {
         rng: &mut R,
     ) -> Result<PfUpdate, ParticleError> {
         let m = lik.rows.len();
-        // The process noise, and the kernel of the last resampling where one is pending.
-        let q = self.mask(q) + self.deferred_kernel.take().unwrap_or_else(SMatrix::zeros);
-        let bootstrap = |pf: &mut Self, rng: &mut R| -> Result<PfUpdate, ParticleError> {
-            pf.add_noise(&q, rng)?;
-            Ok(pf.update_ranges(lik, rng))
-        };
         if self.mm.is_some() {
             return Err(ParticleError::InvalidParameter(
                 "the linearised proposal is for the resampling and Gaussian filters, not the marginalised one"
                     .into(),
             ));
         }
-        if self.rb.is_some() || m == 0 || m > MAX_PROPOSAL_ROWS {
+        // A Kalman-carried clock's variance grows by its own process noise, as in
+        // `predict`; the proposal moves only the sampled components.
+        if let Some(rb) = &mut self.rb {
+            for (s, col) in rb.cols.iter().enumerate() {
+                if let Some(k) = *col {
+                    rb.var_m2[s] += q[(k, k)].max(0.0);
+                }
+            }
+        }
+        // The process noise, and the kernel of the last resampling where one is pending.
+        let q = self.mask(q) + self.deferred_kernel.take().unwrap_or_else(SMatrix::zeros);
+        let bootstrap = |pf: &mut Self, rng: &mut R| -> Result<PfUpdate, ParticleError> {
+            pf.add_noise(&q, rng)?;
+            Ok(pf.update_ranges(lik, rng))
+        };
+        if m == 0 || m > MAX_PROPOSAL_ROWS {
             return bootstrap(self, rng);
         }
         if self.variant == PfVariant::Gaussian {
@@ -881,7 +902,23 @@ impl<const N: usize> ParticleFilter<N> {
         let Some(h) = range_linearisation::<N>(lik, &mean) else {
             return bootstrap(self, rng);
         };
-        let mut s = h * q * h.transpose();
+        // A Kalman-carried clock adds its variance to the predictive covariance of every
+        // range it biases (`E P_c Eᵀ`); under a flat prior (no range of its system seen
+        // yet) the predictive density is improper, and the epoch is a bootstrap one.
+        let mut clock_cov = SMatrix::<f64, N, N>::zeros();
+        if let Some(rb) = &self.rb {
+            for (s, col) in rb.cols.iter().enumerate() {
+                let Some(k) = *col else { continue };
+                if !lik.rows.iter().any(|r| r.clock_col == Some(k)) {
+                    continue;
+                }
+                if !rb.var_m2[s].is_finite() {
+                    return bootstrap(self, rng);
+                }
+                clock_cov[(k, k)] = rb.var_m2[s];
+            }
+        }
+        let mut s = h * (q + clock_cov) * h.transpose();
         for (j, r) in lik.rows.iter().enumerate() {
             s[(j, j)] += -0.5 / r.neg_half_inv_var;
         }
@@ -910,6 +947,16 @@ impl<const N: usize> ParticleFilter<N> {
             }
             self.buf.set(i, &y);
             self.buf.log_lik[i] = -0.5 * nu.dot(&(s_inv * nu));
+        }
+        // The clocks' Kalman update at each particle's new position. Its marginal
+        // likelihood is already in the weight (the predictive density above integrates
+        // the clocks out), so the proposal's log-weights are kept aside meanwhile.
+        if let Some(rb) = &mut self.rb {
+            let b = &mut self.buf;
+            b.scratch.copy_from_slice(&b.log_lik);
+            b.log_lik.fill(0.0);
+            rb_update::<N>(rb, lik, &mut b.cols, &mut b.log_lik);
+            b.log_lik.copy_from_slice(&b.scratch);
         }
         Ok(self.finish_update(rng, true))
     }
@@ -1048,7 +1095,9 @@ impl<const N: usize> ParticleFilter<N> {
                 PfVariant::Sir | PfVariant::Marginalised | PfVariant::Gaussian => {
                     self.resample(rng)
                 }
-                PfVariant::Regularised if defer_kernel => self.resample_deferring_kernel(rng),
+                PfVariant::Regularised | PfVariant::RaoBlackwellised if defer_kernel => {
+                    self.resample_deferring_kernel(rng)
+                }
                 PfVariant::Regularised | PfVariant::RaoBlackwellised => {
                     self.resample_regularised(rng)
                 }
@@ -2056,6 +2105,160 @@ mod tests {
                 "{epoch}: {mean} vs {km} (se {se})"
             );
             assert!((var / kv - 1.0).abs() < 0.05, "{epoch}: {var} vs {kv}");
+        }
+    }
+
+    /// A receiver whose position and clock both random-walk, ranged by four emitters
+    /// 20 000 km away (linear to micrometres over the cloud): the Rao-Blackwellised filter
+    /// with the linearised proposal samples the position from its predictive density
+    /// with the clock integrated out and carries the clock by its Kalman filter. Its
+    /// position and clock must follow the four-state Kalman filter (the optimal filter of
+    /// this linear-Gaussian model) up to Monte Carlo error; the first epoch, under the
+    /// clock's flat prior, is a bootstrap one, and the clock's variance grows by its `Q`.
+    #[test]
+    fn rao_blackwellised_linearised_proposal_follows_the_kalman_filter() {
+        use crate::fusion::linear_kf::LinearKf;
+        use nalgebra::{DMatrix, DVector};
+        struct Wander;
+        impl ProcessModel<4> for Wander {
+            fn f(&self, x: &SVector<f64, 4>, _dt_s: f64) -> SVector<f64, 4> {
+                *x
+            }
+            fn jacobian(&self, _x: &SVector<f64, 4>, _dt_s: f64) -> SMatrix<f64, 4, 4> {
+                SMatrix::identity()
+            }
+            fn q(&self, _x: &SVector<f64, 4>, dt_s: f64) -> SMatrix<f64, 4, 4> {
+                SMatrix::from_diagonal(&SVector::<f64, 4>::new(4.0, 4.0, 1.0, 9.0)) * dt_s
+            }
+        }
+        let layout = position_clock_layout();
+        let row = |az_deg: f64, el_deg: f64| {
+            let (az, el) = (az_deg.to_radians(), el_deg.to_radians());
+            RangeRow {
+                emitter_pos_m: Vector3::new(az.sin() * el.cos(), az.cos() * el.cos(), el.sin())
+                    * 2.0e7,
+                emitter_vel_mps: Vector3::zeros(),
+                system: System::Dtmb,
+                sigma_m: 3.0,
+                sigma_rate_mps: 1.0,
+            }
+        };
+        let ranges = Pseudoranges::<4, 4>::new(
+            layout,
+            [
+                row(0.0, 70.0),
+                row(100.0, 30.0),
+                row(220.0, 40.0),
+                row(300.0, 20.0),
+            ],
+        )
+        .unwrap();
+        let n = 20_000;
+        let mut pf = ParticleFilter::new(
+            ParticleBuffer::<4>::new(n).unwrap(),
+            Resampling::Systematic,
+            0.5,
+        )
+        .unwrap()
+        .rao_blackwellised(std::array::from_fn(|s| {
+            (s == System::Dtmb.index()).then_some(3)
+        }))
+        .unwrap();
+        let mut rng = TrialRng::new(7, 0).stream("test/rbpf-linearised");
+        let mut noise = TrialRng::new(7, 1).stream("test/rbpf-linearised/noise");
+        let p0 = 100.0;
+        let x0 = SVector::<f64, 4>::new(0.0, 0.0, 0.0, 0.0);
+        pf.init_gaussian(&x0, &(SMatrix::<f64, 4, 4>::identity() * p0), &mut rng)
+            .unwrap();
+        let s = System::Dtmb.index();
+        // The Kalman filter starts after the flat-prior epoch, from the particle filter's
+        // own state then: the comparison is of the linearised epochs.
+        let mut kf: Option<LinearKf> = None;
+        let mut truth = SVector::<f64, 4>::new(5.0, -3.0, 2.0, 250.0);
+        let mut lik = PseudorangeLikelihood::with_capacity(4);
+        let q = ProcessModel::<4>::q(&Wander, &x0, 1.0);
+        for epoch in 0..12 {
+            for k in 0..4 {
+                let w: f64 = noise.sample(StandardNormal);
+                truth[k] += q[(k, k)].sqrt() * w;
+            }
+            let mut z = SVector::<f64, 4>::zeros();
+            for (j, r) in ranges.rows().iter().enumerate() {
+                let e: f64 = noise.sample(StandardNormal);
+                z[j] = (r.emitter_pos_m - truth.xyz()).norm() + truth[3] + r.sigma_m * e;
+            }
+            pf.propagate(&Wander, 1.0).unwrap();
+            lik.set(&ranges, &z);
+            let var_before = pf.clock_variance_m2(s).unwrap();
+            pf.update_linearised(&q, &lik, &mut rng).unwrap();
+            let var_after = pf.clock_variance_m2(s).unwrap();
+            assert!(var_after.is_finite(), "{epoch}: the clock stays unresolved");
+            let Some(kf) = kf.as_mut() else {
+                assert!(
+                    !var_before.is_finite(),
+                    "the first epoch is under a flat prior"
+                );
+                kf = Some(
+                    LinearKf::new(
+                        DVector::from_iterator(4, pf.mean().iter().copied()),
+                        DMatrix::from_iterator(4, 4, pf.covariance().iter().copied()),
+                    )
+                    .unwrap(),
+                );
+                continue;
+            };
+            // The clock's Kalman variance grew by its Q before the ranges shrank it.
+            let info = 1.0 / (var_before + q[(3, 3)])
+                + ranges
+                    .rows()
+                    .iter()
+                    .map(|r| r.sigma_m.powi(-2))
+                    .sum::<f64>();
+            assert!(
+                (var_after * info - 1.0).abs() < 1e-9,
+                "{epoch}: {var_after}"
+            );
+            kf.predict(
+                &DMatrix::identity(4, 4),
+                &DMatrix::from_iterator(4, 4, q.iter().copied()),
+            )
+            .unwrap();
+            let xp = kf.state().clone();
+            let p = Vector3::new(xp[0], xp[1], xp[2]);
+            let mut h = DMatrix::zeros(4, 4);
+            let mut innov = DVector::zeros(4);
+            for (j, r) in ranges.rows().iter().enumerate() {
+                let d = p - r.emitter_pos_m;
+                let dist = d.norm();
+                for a in 0..3 {
+                    h[(j, a)] = d[a] / dist;
+                }
+                h[(j, 3)] = 1.0;
+                // The update takes `z − h(x̂) + H x̂`, the linearised measurement.
+                innov[j] = z[j] - dist - xp[3] + (0..4).map(|k| h[(j, k)] * xp[k]).sum::<f64>();
+            }
+            let rm = DMatrix::from_diagonal(&DVector::from_iterator(
+                4,
+                ranges.rows().iter().map(|r| r.sigma_m * r.sigma_m),
+            ));
+            kf.update(&innov, &h, &rm).unwrap();
+            let (mean, cov) = (pf.mean(), pf.covariance());
+            for k in 0..4 {
+                let kv = kf.covariance()[(k, k)];
+                // The Monte Carlo error of a weighted mean of N_eff ≥ N/2 draws.
+                let tol = 4.0 * (2.0 * kv / n as f64).sqrt() + 1e-6;
+                assert!(
+                    (mean[k] - kf.state()[k]).abs() < tol,
+                    "{epoch} state {k}: {} vs {} ({tol})",
+                    mean[k],
+                    kf.state()[k]
+                );
+                assert!(
+                    (cov[(k, k)] / kv - 1.0).abs() < 0.1,
+                    "{epoch} state {k}: variance {} vs {kv}",
+                    cov[(k, k)]
+                );
+            }
         }
     }
 
