@@ -224,6 +224,20 @@ fn bench_pf(c: &mut Criterion) {
                 black_box(rbpf.update_ranges(&lik, &mut rng))
             })
         });
+        // The same filter with the linearised proposal: the noise-free move, then the
+        // proposal with the clock integrated out (one factorisation of the predictive
+        // covariance), each particle's draw and predictive weight, and the clock filters'
+        // update at the new positions.
+        let q_rb = ProcessModel::<4>::q(&RandomWalk, &truth, 1.0);
+        group.bench_function(format!("rao-blackwellised linearised epoch N={n}"), |b| {
+            b.iter(|| {
+                rbpf.propagate(&RandomWalk, 1.0).expect("valid");
+                black_box(
+                    rbpf.update_linearised(&q_rb, &lik, &mut rng)
+                        .expect("valid"),
+                )
+            })
+        });
         // The Gaussian PF on the same state and ranges: its prediction factors the
         // cloud's weighted covariance and redraws every particle from the predicted
         // Gaussian; the update weights them (no resampling).
