@@ -611,3 +611,51 @@ fn the_rmse_against_time_lies_on_or_above_its_bound() {
     assert!(bounded >= 3, "seed 003's EKF and PFs share one model");
     let _ = std::fs::remove_dir_all(&spill);
 }
+
+/// Seed 001's filters estimate on the truth's plane, so their position NEES has 2 degrees
+/// of freedom, not 3: every estimate's vertical error, taken from the trial records in
+/// the world's ENU frame, is zero to a micrometre (its NEES term, against the fixed
+/// 0.01 m² vertical variance, below 1e-10), and the run's summary reports dof 2 for every
+/// seed 001 row and 3 for seed 003's 3-D rows.
+#[test]
+fn planar_filters_report_a_two_degree_of_freedom_nees() {
+    use hybridnav::montecarlo::{reduce::RunReducer, run_trials, store::Shard, RunOptions};
+    for (file, dof) in [("seed001-pf2d.toml", 2.0), ("seed003-seamless.toml", 3.0)] {
+        let world = hybridnav::world::load_world(&repo().join("worlds").join(file)).unwrap();
+        let opts = RunOptions {
+            trials: 2,
+            seed: 5,
+            threads: 2,
+            progress: false,
+            shard: Shard::WHOLE,
+        };
+        let trials = run_trials(&world, &opts).expect("trials");
+        if dof == 2.0 {
+            let mut checked = 0;
+            for t in &trials {
+                for est in &t.estimators {
+                    for ep in &est.epochs {
+                        let Some(e) = ep.est_ecef_m else { continue };
+                        let d = Vector3::from(e) - Vector3::from(ep.truth_ecef_m);
+                        let up = world.frame.enu_vector_of_ecef(&d).z;
+                        assert!(up.abs() < 1e-6, "{} at {}: up error {up}", est.name, ep.t_s);
+                        checked += 1;
+                    }
+                }
+            }
+            assert!(checked > 1000, "{checked} estimates");
+        }
+        let spill = crate::common::tmp_dir(&format!("nees-dof-{file}"));
+        std::fs::create_dir_all(&spill).unwrap();
+        let mut reducer = RunReducer::new(&world, &spill);
+        for t in &trials {
+            reducer.push(t).unwrap();
+        }
+        let reduced = reducer.finish(&world, &opts).unwrap();
+        for e in &reduced.summary.estimators {
+            let n = e.nees.as_ref().expect("a NEES");
+            assert_eq!(n.dof, dof, "{file} {}", e.name);
+        }
+        let _ = std::fs::remove_dir_all(&spill);
+    }
+}

@@ -201,6 +201,17 @@ impl ProcessSpec {
             ProcessSpec::PlaneTurning { .. } => "plane_turning",
         }
     }
+
+    /// The degrees of freedom of the model's position NEES: 2 for the 2-D model, whose
+    /// estimate lies on the truth's plane (its vertical error is zero by construction and
+    /// its vertical variance the fixed [`PLANE_VARIANCE_M2`]), so that a consistent
+    /// filter's NEES is χ² with 2 degrees of freedom; 3 otherwise.
+    pub fn position_dof(&self) -> usize {
+        match self {
+            ProcessSpec::Singer2d { .. } => 2,
+            ProcessSpec::PvaClock {} | ProcessSpec::PlaneTurning { .. } => 3,
+        }
+    }
 }
 
 /// Which filter a paper estimator runs. Every member of the Kalman family runs every paper

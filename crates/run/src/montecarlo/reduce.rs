@@ -65,6 +65,7 @@ impl RunReducer {
                 .map(|e| {
                     let mut acc = EstimatorAcc::new(&e.name, spill_dir, chunk);
                     acc.coast_limit_s = coast_limit_s;
+                    acc.nees_dof = e.process.as_ref().map_or(3, |p| p.position_dof()) as f64;
                     acc.segments = segments
                         .iter()
                         .map(|(label, window_s)| SegmentAcc {
@@ -245,6 +246,8 @@ struct EstimatorAcc {
     first_failures: Vec<FailureEpoch>,
     nees_sum: f64,
     nees_n: usize,
+    /// The degrees of freedom of the position NEES (2 for an estimate on a plane).
+    nees_dof: f64,
     modes: BTreeMap<String, usize>,
     moded: usize,
     /// Per epoch time (its bits: positive times order as their bits do), across trials.
@@ -281,6 +284,7 @@ impl EstimatorAcc {
             first_failures: Vec::new(),
             nees_sum: 0.0,
             nees_n: 0,
+            nees_dof: 3.0,
             modes: BTreeMap::new(),
             moded: 0,
             nees_by_t: BTreeMap::new(),
@@ -353,7 +357,7 @@ impl EstimatorAcc {
             }
         }
         for (t, n) in trial_nees {
-            self.nees_by_t.entry(t).or_default().push(n, 3.0);
+            self.nees_by_t.entry(t).or_default().push(n, self.nees_dof);
         }
         for (t, (n, dof)) in trial_nis {
             self.nis_by_t.entry(t).or_default().push(n, dof as f64);

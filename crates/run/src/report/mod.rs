@@ -23,7 +23,7 @@ const STYLE: &str = "body{font-family:sans-serif;max-width:1100px;margin:1.5em a
 h1{font-size:1.5em}h2{font-size:1.15em;margin-top:1.8em;border-bottom:1px solid #ccc}
 table{border-collapse:collapse;font-size:0.85em;max-width:100%}th,td{padding:3px 6px;border-bottom:1px solid #e3e3e3;text-align:right;vertical-align:top}
 th{font-weight:600;overflow-wrap:break-word}td{white-space:nowrap}td.wrap{white-space:normal}
-th:first-child,td:first-child{text-align:left}th{background:#f3f3f3}.meta{color:#555;font-size:0.9em}
+th:first-child,td:first-child{text-align:left}td:first-child{white-space:normal}th{background:#f3f3f3}.meta{color:#555;font-size:0.9em}
 .flag{color:#b2182b;font-weight:bold}.band{color:#666;font-size:0.9em}
 @media (max-width:900px){th,td{padding:2px 3px}table{font-size:0.8em}}
 figure{margin:0.8em 0}figcaption{color:#555;font-size:0.85em;max-width:860px}svg{max-width:100%;height:auto}";
