@@ -1322,7 +1322,8 @@ impl<const N: usize> ParticleFilter<N> {
     /// filter's by its estimator), plus, for a
     /// Rao-Blackwellised clock, its Kalman variance (law of total variance); a clock
     /// still under a flat prior contributes only its spread. A regularised filter whose
-    /// kernel is pending ([`Self::resample_deferring_kernel`]) stands for the kernel
+    /// kernel is pending (left by a resampling in a linearised epoch,
+    /// [`Self::update_linearised`]) stands for the kernel
     /// density `Σ w_i N(x_i, h² D Dᵀ)`, whose covariance is the cloud's plus the kernel's:
     /// the one its cloud has once the kernel is drawn, and the one the same filter
     /// reports when it jitters at once (Musso, Oudjane & Le Gland 2001, the regularised
