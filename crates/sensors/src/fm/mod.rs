@@ -26,7 +26,7 @@ pub use database::{FingerprintDb, WorldTag};
 pub use field::{FmField, FmFieldConfig, FmStation};
 pub use kriging::{OrdinaryKriging, VariogramFit, VariogramKind, VariogramModel};
 pub use source::{FmSensorConfig, FmSource};
-pub use survey::{grid_points, polyline_points, SurveyConfig};
+pub use survey::{grid_points, grid_points_en, polyline_points, SurveyConfig};
 pub use wknn::{
     Constraint, ConstraintConfig, NoRpPolicy, Weighting, WknnConfig, WknnFix, WknnScratch,
 };

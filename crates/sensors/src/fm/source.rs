@@ -88,6 +88,12 @@ pub struct FmSurveySpec {
     pub rp_spacing_m: f64,
     /// Spacing of the kriged fingerprint grid (m); default 3.
     pub grid_spacing_m: f64,
+    /// Northward spacing of the surveyed RPs (m), when it differs from `rp_spacing_m`
+    /// (which is then the eastward one): a survey driven along parallel east-west lanes
+    /// has one row of RPs per lane. Default: `rp_spacing_m`.
+    pub rp_spacing_north_m: Option<f64>,
+    /// Northward spacing of the kriged grid (m), likewise; default `grid_spacing_m`.
+    pub grid_spacing_north_m: Option<f64>,
     /// How far the surveyed area extends beyond the trajectory's bounding box (m).
     pub margin_m: f64,
     /// The surveyed area `[[e_min, n_min], [e_max, n_max]]` (ENU, m); default: the
@@ -110,6 +116,8 @@ impl Default for FmSurveySpec {
         Self {
             rp_spacing_m: 24.0,
             grid_spacing_m: 3.0,
+            rp_spacing_north_m: None,
+            grid_spacing_north_m: None,
             margin_m: 30.0,
             area_enu_m: None,
             scans_per_point: s.scans_per_point,
@@ -131,11 +139,31 @@ impl FmSurveySpec {
         }
     }
 
+    /// The surveyed RPs' spacing `[east, north]` (m).
+    pub fn rp_spacing_en_m(&self) -> [f64; 2] {
+        [
+            self.rp_spacing_m,
+            self.rp_spacing_north_m.unwrap_or(self.rp_spacing_m),
+        ]
+    }
+
+    /// The kriged grid's spacing `[east, north]` (m).
+    pub fn grid_spacing_en_m(&self) -> [f64; 2] {
+        [
+            self.grid_spacing_m,
+            self.grid_spacing_north_m.unwrap_or(self.grid_spacing_m),
+        ]
+    }
+
     /// Checks every value; the key is the field name.
     pub fn validate(&self) -> Result<(), ConfigIssue> {
+        let [_, rp_north] = self.rp_spacing_en_m();
+        let [_, grid_north] = self.grid_spacing_en_m();
         for (k, v, lo) in [
             ("rp_spacing_m", self.rp_spacing_m, 1.0),
             ("grid_spacing_m", self.grid_spacing_m, 0.5),
+            ("rp_spacing_north_m", rp_north, 1.0),
+            ("grid_spacing_north_m", grid_north, 0.5),
             ("margin_m", self.margin_m, 0.0),
         ] {
             check(k, v.is_finite() && v >= lo && v <= 10_000.0, || {
@@ -153,15 +181,15 @@ impl FmSurveySpec {
             // The survey and its kriged grid are allocated from these counts: refuse an
             // area that would need more than the grid builder's 10 million points here,
             // with the key's line, rather than when the first trial builds it.
-            for (k, spacing) in [
-                ("rp_spacing_m", self.rp_spacing_m),
-                ("grid_spacing_m", self.grid_spacing_m),
+            for (k, [se, sn]) in [
+                ("rp_spacing_m", self.rp_spacing_en_m()),
+                ("grid_spacing_m", self.grid_spacing_en_m()),
             ] {
-                let ne = ((hi[0] - lo[0]) / spacing).floor() + 1.0;
-                let nn = ((hi[1] - lo[1]) / spacing).floor() + 1.0;
+                let ne = ((hi[0] - lo[0]) / se).floor() + 1.0;
+                let nn = ((hi[1] - lo[1]) / sn).floor() + 1.0;
                 check("area_enu_m", ne * nn <= 1e7, || {
                     format!(
-                        "{:.0} × {:.0} m at {k} = {spacing} m is {:.3e} points; expected at most 10 million (a smaller area or a coarser spacing)",
+                        "{:.0} × {:.0} m at {k} = {se} m (east) × {sn} m (north) is {:.3e} points; expected at most 10 million (a smaller area or a coarser spacing)",
                         hi[0] - lo[0],
                         hi[1] - lo[1],
                         ne * nn

@@ -116,18 +116,29 @@ pub fn grid_points(
     max_en_m: [f64; 2],
     spacing_m: f64,
 ) -> Result<Vec<[f64; 2]>, FmError> {
-    let ok = spacing_m.is_finite()
-        && spacing_m > 0.0
+    grid_points_en(min_en_m, max_en_m, [spacing_m, spacing_m])
+}
+
+/// [`grid_points`] with its own spacing along each axis, `[east, north]` (m): a survey
+/// driven along parallel lanes has RPs every few metres along a lane and one row per
+/// lane.
+pub fn grid_points_en(
+    min_en_m: [f64; 2],
+    max_en_m: [f64; 2],
+    spacing_en_m: [f64; 2],
+) -> Result<Vec<[f64; 2]>, FmError> {
+    let ok = spacing_en_m.iter().all(|s| s.is_finite() && *s > 0.0)
         && min_en_m.iter().chain(&max_en_m).all(|v| v.is_finite())
         && max_en_m[0] >= min_en_m[0]
         && max_en_m[1] >= min_en_m[1];
     if !ok {
         return Err(FmError::Data(format!(
-            "expected a grid with min ≤ max corners and a positive spacing, got {min_en_m:?}–{max_en_m:?} every {spacing_m} m"
+            "expected a grid with min ≤ max corners and positive spacings, got {min_en_m:?}–{max_en_m:?} every {spacing_en_m:?} m"
         )));
     }
-    let ne = ((max_en_m[0] - min_en_m[0]) / spacing_m + 1e-9).floor() as usize + 1;
-    let nn = ((max_en_m[1] - min_en_m[1]) / spacing_m + 1e-9).floor() as usize + 1;
+    let [se, sn] = spacing_en_m;
+    let ne = ((max_en_m[0] - min_en_m[0]) / se + 1e-9).floor() as usize + 1;
+    let nn = ((max_en_m[1] - min_en_m[1]) / sn + 1e-9).floor() as usize + 1;
     if ne.saturating_mul(nn) > 10_000_000 {
         return Err(FmError::Data(format!(
             "expected at most 10 million grid points, got {ne} × {nn}"
@@ -136,10 +147,7 @@ pub fn grid_points(
     let mut out = Vec::with_capacity(ne * nn);
     for j in 0..nn {
         for i in 0..ne {
-            out.push([
-                min_en_m[0] + i as f64 * spacing_m,
-                min_en_m[1] + j as f64 * spacing_m,
-            ]);
+            out.push([min_en_m[0] + i as f64 * se, min_en_m[1] + j as f64 * sn]);
         }
     }
     Ok(out)
@@ -354,6 +362,20 @@ mod tests {
         let p = polyline_points(&[[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]], 7.0).unwrap();
         assert_eq!(p, vec![[0.0, 0.0], [7.0, 0.0], [10.0, 4.0]]);
         assert!(grid_points([0.0, 0.0], [1.0, 1.0], 0.0).is_err());
+        // Two lanes 8 m apart, every 4 m along them: 3 × 2 points, north outer.
+        let g = grid_points_en([0.0, 0.0], [8.0, 8.0], [4.0, 8.0]).unwrap();
+        assert_eq!(
+            g,
+            vec![
+                [0.0, 0.0],
+                [4.0, 0.0],
+                [8.0, 0.0],
+                [0.0, 8.0],
+                [4.0, 8.0],
+                [8.0, 8.0]
+            ]
+        );
+        assert!(grid_points_en([0.0, 0.0], [1.0, 1.0], [1.0, f64::NAN]).is_err());
         assert!(polyline_points(&[[0.0, 0.0]], 1.0).is_err());
     }
 }

@@ -13,7 +13,7 @@
 use crate::core::TrialRng;
 use crate::fm::database::build_kriged;
 use crate::fm::kriging::{ChannelKriging, FitOptions};
-use crate::fm::{grid_points, FingerprintDb, FmField, FmSensorConfig, FmStation, WorldTag};
+use crate::fm::{grid_points_en, FingerprintDb, FmField, FmSensorConfig, FmStation, WorldTag};
 use crate::world::scene::TransmitterKind;
 use crate::world::World;
 use std::sync::{Arc, Mutex};
@@ -76,8 +76,8 @@ pub fn survey(
         }
     };
     let err = |e: crate::fm::FmError| format!("sensors.fm.survey: {e}");
-    let rps = grid_points(lo, hi, cfg.survey.rp_spacing_m).map_err(err)?;
-    let grid = grid_points(lo, hi, cfg.survey.grid_spacing_m).map_err(err)?;
+    let rps = grid_points_en(lo, hi, cfg.survey.rp_spacing_en_m()).map_err(err)?;
+    let grid = grid_points_en(lo, hi, cfg.survey.grid_spacing_en_m()).map_err(err)?;
     let stations = crate::fm::field::synthesize_stations(
         &stations(world),
         cfg.synthetic_stations_total,
