@@ -1885,6 +1885,21 @@ mod tests {
         .is_err());
     }
 
+    /// A Rao-Blackwellised filter of `n` particles over `[x, y, z, b]` whose clock `b`
+    /// (column 3, the DTMB system's) is carried by the per-particle Kalman filters.
+    fn rbpf_on_dtmb_clock(n: usize) -> ParticleFilter<4> {
+        ParticleFilter::new(
+            ParticleBuffer::<4>::new(n).unwrap(),
+            Resampling::Systematic,
+            0.5,
+        )
+        .unwrap()
+        .rao_blackwellised(std::array::from_fn(|s| {
+            (s == System::Dtmb.index()).then_some(3)
+        }))
+        .unwrap()
+    }
+
     /// A static receiver with a random-walk clock: state `[x, y, z, b]`.
     struct StaticClock {
         clock_q_m2ps: f64,
@@ -1914,16 +1929,7 @@ mod tests {
         let m = model();
         let pos = Vector3::new(10.0, -20.0, 5.0);
         let model_q = StaticClock { clock_q_m2ps: 4.0 };
-        let mut pf = ParticleFilter::new(
-            ParticleBuffer::<4>::new(64).unwrap(),
-            Resampling::Systematic,
-            0.5,
-        )
-        .unwrap()
-        .rao_blackwellised(std::array::from_fn(|s| {
-            (s == System::Dtmb.index()).then_some(3)
-        }))
-        .unwrap();
+        let mut pf = rbpf_on_dtmb_clock(64);
         let mut rng = TrialRng::new(5, 0).stream("test/rbpf");
         let x0 = SVector::<f64, 4>::new(pos.x, pos.y, pos.z, 0.0);
         pf.init_gaussian(&x0, &SMatrix::<f64, 4, 4>::zeros(), &mut rng)
@@ -2155,16 +2161,7 @@ mod tests {
         )
         .unwrap();
         let n = 20_000;
-        let mut pf = ParticleFilter::new(
-            ParticleBuffer::<4>::new(n).unwrap(),
-            Resampling::Systematic,
-            0.5,
-        )
-        .unwrap()
-        .rao_blackwellised(std::array::from_fn(|s| {
-            (s == System::Dtmb.index()).then_some(3)
-        }))
-        .unwrap();
+        let mut pf = rbpf_on_dtmb_clock(n);
         let mut rng = TrialRng::new(7, 0).stream("test/rbpf-linearised");
         let mut noise = TrialRng::new(7, 1).stream("test/rbpf-linearised/noise");
         let p0 = 100.0;
