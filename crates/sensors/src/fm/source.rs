@@ -85,14 +85,18 @@ pub struct FmSensorConfig {
 #[serde(deny_unknown_fields, default)]
 pub struct FmSurveySpec {
     /// Spacing of the surveyed reference points (m); default 24.
+    #[schemars(range(min = 1.0, max = 10_000.0))]
     pub rp_spacing_m: f64,
     /// Spacing of the kriged fingerprint grid (m); default 3.
+    #[schemars(range(min = 0.5, max = 10_000.0))]
     pub grid_spacing_m: f64,
     /// Northward spacing of the surveyed RPs (m), when it differs from `rp_spacing_m`
     /// (which is then the eastward one): a survey driven along parallel east-west lanes
     /// has one row of RPs per lane. Default: `rp_spacing_m`.
+    #[schemars(range(min = 1.0, max = 10_000.0))]
     pub rp_spacing_north_m: Option<f64>,
     /// Northward spacing of the kriged grid (m), likewise; default `grid_spacing_m`.
+    #[schemars(range(min = 0.5, max = 10_000.0))]
     pub grid_spacing_north_m: Option<f64>,
     /// How far the surveyed area extends beyond the trajectory's bounding box (m).
     pub margin_m: f64,
