@@ -224,6 +224,19 @@ struct RbClocks {
     var_m2: [f64; System::COUNT],
 }
 
+impl RbClocks {
+    /// The time update of the clocks' Kalman filters: each variance grows by its clock's
+    /// process noise `Q_kk` (the means do not move: the clocks are random walks in the
+    /// paper models). A flat prior stays flat.
+    fn predict<const N: usize>(&mut self, q: &SMatrix<f64, N, N>) {
+        for (var, col) in self.var_m2.iter_mut().zip(&self.cols) {
+            if let Some(k) = *col {
+                *var += q[(k, k)].max(0.0);
+            }
+        }
+    }
+}
+
 /// The motion states a marginalised filter carries in closed form: the components that
 /// are neither sampled nor clocks. Their Kalman covariance is common to every particle,
 /// because neither the model (linear, with state-independent noise) nor the conditioning
@@ -671,11 +684,7 @@ impl<const N: usize> ParticleFilter<N> {
         };
         let g = psd_factor(&self.mask(&q))?;
         if let Some(rb) = &mut self.rb {
-            for (s, col) in rb.cols.iter().enumerate() {
-                if let Some(k) = *col {
-                    rb.var_m2[s] += q[(k, k)].max(0.0);
-                }
-            }
+            rb.predict(&q);
         }
         let noisy = g.iter().any(|v| *v != 0.0);
         for i in 0..self.buf.n {
@@ -736,11 +745,7 @@ impl<const N: usize> ParticleFilter<N> {
         let joint = JointFactor::new(&sigma, &self.sampled, &mm.linear)?;
         let p = joint.conditional_covariance();
         if let Some(rb) = &mut self.rb {
-            for (s, col) in rb.cols.iter().enumerate() {
-                if let Some(k) = *col {
-                    rb.var_m2[s] += q[(k, k)].max(0.0);
-                }
-            }
+            rb.predict(q);
         }
         for i in 0..self.buf.n {
             let mut x = model.f(&self.buf.get(i), dt_s);
@@ -880,11 +885,7 @@ impl<const N: usize> ParticleFilter<N> {
         // A Kalman-carried clock's variance grows by its own process noise, as in
         // `predict`; the proposal moves only the sampled components.
         if let Some(rb) = &mut self.rb {
-            for (s, col) in rb.cols.iter().enumerate() {
-                if let Some(k) = *col {
-                    rb.var_m2[s] += q[(k, k)].max(0.0);
-                }
-            }
+            rb.predict(q);
         }
         // The process noise, and the kernel of the last resampling where one is pending.
         let q = self.mask(q) + self.deferred_kernel.take().unwrap_or_else(SMatrix::zeros);
