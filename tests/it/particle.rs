@@ -61,7 +61,7 @@ fn normal4(rng: &mut StreamRng) -> V4 {
 }
 
 /// The members of the family that run on a position-and-clock state, on the same buffers.
-fn family(n: usize) -> [ParticleFilter<4>; 4] {
+fn family(n: usize) -> [ParticleFilter<4>; 5] {
     let make =
         |scheme| ParticleFilter::new(ParticleBuffer::<4>::new(n).unwrap(), scheme, 0.5).unwrap();
     [
@@ -73,12 +73,15 @@ fn family(n: usize) -> [ParticleFilter<4>; 4] {
             }))
             .unwrap(),
         make(Resampling::Systematic).gaussian(),
+        make(Resampling::Systematic)
+            .regularised()
+            .with_progressive_correction(true),
     ]
 }
 
 /// No member of the family allocates in an epoch (predict, the linearised proposal,
 /// weight by ranges, resample with or without the kernel, moments) once built: SIR,
-/// regularised, Rao-Blackwellised, Gaussian (its prediction factors the cloud's covariance
+/// regularised (also with progressive correction), Rao-Blackwellised, Gaussian (its prediction factors the cloud's covariance
 /// and redraws it; its linearised update factors the EKF update) and marginalised.
 #[test]
 fn no_particle_filter_allocates_per_epoch() {
@@ -362,6 +365,25 @@ fn bad_particle_filter_input_is_refused_with_its_place_and_range() {
             "filter = \"gpf\"\nprocess = { model = \"pva_clock\" }\noptions = { particles = 500",
             ":171:10:",
             "runs on a paper process model",
+        ),
+        // Progressive correction splits the bootstrap weighting of the regularised PF only.
+        (
+            "filter = \"rbpf\"\noptions = { particles = 500",
+            "filter = \"rbpf\"\noptions = { pf_correction = \"progressive\", particles = 500",
+            "filter",
+            "pf_correction = \"progressive\" is for filter = \"pf\" with pf_proposal = \"prior\"",
+        ),
+        (
+            "options = { particles = 100, neff_threshold = 0.5, pf_proposal = \"linearised\", pf_kernel = \"musso\" }",
+            "options = { particles = 100, neff_threshold = 0.5, pf_proposal = \"linearised\", pf_kernel = \"musso\", pf_correction = \"progressive\" }",
+            "filter",
+            "pf_correction = \"progressive\" is for filter = \"pf\" with pf_proposal = \"prior\"",
+        ),
+        (
+            "options = { particles = 100 }",
+            "options = { particles = 100, pf_correction = \"staged\" }",
+            ":92:",
+            "expected `single` or `progressive`",
         ),
     ];
     for (i, (find, replace, place, expect)) in cases.iter().enumerate() {

@@ -125,7 +125,9 @@ pub struct EpochRecord {
     pub numerical_failure: bool,
     /// √trace of the position covariance (m): the estimator's own 3-D σ.
     pub pos_sigma_m: Option<f64>,
-    /// Mean NIS of the updates used this epoch.
+    /// NIS of the updates used this epoch per degree of freedom, `Σ νᵀS⁻¹ν / Σ dim ν`:
+    /// about 1 for a consistent filter, whether it updates range by range (the EKFs) or
+    /// with the whole epoch at once (the particle filters).
     pub mean_nis: Option<f64>,
     /// Summed NIS of the updates used this epoch, χ² with `nis_dof` degrees of freedom
     /// for a consistent filter.
@@ -418,7 +420,7 @@ pub fn simulate_observed(
                     .estimate
                     .map(|e| e.cov_pos_m2.trace().max(0.0).sqrt())
                     .filter(|v| v.is_finite()),
-                mean_nis: (out.nis_count > 0).then(|| out.nis_sum / f64::from(out.nis_count)),
+                mean_nis: (out.nis_dof > 0).then(|| out.nis_sum / f64::from(out.nis_dof)),
                 nis: (out.nis_dof > 0).then_some(out.nis_sum),
                 nis_dof: out.nis_dof,
                 rejected_gate: out.rejected_gate,

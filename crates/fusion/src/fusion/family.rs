@@ -117,6 +117,20 @@ pub enum KernelKind {
     Musso,
 }
 
+/// How a regularised particle filter brings an epoch's likelihood in (`[estimator.options]
+/// pf_correction`, [`crate::fusion::particle::ParticleFilter::with_progressive_correction`]).
+#[derive(
+    Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum CorrectionKind {
+    /// All at once: one weighting, then a resampling if `N_eff` fell below the threshold.
+    Single,
+    /// In stages, each keeping half the particles effective, with a resampling and the
+    /// kernel between them (Oudjane & Musso 2000).
+    Progressive,
+}
+
 /// How the Gaussian particle filter estimates its covariance from the weighted cloud
 /// (`[estimator.options] gpf_covariance`,
 /// [`crate::fusion::particle::CovarianceEstimate`]).
@@ -213,6 +227,13 @@ pub struct FamilyConfig {
     /// is kept; default) or `"musso"` (added as it is: the cloud inflates by `h_opt²` of
     /// its covariance at each resampling, as the regularised PF was defined).
     pub pf_kernel: KernelKind,
+    /// The regularised PF (`filter = "pf"`) with the prior proposal: each epoch's
+    /// likelihood is brought in `"single"` (all at once; default) or `"progressive"`
+    /// (in stages, each the largest that keeps half the particles effective, with a
+    /// resampling and the kernel between stages: Oudjane & Musso, "Progressive correction
+    /// for regularized particle filters", FUSION 2000). Other filters refuse
+    /// `"progressive"`.
+    pub pf_correction: CorrectionKind,
     /// The Gaussian PF (`filter = "gpf"`; the other members carry no moment estimate and
     /// ignore it): the covariance of its Gaussian is the weighted cloud's,
     /// `Σ w_i (x_i − μ)(x_i − μ)ᵀ` (`"weighted"`, Kotecha & Djurić 2003; default), or that
@@ -248,6 +269,7 @@ impl Default for FamilyConfig {
             pf_use_rates: false,
             pf_proposal: ProposalKind::Prior,
             pf_kernel: KernelKind::LiuWest,
+            pf_correction: CorrectionKind::Single,
             gpf_covariance: GpfCovarianceKind::Weighted,
             divergence_pos_sigma_m: 1e5,
             divergence_residual_nis: 400.0,

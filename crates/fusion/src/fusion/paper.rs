@@ -261,6 +261,9 @@ pub enum PaperFilter {
         kernel: KernelPlacement,
         /// How the Gaussian PF estimates its covariance.
         covariance: CovarianceEstimate,
+        /// Bring each epoch's likelihood in by progressive correction (the regularised
+        /// filter with the prior proposal only).
+        progressive: bool,
     },
 }
 
@@ -387,13 +390,15 @@ impl<const N: usize> Core<N> {
                 variant,
                 kernel,
                 covariance,
+                progressive,
                 ..
             } => {
                 let buf = ParticleBuffer::<N>::new(particles).map_err(|e| e.to_string())?;
                 let pf = ParticleFilter::new(buf, resampling, neff_threshold)
                     .map_err(|e| e.to_string())?
                     .with_kernel(kernel)
-                    .with_covariance_estimate(covariance);
+                    .with_covariance_estimate(covariance)
+                    .with_progressive_correction(progressive);
                 let mut pf = match variant {
                     PfVariant::Sir => pf,
                     PfVariant::Regularised => pf.regularised(),
@@ -657,6 +662,19 @@ where
             return Err(
                 "options.pf_proposal = \"linearised\" is for filter = \"pf\", \"sir\", \"rbpf\" or \"gpf\": the marginalised filter draws from its exact prediction".into(),
             );
+        }
+        if let PaperFilter::Pf {
+            variant,
+            linearised,
+            progressive: true,
+            ..
+        } = filter
+        {
+            if variant != PfVariant::Regularised || linearised {
+                return Err(
+                    "options.pf_correction = \"progressive\" is for filter = \"pf\" with pf_proposal = \"prior\": the linearised proposal already conditions on the ranges, and the other members' updates are not split".into(),
+                );
+            }
         }
         let core = Core::new(filter, layout.pos, x0, p0, &mut rng)?;
         let mut est = Self {

@@ -496,6 +496,7 @@ impl EstimatorSpec {
                 linearised: cfg.pf_proposal == crate::fusion::family::ProposalKind::Linearised,
                 kernel: cfg.pf_kernel.placement(),
                 covariance: cfg.gpf_covariance.estimate(),
+                progressive: cfg.pf_correction == crate::fusion::family::CorrectionKind::Progressive,
             },
             other @ (FilterKind::Ekf11 | FilterKind::Wls | FilterKind::Ins | FilterKind::Pdr) => {
                 return Err(format!(
