@@ -205,6 +205,31 @@ fn bench_pf(c: &mut Criterion) {
                 black_box(rpf.particles().column(0)[0])
             })
         });
+        // A likelihood much narrower than the cloud (the prior's 10 m against the ranges'
+        // 3 m): the regularised update all at once, and by progressive correction (its
+        // stages each a likelihood evaluation, a resampling and a kernel), each from a
+        // fresh prior cloud every iteration (the draw is in both).
+        let mut ppf = ParticleFilter::new(
+            ParticleBuffer::<4>::new(n).expect("n > 0"),
+            Resampling::Systematic,
+            0.5,
+        )
+        .expect("valid threshold")
+        .regularised()
+        .with_progressive_correction(true);
+        for (label, filter) in [("single", &mut rpf), ("progressive", &mut ppf)] {
+            group.bench_function(
+                format!("regularised {label} update from the prior N={n}"),
+                |b| {
+                    b.iter(|| {
+                        filter
+                            .init_gaussian(&truth, &prior, &mut rng)
+                            .expect("valid prior");
+                        black_box(filter.update_ranges(&lik, &mut rng))
+                    })
+                },
+            );
+        }
         let mut rbpf = ParticleFilter::new(
             ParticleBuffer::<4>::new(n).expect("n > 0"),
             Resampling::Systematic,
