@@ -227,11 +227,12 @@ pub struct FamilyConfig {
     /// is kept; default) or `"musso"` (added as it is: the cloud inflates by `h_opt²` of
     /// its covariance at each resampling, as the regularised PF was defined).
     pub pf_kernel: KernelKind,
-    /// The regularised PF (`filter = "pf"`) with the prior proposal: each epoch's
-    /// likelihood is brought in `"single"` (all at once; default) or `"progressive"`
-    /// (in stages, each the largest that keeps half the particles effective, with a
-    /// resampling and the kernel between stages: Oudjane & Musso, "Progressive correction
-    /// for regularized particle filters", FUSION 2000). Other filters refuse
+    /// The regularised and Rao-Blackwellised PF (`filter = "pf"`, `"rbpf"`) with the prior
+    /// proposal: each epoch's likelihood is brought in `"single"` (all at once; default)
+    /// or `"progressive"` (in stages, each the largest that keeps half the particles
+    /// effective, with a resampling and the kernel between stages: Oudjane & Musso,
+    /// "Progressive correction for regularized particle filters", FUSION 2000; the
+    /// Rao-Blackwellised clocks' Kalman update split with it). Other filters refuse
     /// `"progressive"`.
     pub pf_correction: CorrectionKind,
     /// The Gaussian PF (`filter = "gpf"`; the other members carry no moment estimate and

@@ -670,9 +670,13 @@ where
             ..
         } = filter
         {
-            if variant != PfVariant::Regularised || linearised {
+            let splits = matches!(
+                variant,
+                PfVariant::Regularised | PfVariant::RaoBlackwellised
+            );
+            if !splits || linearised {
                 return Err(
-                    "options.pf_correction = \"progressive\" is for filter = \"pf\" with pf_proposal = \"prior\": the linearised proposal already conditions on the ranges, and the other members' updates are not split".into(),
+                    "options.pf_correction = \"progressive\" is for filter = \"pf\" or \"rbpf\" with pf_proposal = \"prior\": the linearised proposal already conditions on the ranges, and the other members keep their single update".into(),
                 );
             }
         }
