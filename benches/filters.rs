@@ -249,6 +249,36 @@ fn bench_pf(c: &mut Criterion) {
                 black_box(rbpf.update_ranges(&lik, &mut rng))
             })
         });
+        // From a fresh 10 m prior cloud and clock prior each iteration, the
+        // Rao-Blackwellised update all at once and by progressive correction (the clock's
+        // Kalman update split into the stages).
+        let rb_make = |progressive: bool| {
+            ParticleFilter::new(
+                ParticleBuffer::<4>::new(n).expect("n > 0"),
+                Resampling::Systematic,
+                0.5,
+            )
+            .expect("valid threshold")
+            .with_progressive_correction(progressive)
+            .rao_blackwellised(std::array::from_fn(|s| {
+                (s == System::Gps.index()).then_some(3)
+            }))
+            .expect("one clock column")
+        };
+        for (label, mut filter) in [("single", rb_make(false)), ("progressive", rb_make(true))] {
+            group.bench_function(
+                format!("rao-blackwellised {label} update from the prior N={n}"),
+                |b| {
+                    b.iter(|| {
+                        filter
+                            .init_gaussian(&truth, &prior, &mut rng)
+                            .expect("valid prior");
+                        filter.set_clock_prior(System::Gps.index(), truth[3], 100.0);
+                        black_box(filter.update_ranges(&lik, &mut rng))
+                    })
+                },
+            );
+        }
         // The same filter with the linearised proposal: the noise-free move, then the
         // proposal with the clock integrated out (one factorisation of the predictive
         // covariance), each particle's draw and predictive weight, and the clock filters'
