@@ -1351,49 +1351,12 @@ impl<const N: usize> ParticleFilter<N> {
     /// `λ ≤ 1 − done` whose increments keep `fraction · N` effective. The increments go
     /// through the log-likelihood buffer.
     fn rb_tempering_exponent(&mut self, done: f64, fraction: f64) -> f64 {
-        let max = 1.0 - done;
         let target = fraction * self.buf.n as f64;
-        let n_eff = |this: &mut Self, lambda: f64| {
-            this.rb_stage_increments(done, done + lambda);
-            let b = &this.buf;
-            let top = b
-                .log_lik
-                .iter()
-                .zip(&b.weights)
-                .filter(|(l, w)| **w > 0.0 && !l.is_nan())
-                .map(|(l, _)| *l)
-                .fold(f64::NEG_INFINITY, f64::max);
-            if !top.is_finite() {
-                return f64::INFINITY;
-            }
-            let (mut s1, mut s2) = (0.0, 0.0);
-            for (l, w) in b.log_lik.iter().zip(&b.weights) {
-                if l.is_nan() {
-                    continue;
-                }
-                let v = w * (l - top).exp();
-                s1 += v;
-                s2 += v * v;
-            }
-            if s2 > 0.0 {
-                s1 * s1 / s2
-            } else {
-                0.0
-            }
-        };
-        if n_eff(self, max) >= target {
-            return max;
-        }
-        let (mut lo, mut hi) = (0.0, max);
-        for _ in 0..40 {
-            let mid = 0.5 * (lo + hi);
-            if n_eff(self, mid) >= target {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        lo.max(max * 1e-3)
+        bisect_exponent(1.0 - done, target, |lambda| {
+            self.rb_stage_increments(done, done + lambda);
+            let b = &self.buf;
+            tempered_n_eff(&b.weights, |i| b.log_lik[i])
+        })
     }
 
     /// The largest exponent `λ ≤ max` whose tempered weights `w_i p(z|x_i)^λ` (the
@@ -1413,36 +1376,10 @@ impl<const N: usize> ParticleFilter<N> {
         if !top.is_finite() {
             return max;
         }
-        let n_eff = |lambda: f64| {
-            let (mut s1, mut s2) = (0.0, 0.0);
-            for (l, w) in b.log_lik.iter().zip(&b.weights) {
-                if l.is_nan() {
-                    continue;
-                }
-                let v = w * (lambda * (l - top)).exp();
-                s1 += v;
-                s2 += v * v;
-            }
-            if s2 > 0.0 {
-                s1 * s1 / s2
-            } else {
-                0.0
-            }
-        };
         let target = fraction * b.n as f64;
-        if n_eff(max) >= target {
-            return max;
-        }
-        let (mut lo, mut hi) = (0.0, max);
-        for _ in 0..40 {
-            let mid = 0.5 * (lo + hi);
-            if n_eff(mid) >= target {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        lo.max(max * 1e-3)
+        bisect_exponent(max, target, |lambda| {
+            tempered_n_eff(&b.weights, |i| lambda * (b.log_lik[i] - top))
+        })
     }
 
     /// Normalises the weights by the log-likelihoods just formed and resamples when
@@ -1763,6 +1700,57 @@ impl<const N: usize> ParticleFilter<N> {
     pub fn clock_variance_m2(&self, s: usize) -> Option<f64> {
         let rb = self.rb.as_ref()?;
         rb.cols.get(s).copied().flatten().map(|_| rb.var_m2[s])
+    }
+}
+
+/// The largest exponent `λ ∈ (0, max]` whose tempered weights keep `n_eff(λ) ≥ target`
+/// (a progressive correction's next stage): `max` itself when it does, else by 40 steps
+/// of bisection (the size falls from the current weights' as `λ` grows), and at least
+/// `max/1000`, so that the correction always advances.
+fn bisect_exponent(max: f64, target: f64, mut n_eff: impl FnMut(f64) -> f64) -> f64 {
+    if n_eff(max) >= target {
+        return max;
+    }
+    let (mut lo, mut hi) = (0.0, max);
+    for _ in 0..40 {
+        let mid = 0.5 * (lo + hi);
+        if n_eff(mid) >= target {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    lo.max(max * 1e-3)
+}
+
+/// The effective sample size of the weights `w_i · exp(inc(i))`, `(Σ v_i)² / Σ v_i²`,
+/// formed after subtracting the largest increment of a weighted particle (so that the
+/// exponentials cannot all underflow); a NaN increment is a particle left out; infinite
+/// when no weighted particle has a finite increment (no step to limit).
+fn tempered_n_eff(weights: &[f64], inc: impl Fn(usize) -> f64) -> f64 {
+    let top = weights
+        .iter()
+        .enumerate()
+        .filter(|(i, w)| **w > 0.0 && !inc(*i).is_nan())
+        .map(|(i, _)| inc(i))
+        .fold(f64::NEG_INFINITY, f64::max);
+    if !top.is_finite() {
+        return f64::INFINITY;
+    }
+    let (mut s1, mut s2) = (0.0, 0.0);
+    for (i, w) in weights.iter().enumerate() {
+        let l = inc(i);
+        if l.is_nan() {
+            continue;
+        }
+        let v = w * (l - top).exp();
+        s1 += v;
+        s2 += v * v;
+    }
+    if s2 > 0.0 {
+        s1 * s1 / s2
+    } else {
+        0.0
     }
 }
 
