@@ -183,6 +183,17 @@ impl<const N: usize> ParticleBuffer<N> {
         &self.weights
     }
 
+    /// The largest log-likelihood of a particle that still has weight (NaN ones left
+    /// out); −∞ when there is none.
+    fn top_log_lik(&self) -> f64 {
+        self.log_lik
+            .iter()
+            .zip(&self.weights)
+            .filter(|(l, w)| **w > 0.0 && !l.is_nan())
+            .map(|(l, _)| *l)
+            .fold(f64::NEG_INFINITY, f64::max)
+    }
+
     fn get(&self, i: usize) -> SVector<f64, N> {
         SVector::<f64, N>::from_fn(|k, _| self.cols[k * self.n + i])
     }
@@ -210,6 +221,15 @@ pub struct PfUpdate {
     pub resampled: bool,
     /// True when no particle had a usable weight; the weights were reset to uniform.
     pub degenerate: bool,
+}
+
+impl PfUpdate {
+    /// An update no particle survived: every weight underflowed (reset to uniform).
+    const DEGENERATE: Self = Self {
+        n_eff: 0.0,
+        resampled: false,
+        degenerate: true,
+    };
 }
 
 /// The clock states a Rao-Blackwellised filter carries in closed form: one Kalman filter
@@ -1172,17 +1192,22 @@ impl<const N: usize> ParticleFilter<N> {
                 *l *= lambda;
             }
             remaining -= lambda;
-            if self.reweight().is_none() {
-                return PfUpdate {
-                    n_eff: 0.0,
-                    resampled: false,
-                    degenerate: true,
-                };
+            if !self.between_stages(rng) {
+                return PfUpdate::DEGENERATE;
             }
-            self.resample_regularised(rng);
         }
         // Unreachable: the last stage takes the rest.
         self.finish_update(rng, false)
+    }
+
+    /// Between two stages of a progressive correction: the weights of the stages so far,
+    /// then a resampling and the kernel; false when no particle keeps a weight.
+    fn between_stages<R: Rng + ?Sized>(&mut self, rng: &mut R) -> bool {
+        if self.reweight().is_none() {
+            return false;
+        }
+        self.resample_regularised(rng);
+        true
     }
 
     /// The progressive correction of a Rao-Blackwellised filter (see
@@ -1219,14 +1244,9 @@ impl<const N: usize> ParticleFilter<N> {
                 return self.finish_update(rng, false);
             }
             done = next;
-            if self.reweight().is_none() {
-                return PfUpdate {
-                    n_eff: 0.0,
-                    resampled: false,
-                    degenerate: true,
-                };
+            if !self.between_stages(rng) {
+                return PfUpdate::DEGENERATE;
             }
-            self.resample_regularised(rng);
         }
         // Unreachable: the last stage takes the rest.
         self.finish_update(rng, false)
@@ -1366,13 +1386,7 @@ impl<const N: usize> ParticleFilter<N> {
     /// that the correction always advances.
     fn tempering_exponent(&self, max: f64, fraction: f64) -> f64 {
         let b = &self.buf;
-        let top = b
-            .log_lik
-            .iter()
-            .zip(&b.weights)
-            .filter(|(l, w)| **w > 0.0 && !l.is_nan())
-            .map(|(l, _)| *l)
-            .fold(f64::NEG_INFINITY, f64::max);
+        let top = b.top_log_lik();
         if !top.is_finite() {
             return max;
         }
@@ -1388,11 +1402,7 @@ impl<const N: usize> ParticleFilter<N> {
     /// ([`Self::resample_deferring_kernel`]).
     fn finish_update<R: Rng + ?Sized>(&mut self, rng: &mut R, defer_kernel: bool) -> PfUpdate {
         let Some(n_eff) = self.reweight() else {
-            return PfUpdate {
-                n_eff: 0.0,
-                resampled: false,
-                degenerate: true,
-            };
+            return PfUpdate::DEGENERATE;
         };
         let b = &self.buf;
         // The Gaussian filter never resamples: its next prediction redraws the cloud.
@@ -1424,13 +1434,7 @@ impl<const N: usize> ParticleFilter<N> {
     fn reweight(&mut self) -> Option<f64> {
         self.predicted = None;
         let b = &mut self.buf;
-        let max = b
-            .log_lik
-            .iter()
-            .zip(&b.weights)
-            .filter(|(l, w)| **w > 0.0 && !l.is_nan())
-            .map(|(l, _)| *l)
-            .fold(f64::NEG_INFINITY, f64::max);
+        let max = b.top_log_lik();
         let mut sum = 0.0;
         if max.is_finite() {
             for (w, l) in b.weights.iter_mut().zip(&b.log_lik) {
