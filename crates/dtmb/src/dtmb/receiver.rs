@@ -1199,6 +1199,107 @@ mod tests {
     use crate::dtmb::multipath::{ChannelConfig, Path};
     use crate::dtmb::transmitter::{Transmitter, TxConfig};
 
+    /// Counts the allocations of the current thread (each test runs on its own thread),
+    /// for the no-allocation test of the sync; the pattern of `tests/it/particle.rs`.
+    struct Counting;
+
+    thread_local! {
+        static ALLOCATIONS: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
+    }
+
+    // SAFETY: every call is forwarded to the system allocator unchanged; the counter is a
+    // const-initialised thread-local `Cell`, whose access does not allocate.
+    unsafe impl std::alloc::GlobalAlloc for Counting {
+        unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
+            ALLOCATIONS.with(|c| c.set(c.get() + 1));
+            // SAFETY: forwarded with the caller's layout.
+            unsafe { std::alloc::System.alloc(layout) }
+        }
+        unsafe fn dealloc(&self, ptr: *mut u8, layout: std::alloc::Layout) {
+            // SAFETY: forwarded with the caller's pointer and layout.
+            unsafe { std::alloc::System.dealloc(ptr, layout) }
+        }
+        unsafe fn realloc(
+            &self,
+            ptr: *mut u8,
+            layout: std::alloc::Layout,
+            new_size: usize,
+        ) -> *mut u8 {
+            ALLOCATIONS.with(|c| c.set(c.get() + 1));
+            // SAFETY: forwarded with the caller's arguments.
+            unsafe { std::alloc::System.realloc(ptr, layout, new_size) }
+        }
+    }
+
+    #[global_allocator]
+    static GLOBAL: Counting = Counting;
+
+    fn allocations() -> u64 {
+        ALLOCATIONS.with(std::cell::Cell::get)
+    }
+
+    /// Once the receiver has synchronised once (its turned-back block grown to `max_len`
+    /// on the first search that moves the block, an aided sync's window plans made), a
+    /// sync allocates nothing: the full search with and without the frequency search
+    /// (hypothesis zero and a moved one), with the frame known and unknown, and the
+    /// aided sync. The counter is checked to count (a `Vec` allocates once).
+    #[test]
+    fn a_sync_allocates_nothing() {
+        let before = allocations();
+        let v = std::hint::black_box(vec![0u8; 64]);
+        assert_eq!(allocations() - before, 1, "the counter counts");
+        drop(v);
+        for mode in [PnMode::Pn945, PnMode::Pn595] {
+            let n = mode.frame_len();
+            let len = 2 * n + mode.header_len();
+            let path = vec![Path::new(30.37 / SAMPLE_RATE_HZ, 1.0, 0.4, 0.0)];
+            let blocks = [
+                setup(mode, path.clone(), 0.0, Some(10.0), len, (7 * n) as i64),
+                setup(mode, path, 6000.0, Some(10.0), len, (7 * n) as i64),
+            ];
+            let mut r = Receiver::new(mode, len).unwrap();
+            let cfgs = [
+                SyncConfig::default(),
+                SyncConfig {
+                    cfo_search_hz: 10_000.0,
+                    ..SyncConfig::default()
+                },
+                SyncConfig {
+                    search: Search::Full {
+                        frame_in_superframe: Some(7),
+                    },
+                    frames: 2,
+                    cfo_search_hz: 10_000.0,
+                    ..SyncConfig::default()
+                },
+                SyncConfig {
+                    search: Search::Aided {
+                        frame_in_superframe: 7,
+                        predicted_start_samples: 30.0,
+                        half_window_samples: 64,
+                    },
+                    ..SyncConfig::default()
+                },
+            ];
+            // The first pass grows the buffers kept for later syncs.
+            for rx in &blocks {
+                for cfg in &cfgs {
+                    r.sync(rx, cfg).unwrap();
+                }
+            }
+            let mut moved = false;
+            for rx in &blocks {
+                for cfg in &cfgs {
+                    let before = allocations();
+                    let s = r.sync(rx, cfg).unwrap();
+                    moved |= s.coarse_cfo_hz != 0.0;
+                    assert_eq!(allocations() - before, 0, "{mode} {cfg:?}");
+                }
+            }
+            assert!(moved, "{mode}: a search moved the block");
+        }
+    }
+
     pub(super) fn setup(
         mode: PnMode,
         paths: Vec<Path>,
