@@ -153,9 +153,14 @@
 //! header is not cyclic but is the same in every frame: consecutive headers are
 //! correlated at the lag `D = F` = 4375 over the `N = 378` samples `n = W − 1 .. H` free
 //! of the previous body, range `±f_s/(2F)` = **±864 Hz only** — less than a ±2 ppm
-//! oscillator's offset anywhere in UHF (±0.95 kHz at 474 MHz): a PN595 receiver needs a
-//! coarse frequency acquisition first (e.g. a frequency search in the frame sync), which is
-//! not modelled. Beyond the range the estimate wraps to `f_o − 2k f_s/(2D)`.
+//! oscillator's offset anywhere in UHF (±0.95 kHz at 474 MHz). Beyond the range the
+//! estimate wraps to `f_o − 2k f_s/(2D)`. The acquiring receiver therefore starts from the
+//! frame sync's coarse frequency search ([`super::receiver`], module documentation; its
+//! range [`acquisition_search_hz`]), whose estimate — PN595's unwrapped with the phase
+//! between the header's halves — seeds the corrector: the summed correlation is unwrapped
+//! around it ([`CfoCorrector::set_coarse_hz`]), so an offset of several ranges is
+//! estimated, not wrapped. The true-timing receiver has no acquisition and so no search:
+//! beyond the range it wraps.
 //! The correlation's phase is the power-weighted mean of the paths' shifts plus `f_o`: a
 //! common Doppler is corrected with the offset (no receiver can tell them apart).
 //!
@@ -270,9 +275,13 @@
 //! the whole response stays causal in the estimate's window, at the price of `K` lags of
 //! the delay spread covered and `10 log10(1 + K/N)` = 0.018 dB of reconstruction noise.
 //! The timing is then held (the channel's delays do not drift), or followed by the
-//! [`TimingTracker`] when the sample clock is off. The frame sync acquires
-//! through a CFO uncorrected (1 kHz turns a PN945 header by 0.79 rad); the frames at the
-//! acquired timing are then corrected as above. The genie keeps the true timing.
+//! [`TimingTracker`] when the sample clock is off. A receiver that corrects a CFO
+//! acquires with the sync's coarse frequency search over ±[`acquisition_search_hz`]
+//! (the block turned back by the strongest hypothesis; without it the sync loses the
+//! PN945 frame start by 6 kHz, the header's coherent `sinc(f T_H)` having its first null
+//! at 8 kHz); one that does not, without it (bit for bit the receiver without an
+//! oscillator). The frames at the acquired timing are then corrected as above. The genie
+//! keeps the true timing.
 //!
 //! Random streams of `TrialRng::new(seed, 0)`: `dtmb/ber/payload` (the stream's key, as
 //! [`super::ber::measure_point`], so the same packets) and `dtmb/ber/noise`; every SNR
@@ -1589,8 +1598,11 @@ pub fn measure_channel_point_synced(
 
 /// [`measure_channel_point_synced`] with the receiver's oscillator `osc`
 /// ([`measure_channel_point_with_cfo`]): the frame synchroniser acquires through the
-/// offset (uncorrected), then every frame at the acquired timing is corrected by the
-/// [`CfoCorrector`] before the channel estimate when `osc.correct`. With a sampling-clock
+/// offset, with its coarse frequency search when `osc.correct`
+/// ([`acquisition_search_hz`]), then every frame at the acquired timing is corrected by
+/// the [`CfoCorrector`] before the channel estimate when `osc.correct`, seeded with the
+/// sync's estimate ([`CfoCorrector::set_coarse_hz`]) when the search moved the block or
+/// in PN595. With a sampling-clock
 /// offset (`osc.sfo_ppm`) the stream drifts and, with `osc.track_timing`, the
 /// [`TimingTracker`] follows it ([`measure_channel_point_clocked`], which also returns the
 /// measured drift).

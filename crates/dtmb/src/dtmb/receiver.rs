@@ -23,7 +23,48 @@
 //! ±14.8 kHz for PN420, ±7.4 kHz for PN945). PN595 has no cyclic extension and uses the
 //! header-to-header phase `Δf = arg Σ_k c_{k+1} c_k* · f_s / (2π N)` (range ±864 Hz), with
 //! `c_k` the header correlation of frame `k`; this is seed 002's frame-to-frame CFO
-//! (Remote Sens. 15(13):3229, §3.2) on the header instead of the TPS carriers.
+//! (Remote Sens. 15(13):3229, §3.2) on the header instead of the TPS carriers. Both are
+//! the repetition estimators of Moose (IEEE Trans. Commun. 42(10), 1994) and Schmidl &
+//! Cox (IEEE Trans. Commun. 45(12), 1997), whose range is `±f_s/(2D)` for a lag `D`:
+//! beyond it the estimate wraps by `f_s/D`.
+//!
+//! **Coarse frequency search** ([`SyncConfig::cfo_search_hz`]). The header correlation
+//! is coherent over the `H` header samples, so an offset `δf` scales its peak by
+//!
+//! ```text
+//! |R(δf)| / |R(0)| = |sin(π δf H/f_s) / (H sin(π δf/f_s))| ≈ |sinc(δf T_H)|,   T_H = H/f_s
+//! ```
+//!
+//! with its first null at `1/T_H`: 8.0 kHz for PN945 (125 µs), 12.7 kHz PN595, 18 kHz
+//! PN420. Well before the null the noise and the neighbouring frame bodies win (PN945 at
+//! 6 kHz: the frame start found hundreds of samples off). The search tests the offsets
+//! `f_q = q m f_s/M`, `|q| ≤ ⌈f_max/(m f_s/M)⌉`, on the block's `M`-point spectrum `X`
+//! already computed: turning the zero-padded block back by a whole number `s = qm` of
+//! bins, `r[n] e^{−j2π s n/M}`, is exactly the circular shift `X[k + s]` of its spectrum,
+//! so a hypothesis costs one product `X[k + s] H_p*[k]` and one inverse FFT per header
+//! phase — the parallel frequency-bin search of spread-spectrum and GNSS acquisition
+//! (Van Nee & Coenen, "New fast GPS code-acquisition technique using FFT", Electron.
+//! Lett. 27(2), 1991; Borre et al., *A Software-Defined GPS and Galileo Receiver*, 2007,
+//! ch. 6), with the hypotheses over the same peak statistic the frame identification uses
+//! (every phase when the frame number is unknown). The spacing is `m = ⌊M/(2H)⌋` bins,
+//! `Δf = m f_s/M ≤ 1/(2T_H)`, so the worst offset between hypotheses, `Δf/2 ≤ 1/(4T_H)`,
+//! costs at most `sinc(¼)` = 0.900 of the peak (−0.91 dB); with two frames and a header
+//! (`M` = 16 384) that is 3691 Hz in PN945, 5998 Hz PN595, 8767 Hz PN420. The hypothesis
+//! with the strongest peak is taken, the block turned back by it (and its spectrum moved,
+//! so nothing is transformed again), and the synchronisation runs as without the search
+//! on the turned block; the reported CFO is the hypothesis plus the fine estimate. The
+//! cyclic estimators' ranges (±7.4 kHz PN945, ±14.8 kHz PN420) cover a hypothesis
+//! spacing, so the fine estimate needs nothing more. PN595's header-to-header range
+//! (±864 Hz) does not: its estimate `Δf₂` is unwrapped with the phase between the two
+//! halves `A`, `B` (`H' = ⌊H/2⌋` samples each) of each header's correlation,
+//! `Δf₁ = arg Σ_k c_{B,k} c_{A,k}* · f_s/(2π H')` (range `±f_s/(2H')` = ±12.7 kHz;
+//! standard deviation `(f_s/(2πH')) √(2/(Hγ))` from one header at header-sample SNR `γ`,
+//! 74 Hz at 10 dB), as `Δf = Δf₂ + (f_s/F) round((Δf₁ − Δf₂)/(f_s/F))`, right while
+//! `|Δf₁ − Δf| < f_s/(2F)`. Without a second header in the block PN595 reports `Δf₁`.
+//! The search is off by default (`cfo_search_hz = 0`: bit for bit the synchroniser
+//! without it) because a receiver whose offset is known or small does not need its
+//! cost (the hypotheses' inverse FFTs, `2⌈f_max/Δf⌉ + 1` times the frame
+//! identification's: `docs/performance.md`); only with [`Search::Full`].
 //!
 //! **Fine timing.** The timing is the maximiser of the band-limited interpolation of the
 //! correlation, `S(τ) = Σ_b Y[b] e^{j2π b τ / M}` with `Y = W · H*` the cross-spectrum of
