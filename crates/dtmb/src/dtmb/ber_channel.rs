@@ -4584,9 +4584,9 @@ mod tests {
     /// its first path [`SYNC_ADVANCE_SAMPLES`] = 16 lags into the estimate's window, drifts
     /// by `εF` a frame and is lost once it has moved more than those 16.5 samples out of
     /// the window's start (ε < 0; the other way the 217-chip guard leaves 200 samples).
-    /// At −10 ppm (the sample clock alone: its CFO at 600 MHz, +6 kHz, is more than the
-    /// frame sync acquires through without its frequency search, which a receiver that
-    /// does not correct an offset does not run; drift −0.0473 samples a frame) that is
+    /// At −10 ppm (the sample clock alone, its CFO of +6 kHz at 600 MHz left out: the
+    /// whole oscillator is `a_tracked_ten_ppm_oscillator_keeps_the_threshold`'s; drift
+    /// −0.0473 samples a frame) that is
     /// frame 349: over 270 frames (100 measured) the untracked receiver is error-free at
     /// 18 dB as the tracked one; over 470 frames (300 measured) it loses the frames past the
     /// break — at least half of the `(470 − 349)/300` of the packets they carry (the
