@@ -4229,18 +4229,14 @@ mod tests {
     /// samples a frame (+0.00945 at 2 ppm in PN945, F = 4725; 0.0084 PN420, 0.00875
     /// PN595). Over 270 frames at 18 dB, ±2 ppm, the least-squares slope lies within four
     /// of its standard errors (from the fit's residuals) of `εF`, and the tracker has moved
-    /// the frame start by the drift rounded (±1 sample). PN945 and PN420 carry the whole
-    /// oscillator (CFO `−ε f_c` = ∓1200 Hz, estimated and corrected); PN595 the clock
-    /// offset alone (±1200 Hz is beyond its ±864 Hz CFO range).
+    /// the frame start by the drift rounded (±1 sample). Every mode carries the whole
+    /// oscillator (CFO `−ε f_c` = ∓1200 Hz, estimated and corrected; in PN595, beyond its
+    /// ±864 Hz header-to-header range, from the acquisition's frequency search).
     #[test]
     fn the_timing_tracker_measures_the_sampling_clock_drift() {
         for mode in PnMode::ALL {
             for ppm in [2.0, -2.0] {
-                let mut osc = Oscillator::from_ppm(ppm, 600e6).unwrap();
-                if !mode.is_cyclic() {
-                    osc.cfo_hz = 0.0;
-                    osc.correct = false;
-                }
+                let osc = Oscillator::from_ppm(ppm, 600e6).unwrap();
                 let r = clocked(mode, osc, 100, 18.0);
                 let t = r.timing;
                 let want = ppm * 1e-6 * mode.frame_len() as f64;
