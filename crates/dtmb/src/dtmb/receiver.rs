@@ -45,8 +45,10 @@
 //! phase — the parallel frequency-bin search of spread-spectrum and GNSS acquisition
 //! (Van Nee & Coenen, "New fast GPS code-acquisition technique using FFT", Electron.
 //! Lett. 27(2), 1991; Borre et al., *A Software-Defined GPS and Galileo Receiver*, 2007,
-//! ch. 6), with the hypotheses over the same peak statistic the frame identification uses
-//! (every phase when the frame number is unknown). The spacing is `m = ⌊M/(2H)⌋` bins,
+//! ch. 6), with the hypotheses compared on the frame identification's peak statistic, one
+//! header's `max |R_p[ℓ]|²` (over every phase when the frame number is unknown, else the
+//! known frame's; the `K`-frame accumulation follows on the block turned back by the
+//! hypothesis taken). The spacing is `m = ⌊M/(2H)⌋` bins,
 //! `Δf = m f_s/M ≤ 1/(2T_H)`, so the worst offset between hypotheses, `Δf/2 ≤ 1/(4T_H)`,
 //! costs at most `sinc(¼)` = 0.900 of the peak (−0.91 dB); with two frames and a header
 //! (`M` = 16 384) that is 3691 Hz in PN945, 5998 Hz PN595, 8767 Hz PN420. The hypothesis
