@@ -127,6 +127,15 @@ fn bench(c: &mut Criterion) {
     g.bench_function("sync_full_search_one_frame", |b| {
         b.iter(|| black_box(rx.sync(&block, &full).unwrap()))
     });
+    // The same with the coarse frequency search over ±10 kHz: seven hypotheses 3.7 kHz
+    // apart, one more product and inverse FFT each.
+    let full_search = SyncConfig {
+        cfo_search_hz: 10_000.0,
+        ..full
+    };
+    g.bench_function("sync_full_search_one_frame_cfo_search_10khz", |b| {
+        b.iter(|| black_box(rx.sync(&block, &full_search).unwrap()))
+    });
     let aided = SyncConfig {
         search: Search::Aided {
             frame_in_superframe: 20,
@@ -157,6 +166,13 @@ fn bench(c: &mut Criterion) {
     g.bench_function("acquire_frame_number_two_frames", |b| {
         b.iter(|| black_box(rx2.sync(&block2, &SyncConfig::default()).unwrap()))
     });
+    let acquire_search = SyncConfig {
+        cfo_search_hz: 10_000.0,
+        ..SyncConfig::default()
+    };
+    g.bench_function("acquire_frame_number_two_frames_cfo_search_10khz", |b| {
+        b.iter(|| black_box(rx2.sync(&block2, &acquire_search).unwrap()))
+    });
     g.finish();
 
     // Full chain, one core: generate + 6-path channel + aided sync, frame by frame. The
@@ -180,6 +196,7 @@ fn bench(c: &mut Criterion) {
         },
         frames: 1,
         first_path: Some(Default::default()),
+        cfo_search_hz: 0.0,
     };
     let (mut t_gen, mut t_ch, mut t_sync) = (0.0, 0.0, 0.0);
     let wall = Instant::now();

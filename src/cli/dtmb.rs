@@ -227,9 +227,9 @@ pub fn ber(a: &BerArgs) -> Result<()> {
 fn ber_world(a: &BerArgs) -> Result<()> {
     use crate::dtmb::ber::parse_snr_range;
     use crate::dtmb::ber_channel::{
-        cfo_range_hz, doppler_responses, frequency_response, measure_channel_point_clocked,
-        measure_channel_point_synced_with_cfo, measure_channel_point_with_cfo, ChannelBer, Csi,
-        Oscillator, SYNC_ADVANCE_SAMPLES,
+        acquisition_search_hz, cfo_range_hz, doppler_responses, frequency_response,
+        measure_channel_point_clocked, measure_channel_point_synced_with_cfo,
+        measure_channel_point_with_cfo, ChannelBer, Csi, Oscillator, SYNC_ADVANCE_SAMPLES,
     };
     use crate::dtmb::pn::PnMode;
     use crate::world::dtmb_iq::{tower_channel_at, DataLayerOverride, WorldIqRequest};
@@ -428,9 +428,19 @@ fn ber_world(a: &BerArgs) -> Result<()> {
                 "not corrected (--no-cfo-correction)".to_string()
             },
             if osc.correct && f.abs() > range {
-                " — beyond the range: the estimate wraps and the correction fails"
+                if a.true_timing {
+                    " — beyond the range: the true-timing receiver has no frequency search, \
+                     so its estimate wraps and the correction fails"
+                        .to_string()
+                } else {
+                    format!(
+                        " — beyond the range: the acquiring receiver's coarse frequency \
+                         search (±{:.0} Hz) unwraps it",
+                        acquisition_search_hz(osc)
+                    )
+                }
             } else {
-                ""
+                String::new()
             }
         );
     }

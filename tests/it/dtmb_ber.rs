@@ -409,6 +409,67 @@ fn dtmb_ber_world_cfo_is_corrected_and_costs_everything_without() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Offsets beyond the header estimators' ranges, through the acquiring receiver's coarse
+/// frequency search (automatic when it corrects an offset): on the Kehui tower D01 (PN945,
+/// 482 MHz), 64QAM 0.6, 20 frames a point, `--cfo-hz -9000` (beyond PN945's ±7397 Hz
+/// cyclic range; the sync alone loses the frame start past about 6 kHz) keeps the
+/// threshold without an offset within the 0.2 dB of the 1 kHz test, and the note says the
+/// search unwraps it; `--oscillator-ppm -10` (CFO +4.82 kHz, the frame timing drifting
+/// −0.04725 samples a frame, tracked) keeps the threshold of `--oscillator-ppm -2`
+/// (whose drift carries the response across the sample grid too) within the same 0.2 dB,
+/// and reports the analytic drift. `--true-timing` has no search, and its note says so.
+#[test]
+fn dtmb_ber_world_offsets_beyond_the_range_are_searched() {
+    let threshold = |text: &str| -> f64 {
+        let line = text
+            .lines()
+            .find(|l| l.starts_with("# CSI interpolated: PER 1e-2 at"))
+            .unwrap_or_else(|| panic!("no threshold in {text}"));
+        line["# CSI interpolated: PER 1e-2 at ".len()..]
+            .split(' ')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let grid = ["--frames", "20", "--snr-db", "14.3:15.5:0.1"];
+    let with = |extra: &[&str]| {
+        let mut a = grid.to_vec();
+        a.extend_from_slice(extra);
+        kehui_ber(&a)
+    };
+    let still = threshold(&with(&[]));
+    let far = with(&["--cfo-hz", "-9000"]);
+    assert!(
+        far.contains("the acquiring receiver's coarse frequency search (±12000 Hz) unwraps it"),
+        "{far}"
+    );
+    let far = threshold(&far);
+    let two = threshold(&with(&["--oscillator-ppm", "-2"]));
+    let ten_text = with(&["--oscillator-ppm", "-10"]);
+    assert!(
+        ten_text.contains("frame timing drift measured -0.0472"),
+        "{ten_text}"
+    );
+    let ten = threshold(&ten_text);
+    println!("Kehui D01: no offset {still} dB, -9 kHz {far} dB; -2 ppm {two} dB, -10 ppm {ten} dB");
+    assert!((far - still).abs() < 0.2, "{far} vs {still}");
+    assert!((ten - two).abs() < 0.2, "{ten} vs {two}");
+    let tt = kehui_ber(&[
+        "--frames",
+        "1",
+        "--snr-db",
+        "25",
+        "--cfo-hz",
+        "9000",
+        "--true-timing",
+    ]);
+    assert!(
+        tt.contains("the true-timing receiver has no frequency search"),
+        "{tt}"
+    );
+}
+
 /// The receiver's oscillator from the world file: `sensors.dtmb.rx_oscillator_ppm`
 /// (which `dtmb iq --world` records with) applies to `dtmb ber --world` as
 /// `--oscillator-ppm` does. The Kehui world with the key set to −2 ppm gives the CSV of

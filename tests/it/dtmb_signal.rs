@@ -99,6 +99,7 @@ fn timing_errors(mode: PnMode, snr_db: f64, trials: usize) -> (f64, f64) {
             },
             frames: 1,
             first_path: None,
+            cfo_search_hz: 0.0,
         };
         let s = rx.sync(&rx_block, &sc).unwrap();
         let e = s.toa_samples - tau;
@@ -174,6 +175,7 @@ fn first_path_is_found_ahead_of_a_stronger_reflection() {
             },
             frames: 2,
             first_path: Some(FirstPathConfig::default()),
+            cfo_search_hz: 0.0,
         };
         let s = rx.sync(&block, &cfg).unwrap();
         println!(
@@ -653,6 +655,7 @@ fn dtmb_iq_from_a_world_matches_the_link_truth() {
                 },
                 frames: 1,
                 first_path: Some(FirstPathConfig::default()),
+                cfo_search_hz: 0.0,
             },
         )
         .unwrap();

@@ -153,9 +153,14 @@
 //! header is not cyclic but is the same in every frame: consecutive headers are
 //! correlated at the lag `D = F` = 4375 over the `N = 378` samples `n = W − 1 .. H` free
 //! of the previous body, range `±f_s/(2F)` = **±864 Hz only** — less than a ±2 ppm
-//! oscillator's offset anywhere in UHF (±0.95 kHz at 474 MHz): a PN595 receiver needs a
-//! coarse frequency acquisition first (e.g. a frequency search in the frame sync), which is
-//! not modelled. Beyond the range the estimate wraps to `f_o − 2k f_s/(2D)`.
+//! oscillator's offset anywhere in UHF (±0.95 kHz at 474 MHz). Beyond the range the
+//! estimate wraps to `f_o − 2k f_s/(2D)`. The acquiring receiver therefore starts from the
+//! frame sync's coarse frequency search ([`super::receiver`], module documentation; its
+//! range [`acquisition_search_hz`]), whose estimate — PN595's unwrapped with the phase
+//! between the header's halves — seeds the corrector: the summed correlation is unwrapped
+//! around it ([`CfoCorrector::set_coarse_hz`]), so an offset of several ranges is
+//! estimated, not wrapped. The true-timing receiver has no acquisition and so no search:
+//! beyond the range it wraps.
 //! The correlation's phase is the power-weighted mean of the paths' shifts plus `f_o`: a
 //! common Doppler is corrected with the offset (no receiver can tell them apart).
 //!
@@ -270,9 +275,13 @@
 //! the whole response stays causal in the estimate's window, at the price of `K` lags of
 //! the delay spread covered and `10 log10(1 + K/N)` = 0.018 dB of reconstruction noise.
 //! The timing is then held (the channel's delays do not drift), or followed by the
-//! [`TimingTracker`] when the sample clock is off. The frame sync acquires
-//! through a CFO uncorrected (1 kHz turns a PN945 header by 0.79 rad); the frames at the
-//! acquired timing are then corrected as above. The genie keeps the true timing.
+//! [`TimingTracker`] when the sample clock is off. A receiver that corrects a CFO
+//! acquires with the sync's coarse frequency search over ±[`acquisition_search_hz`]
+//! (the block turned back by the strongest hypothesis; without it the sync loses the
+//! PN945 frame start by 6 kHz, the header's coherent `sinc(f T_H)` having its first null
+//! at 8 kHz); one that does not, without it (bit for bit the receiver without an
+//! oscillator). The frames at the acquired timing are then corrected as above. The genie
+//! keeps the true timing.
 //!
 //! Random streams of `TrialRng::new(seed, 0)`: `dtmb/ber/payload` (the stream's key, as
 //! [`super::ber::measure_point`], so the same packets) and `dtmb/ber/noise`; every SNR
@@ -1589,8 +1598,11 @@ pub fn measure_channel_point_synced(
 
 /// [`measure_channel_point_synced`] with the receiver's oscillator `osc`
 /// ([`measure_channel_point_with_cfo`]): the frame synchroniser acquires through the
-/// offset (uncorrected), then every frame at the acquired timing is corrected by the
-/// [`CfoCorrector`] before the channel estimate when `osc.correct`. With a sampling-clock
+/// offset, with its coarse frequency search when `osc.correct`
+/// ([`acquisition_search_hz`]), then every frame at the acquired timing is corrected by
+/// the [`CfoCorrector`] before the channel estimate when `osc.correct`, seeded with the
+/// sync's estimate ([`CfoCorrector::set_coarse_hz`]) when the search moved the block or
+/// in PN595. With a sampling-clock
 /// offset (`osc.sfo_ppm`) the stream drifts and, with `osc.track_timing`, the
 /// [`TimingTracker`] follows it ([`measure_channel_point_clocked`], which also returns the
 /// measured drift).
@@ -1609,6 +1621,28 @@ pub fn measure_channel_point_synced_with_cfo(
         reason: "no frame was received".into(),
     })?;
     Ok((r.point, a))
+}
+
+/// The smallest coarse frequency search of the acquiring receiver, Hz: ±12 kHz, an
+/// oscillator ±20 ppm off at 600 MHz (±14 ppm at UHF's top, 862 MHz), covering the
+/// ±10 ppm of a plain crystal oscillator with a margin.
+pub const ACQUISITION_CFO_SEARCH_HZ: f64 = 12_000.0;
+
+/// The coarse frequency search ([`super::receiver::SyncConfig::cfo_search_hz`]) of the
+/// acquiring receiver with the oscillator `osc`: none when it does not correct an offset
+/// (the receiver without an oscillator error, bit for bit), else the larger of
+/// [`ACQUISITION_CFO_SEARCH_HZ`] and 1.25 times the configured offset (the receiver is
+/// designed for its oscillator: the configured error stands for its grade's bound), at
+/// most [`super::receiver::MAX_CFO_SEARCH_HZ`]. Automatic, so a receiver configured with
+/// an offset acquires through it without another option to know about.
+pub fn acquisition_search_hz(osc: Oscillator) -> f64 {
+    if osc.correct {
+        ACQUISITION_CFO_SEARCH_HZ
+            .max(1.25 * osc.cfo_hz.abs())
+            .min(super::receiver::MAX_CFO_SEARCH_HZ)
+    } else {
+        0.0
+    }
 }
 
 /// What [`measure_channel_point_clocked`] measured.
@@ -1722,7 +1756,23 @@ pub fn measure_channel_point_clocked(
                 }
                 // hist = blocks −1, 0, 1, 2: stream sample s is hist[fl + s].
                 let b = fl + block_start;
-                let r = sync.sync(&hist[b..b + 2 * fl + hl], &SyncConfig::default())?;
+                let search_hz = acquisition_search_hz(osc);
+                let r = sync.sync(
+                    &hist[b..b + 2 * fl + hl],
+                    &SyncConfig {
+                        cfo_search_hz: search_hz,
+                        ..SyncConfig::default()
+                    },
+                )?;
+                // The sync's estimate seeds the corrector when the search moved the
+                // block (the cyclic modes' own estimate covers what is left within a
+                // hypothesis) and always in PN595 (its header-to-header range is less
+                // than a hypothesis).
+                if search_hz > 0.0 && (r.coarse_cfo_hz != 0.0 || !mode.is_cyclic()) {
+                    if let Some(corr) = c.cfo.as_mut() {
+                        corr.set_coarse_hz(r.cfo_hz.unwrap_or(r.coarse_cfo_hz))?;
+                    }
+                }
                 let start = (b as f64 + r.toa_samples).round() as i64 - advance as i64;
                 // With one header phase (PN595) the header does not number the frame: the
                 // receiver takes the frame whose start is nearest (in GB 20600 the frame
@@ -2053,6 +2103,10 @@ pub fn cfo_header_correlation(
 pub struct CfoCorrector {
     mode: PnMode,
     known_hz: Option<f64>,
+    /// A coarse estimate from the frame sync's frequency search
+    /// ([`CfoCorrector::set_coarse_hz`]) that the header correlations' phase is unwrapped
+    /// around.
+    coarse_hz: Option<f64>,
     /// `Σ_k Z_k` and the headers it holds.
     acc: Complex64,
     headers: usize,
@@ -2085,6 +2139,7 @@ impl CfoCorrector {
         Self {
             mode,
             known_hz: None,
+            coarse_hz: None,
             acc: Complex64::default(),
             headers: 0,
             prev: vec![Complex32::default(); mode.header_len()],
@@ -2126,16 +2181,48 @@ impl CfoCorrector {
         Ok(())
     }
 
+    /// Gives the estimating corrector a coarse estimate `coarse_hz` of the offset (the
+    /// frame sync's, [`super::receiver::SyncResult::cfo_hz`] with its frequency search),
+    /// which must lie within the range [`cfo_range_hz`] of the true offset: the headers'
+    /// summed correlation is unwrapped around it,
+    /// `f̂ = f_c + arg(Σ_k Z_k e^{−j2π f_c D/f_s}) f_s/(2πD)`, so an offset beyond the
+    /// range (PN595's ±864 Hz above all) is estimated instead of wrapped. Before the
+    /// first correlation the estimate is `f_c`. No effect on a corrector that knows the
+    /// offset.
+    ///
+    /// # Errors
+    /// [`DtmbError::InvalidParameter`] for a non-finite `coarse_hz`.
+    pub fn set_coarse_hz(&mut self, coarse_hz: f64) -> Result<(), DtmbError> {
+        if !coarse_hz.is_finite() {
+            return Err(DtmbError::InvalidParameter {
+                name: "coarse_hz",
+                reason: format!("must be finite, got {coarse_hz}"),
+            });
+        }
+        self.coarse_hz = Some(coarse_hz);
+        Ok(())
+    }
+
     /// The current estimate (Hz): the known offset, or `arg(Σ Z_k) f_s/(2πD)` (0 before
-    /// the first correlation).
+    /// the first correlation), unwrapped around the coarse estimate when there is one
+    /// ([`CfoCorrector::set_coarse_hz`]).
     pub fn estimate_hz(&self) -> f64 {
         if let Some(f) = self.known_hz {
             return f;
         }
-        if self.headers == 0 {
-            return 0.0;
+        match self.coarse_hz {
+            None if self.headers == 0 => 0.0,
+            None => cfo_hz_of_phase(self.mode, self.acc.arg()),
+            Some(f) if self.headers == 0 => f,
+            Some(f) => {
+                let d = cfo_lag_samples(self.mode) as f64;
+                let turn = Complex64::from_polar(
+                    1.0,
+                    -2.0 * std::f64::consts::PI * f * d / super::pn::SAMPLE_RATE_HZ,
+                );
+                f + cfo_hz_of_phase(self.mode, (self.acc * turn).arg())
+            }
         }
-        cfo_hz_of_phase(self.mode, self.acc.arg())
     }
 
     /// Correlations summed into the estimate so far.
@@ -4142,18 +4229,14 @@ mod tests {
     /// samples a frame (+0.00945 at 2 ppm in PN945, F = 4725; 0.0084 PN420, 0.00875
     /// PN595). Over 270 frames at 18 dB, ±2 ppm, the least-squares slope lies within four
     /// of its standard errors (from the fit's residuals) of `εF`, and the tracker has moved
-    /// the frame start by the drift rounded (±1 sample). PN945 and PN420 carry the whole
-    /// oscillator (CFO `−ε f_c` = ∓1200 Hz, estimated and corrected); PN595 the clock
-    /// offset alone (±1200 Hz is beyond its ±864 Hz CFO range).
+    /// the frame start by the drift rounded (±1 sample). Every mode carries the whole
+    /// oscillator (CFO `−ε f_c` = ∓1200 Hz, estimated and corrected; in PN595, beyond its
+    /// ±864 Hz header-to-header range, from the acquisition's frequency search).
     #[test]
     fn the_timing_tracker_measures_the_sampling_clock_drift() {
         for mode in PnMode::ALL {
             for ppm in [2.0, -2.0] {
-                let mut osc = Oscillator::from_ppm(ppm, 600e6).unwrap();
-                if !mode.is_cyclic() {
-                    osc.cfo_hz = 0.0;
-                    osc.correct = false;
-                }
+                let osc = Oscillator::from_ppm(ppm, 600e6).unwrap();
                 let r = clocked(mode, osc, 100, 18.0);
                 let t = r.timing;
                 let want = ppm * 1e-6 * mode.frame_len() as f64;
@@ -4388,12 +4471,118 @@ mod tests {
         }
     }
 
+    /// The coarse frequency search lets the acquiring PN595 receiver correct an offset
+    /// beyond its header-to-header range of ±864 Hz: at ±3 kHz (3.5 ranges; ±5 ppm at
+    /// 600 MHz), 64QAM 0.6 through one path, 10 frames a point (the set-up of the 1 kHz
+    /// test), the acquired receiver's threshold lies within 0.2 dB plus the advance's
+    /// 0.018 dB of the threshold without an offset (13.975 dB in the validation notes),
+    /// its corrector seeded with the sync's unwrapped estimate. The true-timing receiver,
+    /// which has no acquisition and so no search, estimates the wrapped offset
+    /// (`3000 − 2·1728` = −456 Hz, 3456 Hz off: 1.7 carrier spacings of residual) and
+    /// loses every packet at 25 dB — what the search is for. The seed's estimate
+    /// must lie within the range: a non-finite one is refused.
+    #[test]
+    fn the_frequency_search_corrects_pn595_beyond_its_range() {
+        let prof = profile(Constellation::Qam64, CodeRate::R06);
+        let m = PnMode::Pn595;
+        let h = [Complex32::new(1.0, 0.0)];
+        let cfg = ChannelBer {
+            profile: prof,
+            mode: m,
+            h: &h,
+            doppler: &[],
+            csi: Csi::Interpolated,
+            frames: 10,
+            seed: 1,
+        };
+        let grid = grid_from(14.3 + frame_power_shift_db(m), 9);
+        let still = threshold(&grid, |s| measure_channel_point(&cfg, s).unwrap());
+        let bound = 0.2 + 10.0 * (1.0 + SYNC_ADVANCE_SAMPLES as f64 / BODY_LEN as f64).log10();
+        for f in [3000.0, -3000.0] {
+            let on = Oscillator {
+                cfo_hz: f,
+                correct: true,
+                ..Default::default()
+            };
+            let synced = threshold(&grid, |s| {
+                measure_channel_point_synced_with_cfo(&cfg, on, s)
+                    .unwrap()
+                    .0
+            });
+            let wrapped = measure_channel_point_with_cfo(&cfg, on, 25.0).unwrap();
+            println!(
+                "PN595 {f} Hz: no offset {still:.3} dB, acquired and corrected {synced:.3} dB; \
+                 true timing without the search at 25 dB: {wrapped:?}"
+            );
+            assert!((synced - still).abs() < bound, "{f}: {synced} vs {still}");
+            assert!(
+                wrapped.packets > 0 && wrapped.packet_errors == wrapped.packets,
+                "{wrapped:?}"
+            );
+        }
+        let mut c = CfoCorrector::new(m);
+        assert!(c.set_coarse_hz(f64::NAN).is_err());
+        c.set_coarse_hz(3000.0).unwrap();
+        assert_eq!(c.estimate_hz(), 3000.0);
+    }
+
+    /// The whole oscillator at ∓10 ppm at 600 MHz (CFO ±6 kHz, more than the frame sync
+    /// acquires through without its frequency search — the PN945 frame start was found
+    /// 495 samples off — and sample clock `f_s(1 ∓ 10⁻⁵)`, a drift of ∓0.047 samples a
+    /// frame, 12.7 samples over the 270 frames), PN945 64QAM 0.6 through one path,
+    /// 100 frames a point, acquired timing with the search, CFO corrected, timing
+    /// tracked: the threshold lies within the 0.2 dB plus advance of the ±2 ppm test
+    /// (whose reference is the no-offset threshold through the path off the grid, the
+    /// mean of ¼ and ½ sample, which the drift visits) of that reference. Acquired
+    /// timing already starts frames `K` early, so the advance is counted once.
+    #[test]
+    fn a_tracked_ten_ppm_oscillator_keeps_the_threshold() {
+        let prof = profile(Constellation::Qam64, CodeRate::R06);
+        let grid = grid_from(14.8, 7);
+        let at = |f: f64, osc: Oscillator, acquire: bool| {
+            let h = off_grid_path(f);
+            let cfg = ChannelBer {
+                profile: prof,
+                mode: PnMode::Pn945,
+                h: &h,
+                doppler: &[],
+                csi: Csi::Interpolated,
+                frames: 100,
+                seed: 1,
+            };
+            threshold(&grid, |s| {
+                if acquire {
+                    measure_channel_point_synced_with_cfo(&cfg, osc, s)
+                        .unwrap()
+                        .0
+                } else {
+                    measure_channel_point_with_cfo(&cfg, osc, s).unwrap()
+                }
+            })
+        };
+        let off_grid =
+            0.5 * (at(0.25, Oscillator::default(), false) + at(0.5, Oscillator::default(), false));
+        let advance = 10.0 * (1.0 + SYNC_ADVANCE_SAMPLES as f64 / BODY_LEN as f64).log10();
+        for ppm in [-10.0, 10.0] {
+            let osc = Oscillator::from_ppm(ppm, 600e6).unwrap();
+            let t = at(0.0, osc, true);
+            println!(
+                "no offset off the grid {off_grid:.3} dB; {ppm} ppm acquired, tracked {t:.3} dB"
+            );
+            assert!(
+                (t - off_grid).abs() < 0.2 + advance,
+                "{ppm}: {t} vs {off_grid}"
+            );
+        }
+    }
+
     /// Without tracking, the frames stay where the acquisition put them: the response,
     /// its first path [`SYNC_ADVANCE_SAMPLES`] = 16 lags into the estimate's window, drifts
     /// by `εF` a frame and is lost once it has moved more than those 16.5 samples out of
     /// the window's start (ε < 0; the other way the 217-chip guard leaves 200 samples).
-    /// At −10 ppm (the sample clock alone: its CFO at 600 MHz, +6 kHz, is more than the
-    /// frame sync acquires through uncorrected; drift −0.0473 samples a frame) that is
+    /// At −10 ppm (the sample clock alone, its CFO of +6 kHz at 600 MHz left out: the
+    /// whole oscillator is `a_tracked_ten_ppm_oscillator_keeps_the_threshold`'s; drift
+    /// −0.0473 samples a frame) that is
     /// frame 349: over 270 frames (100 measured) the untracked receiver is error-free at
     /// 18 dB as the tracked one; over 470 frames (300 measured) it loses the frames past the
     /// break — at least half of the `(470 − 349)/300` of the packets they carry (the

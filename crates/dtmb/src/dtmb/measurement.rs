@@ -434,6 +434,7 @@ pub fn signal_timing_errors(
             },
             frames: 1,
             first_path: Some(FirstPathConfig::default()),
+            cfo_search_hz: 0.0,
         };
         if let Ok(s) = rx.sync(&block, &sc) {
             out.push(s.toa_samples - tau);

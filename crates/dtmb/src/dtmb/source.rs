@@ -1106,6 +1106,7 @@ impl DtmbSource {
                     search,
                     frames: k,
                     first_path: Some(FirstPathConfig::default()),
+                    cfo_search_hz: 0.0,
                 },
             )
             .ok()?;
