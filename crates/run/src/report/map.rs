@@ -41,8 +41,10 @@ impl View {
 }
 
 impl View {
-    /// The view of `pts` with a 5 % margin (at least 1 m) on every side, `WIDTH_PX` wide.
-    fn fit(pts: &[[f64; 2]]) -> Self {
+    /// The view of `pts` with a 5 % margin (at least 1 m) on every side, `WIDTH_PX` wide,
+    /// and at least `min_height_px` tall (the legend's box must fit in the frame): a
+    /// flatter extent gets the extra height as equal margins above and below.
+    fn fit(pts: &[[f64; 2]], min_height_px: f64) -> Self {
         let (mut min_e, mut max_e, mut min_n, mut max_n) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
         for p in pts {
             min_e = min_e.min(p[0]);
@@ -53,7 +55,14 @@ impl View {
         let pad = 0.05 * (max_e - min_e).max(max_n - min_n).max(20.0);
         let (min_e, max_e, min_n, max_n) = (min_e - pad, max_e + pad, min_n - pad, max_n + pad);
         let scale = (WIDTH_PX - LEFT_PX - RIGHT_PX) / (max_e - min_e);
-        let height_px = (max_n - min_n) * scale + TOP_PX + BOTTOM_PX;
+        let mut height_px = (max_n - min_n) * scale + TOP_PX + BOTTOM_PX;
+        let (mut min_n, mut max_n) = (min_n, max_n);
+        if height_px < min_height_px {
+            let extra_m = (min_height_px - height_px) / scale;
+            min_n -= 0.5 * extra_m;
+            max_n += 0.5 * extra_m;
+            height_px = min_height_px;
+        }
         View {
             min_e,
             max_e,
@@ -130,7 +139,19 @@ pub fn svg_with(world: &World, overlays: &[Overlay<'_>]) -> Result<String, Strin
             .iter()
             .flat_map(|s| s.polygon_enu_m.iter().copied()),
     );
-    let v = View::fit(&pts);
+    // Over a report's coloured estimates the truth is drawn in black, so that no
+    // estimator's colour can be mistaken for it.
+    let truth_colour = if overlays.is_empty() {
+        "#c0392b"
+    } else {
+        "#111"
+    };
+    let legend = legend_rows(world, &cfg, overlays, truth_colour);
+    // The legend box sits inside the frame, a margin from its top and bottom edges.
+    let v = View::fit(
+        &pts,
+        TOP_PX + 2.0 * LEGEND_MARGIN_PX + legend_height_px(legend.len()) + BOTTOM_PX,
+    );
     let height_px = v.height_px;
 
     let mut svg = String::new();
@@ -149,13 +170,6 @@ pub fn svg_with(world: &World, overlays: &[Overlay<'_>]) -> Result<String, Strin
     labels.reserve_text(title, 15.0, LEFT_PX, 22.0);
     draw_scene(&mut svg, &v, &cfg);
     draw_axes(&mut svg, &v, &mut labels);
-    // Over a report's coloured estimates the truth is drawn in black, so that no
-    // estimator's colour can be mistaken for it.
-    let truth_colour = if overlays.is_empty() {
-        "#c0392b"
-    } else {
-        "#111"
-    };
     let mut d = String::new();
     for (i, p) in track.iter().enumerate() {
         let (x, y) = v.px(p[0], p[1]);
@@ -214,7 +228,7 @@ pub fn svg_with(world: &World, overlays: &[Overlay<'_>]) -> Result<String, Strin
         }
         svg.push_str("</g>\n");
     }
-    draw_legend(&mut svg, world, &cfg, overlays, truth_colour, &mut labels);
+    draw_legend(&mut svg, &legend, &mut labels);
     draw_scale_and_north(&mut svg, &v, &mut labels);
     let (sx, sy) = v.px(track[0][0], track[0][1]);
     labels.reserve(sx - 4.0, sy - 4.0, sx + 4.0, sy + 4.0);
@@ -286,29 +300,39 @@ fn draw_axes(svg: &mut String, v: &View, labels: &mut Labels) {
     );
 }
 
-/// The legend, in a box at the frame's top right: the true path, each estimator's line,
-/// each kind of transmitter and, when the scene has them, indoor zones.
-fn draw_legend(
-    svg: &mut String,
+/// A legend entry's key: a line's style, a transmitter's triangle, an indoor zone's dash.
+enum LegendKey<'a> {
+    Line(Style),
+    Triangle(&'a str),
+    Dashed,
+}
+
+/// The legend box's distance from the frame's top edge (px).
+const LEGEND_MARGIN_PX: f64 = 6.0;
+/// Vertical distance between legend entries (px).
+const LEGEND_ROW_PX: f64 = 16.0;
+
+/// The height (px) of a legend box of `rows` entries.
+fn legend_height_px(rows: usize) -> f64 {
+    LEGEND_ROW_PX * rows as f64 + 8.0
+}
+
+/// The legend's entries: the true path, each estimator's line, each kind of transmitter
+/// and, when the scene has them, indoor zones.
+fn legend_rows<'a>(
     world: &World,
     cfg: &crate::propagation::SceneConfig,
     overlays: &[Overlay<'_>],
     truth_colour: &'static str,
-    labels: &mut Labels,
-) {
-    enum Key<'a> {
-        Line(Style),
-        Triangle(&'a str),
-        Dashed,
-    }
-    let mut rows: Vec<(Key<'_>, String)> = Vec::new();
+) -> Vec<(LegendKey<'a>, String)> {
+    let mut rows: Vec<(LegendKey<'_>, String)> = Vec::new();
     let truth = Style {
         colour: truth_colour,
         dash: "",
         marker: super::svg::Marker::Circle,
     };
     rows.push((
-        Key::Line(truth),
+        LegendKey::Line(truth),
         if overlays.is_empty() {
             "trajectory".into()
         } else {
@@ -316,7 +340,7 @@ fn draw_legend(
         },
     ));
     for o in overlays {
-        rows.push((Key::Line(o.style), o.label.to_string()));
+        rows.push((LegendKey::Line(o.style), o.label.to_string()));
     }
     for kind in [
         TransmitterKind::Dtmb,
@@ -325,22 +349,27 @@ fn draw_legend(
     ] {
         if world.transmitters.iter().any(|t| t.kind == kind) {
             rows.push((
-                Key::Triangle(kind_colour(kind)),
+                LegendKey::Triangle(kind_colour(kind)),
                 format!("{} transmitter", kind.label()),
             ));
         }
     }
     if !cfg.indoor_zones.is_empty() {
-        rows.push((Key::Dashed, "indoor zone".into()));
+        rows.push((LegendKey::Dashed, "indoor zone".into()));
     }
-    let row_px = 16.0;
+    rows
+}
+
+/// The legend, in a box at the frame's top right.
+fn draw_legend(svg: &mut String, rows: &[(LegendKey<'_>, String)], labels: &mut Labels) {
+    let row_px = LEGEND_ROW_PX;
     let text_w = rows
         .iter()
         .map(|(_, t)| text_width_px(t, 11.0))
         .fold(0.0f64, f64::max);
     let w = 26.0 + 8.0 + text_w + 12.0;
-    let h = row_px * rows.len() as f64 + 8.0;
-    let (x, y) = (WIDTH_PX - RIGHT_PX - w - 6.0, TOP_PX + 6.0);
+    let h = legend_height_px(rows.len());
+    let (x, y) = (WIDTH_PX - RIGHT_PX - w - 6.0, TOP_PX + LEGEND_MARGIN_PX);
     labels.reserve(x, y, x + w, y + h);
     let _ = writeln!(
         svg,
@@ -349,7 +378,7 @@ fn draw_legend(
     for (k, (key, text)) in rows.iter().enumerate() {
         let ry = y + 12.0 + row_px * k as f64;
         let sample = match key {
-            Key::Line(s) => {
+            LegendKey::Line(s) => {
                 // The true path is drawn without markers, and so is its legend entry.
                 if k > 0 {
                     legend_sample(s, x + 6.0, ry)
@@ -362,7 +391,7 @@ fn draw_legend(
                     )
                 }
             }
-            Key::Triangle(c) => format!(
+            LegendKey::Triangle(c) => format!(
                 r#"<path d="M{:.1},{:.1} L{:.1},{:.1} L{:.1},{:.1} Z" fill="{c}"/>"#,
                 x + 19.0,
                 ry - 6.0,
@@ -371,7 +400,7 @@ fn draw_legend(
                 x + 25.0,
                 ry + 5.0
             ),
-            Key::Dashed => format!(
+            LegendKey::Dashed => format!(
                 r##"<rect x="{:.1}" y="{:.1}" width="26" height="9" fill="none" stroke="#d95f02" stroke-width="1.5" stroke-dasharray="5,3"/>"##,
                 x + 6.0,
                 ry - 5.0

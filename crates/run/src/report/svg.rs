@@ -658,7 +658,12 @@ pub fn mode_timeline(title: &str, rows: &[ModeRow<'_>]) -> String {
     let row_h = 26.0;
     // Tall enough for the rows and for the legend of modes beside them.
     let h = T + B + (row_h * rows.len() as f64).max(LEGEND_ROW * modes.len() as f64 + 4.0);
-    let left = 150.0;
+    // The row labels end 6 px before the bands: the margin takes the longest of them.
+    let longest = rows
+        .iter()
+        .map(|r| text_width_px(r.label, 11.0))
+        .fold(0.0f64, f64::max);
+    let left = (longest + 14.0).clamp(150.0, 0.4 * W);
     let mut svg = String::new();
     let _ = writeln!(
         svg,
