@@ -1389,6 +1389,11 @@ struct ChannelChain {
     clocked: Option<ClockedLink>,
     /// The noise's σ per complex sample at `snr_db`.
     sigma: f32,
+    /// The offset's drift (Hz/s, [`Oscillator::cfo_rate_hz_per_s`]; 0: none) and the
+    /// receiver's sample period (s; `1/(f_s(1 + ε))` with a sampling-clock offset), the
+    /// time axis of its phase `πḟt²`.
+    cfo_rate_hz_per_s: f64,
+    sample_period_s: f64,
 }
 
 impl ChannelChain {
@@ -1401,10 +1406,12 @@ impl ChannelChain {
             });
         }
         check_ppm(osc.sfo_ppm)?;
+        check_cfo_rate(osc.cfo_rate_hz_per_s)?;
         let groups = groups_with_cfo(cfg.h, cfg.doppler, osc.cfo_hz);
-        let cfo = osc.correct.then(|| match cfg.csi {
-            Csi::Ideal => CfoCorrector::known(mode, osc.cfo_hz),
-            _ => CfoCorrector::new(mode),
+        let cfo = osc.correct.then(|| match (cfg.csi, osc.cfo_estimator) {
+            (Csi::Ideal, _) => CfoCorrector::known_ramp(mode, osc.cfo_hz, osc.cfo_rate_hz_per_s),
+            (_, CfoEstimator::Sum) => CfoCorrector::new(mode),
+            (_, CfoEstimator::Track) => CfoCorrector::tracking(mode),
         });
         let energy: f32 = cfg.h.iter().map(|x| x.norm_sqr()).sum();
         let var =
@@ -1412,9 +1419,11 @@ impl ChannelChain {
         let streams = TrialRng::new(cfg.seed, 0);
         let key: u64 = streams.stream("dtmb/ber/payload").random();
         let rx = TdsReceiver::with_carrier(mode, carrier, cfg.csi, cfg.h, var)?;
+        let mut sample_period_s = 1.0 / super::pn::SAMPLE_RATE_HZ;
         // The genie knows the sampling clock: its stream is the one without the offset
         // (an exact resampling with the known ε).
         let clocked = if osc.sfo_ppm != 0.0 && cfg.csi != Csi::Ideal {
+            sample_period_s /= 1.0 + osc.sfo_ppm * 1e-6;
             let tx = DataLayer::new(cfg.profile, PacketSource::pseudo_random(key));
             Some(ClockedLink::new(cfg, &groups, osc.sfo_ppm, tx, &rx)?)
         } else {
@@ -1428,9 +1437,11 @@ impl ChannelChain {
             tx: DataLayer::new(cfg.profile, PacketSource::pseudo_random(key)),
             data_rx: DataReceiver::new(cfg.profile),
             stream: ChannelStream::with_doppler(mode, carrier, cfg.h, &groups)?,
-            moving: groups.iter().any(|g| g.doppler_hz != 0.0),
+            moving: groups.iter().any(|g| g.doppler_hz != 0.0) || osc.cfo_rate_hz_per_s != 0.0,
             cfo,
             sigma: var.sqrt(),
+            cfo_rate_hz_per_s: osc.cfo_rate_hz_per_s,
+            sample_period_s,
         })
     }
 
@@ -1452,8 +1463,19 @@ impl ChannelChain {
                 self.stream.next_frame(self.rx.header(ph), logical, y)?;
             }
         }
+        self.drift(k, y);
         crate::dtmb::noise::add_awgn(y, self.sigma, &mut self.noise);
         Ok(())
+    }
+
+    /// Turns receiver block `k` (`F` samples from `kF`, before the noise) by the offset's
+    /// drift ([`apply_cfo_ramp`]); nothing without one, so the stream is bit for bit the
+    /// one without the drift.
+    fn drift(&self, k: usize, y: &mut [Complex32]) {
+        if self.cfo_rate_hz_per_s != 0.0 {
+            let n0 = (k * y.len()) as f64;
+            apply_cfo_ramp(self.cfo_rate_hz_per_s, n0, self.sample_period_s, y);
+        }
     }
 
     /// The data receiver's codeword counts into `p`.
@@ -1515,6 +1537,7 @@ pub fn measure_channel_point_with_cfo(
         let phase = mode.phase_of_frame(k % fsf);
         c.tx.next_frame(cfg.profile.si_index(), &mut logical)?;
         c.stream.next_frame(c.rx.header(phase), &logical, &mut y)?;
+        c.drift(k, &mut y);
         crate::dtmb::noise::add_awgn(&mut y, c.sigma, &mut c.noise);
         if k > 0 {
             let prev_phase = mode.phase_of_frame((k - 1) % fsf);
@@ -1522,10 +1545,19 @@ pub fn measure_channel_point_with_cfo(
                 // The genie's response: the true one at the centre of frame k − 1's body.
                 let centre = ((k - 1) * fl + hl) as f64 + (BODY_LEN - 1) as f64 / 2.0;
                 c.stream.response_at(centre, &mut h_mid);
-                if c.cfo.is_some() {
-                    // The genie removed the offset's phase 2π f n/f_s: the response
-                    // without it.
-                    let r = phasor(-osc.cfo_hz, centre);
+                // The drift's phase πḟt² is not in the stream's groups: the true response
+                // carries it, unless the genie removed it with the offset's 2π f n/f_s
+                // (the response without the offset, as the constant offset's).
+                let t = centre / super::pn::SAMPLE_RATE_HZ;
+                let drift = 0.5 * osc.cfo_rate_hz_per_s * t * t;
+                let r = if c.cfo.is_some() {
+                    Some(phasor(-osc.cfo_hz, centre))
+                } else {
+                    (drift != 0.0).then(|| {
+                        Complex64::from_polar(1.0, 2.0 * std::f64::consts::PI * drift.fract())
+                    })
+                };
+                if let Some(r) = r {
                     let r = Complex32::new(r.re as f32, r.im as f32);
                     for x in h_mid.iter_mut() {
                         *x *= r;
@@ -1925,6 +1957,74 @@ pub struct Oscillator {
     /// Whether the estimating receivers follow the frame timing's drift ([`TimingTracker`]);
     /// without it they hold the timing they started with.
     pub track_timing: bool,
+    /// How fast the carrier-frequency offset drifts (Hz/s, module documentation,
+    /// *Drifting offset*): the offset is the ramp `f(t) = cfo_hz + cfo_rate_hz_per_s·t`,
+    /// `t` from the first frame's start, so the stream turns by
+    /// `2π(f₀t + ½ḟt²)`. 0: the constant offset, the stream bit for bit as without this
+    /// field. The genie knows the ramp.
+    pub cfo_rate_hz_per_s: f64,
+    /// How the estimating receivers estimate the offset from the headers'
+    /// correlations ([`CfoCorrector`]): summed since the start (the default, the
+    /// maximum-likelihood estimate of a constant offset) or followed by the type-2
+    /// tracking loop that a drifting offset needs.
+    pub cfo_estimator: CfoEstimator,
+}
+
+/// The estimator of [`CfoCorrector`] (module documentation, *Drifting offset*).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum CfoEstimator {
+    /// `arg(Σ_k Z_k)`: every header's correlation summed since the start — the
+    /// maximum-likelihood estimate of a constant offset, which lags a ramp `ḟ` by
+    /// `ḟt/2` after `t` seconds.
+    #[default]
+    Sum,
+    /// The type-2 (α-β) frequency-tracking loop on the header correlations' phase
+    /// ([`CfoLoop`]): zero steady-state error to a ramp, the noise of
+    /// [`CFO_LOOP_MEMORY_HEADERS`] headers' average.
+    Track,
+}
+
+/// The magnitude bound of a CFO drift rate (Hz/s) [`Oscillator`] accepts: 100 kHz/s, a
+/// sweep across the widest unambiguous range of the CFO estimate (±14.8 kHz, PN420) in
+/// a third of a second — beyond any oscillator's warm-up (ppm over minutes) or any
+/// vehicle's Doppler rate (module documentation, *Drifting offset*: a 350 km/h train
+/// passing a mast 50 m away sees 378 Hz/s at 600 MHz). A larger figure is an input error.
+pub const MAX_CFO_RATE_HZ_PER_S: f64 = 100_000.0;
+
+/// A CFO drift rate (Hz/s): finite and within ±[`MAX_CFO_RATE_HZ_PER_S`].
+fn check_cfo_rate(rate_hz_per_s: f64) -> Result<(), DtmbError> {
+    if rate_hz_per_s.is_finite() && rate_hz_per_s.abs() <= MAX_CFO_RATE_HZ_PER_S {
+        Ok(())
+    } else {
+        Err(DtmbError::InvalidParameter {
+            name: "cfo_rate_hz_per_s",
+            reason: format!(
+                "expected a finite drift within ±{MAX_CFO_RATE_HZ_PER_S} Hz/s, got \
+                 {rate_hz_per_s}"
+            ),
+        })
+    }
+}
+
+/// Turns the received block `y` (receiver samples `n₀ ..`, taken every `period_s`
+/// seconds) by the drift's phase `e^{jπḟt²}`, `t = n·period_s` (the part of
+/// `2π(f₀t + ½ḟt²)` beyond the constant offset, which the Doppler groups carry). The
+/// phasor starts at its exact phase (reduced to one turn in double precision) and
+/// advances by the chirp's recursion `r_{i+1} = r_i s_i`, `s_{i+1} = s_i e^{j2πḟΔ²}`
+/// (`Δ = period_s`), double precision, drift over a frame ~10⁻¹² rad.
+fn apply_cfo_ramp(rate_hz_per_s: f64, n0: f64, period_s: f64, y: &mut [Complex32]) {
+    let tau = 2.0 * std::f64::consts::PI;
+    let t0 = n0 * period_s;
+    let mut r = Complex64::from_polar(1.0, tau * (0.5 * rate_hz_per_s * t0 * t0).fract());
+    // Phase from sample i to i + 1: πḟ(t_{i+1}² − t_i²) = πḟΔ(2t_i + Δ).
+    let first = (0.5 * rate_hz_per_s * period_s * (2.0 * t0 + period_s)).fract();
+    let mut s = Complex64::from_polar(1.0, tau * first);
+    let c = Complex64::from_polar(1.0, tau * rate_hz_per_s * period_s * period_s);
+    for x in y.iter_mut() {
+        *x *= Complex32::new(r.re as f32, r.im as f32);
+        r *= s;
+        s *= c;
+    }
 }
 
 impl Oscillator {
@@ -1959,6 +2059,7 @@ impl Oscillator {
             correct: true,
             sfo_ppm: ppm,
             track_timing: true,
+            ..Self::default()
         })
     }
 }
@@ -2093,16 +2194,159 @@ pub fn cfo_header_correlation(
     }
 }
 
+/// The headers a tracking loop's steady-state estimate averages,
+/// `N_eq = 1/VRR` ([`CfoLoop`]): 170, the headers the summing estimate holds when the
+/// first frame is decoded after the M = 240 interleaver's delay. The loop is then as good
+/// as the sum at the moment the sum is first used, and stays so while the sum's lag to a
+/// drift grows (module documentation, *Drifting offset*). Its noise bandwidth is
+/// `B_L = 1/(2 N_eq T)`: 4.7 Hz in PN945 (`T` = 625 µs), 5.4 Hz PN420, 5.1 Hz PN595.
+pub const CFO_LOOP_MEMORY_HEADERS: f64 = 170.0;
+
+/// The type-2 frequency-tracking loop of [`CfoEstimator::Track`] (module documentation,
+/// *Drifting offset*): an α-β filter on one frequency measurement a header,
+/// `m_k = f(t_k) + n_k`, with the state `f̂` (Hz) and `ν̂` (Hz a header):
+///
+/// ```text
+/// predict   f̂⁻_k = f̂_{k−1} + ν̂_{k−1}
+/// measure   e_k  = arg(Z_k e^{−j2π f̂⁻_k D/f_s}) f_s/(2πD)     (the phase discriminator)
+/// update    f̂_k = f̂⁻_k + α e_k,   ν̂_k = ν̂_{k−1} + β e_k
+/// ```
+///
+/// (Brookner, *Tracking and Kalman Filtering Made Easy*, 1998, ch. 1, the g-h filter
+/// with g = α, h = β.) Two integrators make it a type-2 loop: a ramp `f = a + bk` leaves
+/// no steady-state error, a frequency acceleration `A` (Hz/s²) the error `AT²/β = A/ω_n²`
+/// (Kaplan & Hegarty, *Understanding GPS: Principles and Applications*, 2nd ed., 2006,
+/// §5.6, the FLL/PLL loop orders; Gardner, *Phaselock Techniques*, 3rd ed., 2005, ch. 2);
+/// a first-order loop (β = 0, an exponentially weighted average of gain α) would lag a
+/// ramp `ḟ` by `ḟT/α`, the sum by `ḟt/2`, growing. The steady-state gains follow
+/// Benedict & Bordner ("Improvement in the smoothing of cyclic time-series…", IRE Trans.
+/// Autom. Control 7, 1962): `β = α²/(2 − α)`, close to the continuous loop's `ζ = 1/√2`
+/// (`α ≈ 2ζω_nT`, `β ≈ (ω_nT)²`). With white measurement noise of variance `σ²` the
+/// estimate's variance is `VRR·σ²` (Kalata, "The tracking index", IEEE Trans. AES 20(2),
+/// 1984):
+///
+/// ```text
+/// VRR = (2α² + 2β − 3αβ) / (α(4 − 2α − β)),   B_L = VRR/(2T)  (one-sided, Hz)
+/// ```
+///
+/// and `α` is chosen so that `1/VRR` = [`CFO_LOOP_MEMORY_HEADERS`]: α = 0.00783,
+/// β = 3.08·10⁻⁵, `ω_n = √β/T` = 8.9 rad/s and `B_L` = 4.7 Hz in PN945. It starts with
+/// expanding memory — the least-squares line through every measurement so far,
+/// `α_n = 2(2n + 1)/((n + 1)(n + 2))`, `β_n = 6/((n + 1)(n + 2))` for the `(n + 1)`-th
+/// (`α_0 = 1`, `β_0 = 0`), exact for a ramp, its variance `α_n σ²` — and switches to the
+/// steady gains once `α_n` has fallen to `α` (Brookner §1.2.10), after 509 headers.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CfoLoop {
+    alpha: f64,
+    beta: f64,
+    /// Measurements so far.
+    n: usize,
+    f_hz: f64,
+    rate_hz_per_header: f64,
+}
+
+impl CfoLoop {
+    /// The variance reduction ratio `VRR` of the Benedict–Bordner α-β filter of gain `α`
+    /// (`β = α²/(2 − α)`), with that `β`.
+    pub fn noise_ratio(alpha: f64) -> (f64, f64) {
+        let b = alpha * alpha / (2.0 - alpha);
+        let vrr =
+            (2.0 * alpha * alpha + 2.0 * b - 3.0 * alpha * b) / (alpha * (4.0 - 2.0 * alpha - b));
+        (vrr, b)
+    }
+
+    /// The loop whose steady state averages `memory_headers` headers (`1/VRR`, at least
+    /// 1): `α` from `VRR(α) = 1/memory_headers` by bisection (VRR grows with `α` on
+    /// `(0, 1]`, where it reaches 1).
+    pub fn new(memory_headers: f64) -> Self {
+        let want = 1.0 / memory_headers.max(1.0);
+        let (mut lo, mut hi) = (0.0f64, 1.0f64);
+        for _ in 0..60 {
+            let m = 0.5 * (lo + hi);
+            if Self::noise_ratio(m).0 > want {
+                hi = m;
+            } else {
+                lo = m;
+            }
+        }
+        let (_, beta) = Self::noise_ratio(hi);
+        Self {
+            alpha: hi,
+            beta,
+            n: 0,
+            f_hz: 0.0,
+            rate_hz_per_header: 0.0,
+        }
+    }
+
+    /// The steady-state gains `(α, β)`.
+    pub fn gains(&self) -> (f64, f64) {
+        (self.alpha, self.beta)
+    }
+
+    /// The gains of the `(n + 1)`-th measurement: the expanding memory's until they fall
+    /// to the steady state's.
+    pub fn gains_at(&self, n: usize) -> (f64, f64) {
+        if n == 0 {
+            return (1.0, 0.0);
+        }
+        let (a, b) = (n as f64 + 1.0, n as f64 + 2.0);
+        let g = 2.0 * (2.0 * n as f64 + 1.0) / (a * b);
+        if g <= self.alpha {
+            (self.alpha, self.beta)
+        } else {
+            (g, 6.0 / (a * b))
+        }
+    }
+
+    /// The frequency the loop predicts for its next measurement (Hz); `start_hz` before
+    /// the first.
+    pub fn predict_hz(&self, start_hz: f64) -> f64 {
+        if self.n == 0 {
+            start_hz
+        } else {
+            self.f_hz + self.rate_hz_per_header
+        }
+    }
+
+    /// Takes the discriminator's error `error_hz` of a measurement against the
+    /// prediction `predicted_hz` ([`CfoLoop::predict_hz`]).
+    pub fn update(&mut self, predicted_hz: f64, error_hz: f64) {
+        let (a, b) = self.gains_at(self.n);
+        self.f_hz = predicted_hz + a * error_hz;
+        self.rate_hz_per_header += b * error_hz;
+        self.n += 1;
+    }
+
+    /// The filtered estimate (Hz) at the last measurement, and the drift (Hz a header).
+    pub fn estimate(&self) -> (f64, f64) {
+        (self.f_hz, self.rate_hz_per_header)
+    }
+
+    /// Measurements taken.
+    pub fn measurements(&self) -> usize {
+        self.n
+    }
+}
+
 /// The receiver's CFO estimation and correction (module documentation, *Carrier-frequency
 /// offset*): the headers' correlations [`cfo_header_correlation`] are summed over every
-/// header received so far, `f̂ = arg(Σ_k Z_k) f_s/(2πD)`, and the stream is turned back by
+/// header received so far, `f̂ = arg(Σ_k Z_k) f_s/(2πD)` ([`CfoCorrector::new`]), or
+/// followed by the type-2 loop [`CfoLoop`] ([`CfoCorrector::tracking`], module
+/// documentation, *Drifting offset*), and the stream is turned back by
 /// `e^{−jφ(n)}`, `φ` advancing by the latest `2πf̂/f_s` every sample (continuous across
 /// frames). Streaming, one frame and the next header at a time, with its buffers allocated
 /// once. With a known offset (the genie) the estimate is that offset and `φ(n) = 2πf n/f_s`
-/// from the first frame's start.
+/// from the first frame's start, plus the known drift's `πḟ(n/f_s)²`.
 pub struct CfoCorrector {
     mode: PnMode,
     known_hz: Option<f64>,
+    /// The genie's known drift (Hz/s; 0: none) and the stream sample of the next sample
+    /// it corrects (its time axis).
+    known_rate_hz_per_s: f64,
+    pos: f64,
+    /// The tracking loop (`None`: the sum).
+    track: Option<CfoLoop>,
     /// A coarse estimate from the frame sync's frequency search
     /// ([`CfoCorrector::set_coarse_hz`]) that the header correlations' phase is unwrapped
     /// around.
@@ -2139,6 +2383,9 @@ impl CfoCorrector {
         Self {
             mode,
             known_hz: None,
+            known_rate_hz_per_s: 0.0,
+            pos: 0.0,
+            track: None,
             coarse_hz: None,
             acc: Complex64::default(),
             headers: 0,
@@ -2151,11 +2398,51 @@ impl CfoCorrector {
         }
     }
 
+    /// An estimating corrector that follows the offset with the type-2 loop
+    /// ([`CfoLoop`] of [`CFO_LOOP_MEMORY_HEADERS`]) instead of summing.
+    pub fn tracking(mode: PnMode) -> Self {
+        Self {
+            track: Some(CfoLoop::new(CFO_LOOP_MEMORY_HEADERS)),
+            ..Self::new(mode)
+        }
+    }
+
     /// A corrector that knows the offset `cfo_hz` (the genie's).
     pub fn known(mode: PnMode, cfo_hz: f64) -> Self {
         Self {
             known_hz: Some(cfo_hz),
             ..Self::new(mode)
+        }
+    }
+
+    /// A corrector that knows the drifting offset `cfo_hz + rate_hz_per_s·t`, `t` from
+    /// the first frame's start (the genie's); [`CfoCorrector::known`] for a zero rate.
+    pub fn known_ramp(mode: PnMode, cfo_hz: f64, rate_hz_per_s: f64) -> Self {
+        Self {
+            known_rate_hz_per_s: rate_hz_per_s,
+            ..Self::known(mode, cfo_hz)
+        }
+    }
+
+    /// The tracking loop's state (`None` for the summing or the known corrector).
+    pub fn tracker(&self) -> Option<&CfoLoop> {
+        self.track.as_ref()
+    }
+
+    /// Adds one header's correlation `z` to the estimate: summed, or measured against
+    /// the loop's prediction (unwrapped around it, so the loop follows an offset beyond
+    /// the range [`cfo_range_hz`] once it holds it).
+    fn add_correlation(&mut self, z: Complex64) {
+        self.acc += z;
+        self.headers += 1;
+        if let Some(l) = self.track.as_mut() {
+            let pred = l.predict_hz(self.coarse_hz.unwrap_or(0.0));
+            let d = cfo_lag_samples(self.mode) as f64;
+            let turn = Complex64::from_polar(
+                1.0,
+                -2.0 * std::f64::consts::PI * pred * d / super::pn::SAMPLE_RATE_HZ,
+            );
+            l.update(pred, cfo_hz_of_phase(self.mode, (z * turn).arg()));
         }
     }
 
@@ -2166,12 +2453,12 @@ impl CfoCorrector {
     /// [`DtmbError::BufferLength`] when `header` is not `H` samples long.
     pub fn push_header(&mut self, header: &[Complex32]) -> Result<(), DtmbError> {
         if self.mode.is_cyclic() {
-            self.acc += cfo_header_correlation(self.mode, header, &[])?;
-            self.headers += 1;
+            let z = cfo_header_correlation(self.mode, header, &[])?;
+            self.add_correlation(z);
         } else {
             if self.have_prev {
-                self.acc += cfo_header_correlation(self.mode, header, &self.prev)?;
-                self.headers += 1;
+                let z = cfo_header_correlation(self.mode, header, &self.prev)?;
+                self.add_correlation(z);
             } else {
                 check_header_len(self.mode, header, "CFO header")?;
             }
@@ -2209,6 +2496,12 @@ impl CfoCorrector {
     pub fn estimate_hz(&self) -> f64 {
         if let Some(f) = self.known_hz {
             return f;
+        }
+        if let Some(l) = &self.track {
+            return match (l.measurements(), self.coarse_hz) {
+                (0, c) => c.unwrap_or(0.0),
+                _ => l.estimate().0,
+            };
         }
         match self.coarse_hz {
             None if self.headers == 0 => 0.0,
@@ -2273,6 +2566,7 @@ impl CfoCorrector {
             // the estimate) is corrected afresh from the phase `shift` set.
             let omega = tau * self.estimate_hz();
             Self::derotate(&mut self.phase, omega, &frame[..hl], &mut self.out[..hl]);
+            self.ramp_back(0, hl);
             self.reheader = false;
         } else if self.started {
             self.out.copy_within(fl.., 0);
@@ -2280,6 +2574,7 @@ impl CfoCorrector {
             self.push_header(&frame[..hl])?;
             let omega = tau * self.estimate_hz();
             Self::derotate(&mut self.phase, omega, &frame[..hl], &mut self.out[..hl]);
+            self.ramp_back(0, hl);
             self.started = true;
         }
         self.push_header(next_header)?;
@@ -2287,7 +2582,23 @@ impl CfoCorrector {
         let (body, next) = self.out[hl..].split_at_mut(fl - hl);
         Self::derotate(&mut self.phase, omega, &frame[hl..], body);
         Self::derotate(&mut self.phase, omega, next_header, next);
+        self.ramp_back(hl, fl + hl);
         Ok((&self.out[..fl], &self.out[fl..]))
+    }
+
+    /// The genie's known drift: turns the corrected `out[from..to]` (the stream samples
+    /// from `pos`) back by `e^{−jπḟ(n/f_s)²}` ([`apply_cfo_ramp`]) and moves `pos` past
+    /// them. Without a drift only `pos` moves.
+    fn ramp_back(&mut self, from: usize, to: usize) {
+        if self.known_rate_hz_per_s != 0.0 {
+            apply_cfo_ramp(
+                -self.known_rate_hz_per_s,
+                self.pos,
+                1.0 / super::pn::SAMPLE_RATE_HZ,
+                &mut self.out[from..to],
+            );
+        }
+        self.pos += (to - from) as f64;
     }
 
     /// The receiver moves its next frame's start `samples` after the start of the last
@@ -2303,6 +2614,7 @@ impl CfoCorrector {
         let omega = 2.0 * std::f64::consts::PI * self.estimate_hz() / super::pn::SAMPLE_RATE_HZ;
         let back = (samples - self.mode.header_len() as i64) as f64 * omega;
         self.phase = (self.phase + back).rem_euclid(2.0 * std::f64::consts::PI);
+        self.pos += (samples - self.mode.header_len() as i64) as f64;
         self.reheader = true;
     }
 }
