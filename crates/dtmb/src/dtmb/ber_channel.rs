@@ -5131,18 +5131,25 @@ mod tests {
     }
 
     /// The drifting offset through the receiver: 64QAM 0.6 in PN945 through one path,
-    /// interpolated estimate, [`RAMP`] (1 kHz + 200 Hz/s), 2000 frames a point after the
-    /// interleaver's delay (2170 frames, 1.36 s: the offset ends at 1271 Hz), seed 1. With
-    /// the tracking loop the PER 10⁻² threshold lies within 0.2 dB (the bound of
-    /// `a_corrected_1_khz_cfo_keeps_the_threshold`) of the threshold without an offset, for
-    /// the true timing and (plus the advance's 0.018 dB) the acquired one. The summing
-    /// corrector lags by `ḟt/2`, 0.1 Hz a frame: 17 Hz when the first frame is decoded,
-    /// 136 Hz at the last, where the residual's inter-carrier interference
-    /// `(πε)²/3` (`ε` = 0.068 carrier spacings) is −18.1 dB, more than the 15 dB
-    /// threshold's noise can spare; at the grid's top, 0.3 dB or more above both
-    /// thresholds, it loses more than a tenth of the packets (the need for the loop).
-    /// The loop with a constant 1 kHz offset (the 10-frame set-up of the constant-offset
-    /// test) keeps that test's threshold within the same 0.2 dB.
+    /// interpolated estimate, 10 frames a point after the interleaver's delay (the set-up
+    /// of `a_corrected_1_khz_cfo_keeps_the_threshold`), seed 1, 1 kHz at the first frame
+    /// drifting at the steepest Doppler rate of a high-speed train: `f_d v/D_min =
+    /// v² f_c/(c D_min)` = 2718 Hz/s for 350 km/h (the 3GPP high-speed-train speed) past a
+    /// mast 10 m from the track at 862 MHz (UHF's top), near-linear for `|x| < D_min/2`,
+    /// about the 0.11 s the 180 frames last. (The sum's lag `ḟt/2` depends on the
+    /// product: this is also what 200 Hz/s does after 1.5 s.) With the tracking loop the PER
+    /// 10⁻² threshold lies within 0.2 dB (that test's bound) of the threshold without an
+    /// offset, for the true timing and (plus the advance's 0.018 dB) the acquired one; so
+    /// does the loop with the constant 1 kHz. The summing corrector lags by 144–152 Hz on
+    /// the decoded frames 170–179, a residual of `ε` ≈ 0.075 carrier spacings whose
+    /// inter-carrier interference `(πε)²/3` is −17.3 dB of the carriers' power: it must
+    /// fail the 0.2 dB bound the loop meets, and at the grid's top (0.3 dB or more above
+    /// both thresholds) lose more than a tenth of the packets — the need for the loop.
+    /// Measured (seed 1): no offset 14.767 dB, tracked 14.676, acquired 14.767, constant
+    /// 1 kHz tracked 14.767; summed PER 0.43 at 15.1 dB and threshold 15.567 dB, 0.8 dB
+    /// late — less than the 1.7 dB of SINR that the ICI's power added to the body's noise
+    /// (frame SNR less the header's 0.79 dB) would cost as Gaussian noise; the difference
+    /// is not analysed here, the test asserts only the failure.
     #[test]
     fn a_tracked_drifting_cfo_keeps_the_threshold_where_the_sum_fails() {
         let prof = profile(Constellation::Qam64, CodeRate::R06);
@@ -5153,13 +5160,14 @@ mod tests {
             h: &h,
             doppler: &[],
             csi: Csi::Interpolated,
-            frames: 2000,
+            frames: 10,
             seed: 1,
         };
         let grid = grid_from(14.3, 9);
-        let (f0, rate) = RAMP;
+        let (v_m_per_s, fc_hz, d_min_m) = (350.0 / 3.6, 862e6, 10.0);
+        let rate = v_m_per_s * v_m_per_s * fc_hz / (299_792_458.0 * d_min_m);
         let track = Oscillator {
-            cfo_hz: f0,
+            cfo_hz: 1000.0,
             correct: true,
             cfo_rate_hz_per_s: rate,
             cfo_estimator: CfoEstimator::Track,
@@ -5167,6 +5175,10 @@ mod tests {
         };
         let sum = Oscillator {
             cfo_estimator: CfoEstimator::Sum,
+            ..track
+        };
+        let constant = Oscillator {
+            cfo_rate_hz_per_s: 0.0,
             ..track
         };
         let still = threshold(&grid, |s| measure_channel_point(&cfg, s).unwrap());
@@ -5178,25 +5190,24 @@ mod tests {
                 .unwrap()
                 .0
         });
+        let steady = threshold(&grid, |s| {
+            measure_channel_point_with_cfo(&cfg, constant, s).unwrap()
+        });
         let top = *grid.last().unwrap();
         let summed = measure_channel_point_with_cfo(&cfg, sum, top).unwrap();
-        // The loop at a constant offset, the 10-frame set-up.
-        let short = ChannelBer {
-            frames: 10,
-            ..cfg.clone()
-        };
-        let constant = Oscillator {
-            cfo_rate_hz_per_s: 0.0,
-            ..track
-        };
-        let still_10 = threshold(&grid, |s| measure_channel_point(&short, s).unwrap());
-        let constant_10 = threshold(&grid, |s| {
-            measure_channel_point_with_cfo(&short, constant, s).unwrap()
+        // The sum's own threshold, on a grid 3 dB wide.
+        let wide = grid_from(14.3, 31);
+        let summed_threshold = threshold(&wide, |s| {
+            measure_channel_point_with_cfo(&cfg, sum, s).unwrap()
         });
+        let t_frame = PnMode::Pn945.frame_len() as f64 / crate::dtmb::pn::SAMPLE_RATE_HZ;
         println!(
-            "2000 frames: no offset {still:.3} dB; 1 kHz + 200 Hz/s tracked {tracked:.3} dB, \
-             acquired {synced:.3} dB; summed at {top:.1} dB: PER {:.4} ({summed:?}); 10 \
-             frames: no offset {still_10:.3} dB, constant 1 kHz tracked {constant_10:.3} dB",
+            "drift {rate:.1} Hz/s (sum's lag {:.1}–{:.1} Hz on the decoded frames): no offset \
+             {still:.3} dB; tracked {tracked:.3} dB, acquired {synced:.3} dB; constant 1 kHz \
+             tracked {steady:.3} dB; summed at {top:.1} dB: PER {:.4} ({summed:?}), threshold \
+             {summed_threshold:.3} dB",
+            rate * 170.0 * t_frame / 2.0,
+            rate * 179.0 * t_frame / 2.0,
             summed.per()
         );
         let advance = 10.0 * (1.0 + SYNC_ADVANCE_SAMPLES as f64 / BODY_LEN as f64).log10();
@@ -5205,14 +5216,15 @@ mod tests {
             (synced - still).abs() < 0.2 + advance,
             "{synced} vs {still}"
         );
+        assert!((steady - still).abs() < 0.2, "{steady} vs {still}");
         assert!(
             top - still.max(tracked) >= 0.3 - 1e-9,
             "{top} {still} {tracked}"
         );
         assert!(summed.per() > 0.1, "{summed:?}");
         assert!(
-            (constant_10 - still_10).abs() < 0.2,
-            "{constant_10} vs {still_10}"
+            summed_threshold - still > 0.2,
+            "{summed_threshold} vs {still}"
         );
     }
 
