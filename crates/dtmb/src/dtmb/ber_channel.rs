@@ -186,9 +186,8 @@
 //! a constant offset the coherent sum is the maximum-likelihood combination of headers
 //! with independent noise (each weighted by its own power), so the cyclic headers'
 //! variance falls as `1/K` over `K` headers (in PN945 at 15 dB, 22 Hz/√171 = 1.7 Hz
-//! after the 170-frame interleaver delay of M = 240). A first-order loop would follow a
-//! drift at the price of a window of about `2/g` frames for a gain `g`; none is needed
-//! here. For PN595 consecutive pairs share a header and the signal-times-noise terms of
+//! after the 170-frame interleaver delay of M = 240). A drifting offset needs a loop
+//! instead (*Drifting offset* below). For PN595 consecutive pairs share a header and the signal-times-noise terms of
 //! every inner header cancel in the imaginary part (`Im(s* w) + Im(s w*) = 0`): the sum
 //! measures the phase from the first header to the last, `var(θ̂) = 1/(K² N γ) + 1/(2K N
 //! γ²)` over `K` pairs.
@@ -197,6 +196,60 @@
 //! holds anyway) and continuous across frames, before the channel estimate; the residual
 //! is a slow rotation the estimates follow. The genie knows `f_o`: it turns the stream
 //! back by `2π f_o n/f_s` from the first frame's start and knows the response without it.
+//!
+//! **Drifting offset** ([`Oscillator::cfo_rate_hz_per_s`], [`CfoEstimator`], [`CfoLoop`]).
+//! An oscillator warming up or changing temperature drifts (TCXOs: a fraction of a ppm
+//! over minutes, ~10 Hz/s at 600 MHz), and a moving receiver's Doppler changes with its
+//! geometry: passing a mast at the distance `D_min` at the speed `v`, the shift
+//! `f_d x/√(D_min² + x²)` (`x` along the track, `f_d = v f_c/c`) changes at up to
+//! `f_d v/D_min = v² f_c/(c D_min)` (200 Hz/s for 300 km/h at 70 m, 600 MHz; 2718 Hz/s
+//! for 350 km/h at 10 m, 862 MHz — the 3GPP high-speed-train geometry puts masts 2–50 m
+//! from the track), linear over `|x| < D_min/2`. The offset is then the ramp
+//! `f(t) = f₀ + ḟt` (`t` from the first frame's start) and the stream turns by
+//! `2π(f₀t + ½ḟt²)`: `f₀` rides on the Doppler groups as above and the drift's `πḟt²`
+//! multiplies every received block before the noise ([`apply_cfo_ramp`], receiver time
+//! `t = n/(f_s(1 + ε))` with a sampling-clock offset); `ḟ = 0` builds nothing of it, bit
+//! for bit. The genie knows the ramp.
+//! *The sum lags.* The sum of the headers' correlations estimates the mean frequency of
+//! the headers so far, `f₀ + ḟt/2`: its error `ḟt/2` grows without bound (0.1 Hz a frame
+//! at 200 Hz/s; 150 Hz after 1.5 s, when the residual's ICI `(πε)²/3`, `ε = 0.075`, is
+//! −17 dB).
+//! *The loop* ([`CfoEstimator::Track`], [`CfoLoop`]). Each header's correlation is a
+//! frequency measurement `m_k = f(t_k) + n_k` with the one-header variance above (22 Hz
+//! in PN945 at 15 dB); the loop is the α-β (g-h) filter on it, its error taken by the
+//! phase discriminator `arg(Z_k e^{−j2π f̂⁻ D/f_s})` against its prediction `f̂⁻` (so it
+//! unwraps around the prediction and follows a ramp across the range [`cfo_range_hz`]):
+//! `f̂ = f̂⁻ + αe`, `ν̂ += βe`, `f̂⁻ ← f̂ + ν̂`. Two integrators make it a type-2 loop
+//! (Kaplan & Hegarty, *Understanding GPS*, 2nd ed., 2006, §5.6; Gardner, *Phaselock
+//! Techniques*, 3rd ed., 2005): no steady-state error to a ramp (a first-order loop of gain
+//! `α` lags it by `ḟT/α`), `A/ω_n²` to an acceleration `A`. The gains follow Benedict and
+//! Bordner (1962), `β = α²/(2 − α)` (`ζ ≈ 1/√2`), and the noise (Kalata 1984) is
+//!
+//! ```text
+//! var(f̂) = VRR σ²,  VRR = (2α² + 2β − 3αβ)/(α(4 − 2α − β)),  B_L = VRR/(2T),
+//! var(ν̂) = 2β²/(α(4 − 2α − β)) σ²
+//! ```
+//!
+//! The bandwidth is set by what the loop replaces: `1/VRR` = [`CFO_LOOP_MEMORY_HEADERS`]
+//! = 170, the headers the sum holds when the first frame is decoded after M = 240's
+//! interleaver delay, so the loop's noise equals the sum's at the moment the sum is first
+//! used (1.7 Hz in PN945 at 15 dB) and stays there while the sum's lag grows: α = 0.00783,
+//! β = 3.08·10⁻⁵, `B_L` = 4.7 Hz, `ω_n` = 8.9 rad/s in PN945. A curving offset is
+//! another matter: the passing train's `A` peaks at `0.86 f_d v²/D_min²` (at
+//! `x = D_min/2`), 203 Hz/s² for 300 km/h at 70 m and 600 MHz (an error `A/ω_n²` of
+//! 2.6 Hz), but 22.7 kHz/s² at 10 m and 862 MHz, whose bend lasts `D_min/v` = 0.1 s, less
+//! than the loop's time constant `1/(ζω_n)` = 0.16 s: that case needs a wider
+//! loop (or a third-order one) and is not modelled — the drift here is a ramp. It starts
+//! with expanding memory, the least-squares line through every header so far (gains
+//! `α_n = 2(2n + 1)/((n + 1)(n + 2))`, `β_n = 6/((n + 1)(n + 2))`, exact for a ramp, its
+//! variance `α_n σ²`, twice the sum's standard deviation at a constant offset — the price
+//! of estimating the rate too), until `α_n` falls to `α` (header 509; Brookner,
+//! *Tracking and Kalman Filtering Made Easy*, 1998, §1.2.10). PN595's pair measurements
+//! share a header, so its noise is not white: the analysis is the cyclic headers'.
+//! The sum stays the default: for a constant offset it is the maximum-likelihood
+//! estimate, its variance falling as `1/K` where the loop's stops at `1/170`, and every
+//! result measured with it is kept bit for bit; a receiver configured with a drift
+//! (`dtmb ber --cfo-rate-hz-per-s`) tracks.
 //!
 //! **Sampling-clock offset** ([`Oscillator::sfo_ppm`], [`Oscillator::from_ppm`],
 //! [`measure_channel_point_clocked`], [`TimingTracker`]). A receiver derives its local
