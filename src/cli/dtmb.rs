@@ -257,12 +257,14 @@ fn ber_world(a: &BerArgs) -> Result<()> {
         // modelled, so the rate needs --cfo-hz.
         if a.cfo_hz.is_none() {
             anyhow::bail!(
-                "--cfo-rate-hz-per-s needs --cfo-hz (the offset at the first frame, 0 for a                  drift from zero): the drift is a ramp of the pure carrier offset"
+                "--cfo-rate-hz-per-s needs --cfo-hz (the offset at the first frame, 0 for a \
+                 drift from zero): the drift is a ramp of the pure carrier offset"
             );
         }
         if !(r.is_finite() && r.abs() <= MAX_CFO_RATE_HZ_PER_S) {
             anyhow::bail!(
-                "--cfo-rate-hz-per-s must be a finite drift within ±{MAX_CFO_RATE_HZ_PER_S}                  Hz/s, got {r}"
+                "--cfo-rate-hz-per-s must be a finite drift within ±{MAX_CFO_RATE_HZ_PER_S} \
+                 Hz/s, got {r}"
             );
         }
     }
