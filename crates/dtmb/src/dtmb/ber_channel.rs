@@ -220,7 +220,7 @@
 //! phase discriminator `arg(Z_k e^{−j2π f̂⁻ D/f_s})` against its prediction `f̂⁻` (so it
 //! unwraps around the prediction and follows a ramp across the range [`cfo_range_hz`]):
 //! `f̂ = f̂⁻ + αe`, `ν̂ += βe`, `f̂⁻ ← f̂ + ν̂`. Two integrators make it a type-2 loop
-//! (Kaplan & Hegarty, *Understanding GPS*, 2nd ed., 2006, §5.6; Gardner, *Phaselock
+//! (Kaplan & Hegarty, *Understanding GPS*, 2nd ed., 2006, ch. 5; Gardner, *Phaselock
 //! Techniques*, 3rd ed., 2005): no steady-state error to a ramp (a first-order loop of gain
 //! `α` lags it by `ḟT/α`), `A/ω_n²` to an acceleration `A`. The gains follow Benedict and
 //! Bordner (1962), `β = α²/(2 − α)` (`ζ ≈ 1/√2`), and the noise (Kalata 1984) is
@@ -244,7 +244,7 @@
 //! `α_n = 2(2n + 1)/((n + 1)(n + 2))`, `β_n = 6/((n + 1)(n + 2))`, exact for a ramp, its
 //! variance `α_n σ²`, twice the sum's standard deviation at a constant offset — the price
 //! of estimating the rate too), until `α_n` falls to `α` (header 509; Brookner,
-//! *Tracking and Kalman Filtering Made Easy*, 1998, §1.2.10). PN595's pair measurements
+//! *Tracking and Kalman Filtering Made Easy*, 1998, ch. 1). PN595's pair measurements
 //! share a header, so its noise is not white: the analysis is the cyclic headers'.
 //! The sum stays the default: for a constant offset it is the maximum-likelihood
 //! estimate, its variance falling as `1/K` where the loop's stops at `1/170`, and every
@@ -2269,14 +2269,16 @@ pub const CFO_LOOP_MEMORY_HEADERS: f64 = 170.0;
 /// with g = α, h = β.) Two integrators make it a type-2 loop: a ramp `f = a + bk` leaves
 /// no steady-state error, a frequency acceleration `A` (Hz/s²) the error `AT²/β = A/ω_n²`
 /// (Kaplan & Hegarty, *Understanding GPS: Principles and Applications*, 2nd ed., 2006,
-/// §5.6, the FLL/PLL loop orders; Gardner, *Phaselock Techniques*, 3rd ed., 2005, ch. 2);
+/// ch. 5, the FLL/PLL loop orders; Gardner, *Phaselock Techniques*, 3rd ed., 2005, ch. 2);
 /// a first-order loop (β = 0, an exponentially weighted average of gain α) would lag a
 /// ramp `ḟ` by `ḟT/α`, the sum by `ḟt/2`, growing. The steady-state gains follow
-/// Benedict & Bordner ("Improvement in the smoothing of cyclic time-series…", IRE Trans.
-/// Autom. Control 7, 1962): `β = α²/(2 − α)`, close to the continuous loop's `ζ = 1/√2`
+/// Benedict & Bordner ("Synthesis of an optimal set of radar track-while-scan smoothing
+/// equations", IRE Trans. Autom. Control 7, 1962): `β = α²/(2 − α)`, close to the continuous loop's `ζ = 1/√2`
 /// (`α ≈ 2ζω_nT`, `β ≈ (ω_nT)²`). With white measurement noise of variance `σ²` the
-/// estimate's variance is `VRR·σ²` (Kalata, "The tracking index", IEEE Trans. AES 20(2),
-/// 1984):
+/// estimate's variance is `VRR·σ²` (Kalata, "The tracking index: a generalized parameter
+/// for α-β and α-β-γ target trackers", IEEE Trans. AES 20(2), 1984; a white-noise
+/// simulation of 2·10⁵ samples gave it to 1 %, and
+/// `the_cfo_loop_follows_a_ramp_with_its_analytic_error` checks it on headers):
 ///
 /// ```text
 /// VRR = (2α² + 2β − 3αβ) / (α(4 − 2α − β)),   B_L = VRR/(2T)  (one-sided, Hz)
@@ -2287,7 +2289,7 @@ pub const CFO_LOOP_MEMORY_HEADERS: f64 = 170.0;
 /// expanding memory — the least-squares line through every measurement so far,
 /// `α_n = 2(2n + 1)/((n + 1)(n + 2))`, `β_n = 6/((n + 1)(n + 2))` for the `(n + 1)`-th
 /// (`α_0 = 1`, `β_0 = 0`), exact for a ramp, its variance `α_n σ²` — and switches to the
-/// steady gains once `α_n` has fallen to `α` (Brookner §1.2.10), after 509 headers.
+/// steady gains once `α_n` has fallen to `α` (Brookner, ch. 1), after 509 headers.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CfoLoop {
     alpha: f64,
