@@ -483,6 +483,27 @@ fn bench_channel_receiver(c: &mut Criterion) {
             },
         );
     }
+    // The CFO correction of one PN945 frame and the next header (derotation of F + H
+    // samples, one header correlation), summing and tracking: the loop adds one complex
+    // turn, one atan2 and a few multiplications a frame. The corrector streams, so each
+    // iteration is one more frame (the same samples again).
+    {
+        use hybridnav::dtmb::ber_channel::CfoCorrector;
+        let y: Vec<Complex32> = (0..n + hl)
+            .map(|i| Complex32::from_polar(1.0, 1e-3 * i as f32))
+            .collect();
+        for (name, mut corr) in [
+            ("sum", CfoCorrector::new(MODE)),
+            ("track", CfoCorrector::tracking(MODE)),
+        ] {
+            g.bench_function(format!("cfo_correct_frame_pn945_{name}"), |b| {
+                b.iter(|| {
+                    let (f, h) = corr.correct(&y[..n], &y[n..]).unwrap();
+                    black_box((f[0], h[0]));
+                })
+            });
+        }
+    }
     g.finish();
 
     // The channel itself, one PN945 frame: static (one convolution with the 57 taps) and

@@ -59,6 +59,7 @@ pub struct BerArgs {
     pub no_doppler: bool,
     pub true_timing: bool,
     pub cfo_hz: Option<f64>,
+    pub cfo_rate_hz_per_s: Option<f64>,
     pub no_cfo_correction: bool,
     pub oscillator_ppm: Option<f64>,
     pub no_timing_tracking: bool,
@@ -184,6 +185,7 @@ pub fn ber(a: &BerArgs) -> Result<()> {
         (a.no_doppler, "--no-doppler"),
         (a.true_timing, "--true-timing"),
         (a.cfo_hz.is_some(), "--cfo-hz"),
+        (a.cfo_rate_hz_per_s.is_some(), "--cfo-rate-hz-per-s"),
         (a.no_cfo_correction, "--no-cfo-correction"),
         (a.oscillator_ppm.is_some(), "--oscillator-ppm"),
         (a.no_timing_tracking, "--no-timing-tracking"),
@@ -229,7 +231,8 @@ fn ber_world(a: &BerArgs) -> Result<()> {
     use crate::dtmb::ber_channel::{
         acquisition_search_hz, cfo_range_hz, doppler_responses, frequency_response,
         measure_channel_point_clocked, measure_channel_point_synced_with_cfo,
-        measure_channel_point_with_cfo, ChannelBer, Csi, Oscillator, SYNC_ADVANCE_SAMPLES,
+        measure_channel_point_with_cfo, CfoEstimator, ChannelBer, Csi, Oscillator,
+        CFO_LOOP_MEMORY_HEADERS, MAX_CFO_RATE_HZ_PER_S, SYNC_ADVANCE_SAMPLES,
     };
     use crate::dtmb::pn::PnMode;
     use crate::world::dtmb_iq::{tower_channel_at, DataLayerOverride, WorldIqRequest};
@@ -247,6 +250,23 @@ fn ber_world(a: &BerArgs) -> Result<()> {
     }
     if a.cfo_hz.is_some_and(|f| !f.is_finite()) {
         anyhow::bail!("--cfo-hz must be a finite frequency in Hz");
+    }
+    if let Some(r) = a.cfo_rate_hz_per_s {
+        // The drift is a ramp of the pure carrier offset from --cfo-hz; an oscillator
+        // (--oscillator-ppm, the world key) would drift its sample clock too, which is not
+        // modelled, so the rate needs --cfo-hz.
+        if a.cfo_hz.is_none() {
+            anyhow::bail!(
+                "--cfo-rate-hz-per-s needs --cfo-hz (the offset at the first frame, 0 for a \
+                 drift from zero): the drift is a ramp of the pure carrier offset"
+            );
+        }
+        if !(r.is_finite() && r.abs() <= MAX_CFO_RATE_HZ_PER_S) {
+            anyhow::bail!(
+                "--cfo-rate-hz-per-s must be a finite drift within ±{MAX_CFO_RATE_HZ_PER_S} \
+                 Hz/s, got {r}"
+            );
+        }
     }
     if let Some(p) = a.oscillator_ppm {
         if !crate::dtmb::multipath::rx_oscillator_ppm_valid(p) {
@@ -309,11 +329,22 @@ fn ber_world(a: &BerArgs) -> Result<()> {
         ),
     };
     let mut osc = match a.cfo_hz {
-        Some(f) => Oscillator {
-            cfo_hz: f,
-            correct: true,
-            ..Oscillator::default()
-        },
+        Some(f) => {
+            let rate = a.cfo_rate_hz_per_s.unwrap_or(0.0);
+            Oscillator {
+                cfo_hz: f,
+                correct: true,
+                cfo_rate_hz_per_s: rate,
+                // A receiver designed for a drifting offset tracks it; without a drift
+                // the sum (the constant offset's maximum-likelihood estimate) as before.
+                cfo_estimator: if rate != 0.0 {
+                    CfoEstimator::Track
+                } else {
+                    CfoEstimator::Sum
+                },
+                ..Oscillator::default()
+            }
+        }
         None => Oscillator::from_ppm(ppm, ch.freq_hz)
             .map_err(|e| anyhow::anyhow!("{e} (from {ppm_from})"))?,
     };
@@ -418,7 +449,20 @@ fn ber_world(a: &BerArgs) -> Result<()> {
             "# receiver CFO {f:.1} Hz ({:.3} ppm at {:.0} MHz) on every path: {}{}",
             f / ch.freq_hz * 1e6,
             ch.freq_hz * 1e-6,
-            if osc.correct {
+            if osc.correct && osc.cfo_rate_hz_per_s != 0.0 {
+                format!(
+                    "drifting {:+.1} Hz/s, followed from the PN headers by a type-2 tracking \
+                     loop (memory {CFO_LOOP_MEMORY_HEADERS} headers; unambiguous within \
+                     ±{range:.0} Hz of its prediction in {}), known to the genie",
+                    osc.cfo_rate_hz_per_s,
+                    ch.mode.name()
+                )
+            } else if osc.cfo_rate_hz_per_s != 0.0 {
+                format!(
+                    "drifting {:+.1} Hz/s, not corrected (--no-cfo-correction)",
+                    osc.cfo_rate_hz_per_s
+                )
+            } else if osc.correct {
                 format!(
                     "estimated from the PN headers and corrected (unambiguous within \
                      ±{range:.0} Hz in {}), known to the genie",

@@ -243,6 +243,12 @@ pub enum DtmbCommand {
         /// headers and correct it (the genie knows it) unless --no-cfo-correction.
         #[arg(long, allow_hyphen_values = true, value_name = "HZ")]
         cfo_hz: Option<f64>,
+        /// With --cfo-hz: the offset drifts at this rate in Hz/s (|rate| ≤ 100000), a ramp
+        /// from --cfo-hz at the first frame (e.g. 200: a 300 km/h train passing a mast at
+        /// 600 MHz). The estimating receivers then follow it with a type-2 tracking loop
+        /// instead of summing every header (the genie knows the ramp).
+        #[arg(long, allow_hyphen_values = true, value_name = "HZ_PER_S")]
+        cfo_rate_hz_per_s: Option<f64>,
         /// With --world: the receiver's oscillator error in ppm (|ppm| ≤ 100), overriding
         /// the world's sensors.dtmb.rx_oscillator_ppm (which applies by default, as in
         /// `dtmb iq --world`). One reference drives the local oscillator and the sample
@@ -490,6 +496,7 @@ pub fn run(cli: Cli) -> Result<()> {
             no_doppler,
             true_timing,
             cfo_hz,
+            cfo_rate_hz_per_s,
             no_cfo_correction,
             oscillator_ppm,
             no_timing_tracking,
@@ -511,6 +518,7 @@ pub fn run(cli: Cli) -> Result<()> {
             no_doppler,
             true_timing,
             cfo_hz,
+            cfo_rate_hz_per_s,
             no_cfo_correction,
             oscillator_ppm,
             no_timing_tracking,
