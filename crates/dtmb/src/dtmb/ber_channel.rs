@@ -4420,6 +4420,21 @@ mod tests {
         assert!(worst < 1e-5, "{worst}");
     }
 
+    /// The carrier-offset tests' receiver: 64QAM 0.6 in PN945 through the response `h`,
+    /// the interpolated channel estimate, 10 frames a point after the interleaver's delay,
+    /// seed 1.
+    fn qam64_06_pn945_interpolated(h: &[Complex32]) -> ChannelBer<'_> {
+        ChannelBer {
+            profile: profile(Constellation::Qam64, CodeRate::R06),
+            mode: PnMode::Pn945,
+            h,
+            doppler: &[],
+            csi: Csi::Interpolated,
+            frames: 10,
+            seed: 1,
+        }
+    }
+
     /// What a 1 kHz offset (1.7 ppm at 600 MHz: inside the ±2.0 ppm stability grade of
     /// TCXOs, e.g. IQD's "Specifying TCXOs" codes, where the example CFPT-123 is
     /// ±2.5 ppm) costs 64QAM 0.6 in PN945 through one path, 10 frames a point after the
@@ -4437,19 +4452,9 @@ mod tests {
     /// same at 500 Hz.
     #[test]
     fn a_corrected_1_khz_cfo_keeps_the_threshold() {
-        let prof = profile(Constellation::Qam64, CodeRate::R06);
-        let mode = PnMode::Pn945;
         let h = [Complex32::new(1.0, 0.0)];
         let grid = grid_from(14.3, 9);
-        let cfg = ChannelBer {
-            profile: prof,
-            mode,
-            h: &h,
-            doppler: &[],
-            csi: Csi::Interpolated,
-            frames: 10,
-            seed: 1,
-        };
+        let cfg = qam64_06_pn945_interpolated(&h);
         let on = Oscillator {
             cfo_hz: 1000.0,
             correct: true,
@@ -5207,17 +5212,8 @@ mod tests {
     /// is not analysed here, the test asserts only the failure.
     #[test]
     fn a_tracked_drifting_cfo_keeps_the_threshold_where_the_sum_fails() {
-        let prof = profile(Constellation::Qam64, CodeRate::R06);
         let h = [Complex32::new(1.0, 0.0)];
-        let cfg = ChannelBer {
-            profile: prof,
-            mode: PnMode::Pn945,
-            h: &h,
-            doppler: &[],
-            csi: Csi::Interpolated,
-            frames: 10,
-            seed: 1,
-        };
+        let cfg = qam64_06_pn945_interpolated(&h);
         let grid = grid_from(14.3, 9);
         let (v_m_per_s, fc_hz, d_min_m) = (350.0 / 3.6, 862e6, 10.0);
         let rate = v_m_per_s * v_m_per_s * fc_hz / (299_792_458.0 * d_min_m);
@@ -5296,17 +5292,8 @@ mod tests {
     /// drifts are refused.
     #[test]
     fn a_zero_cfo_rate_is_todays_receiver_bit_for_bit() {
-        let prof = profile(Constellation::Qam64, CodeRate::R06);
         let h = [Complex32::new(1.0, 0.0)];
-        let cfg = ChannelBer {
-            profile: prof,
-            mode: PnMode::Pn945,
-            h: &h,
-            doppler: &[],
-            csi: Csi::Interpolated,
-            frames: 10,
-            seed: 1,
-        };
+        let cfg = qam64_06_pn945_interpolated(&h);
         let on = Oscillator {
             cfo_hz: 1000.0,
             correct: true,
