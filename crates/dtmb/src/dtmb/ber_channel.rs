@@ -4825,18 +4825,12 @@ mod tests {
     /// the drift's phase slope between headers.
     #[test]
     fn a_tracked_two_ppm_oscillator_keeps_the_threshold() {
-        let prof = profile(Constellation::Qam64, CodeRate::R06);
         let grid = grid_from(14.8, 7);
         let at = |f: f64, osc: Oscillator| {
             let h = off_grid_path(f);
             let cfg = ChannelBer {
-                profile: prof,
-                mode: PnMode::Pn945,
-                h: &h,
-                doppler: &[],
-                csi: Csi::Interpolated,
                 frames: 100,
-                seed: 1,
+                ..qam64_06_pn945_interpolated(&h)
             };
             threshold(&grid, |s| {
                 measure_channel_point_with_cfo(&cfg, osc, s).unwrap()
@@ -4928,18 +4922,12 @@ mod tests {
     /// timing already starts frames `K` early, so the advance is counted once.
     #[test]
     fn a_tracked_ten_ppm_oscillator_keeps_the_threshold() {
-        let prof = profile(Constellation::Qam64, CodeRate::R06);
         let grid = grid_from(14.8, 7);
         let at = |f: f64, osc: Oscillator, acquire: bool| {
             let h = off_grid_path(f);
             let cfg = ChannelBer {
-                profile: prof,
-                mode: PnMode::Pn945,
-                h: &h,
-                doppler: &[],
-                csi: Csi::Interpolated,
                 frames: 100,
-                seed: 1,
+                ..qam64_06_pn945_interpolated(&h)
             };
             threshold(&grid, |s| {
                 if acquire {
