@@ -369,6 +369,22 @@ fn dtmb_ber_world_single_carrier_and_static_channel() {
     assert!(still.contains("static: --no-doppler"), "{still}");
 }
 
+/// The PER 10⁻² threshold (dB) of the interpolated-CSI curve that `dtmb ber` prints in
+/// its `# CSI interpolated: PER 1e-2 at …` line.
+fn interpolated_threshold_db(text: &str) -> f64 {
+    const HEAD: &str = "# CSI interpolated: PER 1e-2 at ";
+    let line = text
+        .lines()
+        .find(|l| l.starts_with(HEAD))
+        .unwrap_or_else(|| panic!("no threshold in {text}"));
+    line[HEAD.len()..]
+        .split(' ')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap()
+}
+
 /// The receiver's carrier-frequency offset on the command line (`--cfo-hz`): the Kehui
 /// tower D01 at 5 s (PN945, 482 MHz), 64QAM 0.6, 20 frames a point. 1 kHz is
 /// 1000/482·10⁶ = 2.075 ppm, printed. Corrected from the PN headers, the interpolating
@@ -385,18 +401,7 @@ fn dtmb_ber_world_cfo_is_corrected_and_costs_everything_without() {
         a.extend_from_slice(extra);
         kehui_ber(&a)
     };
-    let threshold = |text: &str| -> f64 {
-        let line = text
-            .lines()
-            .find(|l| l.starts_with("# CSI interpolated: PER 1e-2 at"))
-            .unwrap_or_else(|| panic!("no threshold in {text}"));
-        line["# CSI interpolated: PER 1e-2 at ".len()..]
-            .split(' ')
-            .next()
-            .unwrap()
-            .parse()
-            .unwrap()
-    };
+    let threshold = interpolated_threshold_db;
     let grid = ["--snr-db", "14.3:15.5:0.1"];
     let still = run(&grid);
     let cfo = run(&[grid[0], grid[1], "--cfo-hz", "1000"]);
@@ -450,18 +455,7 @@ fn dtmb_ber_world_drifting_cfo_is_tracked() {
         a.extend_from_slice(extra);
         kehui_ber(&a)
     };
-    let threshold = |text: &str| -> f64 {
-        let line = text
-            .lines()
-            .find(|l| l.starts_with("# CSI interpolated: PER 1e-2 at"))
-            .unwrap_or_else(|| panic!("no threshold in {text}"));
-        line["# CSI interpolated: PER 1e-2 at ".len()..]
-            .split(' ')
-            .next()
-            .unwrap()
-            .parse()
-            .unwrap()
-    };
+    let threshold = interpolated_threshold_db;
     let still = run(&[]);
     let drift = run(&["--cfo-hz", "1000", "--cfo-rate-hz-per-s", "2718"]);
     assert!(
@@ -485,18 +479,7 @@ fn dtmb_ber_world_drifting_cfo_is_tracked() {
 /// and reports the analytic drift. `--true-timing` has no search, and its note says so.
 #[test]
 fn dtmb_ber_world_offsets_beyond_the_range_are_searched() {
-    let threshold = |text: &str| -> f64 {
-        let line = text
-            .lines()
-            .find(|l| l.starts_with("# CSI interpolated: PER 1e-2 at"))
-            .unwrap_or_else(|| panic!("no threshold in {text}"));
-        line["# CSI interpolated: PER 1e-2 at ".len()..]
-            .split(' ')
-            .next()
-            .unwrap()
-            .parse()
-            .unwrap()
-    };
+    let threshold = interpolated_threshold_db;
     let grid = ["--frames", "20", "--snr-db", "14.3:15.5:0.1"];
     let with = |extra: &[&str]| {
         let mut a = grid.to_vec();

@@ -4868,17 +4868,11 @@ mod tests {
     /// must lie within the range: a non-finite one is refused.
     #[test]
     fn the_frequency_search_corrects_pn595_beyond_its_range() {
-        let prof = profile(Constellation::Qam64, CodeRate::R06);
         let m = PnMode::Pn595;
         let h = [Complex32::new(1.0, 0.0)];
         let cfg = ChannelBer {
-            profile: prof,
             mode: m,
-            h: &h,
-            doppler: &[],
-            csi: Csi::Interpolated,
-            frames: 10,
-            seed: 1,
+            ..qam64_06_pn945_interpolated(&h)
         };
         let grid = grid_from(14.3 + frame_power_shift_db(m), 9);
         let still = threshold(&grid, |s| measure_channel_point(&cfg, s).unwrap());
