@@ -228,13 +228,15 @@ pub struct FamilyConfig {
     /// its covariance at each resampling, as the regularised PF was defined).
     pub pf_kernel: KernelKind,
     /// The regularised and Rao-Blackwellised PF (`filter = "pf"`, `"rbpf"`) with the prior
-    /// proposal: each epoch's likelihood is brought in `"single"` (all at once; default)
-    /// or `"progressive"` (in stages, each the largest that keeps half the particles
-    /// effective, with a resampling and the kernel between stages: Oudjane & Musso,
-    /// "Progressive correction for regularized particle filters", FUSION 2000; the
-    /// Rao-Blackwellised clocks' Kalman update split with it). Other filters refuse
-    /// `"progressive"`.
-    pub pf_correction: CorrectionKind,
+    /// proposal: each epoch's likelihood is brought in `"progressive"` (in stages, each the
+    /// largest that keeps half the particles effective, with a resampling and the kernel
+    /// between stages: Oudjane & Musso, "Progressive correction for regularized particle
+    /// filters", FUSION 2000; the Rao-Blackwellised clocks' Kalman update split with it;
+    /// an epoch whose whole likelihood keeps half the particles effective is the single
+    /// update, bit for bit) or `"single"` (all at once). Default: `"progressive"` for
+    /// those two with the prior proposal, `"single"` for every other member, which
+    /// refuses an explicit `"progressive"`.
+    pub pf_correction: Option<CorrectionKind>,
     /// The Gaussian PF (`filter = "gpf"`; the other members carry no moment estimate and
     /// ignore it): the covariance of its Gaussian is the weighted cloud's,
     /// `Σ w_i (x_i − μ)(x_i − μ)ᵀ` (`"weighted"`, Kotecha & Djurić 2003; default), or that
@@ -270,7 +272,7 @@ impl Default for FamilyConfig {
             pf_use_rates: false,
             pf_proposal: ProposalKind::Prior,
             pf_kernel: KernelKind::LiuWest,
-            pf_correction: CorrectionKind::Single,
+            pf_correction: None,
             gpf_covariance: GpfCovarianceKind::Weighted,
             divergence_pos_sigma_m: 1e5,
             divergence_residual_nis: 400.0,

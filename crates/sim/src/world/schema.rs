@@ -496,7 +496,16 @@ impl EstimatorSpec {
                 linearised: cfg.pf_proposal == crate::fusion::family::ProposalKind::Linearised,
                 kernel: cfg.pf_kernel.placement(),
                 covariance: cfg.gpf_covariance.estimate(),
-                progressive: cfg.pf_correction == crate::fusion::family::CorrectionKind::Progressive,
+                // Progressive correction is the default wherever it applies (the
+                // regularised and Rao-Blackwellised members with the prior proposal); an
+                // explicit "progressive" elsewhere reaches the paper filter, which refuses it.
+                progressive: match cfg.pf_correction {
+                    Some(kind) => kind == crate::fusion::family::CorrectionKind::Progressive,
+                    None => {
+                        matches!(self.filter, FilterKind::Pf | FilterKind::Rbpf)
+                            && cfg.pf_proposal == crate::fusion::family::ProposalKind::Prior
+                    }
+                },
             },
             other @ (FilterKind::Ekf11 | FilterKind::Wls | FilterKind::Ins | FilterKind::Pdr) => {
                 return Err(format!(
