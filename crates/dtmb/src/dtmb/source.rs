@@ -1271,6 +1271,124 @@ mod tests {
         res
     }
 
+    /// Timing statistics of the signal-level sync on one tower ([`sync_timing_stats`]).
+    #[derive(Debug, Default)]
+    struct SyncStats {
+        /// Syncs run, and of them those that returned no measurement.
+        epochs: usize,
+        lost: usize,
+        /// Measurements more than one sample from the true arrival.
+        outliers: usize,
+        /// Sum of the squared errors of the other measurements (samples²), and their number.
+        sum_sq: f64,
+        inliers: usize,
+    }
+
+    impl SyncStats {
+        fn add(&mut self, err_samples: Option<f64>) {
+            self.epochs += 1;
+            match err_samples {
+                None => self.lost += 1,
+                Some(e) if e.abs() > 1.0 => self.outliers += 1,
+                Some(e) => {
+                    self.sum_sq += e * e;
+                    self.inliers += 1;
+                }
+            }
+        }
+
+        /// RMS of the measurements within a sample of the truth (samples).
+        fn rms_samples(&self) -> f64 {
+            (self.sum_sq / self.inliers.max(1) as f64).sqrt()
+        }
+
+        /// Share of the syncs that returned nothing or an outlier.
+        fn bad_share(&self) -> f64 {
+            (self.lost + self.outliers) as f64 / self.epochs.max(1) as f64
+        }
+    }
+
+    /// The signal-level sync of tower 1 of [`towers`] (PN945, 482 MHz, line of sight, no
+    /// scene) with the receiver oscillator `ppm` off, at the reference SNR `snr_db`, over
+    /// `epochs` syncs: every tenth a full search (acquisition), the others aided with the
+    /// window centred on the truth. The block's frame number cycles over 8..18 and the
+    /// range moves 0.37 sample a sync, so every fractional delay occurs. Returns the
+    /// statistics of the full and of the aided syncs.
+    ///
+    /// The truth is the header's arrival in the receiver's samples: with the sample clock
+    /// `f_s(1 + ε)` the channel puts transmitter sample `m` at receiver sample `m(1 + ε)`
+    /// (`channel` module), so the header of frame `j` reached `offset` samples into a
+    /// block starting at receiver sample `jN` arrives at `offset + ε(jN + offset)`, 4
+    /// samples late at 100 ppm. That drift is the receiver clock's, not the sync's error,
+    /// and is taken out here.
+    fn sync_timing_stats(ppm: f64, snr_db: f64, epochs: usize) -> (SyncStats, SyncStats) {
+        let f = frame();
+        let rng = TrialRng::new(11, 0);
+        let cfg = DtmbSensorConfig {
+            level: DtmbLevel::Signal,
+            aided: true,
+            shadowing: ShadowingConfig {
+                sigma_db: 0.0,
+                ..ShadowingConfig::default()
+            },
+            rx_oscillator_ppm: ppm,
+            ..DtmbSensorConfig::default()
+        };
+        let tower = towers(&f)[0].clone();
+        let n = tower.pn_mode.frame_len();
+        let mut src = DtmbSource::new(
+            cfg.clone(),
+            vec![tower],
+            None,
+            f.clone(),
+            clock(&rng),
+            Some(0),
+            &rng,
+            SimTime::from_seconds(5.0),
+        )
+        .unwrap();
+        let tr = truth(&f, SimTime(0), Vector3::new(0.0, 0.0, 1.5));
+        // Fills the taps with the direct path alone (no scene).
+        src.tower_link(0, &tr);
+        let w = window_samples(&cfg);
+        let eps = ppm * 1e-6;
+        let (mut full, mut aided) = (SyncStats::default(), SyncStats::default());
+        for i in 0..epochs {
+            let frame_no = 8 + (i % 10) as i64;
+            let range_m = 3000.0 + 0.37 * i as f64 * METRES_PER_SAMPLE;
+            let centre_off = (i % 10 != 0).then_some(0.0);
+            let margin = if centre_off.is_some() { w + 16 } else { n / 2 };
+            let offset = margin as f64 + (range_m / METRES_PER_SAMPLE).fract();
+            let clock_drift_samples = eps * (frame_no as f64 * n as f64 + offset);
+            let e = src
+                .signal_error(0, frame_no, snr_db, range_m, &[0.0], centre_off, &tr)
+                .map(|e| e - clock_drift_samples);
+            if centre_off.is_some() {
+                aided.add(e);
+            } else {
+                full.add(e);
+            }
+        }
+        (full, aided)
+    }
+
+    /// Prints [`sync_timing_stats`] over oscillator errors and SNRs (the numbers of
+    /// `docs/validation.md`, *The world's DTMB source and its oscillator*).
+    #[test]
+    #[ignore = "prints a table; run on its own with --ignored --nocapture"]
+    fn print_signal_level_timing_over_oscillator_error() {
+        for snr_db in [-10.0, -15.0] {
+            for ppm in [0.0, 2.0, 10.0, 20.0, 50.0, 100.0] {
+                let (full, aided) = sync_timing_stats(ppm, snr_db, 2000);
+                println!(
+                    "SNR {snr_db:>5.1} dB {ppm:>5.1} ppm | full: RMS {:.4} bad {:.3} ({} lost {} out of {}) | aided: RMS {:.4} bad {:.3} ({} lost {} out of {})",
+                    full.rms_samples(), full.bad_share(), full.lost, full.outliers, full.epochs,
+                    aided.rms_samples(), aided.bad_share(), aided.lost, aided.outliers, aided.epochs,
+                );
+            }
+        }
+    }
+
     #[test]
     fn cochannel_towers_add_and_the_sync_measures_the_earliest_strong_copy() {
         // Towers A (2 km east) and B (5 km west) on DS-14; B's clock runs 1 µs ahead, so
