@@ -23,6 +23,30 @@
 //! outside the window the sync locks onto noise. The Earth's rotation during the ≤ 0.3 ms
 //! of flight (< 0.1 m) is neglected.
 //!
+//! **The receiver's oscillator** (signal level, `rx_oscillator_ppm = ε`). One reference
+//! drives the receiver's mixer and sample clock, so the block carries the carrier offset
+//! `−ε f_c` and is sampled at `f_s(1 + ε)` ([`ChannelConfig::from_oscillators`]). The
+//! sync correlates a header coherently (125 µs in PN945), so an uncorrected offset costs
+//! `|sinc(ε f_c T_H)|` of the peak: at 482 MHz, 10 ppm loses a quarter of the
+//! acquisitions at −10 dB and 20 ppm three quarters of the aided syncs. The receiver is
+//! designed for its oscillator, as `dtmb ber`'s acquiring receiver is: when it acquires a
+//! tower (a full search, and a tower's first sync even when aided) it also searches the
+//! frequency over `±max(12 kHz, 1.25 |ε| f_c)` ([`acquisition_cfo_search_hz`], at most
+//! ±100 kHz) and keeps the acquisition's [`SyncResult`]; every aided block after it is
+//! turned back by that sync's coarse hypothesis (whole FFT bins, within one hypothesis
+//! spacing of the offset, 3691 Hz in PN945) before the aided sync. The offset comes from
+//! the received signal, never from the configuration; it is static apart from the paths'
+//! Doppler (hertz). The fine estimate is not added: from one header at −10 dB it errs by
+//! up to 2 kHz, more than the half spacing it would remove. Without an oscillator error
+//! nothing is searched or turned (the source as before, bit for bit). What the sample
+//! clock does is not corrected: the header stretched by `1 + ε` delays the fine timing by
+//! `ε (P + C/2)` samples (preamble `P`, core `C`: +0.047 samples, 1.9 m, at 100 ppm in
+//! PN945), and the blocks are cut at receiver sample indices counted from the trial's
+//! start, so a tower's arrival drifts by `ε f_s` samples a second (15 at 2 ppm), a
+//! receiver clock drift on top of `[receiver.clock]` that the aided window, centred on
+//! the geometric prediction, does not follow (`docs/validation.md`, *The world's DTMB
+//! source and its oscillator*). A wrong acquisition is kept until the next full search.
+//!
 //! Random streams (all per tower `Dnn`): `dtmb/Dnn/timing` (model draws), `dtmb/Dnn/tx`,
 //! `dtmb/Dnn/noise` (signal level), `dtmb/Dnn/tps`; shadowing `dtmb/shadowing/Dnn` from the
 //! master seed (the same city in every trial).
