@@ -1708,23 +1708,20 @@ pub fn measure_channel_point_synced_with_cfo(
     Ok((r.point, a))
 }
 
-/// The smallest coarse frequency search of the acquiring receiver, Hz: ±12 kHz, an
-/// oscillator ±20 ppm off at 600 MHz (±14 ppm at UHF's top, 862 MHz), covering the
-/// ±10 ppm of a plain crystal oscillator with a margin.
-pub const ACQUISITION_CFO_SEARCH_HZ: f64 = 12_000.0;
+/// The smallest coarse frequency search of the acquiring receiver, Hz; the rule is shared
+/// with the world's DTMB source, so it lives with the synchroniser.
+pub use super::receiver::ACQUISITION_CFO_SEARCH_HZ;
 
 /// The coarse frequency search ([`super::receiver::SyncConfig::cfo_search_hz`]) of the
 /// acquiring receiver with the oscillator `osc`: none when it does not correct an offset
-/// (the receiver without an oscillator error, bit for bit), else the larger of
-/// [`ACQUISITION_CFO_SEARCH_HZ`] and 1.25 times the configured offset (the receiver is
-/// designed for its oscillator: the configured error stands for its grade's bound), at
-/// most [`super::receiver::MAX_CFO_SEARCH_HZ`]. Automatic, so a receiver configured with
-/// an offset acquires through it without another option to know about.
+/// (the receiver without an oscillator error, bit for bit), else
+/// [`super::receiver::acquisition_cfo_search_hz`] of the configured offset (the receiver
+/// is designed for its oscillator: the configured error stands for its grade's bound).
+/// Automatic, so a receiver configured with an offset acquires through it without
+/// another option to know about.
 pub fn acquisition_search_hz(osc: Oscillator) -> f64 {
     if osc.correct {
-        ACQUISITION_CFO_SEARCH_HZ
-            .max(1.25 * osc.cfo_hz.abs())
-            .min(super::receiver::MAX_CFO_SEARCH_HZ)
+        super::receiver::acquisition_cfo_search_hz(osc.cfo_hz)
     } else {
         0.0
     }

@@ -41,8 +41,13 @@ pub struct ChannelConfig {
 
 /// The largest receiver oscillator error accepted anywhere a receiver's oscillator is
 /// given (ppm): the world key `sensors.dtmb.rx_oscillator_ppm`, `dtmb iq` and `dtmb ber`.
-/// A crystal without temperature compensation is specified to some tens of ppm; beyond
-/// 100 ppm the frame sync would need a coarse frequency search first.
+/// A crystal without temperature compensation is specified to some tens of ppm. The
+/// acquiring receivers (`dtmb ber`'s and the world's DTMB source's) search the carrier
+/// offset `−ε f_c` over `±max(12 kHz, 1.25 |ε| f_c)`
+/// ([`super::receiver::acquisition_cfo_search_hz`]), capped at the sync's largest search,
+/// ±100 kHz ([`super::receiver::MAX_CFO_SEARCH_HZ`]): 100 ppm at the UHF band's top
+/// (862 MHz) is an 86 kHz offset, still inside it, while a larger error could fall
+/// outside.
 pub const MAX_RX_OSCILLATOR_PPM: f64 = 100.0;
 
 /// Whether `ppm` is a receiver oscillator error those accept: finite and within

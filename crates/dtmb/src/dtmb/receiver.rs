@@ -324,6 +324,22 @@ pub const MAX_FRAMES: usize = 16;
 /// The largest [`SyncConfig::cfo_search_hz`] accepted: ±100 ppm (the largest receiver
 /// oscillator error the simulator accepts) at 1 GHz, above the UHF band's 862 MHz.
 pub const MAX_CFO_SEARCH_HZ: f64 = 100_000.0;
+/// The smallest coarse frequency search of an acquiring receiver, Hz: ±12 kHz, an
+/// oscillator ±20 ppm off at 600 MHz (±14 ppm at UHF's top, 862 MHz), covering the
+/// ±10 ppm of a plain crystal oscillator with a margin.
+pub const ACQUISITION_CFO_SEARCH_HZ: f64 = 12_000.0;
+
+/// The coarse frequency search ([`SyncConfig::cfo_search_hz`]) a receiver designer takes
+/// for an oscillator whose carrier offset is specified to within `±offset_bound_hz`: the
+/// larger of [`ACQUISITION_CFO_SEARCH_HZ`] and 1.25 times the bound (the margin keeps the
+/// specified extreme inside the outermost hypothesis rather than on its edge), at most
+/// [`MAX_CFO_SEARCH_HZ`]. One rule for every acquiring receiver: `dtmb ber`'s
+/// (`ber_channel::acquisition_search_hz`) and the world's DTMB source's.
+pub fn acquisition_cfo_search_hz(offset_bound_hz: f64) -> f64 {
+    ACQUISITION_CFO_SEARCH_HZ
+        .max(1.25 * offset_bound_hz.abs())
+        .min(MAX_CFO_SEARCH_HZ)
+}
 
 impl Receiver {
     /// Builds a receiver for blocks of up to `max_len` samples.

@@ -23,6 +23,30 @@
 //! outside the window the sync locks onto noise. The Earth's rotation during the ≤ 0.3 ms
 //! of flight (< 0.1 m) is neglected.
 //!
+//! **The receiver's oscillator** (signal level, `rx_oscillator_ppm = ε`). One reference
+//! drives the receiver's mixer and sample clock, so the block carries the carrier offset
+//! `−ε f_c` and is sampled at `f_s(1 + ε)` ([`ChannelConfig::from_oscillators`]). The
+//! sync correlates a header coherently (125 µs in PN945), so an uncorrected offset costs
+//! `|sinc(ε f_c T_H)|` of the peak: at 482 MHz, 10 ppm loses a quarter of the
+//! acquisitions at −10 dB and 20 ppm three quarters of the aided syncs. The receiver is
+//! designed for its oscillator, as `dtmb ber`'s acquiring receiver is: when it acquires a
+//! tower (a full search, and a tower's first sync even when aided) it also searches the
+//! frequency over `±max(12 kHz, 1.25 |ε| f_c)` ([`acquisition_cfo_search_hz`], at most
+//! ±100 kHz) and keeps the acquisition's [`SyncResult`]; every aided block after it is
+//! turned back by that sync's coarse hypothesis (whole FFT bins, within one hypothesis
+//! spacing of the offset, 3691 Hz in PN945) before the aided sync. The offset comes from
+//! the received signal, never from the configuration; it is static apart from the paths'
+//! Doppler (hertz). The fine estimate is not added: from one header at −10 dB it errs by
+//! up to 2 kHz, more than the half spacing it would remove. Without an oscillator error
+//! nothing is searched or turned (the source as before, bit for bit). What the sample
+//! clock does is not corrected: the header stretched by `1 + ε` delays the fine timing by
+//! `ε (P + C/2)` samples (preamble `P`, core `C`: +0.047 samples, 1.9 m, at 100 ppm in
+//! PN945), and the blocks are cut at receiver sample indices counted from the trial's
+//! start, so a tower's arrival drifts by `ε f_s` samples a second (15 at 2 ppm), a
+//! receiver clock drift on top of `[receiver.clock]` that the aided window, centred on
+//! the geometric prediction, does not follow (`docs/validation.md`, *The world's DTMB
+//! source and its oscillator*). A wrong acquisition is kept until the next full search.
+//!
 //! Random streams (all per tower `Dnn`): `dtmb/Dnn/timing` (model draws), `dtmb/Dnn/tx`,
 //! `dtmb/Dnn/noise` (signal level), `dtmb/Dnn/tps`; shadowing `dtmb/shadowing/Dnn` from the
 //! master seed (the same city in every trial).
@@ -34,7 +58,10 @@ use super::measurement::{
     METRES_PER_SAMPLE,
 };
 use super::pn::{PnMode, SAMPLE_RATE_HZ};
-use super::receiver::{FirstPathConfig, Receiver, Search, SyncConfig, MAX_FRAMES};
+use super::receiver::{
+    acquisition_cfo_search_hz, FirstPathConfig, Receiver, Search, SyncConfig, SyncResult,
+    MAX_FRAMES,
+};
 use super::tps::{TpsErrorModel, TpsPath};
 use super::transmitter::{FrameSchedule, Transmitter, TxConfig};
 use crate::core::config::check;
@@ -369,6 +396,11 @@ struct TowerState {
     /// TPS ranging: true range at the reference epoch and the error model.
     tps_ref: Option<(GpsTime, f64)>,
     tps_model: TpsErrorModel,
+    /// Signal level with an oscillator error: the last acquisition's sync (a full search
+    /// with the coarse frequency search), whose carrier-offset estimate turns back every
+    /// block tracked after it. `None` until the first acquisition, and always without an
+    /// oscillator error.
+    acquisition: Option<SyncResult>,
 }
 
 /// A tower link the receiver holds ([`DtmbSource::held_link`]).
@@ -401,6 +433,10 @@ pub struct DtmbSource {
     block2: Vec<Complex32>,
     validity: ValidityLog,
     warnings: Vec<String>,
+    /// Whether the signal-level receiver searches its carrier offset at acquisition when
+    /// its oscillator is off (always, except in the test that measures the receiver
+    /// without the search).
+    cfo_search: bool,
 }
 
 impl std::fmt::Debug for DtmbSource {
@@ -512,6 +548,7 @@ impl DtmbSource {
                 interference: None,
                 tps_ref: None,
                 tps_model: TpsErrorModel::new(spec_mode, spec_freq),
+                acquisition: None,
             });
         }
         // Co-channel towers (DTMB: the same carrier) add at the receiver; towers of one
@@ -578,6 +615,7 @@ impl DtmbSource {
             taps: Vec::with_capacity(crate::propagation::MAX_PATHS),
             validity: ValidityLog::default(),
             warnings,
+            cfo_search: true,
         })
     }
 
@@ -965,6 +1003,23 @@ impl DtmbSource {
         let mode = self.towers[ti].spec.pn_mode;
         let n = mode.frame_len();
         let len = signal_block_len(mode, k, w);
+        // The receiver is designed for its oscillator: with an error of `ε` its carrier
+        // offset is up to `|ε| f_c`, so its acquisition searches the frequency over the
+        // shared acquisition rule's span. Without an oscillator error nothing is searched
+        // (the source as it was, bit for bit).
+        let ppm = self.cfg.rx_oscillator_ppm;
+        let cfo_search_hz = if self.cfo_search && ppm != 0.0 {
+            acquisition_cfo_search_hz(ppm * 1e-6 * self.towers[ti].spec.freq_hz)
+        } else {
+            0.0
+        };
+        // A receiver that has to search its frequency acquires before it tracks: until
+        // the tower has been acquired, an aided request is a full search.
+        let centre_off = if cfo_search_hz > 0.0 && self.towers[ti].acquisition.is_none() {
+            None
+        } else {
+            centre_off
+        };
         // The header of frame `frame_no` arrives at `offset` samples into the block: the
         // fraction is the true range's, so every fractional delay occurs.
         let margin = if centre_off.is_some() { w + 16 } else { n / 2 };
@@ -1099,6 +1154,16 @@ impl DtmbSource {
                 frame_in_superframe: Some(frame_in_superframe),
             },
         };
+        // Tracking: the block is turned back by the acquisition's carrier-offset estimate
+        // (its coarse hypothesis plus the fine estimate made after it), which the received
+        // signal gave; the offset is static apart from the paths' Doppler, a few hertz.
+        // Acquisition: the sync searches the frequency itself.
+        let acquiring = centre_off.is_none();
+        if !acquiring {
+            if let Some(a) = st.acquisition.as_ref() {
+                super::fd_channel::rotate(block, 0, -a.coarse_cfo_hz / SAMPLE_RATE_HZ);
+            }
+        }
         let s = rx
             .sync(
                 block,
@@ -1106,10 +1171,13 @@ impl DtmbSource {
                     search,
                     frames: k,
                     first_path: Some(FirstPathConfig::default()),
-                    cfo_search_hz: 0.0,
+                    cfo_search_hz: if acquiring { cfo_search_hz } else { 0.0 },
                 },
             )
             .ok()?;
+        if acquiring && cfo_search_hz > 0.0 {
+            st.acquisition = Some(s);
+        }
         // A full search over a frame may lock on the next or previous frame's header only
         // if the phase is misidentified; the error is taken modulo nothing, as a receiver
         // would report it.
@@ -1269,6 +1337,299 @@ mod tests {
             }
         }
         res
+    }
+
+    /// Timing statistics of the signal-level sync on one tower ([`sync_timing_stats`]).
+    #[derive(Debug, Default)]
+    struct SyncStats {
+        /// Syncs run, and of them those that returned no measurement.
+        epochs: usize,
+        lost: usize,
+        /// Measurements more than one sample from the true arrival.
+        outliers: usize,
+        /// Sum and sum of squares of the errors of the other measurements (samples,
+        /// samples²), and their number.
+        sum: f64,
+        sum_sq: f64,
+        inliers: usize,
+    }
+
+    impl SyncStats {
+        fn add(&mut self, err_samples: Option<f64>) {
+            self.epochs += 1;
+            match err_samples {
+                None => self.lost += 1,
+                Some(e) if e.abs() > 1.0 => self.outliers += 1,
+                Some(e) => {
+                    self.sum += e;
+                    self.sum_sq += e * e;
+                    self.inliers += 1;
+                }
+            }
+        }
+
+        /// RMS of the measurements within a sample of the truth (samples).
+        fn rms_samples(&self) -> f64 {
+            (self.sum_sq / self.inliers.max(1) as f64).sqrt()
+        }
+
+        /// Mean of the measurements within a sample of the truth (samples).
+        fn mean_samples(&self) -> f64 {
+            self.sum / self.inliers.max(1) as f64
+        }
+
+        /// Their standard deviation about that mean (samples).
+        fn std_samples(&self) -> f64 {
+            (self.rms_samples().powi(2) - self.mean_samples().powi(2))
+                .max(0.0)
+                .sqrt()
+        }
+
+        /// Share of the syncs that returned nothing or an outlier.
+        fn bad_share(&self) -> f64 {
+            (self.lost + self.outliers) as f64 / self.epochs.max(1) as f64
+        }
+    }
+
+    /// What [`sync_timing_stats`] measured.
+    #[derive(Debug, Default)]
+    struct OscillatorRun {
+        /// The full searches (acquisitions) and the aided syncs.
+        full: SyncStats,
+        aided: SyncStats,
+        /// The largest distance of an acquisition's coarse hypothesis
+        /// (`SyncResult::coarse_cfo_hz`) and of its whole estimate (hypothesis plus fine
+        /// estimate, which turns the tracked blocks back) from the true offset (Hz).
+        coarse_err_max_hz: f64,
+        estimate_err_max_hz: f64,
+        /// The spacing of the frequency search's hypotheses, `⌊M/(2H)⌋ f_s/M` (Hz).
+        search_spacing_hz: f64,
+    }
+
+    /// The signal-level sync of tower 1 of [`towers`] (PN945, 482 MHz, line of sight, no
+    /// scene) with the receiver oscillator `ppm` off, at the reference SNR `snr_db`, over
+    /// `epochs` syncs: every tenth a full search (acquisition), the others aided with the
+    /// window centred on the truth. The block's frame number cycles over 8..18 and the
+    /// range moves 0.37 sample a sync, so every fractional delay occurs. `cfo_search`
+    /// false is the receiver without its frequency search (the source before it).
+    ///
+    /// The truth is the header's arrival in the receiver's samples: with the sample clock
+    /// `f_s(1 + ε)` the channel puts transmitter sample `m` at receiver sample `m(1 + ε)`
+    /// (`channel` module), so the header of frame `j` reached `offset` samples into a
+    /// block starting at receiver sample `jN` arrives at `offset + ε(jN + offset)`, 4
+    /// samples late at 100 ppm. That drift is the receiver clock's, not the sync's error,
+    /// and is taken out here. The true carrier offset, `−ε f_c`, turns by `−ε f_c/(1 + ε)`
+    /// per receiver sample period at the nominal `f_s`, which is what the sync measures.
+    fn sync_timing_stats(ppm: f64, snr_db: f64, epochs: usize, cfo_search: bool) -> OscillatorRun {
+        let f = frame();
+        let rng = TrialRng::new(11, 0);
+        let cfg = DtmbSensorConfig {
+            level: DtmbLevel::Signal,
+            aided: true,
+            shadowing: ShadowingConfig {
+                sigma_db: 0.0,
+                ..ShadowingConfig::default()
+            },
+            rx_oscillator_ppm: ppm,
+            ..DtmbSensorConfig::default()
+        };
+        let tower = towers(&f)[0].clone();
+        let (n, h) = (tower.pn_mode.frame_len(), tower.pn_mode.header_len());
+        let eps = ppm * 1e-6;
+        let true_cfo_hz = -eps * tower.freq_hz / (1.0 + eps);
+        let mut src = DtmbSource::new(
+            cfg.clone(),
+            vec![tower],
+            None,
+            f.clone(),
+            clock(&rng),
+            Some(0),
+            &rng,
+            SimTime::from_seconds(5.0),
+        )
+        .unwrap();
+        src.cfo_search = cfo_search;
+        let m = src.towers[0].receiver.as_ref().unwrap().fft_len();
+        let mut run = OscillatorRun {
+            search_spacing_hz: (m / (2 * h)) as f64 * SAMPLE_RATE_HZ / m as f64,
+            ..OscillatorRun::default()
+        };
+        let tr = truth(&f, SimTime(0), Vector3::new(0.0, 0.0, 1.5));
+        // Fills the taps with the direct path alone (no scene).
+        src.tower_link(0, &tr);
+        let w = window_samples(&cfg);
+        for i in 0..epochs {
+            let frame_no = 8 + (i % 10) as i64;
+            let range_m = 3000.0 + 0.37 * i as f64 * METRES_PER_SAMPLE;
+            // A searching receiver not yet acquired acquires whatever it is asked.
+            let unacquired = cfo_search && ppm != 0.0 && src.towers[0].acquisition.is_none();
+            let acquiring = i % 10 == 0 || unacquired;
+            let centre_off = (i % 10 != 0).then_some(0.0);
+            let margin = if acquiring { n / 2 } else { w + 16 };
+            let offset = margin as f64 + (range_m / METRES_PER_SAMPLE).fract();
+            let clock_drift_samples = eps * (frame_no as f64 * n as f64 + offset);
+            let e = src
+                .signal_error(0, frame_no, snr_db, range_m, &[0.0], centre_off, &tr)
+                .map(|e| e - clock_drift_samples);
+            if acquiring {
+                run.full.add(e);
+                if let (Some(_), Some(a)) = (e, src.towers[0].acquisition.as_ref()) {
+                    let estimate_hz = a.cfo_hz.unwrap_or(a.coarse_cfo_hz);
+                    run.coarse_err_max_hz = run
+                        .coarse_err_max_hz
+                        .max((a.coarse_cfo_hz - true_cfo_hz).abs());
+                    run.estimate_err_max_hz = run
+                        .estimate_err_max_hz
+                        .max((estimate_hz - true_cfo_hz).abs());
+                }
+            } else {
+                run.aided.add(e);
+            }
+        }
+        run
+    }
+
+    /// Prints [`sync_timing_stats`] over oscillator errors and SNRs, with and without the
+    /// frequency search (the numbers of `docs/validation.md`, *The world's DTMB source
+    /// and its oscillator*).
+    #[test]
+    #[ignore = "prints a table; run on its own with --ignored --nocapture"]
+    fn print_signal_level_timing_over_oscillator_error() {
+        for snr_db in [-10.0, -15.0] {
+            for cfo_search in [false, true] {
+                for ppm in [0.0, 2.0, 10.0, 20.0, 50.0, 100.0] {
+                    let r = sync_timing_stats(ppm, snr_db, 2000, cfo_search);
+                    let (full, aided) = (&r.full, &r.aided);
+                    println!(
+                        "SNR {snr_db:>5.1} dB search {cfo_search:>5} {ppm:>5.1} ppm | full: RMS \
+                         {:.4} mean {:+.4} std {:.4} bad {:.3} ({} lost {} out of {}) | aided: \
+                         RMS {:.4} mean {:+.4} std {:.4} bad {:.3} ({} lost {} out of {}) | \
+                         coarse err ≤ {:.0} Hz, estimate err ≤ {:.1} Hz, spacing {:.0} Hz",
+                        full.rms_samples(),
+                        full.mean_samples(),
+                        full.std_samples(),
+                        full.bad_share(),
+                        full.lost,
+                        full.outliers,
+                        full.epochs,
+                        aided.rms_samples(),
+                        aided.mean_samples(),
+                        aided.std_samples(),
+                        aided.bad_share(),
+                        aided.lost,
+                        aided.outliers,
+                        aided.epochs,
+                        r.coarse_err_max_hz,
+                        r.estimate_err_max_hz,
+                        r.search_spacing_hz,
+                    );
+                }
+            }
+        }
+    }
+
+    /// The SNR of the oscillator tests: high enough that the sync without an oscillator
+    /// error has essentially no outliers (2 of 2000), low enough that a few dB of
+    /// correlation lost to a carrier offset shows.
+    const OSCILLATOR_TEST_SNR_DB: f64 = -10.0;
+    const OSCILLATOR_TEST_EPOCHS: usize = 2000;
+
+    /// The bias the sampling-clock offset `ε` puts into the fine timing, independent of
+    /// the carrier offset: the channel stretches the header by `1 + ε`, and the sync
+    /// measures the core (`C` samples after the `P`-sample preamble) and steps back `P`
+    /// from its start, so a header start estimated from the core's centre is late by
+    /// `ε (P + C/2)` samples (0.047 at 100 ppm in PN945).
+    fn header_stretch_bias_samples(ppm: f64, mode: PnMode) -> f64 {
+        ppm * 1e-6 * (mode.preamble_len() as f64 + mode.core_len() as f64 / 2.0)
+    }
+
+    /// Four standard errors of the difference of two standard deviations each estimated
+    /// from `n` Gaussian errors (`σ/√(2n)` each): `4σ/√n`.
+    fn std_tolerance(sigma: f64, n: usize) -> f64 {
+        4.0 * sigma / (n as f64).sqrt()
+    }
+
+    #[test]
+    fn an_oscillator_error_costs_the_signal_level_sync_nothing_once_it_searches_its_frequency() {
+        let snr = OSCILLATOR_TEST_SNR_DB;
+        let n = OSCILLATOR_TEST_EPOCHS;
+        let zero = sync_timing_stats(0.0, snr, n, true);
+        assert!(
+            zero.full.bad_share() + zero.aided.bad_share() < 0.005,
+            "0 ppm: {zero:?}"
+        );
+        for ppm in [10.0, 20.0, 50.0, 100.0] {
+            let r = sync_timing_stats(ppm, snr, n, true);
+            // The acquisition's coarse hypothesis is within one hypothesis spacing of the
+            // true offset −ε f_c (482 MHz: −4.8 to −48.2 kHz).
+            assert!(
+                r.coarse_err_max_hz <= r.search_spacing_hz,
+                "{ppm} ppm: coarse estimate {} Hz off, spacing {} Hz",
+                r.coarse_err_max_hz,
+                r.search_spacing_hz
+            );
+            let bias = header_stretch_bias_samples(ppm, PnMode::Pn945);
+            for (what, got, base) in [
+                ("full", &r.full, &zero.full),
+                ("aided", &r.aided, &zero.aided),
+            ] {
+                // Lost and outlying syncs: at most half a percent, plus one (0 ppm: 2 of
+                // 2000; without the search 20 ppm loses 74 % of the aided syncs and 98 %
+                // of the full ones).
+                assert!(
+                    got.lost + got.outliers <= got.epochs / 200 + 1,
+                    "{ppm} ppm {what}: {got:?}"
+                );
+                // The spread about the mean is the 0 ppm one within Monte-Carlo noise.
+                let tol = std_tolerance(base.std_samples(), got.inliers.min(base.inliers));
+                assert!(
+                    (got.std_samples() - base.std_samples()).abs() <= tol,
+                    "{ppm} ppm {what}: std {} against {} ± {tol}",
+                    got.std_samples(),
+                    base.std_samples()
+                );
+                // The mean moves by the sampling clock's header stretch and nothing else
+                // (standard error σ/√n about the 0 ppm mean).
+                let se = got.std_samples() / (got.inliers as f64).sqrt();
+                let excess = got.mean_samples() - base.mean_samples() - bias;
+                assert!(
+                    excess.abs()
+                        <= 4.0 * se + 4.0 * base.std_samples() / (base.inliers as f64).sqrt(),
+                    "{ppm} ppm {what}: mean {} against {} + stretch {bias}",
+                    got.mean_samples(),
+                    base.mean_samples()
+                );
+                // So the RMS less that bias is the 0 ppm RMS within the same noise.
+                let rms_less_bias =
+                    (got.std_samples().powi(2) + (got.mean_samples() - bias).powi(2)).sqrt();
+                assert!(
+                    (rms_less_bias - base.rms_samples()).abs() <= tol + 4.0 * se,
+                    "{ppm} ppm {what}: RMS less the stretch {rms_less_bias} against {}",
+                    base.rms_samples()
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn without_its_frequency_search_the_signal_level_sync_loses_a_20_ppm_oscillator() {
+        let snr = OSCILLATOR_TEST_SNR_DB;
+        let n = OSCILLATOR_TEST_EPOCHS;
+        let zero = sync_timing_stats(0.0, snr, n, false);
+        let off = sync_timing_stats(20.0, snr, n, false);
+        // 20 ppm at 482 MHz is 9.64 kHz, past the PN945 header's first null (8 kHz).
+        assert!(off.full.bad_share() > 0.5, "full: {:?}", off.full);
+        assert!(off.aided.bad_share() > 0.5, "aided: {:?}", off.aided);
+        assert!(zero.full.bad_share() + zero.aided.bad_share() < 0.005);
+        // Without an oscillator error the search is never on: the same syncs, bit for bit.
+        let searching = sync_timing_stats(0.0, snr, n, true);
+        assert_eq!(
+            (
+                searching.aided.sum_sq.to_bits(),
+                searching.full.sum_sq.to_bits()
+            ),
+            (zero.aided.sum_sq.to_bits(), zero.full.sum_sq.to_bits())
+        );
     }
 
     #[test]
