@@ -38,14 +38,14 @@
 //! the received signal, never from the configuration; it is static apart from the paths'
 //! Doppler (hertz). The fine estimate is not added: from one header at −10 dB it errs by
 //! up to 2 kHz, more than the half spacing it would remove. Without an oscillator error
-//! nothing is searched or turned (the source as before, bit for bit). What the sample
-//! clock does is not corrected: the header stretched by `1 + ε` delays the fine timing by
+//! nothing is searched or turned (the source as before, bit for bit). The sample clock's
+//! slip since the trial's start (`ε f_s` samples a second, 15 at 2 ppm) is the receiver
+//! clock's drift, which `[receiver.clock]` already puts into every range, so each block is
+//! cut as if the sample clock started at the block; the stretch inside it stays and is
+//! not corrected: the header stretched by `1 + ε` delays the fine timing by
 //! `ε (P + C/2)` samples (preamble `P`, core `C`: +0.047 samples, 1.9 m, at 100 ppm in
-//! PN945), and the blocks are cut at receiver sample indices counted from the trial's
-//! start, so a tower's arrival drifts by `ε f_s` samples a second (15 at 2 ppm), a
-//! receiver clock drift on top of `[receiver.clock]` that the aided window, centred on
-//! the geometric prediction, does not follow (`docs/validation.md`, *The world's DTMB
-//! source and its oscillator*). A wrong acquisition is kept until the next full search.
+//! PN945) (`docs/validation.md`, *The world's DTMB source and its oscillator*). A wrong
+//! acquisition is kept until the next full search.
 //!
 //! Random streams (all per tower `Dnn`): `dtmb/Dnn/timing` (model draws), `dtmb/Dnn/tx`,
 //! `dtmb/Dnn/noise` (signal level), `dtmb/Dnn/tps`; shadowing `dtmb/shadowing/Dnn` from the
@@ -1071,12 +1071,28 @@ impl DtmbSource {
         } else {
             0.0
         };
+        // The channel samples at `f_s(1 + ε)` from receiver sample 0, so by receiver
+        // sample `n₀` the stream has slipped `n₀ ε/(1 + ε)` samples: 15 a second at 2 ppm.
+        // That slip is the receiver clock's drift, which the world already carries in its
+        // `[receiver.clock]` (every tower's range, and every GNSS range, takes that one
+        // clock); counted here as well it would be a second, unshared clock, and the aided
+        // window, centred on the truth, would lose the header within seconds. So each block
+        // is cut as if the receiver's sample clock started at the block: the block is read
+        // from receiver sample `n₀ + k`, `k = ⌈n₀ ε⌉`, which reads the transmitter at
+        // `n₀ + (k − n₀ ε + m)/(1 + ε)` for block sample `m`, and the delays take the
+        // fraction `(k − n₀ ε)/(1 + ε)` back. Only the stretch inside the block (`ε` per
+        // sample) stays. With `ε = 0` nothing moves.
+        let eps = self.cfg.rx_oscillator_ppm * 1e-6;
+        let block_start = frame_no * n as i64 + shift as i64;
+        let slip = block_start as f64 * eps;
+        let slip_whole = slip.ceil();
+        let rx_start = block_start + slip_whole as i64;
+        let fraction = (slip_whole - slip) / (1.0 + eps);
         for (_, v) in signals.iter_mut() {
             for p in v.iter_mut() {
-                p.delay_s = (p.delay_s + shift) / SAMPLE_RATE_HZ;
+                p.delay_s = (p.delay_s + shift + fraction) / SAMPLE_RATE_HZ;
             }
         }
-        let rx_start = frame_no * n as i64 + shift as i64;
         // Tower i's own signal (with its network's other towers) carries the noise: the
         // noise is referred to tower i's free-space reference path, γ_ref.
         let (owner_i, main_paths) = signals.swap_remove(0);
@@ -1420,7 +1436,13 @@ mod tests {
     /// samples late at 100 ppm. That drift is the receiver clock's, not the sync's error,
     /// and is taken out here. The true carrier offset, `−ε f_c`, turns by `−ε f_c/(1 + ε)`
     /// per receiver sample period at the nominal `f_s`, which is what the sync measures.
-    fn sync_timing_stats(ppm: f64, snr_db: f64, epochs: usize, cfo_search: bool) -> OscillatorRun {
+    fn sync_timing_stats(
+        ppm: f64,
+        snr_db: f64,
+        epochs: usize,
+        cfo_search: bool,
+        first_frame: i64,
+    ) -> OscillatorRun {
         let f = frame();
         let rng = TrialRng::new(11, 0);
         let cfg = DtmbSensorConfig {
@@ -1459,7 +1481,7 @@ mod tests {
         src.tower_link(0, &tr);
         let w = window_samples(&cfg);
         for i in 0..epochs {
-            let frame_no = 8 + (i % 10) as i64;
+            let frame_no = first_frame + (i % 10) as i64;
             let range_m = 3000.0 + 0.37 * i as f64 * METRES_PER_SAMPLE;
             // A searching receiver not yet acquired acquires whatever it is asked.
             let unacquired = cfo_search && ppm != 0.0 && src.towers[0].acquisition.is_none();
@@ -1467,10 +1489,12 @@ mod tests {
             let centre_off = (i % 10 != 0).then_some(0.0);
             let margin = if acquiring { n / 2 } else { w + 16 };
             let offset = margin as f64 + (range_m / METRES_PER_SAMPLE).fract();
-            let clock_drift_samples = eps * (frame_no as f64 * n as f64 + offset);
+            // The stretch of the block's own first `offset` samples (the slip before the
+            // block is the receiver clock's, taken out by `signal_error`).
+            let stretch_samples = eps * offset;
             let e = src
                 .signal_error(0, frame_no, snr_db, range_m, &[0.0], centre_off, &tr)
-                .map(|e| e - clock_drift_samples);
+                .map(|e| e - stretch_samples);
             if acquiring {
                 run.full.add(e);
                 if let (Some(_), Some(a)) = (e, src.towers[0].acquisition.as_ref()) {
@@ -1498,7 +1522,7 @@ mod tests {
         for snr_db in [-10.0, -15.0] {
             for cfo_search in [false, true] {
                 for ppm in [0.0, 2.0, 10.0, 20.0, 50.0, 100.0] {
-                    let r = sync_timing_stats(ppm, snr_db, 2000, cfo_search);
+                    let r = sync_timing_stats(ppm, snr_db, 2000, cfo_search, 8);
                     let (full, aided) = (&r.full, &r.aided);
                     println!(
                         "SNR {snr_db:>5.1} dB search {cfo_search:>5} {ppm:>5.1} ppm | full: RMS \
@@ -1553,13 +1577,13 @@ mod tests {
     fn an_oscillator_error_costs_the_signal_level_sync_nothing_once_it_searches_its_frequency() {
         let snr = OSCILLATOR_TEST_SNR_DB;
         let n = OSCILLATOR_TEST_EPOCHS;
-        let zero = sync_timing_stats(0.0, snr, n, true);
+        let zero = sync_timing_stats(0.0, snr, n, true, 8);
         assert!(
             zero.full.bad_share() + zero.aided.bad_share() < 0.005,
             "0 ppm: {zero:?}"
         );
         for ppm in [10.0, 20.0, 50.0, 100.0] {
-            let r = sync_timing_stats(ppm, snr, n, true);
+            let r = sync_timing_stats(ppm, snr, n, true, 8);
             // The acquisition's coarse hypothesis is within one hypothesis spacing of the
             // true offset −ε f_c (482 MHz: −4.8 to −48.2 kHz).
             assert!(
@@ -1611,18 +1635,59 @@ mod tests {
         }
     }
 
+    /// A minute into a run the receiver's sample clock has slipped `ε f_s t` samples
+    /// (907 at 2 ppm, 9070 at 20 ppm): the receiver clock's drift, which the world carries
+    /// in `[receiver.clock]` and `signal_error` therefore takes out of the block. The sync
+    /// then sees what it sees in the first frames: the same losses and the same spread
+    /// about the same mean (the tolerances of the test above). Before the slip was taken
+    /// out, the header left the ±38-sample aided window within 2.5 s at 2 ppm.
+    #[test]
+    fn a_minute_into_a_run_the_oscillator_error_still_costs_the_sync_nothing() {
+        let snr = OSCILLATOR_TEST_SNR_DB;
+        let n = 600;
+        // 60 s of PN945 frames (625 µs each).
+        let late = 96_000;
+        for ppm in [2.0, 20.0] {
+            let early = sync_timing_stats(ppm, snr, n, true, 8);
+            let r = sync_timing_stats(ppm, snr, n, true, late);
+            for (what, got, base) in [
+                ("full", &r.full, &early.full),
+                ("aided", &r.aided, &early.aided),
+            ] {
+                assert!(
+                    got.lost + got.outliers <= got.epochs / 200 + 1,
+                    "{ppm} ppm {what} at 60 s: {got:?}"
+                );
+                let tol = std_tolerance(base.std_samples(), got.inliers.min(base.inliers));
+                assert!(
+                    (got.std_samples() - base.std_samples()).abs() <= tol,
+                    "{ppm} ppm {what} at 60 s: std {} against {} ± {tol}",
+                    got.std_samples(),
+                    base.std_samples()
+                );
+                let se = |x: &SyncStats| x.std_samples() / (x.inliers as f64).sqrt();
+                assert!(
+                    (got.mean_samples() - base.mean_samples()).abs() <= 4.0 * (se(got) + se(base)),
+                    "{ppm} ppm {what} at 60 s: mean {} against {}",
+                    got.mean_samples(),
+                    base.mean_samples()
+                );
+            }
+        }
+    }
+
     #[test]
     fn without_its_frequency_search_the_signal_level_sync_loses_a_20_ppm_oscillator() {
         let snr = OSCILLATOR_TEST_SNR_DB;
         let n = OSCILLATOR_TEST_EPOCHS;
-        let zero = sync_timing_stats(0.0, snr, n, false);
-        let off = sync_timing_stats(20.0, snr, n, false);
+        let zero = sync_timing_stats(0.0, snr, n, false, 8);
+        let off = sync_timing_stats(20.0, snr, n, false, 8);
         // 20 ppm at 482 MHz is 9.64 kHz, past the PN945 header's first null (8 kHz).
         assert!(off.full.bad_share() > 0.5, "full: {:?}", off.full);
         assert!(off.aided.bad_share() > 0.5, "aided: {:?}", off.aided);
         assert!(zero.full.bad_share() + zero.aided.bad_share() < 0.005);
         // Without an oscillator error the search is never on: the same syncs, bit for bit.
-        let searching = sync_timing_stats(0.0, snr, n, true);
+        let searching = sync_timing_stats(0.0, snr, n, true, 8);
         assert_eq!(
             (
                 searching.aided.sum_sq.to_bits(),
