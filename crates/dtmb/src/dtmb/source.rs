@@ -1197,7 +1197,11 @@ impl DtmbSource {
         // A full search over a frame may lock on the next or previous frame's header only
         // if the phase is misidentified; the error is taken modulo nothing, as a receiver
         // would report it.
-        Some(s.toa_samples - offset)
+        // The header arrives `offset` true samples into the block, `offset (1 + ε)` of the
+        // receiver's: the `ε · offset` between them is, like the slip before the block, the
+        // receiver clock's drift (over the block's first samples), which `[receiver.clock]`
+        // carries. What stays is the sync's own error, with the header's stretch.
+        Some(s.toa_samples - offset * (1.0 + eps))
     }
 }
 
@@ -1456,7 +1460,7 @@ mod tests {
             ..DtmbSensorConfig::default()
         };
         let tower = towers(&f)[0].clone();
-        let (n, h) = (tower.pn_mode.frame_len(), tower.pn_mode.header_len());
+        let h = tower.pn_mode.header_len();
         let eps = ppm * 1e-6;
         let true_cfo_hz = -eps * tower.freq_hz / (1.0 + eps);
         let mut src = DtmbSource::new(
@@ -1479,7 +1483,6 @@ mod tests {
         let tr = truth(&f, SimTime(0), Vector3::new(0.0, 0.0, 1.5));
         // Fills the taps with the direct path alone (no scene).
         src.tower_link(0, &tr);
-        let w = window_samples(&cfg);
         for i in 0..epochs {
             let frame_no = first_frame + (i % 10) as i64;
             let range_m = 3000.0 + 0.37 * i as f64 * METRES_PER_SAMPLE;
@@ -1487,14 +1490,10 @@ mod tests {
             let unacquired = cfo_search && ppm != 0.0 && src.towers[0].acquisition.is_none();
             let acquiring = i % 10 == 0 || unacquired;
             let centre_off = (i % 10 != 0).then_some(0.0);
-            let margin = if acquiring { n / 2 } else { w + 16 };
-            let offset = margin as f64 + (range_m / METRES_PER_SAMPLE).fract();
-            // The stretch of the block's own first `offset` samples (the slip before the
-            // block is the receiver clock's, taken out by `signal_error`).
-            let stretch_samples = eps * offset;
-            let e = src
-                .signal_error(0, frame_no, snr_db, range_m, &[0.0], centre_off, &tr)
-                .map(|e| e - stretch_samples);
+            // The returned error is against the arrival in the receiver's samples,
+            // `offset (1 + ε)`: the slip and the stretch before the header are the
+            // receiver clock's, taken out by `signal_error`.
+            let e = src.signal_error(0, frame_no, snr_db, range_m, &[0.0], centre_off, &tr);
             if acquiring {
                 run.full.add(e);
                 if let (Some(_), Some(a)) = (e, src.towers[0].acquisition.as_ref()) {
