@@ -84,6 +84,25 @@ pub fn refused(args: &[&str], needles: &[&str]) -> String {
     e
 }
 
+/// Runs `hybridnav run WORLD --quiet --outputs summary --out OUT` with `extra` arguments
+/// (trials, seed …), asserts that it succeeded, and returns its `summary.json`.
+pub fn run_summary(world: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+    let mut args = vec![
+        "run",
+        world.to_str().expect("utf-8 path"),
+        "--quiet",
+        "--outputs",
+        "summary",
+        "--out",
+        out.to_str().expect("utf-8 path"),
+    ];
+    args.extend_from_slice(extra);
+    let o = hybridnav(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("summary"))
+        .expect("summary.json")
+}
+
 /// Writes `text` to `dir/name` and returns the path.
 pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     let p = dir.join(name);

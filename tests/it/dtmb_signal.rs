@@ -946,48 +946,22 @@ filter = "wls"
 /// aided window lost the headers within seconds.
 #[test]
 fn a_receiver_oscillator_error_leaves_the_signal_level_world_unchanged() {
-    let repo = crate::common::repo();
-    let base = std::fs::read_to_string(repo.join("worlds/default.toml")).unwrap();
-    let ephemeris = repo.join("ephemeris/ESBC00DNK_R_20201770000_01D_MN.rnx");
+    let base = crate::common::default_world_text();
     let mut rmse = Vec::new();
     for ppm in [0.0, 2.0, 20.0] {
         let dir = crate::common::tmp_dir(&format!("dtmb-osc-{ppm}"));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        let world = base
-            .replace(
-                "ephemeris = \"../ephemeris/ESBC00DNK_R_20201770000_01D_MN.rnx\"",
-                &format!("ephemeris = {:?}", ephemeris.to_str().expect("utf-8 path")),
-            )
-            .replacen(
-                "level = \"measurement\"",
-                &format!("level = \"signal\"\naided = true\nrx_oscillator_ppm = {ppm}"),
-                1,
-            );
+        let world = base.replacen(
+            "level = \"measurement\"",
+            &format!("level = \"signal\"\naided = true\nrx_oscillator_ppm = {ppm}"),
+            1,
+        );
         assert!(
             world.contains("rx_oscillator_ppm"),
             "the default world changed"
         );
-        let path = dir.join("world.toml");
-        std::fs::write(&path, world).unwrap();
-        let out = dir.join("out");
-        let o = crate::common::hybridnav(&[
-            "run",
-            path.to_str().expect("utf-8 path"),
-            "--trials",
-            "2",
-            "--seed",
-            "1",
-            "--quiet",
-            "--outputs",
-            "summary",
-            "--out",
-            out.to_str().expect("utf-8 path"),
-        ]);
-        assert!(o.status.success(), "{}", crate::common::stderr(&o));
-        let summary: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
-                .unwrap();
+        let path = crate::common::write(&dir, "world.toml", &world);
+        let summary =
+            crate::common::run_summary(&path, &dir.join("out"), &["--trials", "2", "--seed", "1"]);
         let rows: Vec<(String, f64)> = summary["estimators"]
             .as_array()
             .unwrap()

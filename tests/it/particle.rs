@@ -508,25 +508,11 @@ fn the_few_particle_goals_hold_on_the_paper_worlds() {
     for (file, trials, rows) in cases {
         let out = crate::common::tmp_dir(&format!("pf-goals-{file}"));
         let _ = std::fs::remove_dir_all(&out);
-        let o = crate::common::hybridnav(&[
-            "run",
-            repo()
-                .join("worlds")
-                .join(file)
-                .to_str()
-                .expect("utf-8 path"),
-            "--trials",
-            trials,
-            "--quiet",
-            "--outputs",
-            "summary",
-            "--out",
-            out.to_str().expect("utf-8 path"),
-        ]);
-        assert!(o.status.success(), "{}", crate::common::stderr(&o));
-        let summary: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
-                .unwrap();
+        let summary = crate::common::run_summary(
+            &repo().join("worlds").join(file),
+            &out,
+            &["--trials", trials],
+        );
         let ests = summary["estimators"].as_array().unwrap();
         for (name, limit) in rows {
             let e = ests
