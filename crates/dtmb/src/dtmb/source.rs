@@ -1572,6 +1572,35 @@ mod tests {
         4.0 * sigma / (n as f64).sqrt()
     }
 
+    /// Asserts that `got` is the sync of `base` within Monte-Carlo noise, its mean moved
+    /// by `shift` samples: lost and outlying syncs at most half a percent plus one (0 ppm:
+    /// 2 of 2000; without the search 20 ppm loses 74 % of the aided syncs and 98 % of the
+    /// full ones), the spread about the mean within [`std_tolerance`], the mean within
+    /// four standard errors (`σ/√n` each). Returns that tolerance and `got`'s standard
+    /// error of the mean.
+    fn assert_same_sync(what: &str, got: &SyncStats, base: &SyncStats, shift: f64) -> (f64, f64) {
+        assert!(
+            got.lost + got.outliers <= got.epochs / 200 + 1,
+            "{what}: {got:?}"
+        );
+        let tol = std_tolerance(base.std_samples(), got.inliers.min(base.inliers));
+        assert!(
+            (got.std_samples() - base.std_samples()).abs() <= tol,
+            "{what}: std {} against {} ± {tol}",
+            got.std_samples(),
+            base.std_samples()
+        );
+        let se = |x: &SyncStats| x.std_samples() / (x.inliers as f64).sqrt();
+        let excess = got.mean_samples() - base.mean_samples() - shift;
+        assert!(
+            excess.abs() <= 4.0 * (se(got) + se(base)),
+            "{what}: mean {} against {} + {shift}",
+            got.mean_samples(),
+            base.mean_samples()
+        );
+        (tol, se(got))
+    }
+
     #[test]
     fn an_oscillator_error_costs_the_signal_level_sync_nothing_once_it_searches_its_frequency() {
         let snr = OSCILLATOR_TEST_SNR_DB;
@@ -1596,32 +1625,9 @@ mod tests {
                 ("full", &r.full, &zero.full),
                 ("aided", &r.aided, &zero.aided),
             ] {
-                // Lost and outlying syncs: at most half a percent, plus one (0 ppm: 2 of
-                // 2000; without the search 20 ppm loses 74 % of the aided syncs and 98 %
-                // of the full ones).
-                assert!(
-                    got.lost + got.outliers <= got.epochs / 200 + 1,
-                    "{ppm} ppm {what}: {got:?}"
-                );
-                // The spread about the mean is the 0 ppm one within Monte-Carlo noise.
-                let tol = std_tolerance(base.std_samples(), got.inliers.min(base.inliers));
-                assert!(
-                    (got.std_samples() - base.std_samples()).abs() <= tol,
-                    "{ppm} ppm {what}: std {} against {} ± {tol}",
-                    got.std_samples(),
-                    base.std_samples()
-                );
-                // The mean moves by the sampling clock's header stretch and nothing else
-                // (standard error σ/√n about the 0 ppm mean).
-                let se = got.std_samples() / (got.inliers as f64).sqrt();
-                let excess = got.mean_samples() - base.mean_samples() - bias;
-                assert!(
-                    excess.abs()
-                        <= 4.0 * se + 4.0 * base.std_samples() / (base.inliers as f64).sqrt(),
-                    "{ppm} ppm {what}: mean {} against {} + stretch {bias}",
-                    got.mean_samples(),
-                    base.mean_samples()
-                );
+                // The same sync as at 0 ppm, its mean moved by the sampling clock's
+                // header stretch and nothing else.
+                let (tol, se) = assert_same_sync(&format!("{ppm} ppm {what}"), got, base, bias);
                 // So the RMS less that bias is the 0 ppm RMS within the same noise.
                 let rms_less_bias =
                     (got.std_samples().powi(2) + (got.mean_samples() - bias).powi(2)).sqrt();
@@ -1653,24 +1659,7 @@ mod tests {
                 ("full", &r.full, &early.full),
                 ("aided", &r.aided, &early.aided),
             ] {
-                assert!(
-                    got.lost + got.outliers <= got.epochs / 200 + 1,
-                    "{ppm} ppm {what} at 60 s: {got:?}"
-                );
-                let tol = std_tolerance(base.std_samples(), got.inliers.min(base.inliers));
-                assert!(
-                    (got.std_samples() - base.std_samples()).abs() <= tol,
-                    "{ppm} ppm {what} at 60 s: std {} against {} ± {tol}",
-                    got.std_samples(),
-                    base.std_samples()
-                );
-                let se = |x: &SyncStats| x.std_samples() / (x.inliers as f64).sqrt();
-                assert!(
-                    (got.mean_samples() - base.mean_samples()).abs() <= 4.0 * (se(got) + se(base)),
-                    "{ppm} ppm {what} at 60 s: mean {} against {}",
-                    got.mean_samples(),
-                    base.mean_samples()
-                );
+                assert_same_sync(&format!("{ppm} ppm {what} at 60 s"), got, base, 0.0);
             }
         }
     }
