@@ -670,11 +670,7 @@ where
             ..
         } = filter
         {
-            let splits = matches!(
-                variant,
-                PfVariant::Regularised | PfVariant::RaoBlackwellised
-            );
-            if !splits || linearised {
+            if !variant.takes_progressive_correction(linearised) {
                 return Err(
                     "options.pf_correction = \"progressive\" is for filter = \"pf\" or \"rbpf\" with pf_proposal = \"prior\": the linearised proposal already conditions on the ranges, and the other members keep their single update".into(),
                 );

@@ -119,6 +119,17 @@ pub enum PfVariant {
     Gaussian,
 }
 
+impl PfVariant {
+    /// Whether this member can bring an epoch's likelihood in by progressive correction
+    /// ([`ParticleFilter::with_progressive_correction`]): the regularised and
+    /// Rao-Blackwellised members with the prior proposal (the linearised proposal already
+    /// conditions on the ranges; the others keep their single update). Where it can, it is
+    /// the world's default.
+    pub fn takes_progressive_correction(self, linearised: bool) -> bool {
+        matches!(self, PfVariant::Regularised | PfVariant::RaoBlackwellised) && !linearised
+    }
+}
+
 /// The storage of `n` particles of dimension `N`, allocated once.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ParticleBuffer<const N: usize> {

@@ -482,31 +482,34 @@ impl EstimatorSpec {
             | FilterKind::Sir
             | FilterKind::Rbpf
             | FilterKind::Mpf
-            | FilterKind::Gpf => PaperFilter::Pf {
-                particles: cfg.particles,
-                resampling: cfg.resampling.scheme(),
-                neff_threshold: cfg.neff_threshold,
-                variant: match self.filter {
-                    FilterKind::Sir => crate::fusion::particle::PfVariant::Sir,
-                    FilterKind::Rbpf => crate::fusion::particle::PfVariant::RaoBlackwellised,
-                    FilterKind::Mpf => crate::fusion::particle::PfVariant::Marginalised,
-                    FilterKind::Gpf => crate::fusion::particle::PfVariant::Gaussian,
-                    _ => crate::fusion::particle::PfVariant::Regularised,
-                },
-                linearised: cfg.pf_proposal == crate::fusion::family::ProposalKind::Linearised,
-                kernel: cfg.pf_kernel.placement(),
-                covariance: cfg.gpf_covariance.estimate(),
-                // Progressive correction is the default wherever it applies (the
-                // regularised and Rao-Blackwellised members with the prior proposal); an
-                // explicit "progressive" elsewhere reaches the paper filter, which refuses it.
-                progressive: match cfg.pf_correction {
-                    Some(kind) => kind == crate::fusion::family::CorrectionKind::Progressive,
-                    None => {
-                        matches!(self.filter, FilterKind::Pf | FilterKind::Rbpf)
-                            && cfg.pf_proposal == crate::fusion::family::ProposalKind::Prior
-                    }
-                },
-            },
+            | FilterKind::Gpf => {
+                use crate::fusion::particle::PfVariant;
+                let variant = match self.filter {
+                    FilterKind::Sir => PfVariant::Sir,
+                    FilterKind::Rbpf => PfVariant::RaoBlackwellised,
+                    FilterKind::Mpf => PfVariant::Marginalised,
+                    FilterKind::Gpf => PfVariant::Gaussian,
+                    _ => PfVariant::Regularised,
+                };
+                let linearised =
+                    cfg.pf_proposal == crate::fusion::family::ProposalKind::Linearised;
+                PaperFilter::Pf {
+                    particles: cfg.particles,
+                    resampling: cfg.resampling.scheme(),
+                    neff_threshold: cfg.neff_threshold,
+                    variant,
+                    linearised,
+                    kernel: cfg.pf_kernel.placement(),
+                    covariance: cfg.gpf_covariance.estimate(),
+                    // Progressive correction is the default wherever it applies; an
+                    // explicit "progressive" elsewhere reaches the paper filter, which
+                    // refuses it.
+                    progressive: cfg.pf_correction.map_or_else(
+                        || variant.takes_progressive_correction(linearised),
+                        |kind| kind == crate::fusion::family::CorrectionKind::Progressive,
+                    ),
+                }
+            }
             other @ (FilterKind::Ekf11 | FilterKind::Wls | FilterKind::Ins | FilterKind::Pdr) => {
                 return Err(format!(
                     "process model '{}' runs with filter = \"ekf\", \"ukf\", \"ckf\", \"stf\", \"rekf\" or \"pf\", not '{}'",
