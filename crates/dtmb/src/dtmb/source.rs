@@ -1007,9 +1007,9 @@ impl DtmbSource {
         // offset is up to `|ε| f_c`, so its acquisition searches the frequency over the
         // shared acquisition rule's span. Without an oscillator error nothing is searched
         // (the source as it was, bit for bit).
-        let ppm = self.cfg.rx_oscillator_ppm;
-        let cfo_search_hz = if self.cfo_search && ppm != 0.0 {
-            acquisition_cfo_search_hz(ppm * 1e-6 * self.towers[ti].spec.freq_hz)
+        let eps = self.cfg.rx_oscillator_ppm * 1e-6;
+        let cfo_search_hz = if self.cfo_search && eps != 0.0 {
+            acquisition_cfo_search_hz(eps * self.towers[ti].spec.freq_hz)
         } else {
             0.0
         };
@@ -1082,7 +1082,6 @@ impl DtmbSource {
         // `n₀ + (k − n₀ ε + m)/(1 + ε)` for block sample `m`, and the delays take the
         // fraction `(k − n₀ ε)/(1 + ε)` back. Only the stretch inside the block (`ε` per
         // sample) stays. With `ε = 0` nothing moves.
-        let eps = self.cfg.rx_oscillator_ppm * 1e-6;
         let block_start = frame_no * n as i64 + shift as i64;
         let slip = block_start as f64 * eps;
         let slip_whole = slip.ceil();
@@ -1170,9 +1169,10 @@ impl DtmbSource {
                 frame_in_superframe: Some(frame_in_superframe),
             },
         };
-        // Tracking: the block is turned back by the acquisition's carrier-offset estimate
-        // (its coarse hypothesis plus the fine estimate made after it), which the received
-        // signal gave; the offset is static apart from the paths' Doppler, a few hertz.
+        // Tracking: the block is turned back by the acquisition's coarse hypothesis, which
+        // the received signal gave (the fine estimate from one header is noisier than the
+        // half hypothesis spacing it would remove, module documentation); the offset is
+        // static apart from the paths' Doppler, a few hertz.
         // Acquisition: the sync searches the frequency itself.
         let acquiring = centre_off.is_none();
         if !acquiring {
@@ -1433,13 +1433,11 @@ mod tests {
     /// range moves 0.37 sample a sync, so every fractional delay occurs. `cfo_search`
     /// false is the receiver without its frequency search (the source before it).
     ///
-    /// The truth is the header's arrival in the receiver's samples: with the sample clock
-    /// `f_s(1 + ε)` the channel puts transmitter sample `m` at receiver sample `m(1 + ε)`
-    /// (`channel` module), so the header of frame `j` reached `offset` samples into a
-    /// block starting at receiver sample `jN` arrives at `offset + ε(jN + offset)`, 4
-    /// samples late at 100 ppm. That drift is the receiver clock's, not the sync's error,
-    /// and is taken out here. The true carrier offset, `−ε f_c`, turns by `−ε f_c/(1 + ε)`
-    /// per receiver sample period at the nominal `f_s`, which is what the sync measures.
+    /// The errors are `signal_error`'s: against the header's arrival `offset (1 + ε)`
+    /// receiver samples into a block whose sample clock starts at the block (the clock's
+    /// drift before the header is the receiver clock's, not the sync's error). The true
+    /// carrier offset, `−ε f_c`, turns by `−ε f_c/(1 + ε)` per receiver sample period at
+    /// the nominal `f_s`, which is what the sync measures.
     fn sync_timing_stats(
         ppm: f64,
         snr_db: f64,
