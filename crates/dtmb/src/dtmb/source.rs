@@ -791,6 +791,35 @@ impl DtmbSource {
     pub fn taps(&self) -> &[Tap] {
         &self.taps
     }
+
+    /// One signal-level sync of tower `ti` (the chain of [`Source::sample`] for one tower,
+    /// without the link budget): frame `frame_no` through the paths of the last
+    /// [`DtmbSource::tower_link`] (no Doppler) at the reference SNR `snr_ref_db`, the true
+    /// range `range_m`, then a full search (`centre_off_samples` `None`, with the frequency
+    /// search when the oscillator is off) or an aided sync with the window centred that
+    /// many samples from the truth. Returns the timing error in samples, as the pseudorange
+    /// carries it. Exposed for `benches/dtmb.rs`, which times the source's syncs; not an
+    /// interface to build on.
+    #[doc(hidden)]
+    pub fn signal_sync_error_samples(
+        &mut self,
+        ti: usize,
+        frame_no: i64,
+        snr_ref_db: f64,
+        range_m: f64,
+        centre_off_samples: Option<f64>,
+        truth: &crate::measurement::Truth,
+    ) -> Option<f64> {
+        self.signal_error(
+            ti,
+            frame_no,
+            snr_ref_db,
+            range_m,
+            &[0.0],
+            centre_off_samples,
+            truth,
+        )
+    }
 }
 
 /// Half-width of the aided window in samples.
