@@ -41,11 +41,15 @@
 //! nothing is searched or turned (the source as before, bit for bit). The sample clock's
 //! slip since the trial's start (`ε f_s` samples a second, 15 at 2 ppm) is the receiver
 //! clock's drift, which `[receiver.clock]` already puts into every range, so each block is
-//! cut as if the sample clock started at the block; the stretch inside it stays and is
-//! not corrected: the header stretched by `1 + ε` delays the fine timing by
-//! `ε (P + C/2)` samples (preamble `P`, core `C`: +0.047 samples, 1.9 m, at 100 ppm in
-//! PN945) (`docs/validation.md`, *The world's DTMB source and its oscillator*). A wrong
-//! acquisition is kept until the next full search.
+//! cut as if the sample clock started at the block; the stretch inside it stays: the
+//! header stretched by `1 + ε` delays the fine timing by `ε (P + C/2)` samples (preamble
+//! `P`, core `C`: +0.047 samples, 1.9 m, at 100 ppm in PN945;
+//! [`header_stretch_delay_samples`]). The receiver takes that delay out with its own
+//! estimate of its oscillator, `ε̂ = −f̂/(f_c + f̂)` from the acquisition's carrier
+//! estimate `f̂` (coarse hypothesis plus fine estimate; the towers' carriers are exact),
+//! never the configured `ε`; at −10 dB `f̂` is within 2.2 kHz of the truth, so `ε̂` within
+//! 4.5 ppm and the stretch within 0.002 samples (`docs/validation.md`, *The world's DTMB
+//! source and its oscillator*). A wrong acquisition is kept until the next full search.
 //!
 //! Random streams (all per tower `Dnn`): `dtmb/Dnn/timing` (model draws), `dtmb/Dnn/tx`,
 //! `dtmb/Dnn/noise` (signal level), `dtmb/Dnn/tps`; shadowing `dtmb/shadowing/Dnn` from the
@@ -437,6 +441,9 @@ pub struct DtmbSource {
     /// its oscillator is off (always, except in the test that measures the receiver
     /// without the search).
     cfo_search: bool,
+    /// Whether the receiver takes the header's stretch out of its timing with its own
+    /// oscillator estimate (always, except in the test that shows the bias it removes).
+    correct_stretch: bool,
 }
 
 impl std::fmt::Debug for DtmbSource {
@@ -616,6 +623,7 @@ impl DtmbSource {
             validity: ValidityLog::default(),
             warnings,
             cfo_search: true,
+            correct_stretch: true,
         })
     }
 
@@ -1037,8 +1045,9 @@ impl DtmbSource {
         // shared acquisition rule's span. Without an oscillator error nothing is searched
         // (the source as it was, bit for bit).
         let eps = self.cfg.rx_oscillator_ppm * 1e-6;
+        let carrier_hz = self.towers[ti].spec.freq_hz;
         let cfo_search_hz = if self.cfo_search && eps != 0.0 {
-            acquisition_cfo_search_hz(eps * self.towers[ti].spec.freq_hz)
+            acquisition_cfo_search_hz(eps * carrier_hz)
         } else {
             0.0
         };
@@ -1223,15 +1232,48 @@ impl DtmbSource {
         if acquiring && cfo_search_hz > 0.0 {
             st.acquisition = Some(s);
         }
+        // The header's stretch: the sample clock runs `1 + ε` fast, so the fine timing,
+        // which measures the core's centre and steps back `P + C/2` nominal samples, is
+        // late by `ε (P + C/2)`. One reference drives the mixer and the sample clock, so
+        // the receiver takes `ε̂` from its own carrier estimate (the acquisition's coarse
+        // hypothesis plus its fine estimate), never from the configuration. A receiver
+        // without the frequency search (and every receiver at 0 ppm) has no estimate and
+        // corrects nothing, which keeps `ε = 0` bit for bit.
+        let stretch_samples = match st.acquisition.as_ref() {
+            Some(a) if cfo_search_hz > 0.0 && self.correct_stretch => {
+                let eps_hat =
+                    oscillator_error_from_cfo(a.cfo_hz.unwrap_or(a.coarse_cfo_hz), carrier_hz);
+                header_stretch_delay_samples(eps_hat, mode)
+            }
+            _ => 0.0,
+        };
         // A full search over a frame may lock on the next or previous frame's header only
         // if the phase is misidentified; the error is taken modulo nothing, as a receiver
         // would report it.
         // The header arrives `offset` true samples into the block, `offset (1 + ε)` of the
         // receiver's: the `ε · offset` between them is, like the slip before the block, the
         // receiver clock's drift (over the block's first samples), which `[receiver.clock]`
-        // carries. What stays is the sync's own error, with the header's stretch.
-        Some(s.toa_samples - offset * (1.0 + eps))
+        // carries. What stays is the sync's own error, less the receiver's estimate of the
+        // header's stretch.
+        Some(s.toa_samples - stretch_samples - offset * (1.0 + eps))
     }
+}
+
+/// The delay (samples) that a sample clock running `1 + eps` fast puts into the fine
+/// timing of a `mode` header: the header is stretched by `1 + eps`, and the sync measures
+/// the core (`C` samples after the `P`-sample preamble) and steps back `P + C/2` nominal
+/// samples from its centre, so the header start it reports is late by `eps (P + C/2)`
+/// (0.047 samples at 100 ppm in PN945).
+pub fn header_stretch_delay_samples(eps: f64, mode: PnMode) -> f64 {
+    eps * (mode.preamble_len() as f64 + mode.core_len() as f64 / 2.0)
+}
+
+/// The oscillator's fractional error a receiver infers from its carrier-offset estimate
+/// `cfo_hz` (at the nominal sample rate) on a carrier `carrier_hz`: one reference drives
+/// the mixer and the sample clock and the tower's carrier is exact, so the block carries
+/// `f = −ε f_c/(1 + ε)` and `ε̂ = −f̂/(f_c + f̂)`.
+fn oscillator_error_from_cfo(cfo_hz: f64, carrier_hz: f64) -> f64 {
+    -cfo_hz / (carrier_hz + cfo_hz)
 }
 
 /// The CRB-based σ (m) the source reports at `snr_db` for `mode` and `frames` (exposed
@@ -1460,7 +1502,9 @@ mod tests {
     /// `epochs` syncs: every tenth a full search (acquisition), the others aided with the
     /// window centred on the truth. The block's frame number cycles over 8..18 and the
     /// range moves 0.37 sample a sync, so every fractional delay occurs. `cfo_search`
-    /// false is the receiver without its frequency search (the source before it).
+    /// false is the receiver without its frequency search (the source before it);
+    /// `correct_stretch` false the receiver that leaves the header's stretch in its timing
+    /// (the source before it took it out).
     ///
     /// The errors are `signal_error`'s: against the header's arrival `offset (1 + ε)`
     /// receiver samples into a block whose sample clock starts at the block (the clock's
@@ -1472,6 +1516,7 @@ mod tests {
         snr_db: f64,
         epochs: usize,
         cfo_search: bool,
+        correct_stretch: bool,
         first_frame: i64,
     ) -> OscillatorRun {
         let f = frame();
@@ -1502,6 +1547,7 @@ mod tests {
         )
         .unwrap();
         src.cfo_search = cfo_search;
+        src.correct_stretch = correct_stretch;
         let m = src.towers[0].receiver.as_ref().unwrap().fft_len();
         let mut run = OscillatorRun {
             search_spacing_hz: (m / (2 * h)) as f64 * SAMPLE_RATE_HZ / m as f64,
@@ -1548,7 +1594,7 @@ mod tests {
         for snr_db in [-10.0, -15.0] {
             for cfo_search in [false, true] {
                 for ppm in [0.0, 2.0, 10.0, 20.0, 50.0, 100.0] {
-                    let r = sync_timing_stats(ppm, snr_db, 2000, cfo_search, 8);
+                    let r = sync_timing_stats(ppm, snr_db, 2000, cfo_search, true, 8);
                     let (full, aided) = (&r.full, &r.aided);
                     println!(
                         "SNR {snr_db:>5.1} dB search {cfo_search:>5} {ppm:>5.1} ppm | full: RMS \
@@ -1584,19 +1630,29 @@ mod tests {
     const OSCILLATOR_TEST_SNR_DB: f64 = -10.0;
     const OSCILLATOR_TEST_EPOCHS: usize = 2000;
 
-    /// The bias the sampling-clock offset `ε` puts into the fine timing, independent of
-    /// the carrier offset: the channel stretches the header by `1 + ε`, and the sync
-    /// measures the core (`C` samples after the `P`-sample preamble) and steps back `P`
-    /// from its start, so a header start estimated from the core's centre is late by
-    /// `ε (P + C/2)` samples (0.047 at 100 ppm in PN945).
+    /// The bias the sampling-clock offset `ε` puts into the fine timing when the receiver
+    /// leaves it in ([`header_stretch_delay_samples`] at the true `ε`).
     fn header_stretch_bias_samples(ppm: f64, mode: PnMode) -> f64 {
-        ppm * 1e-6 * (mode.preamble_len() as f64 + mode.core_len() as f64 / 2.0)
+        header_stretch_delay_samples(ppm * 1e-6, mode)
     }
 
     /// Four standard errors of the difference of two standard deviations each estimated
     /// from `n` Gaussian errors (`σ/√(2n)` each): `4σ/√n`.
     fn std_tolerance(sigma: f64, n: usize) -> f64 {
         4.0 * sigma / (n as f64).sqrt()
+    }
+
+    /// Four standard errors (`σ/√n`) of each of two means: the tolerance of
+    /// [`mean_within`].
+    fn mean_tolerance(got: &SyncStats, base: &SyncStats) -> f64 {
+        let se = |x: &SyncStats| x.std_samples() / (x.inliers as f64).sqrt();
+        4.0 * (se(got) + se(base))
+    }
+
+    /// Whether `got`'s mean is `base`'s moved by `shift` samples within
+    /// [`mean_tolerance`].
+    fn mean_within(got: &SyncStats, base: &SyncStats, shift: f64) -> bool {
+        (got.mean_samples() - base.mean_samples() - shift).abs() <= mean_tolerance(got, base)
     }
 
     /// Asserts that `got` is the sync of `base` within Monte-Carlo noise, its mean moved
@@ -1618,9 +1674,8 @@ mod tests {
             base.std_samples()
         );
         let se = |x: &SyncStats| x.std_samples() / (x.inliers as f64).sqrt();
-        let excess = got.mean_samples() - base.mean_samples() - shift;
         assert!(
-            excess.abs() <= 4.0 * (se(got) + se(base)),
+            mean_within(got, base, shift),
             "{what}: mean {} against {} + {shift}",
             got.mean_samples(),
             base.mean_samples()
@@ -1628,17 +1683,29 @@ mod tests {
         (tol, se(got))
     }
 
+    /// With its frequency search and its own correction of the header's stretch, the sync
+    /// at 10–100 ppm is the 0 ppm sync within Monte-Carlo noise: the same losses, spread
+    /// and mean, with nothing added for the oscillator. The receiver that leaves the
+    /// stretch in (the source before the correction) has its mean moved by the stretch,
+    /// and fails the same check wherever the stretch is more than twice the check's
+    /// tolerance, so that the Monte-Carlo noise cannot hide it: the aided syncs at 50 and
+    /// 100 ppm (tolerance about 0.0095 samples against 0.024 and 0.047). At 20 ppm the
+    /// stretch, 0.0095 samples, is at the tolerance, and the 200 full searches resolve
+    /// none (tolerance about 0.03).
     #[test]
     fn an_oscillator_error_costs_the_signal_level_sync_nothing_once_it_searches_its_frequency() {
         let snr = OSCILLATOR_TEST_SNR_DB;
         let n = OSCILLATOR_TEST_EPOCHS;
-        let zero = sync_timing_stats(0.0, snr, n, true, 8);
+        let zero = sync_timing_stats(0.0, snr, n, true, true, 8);
         assert!(
             zero.full.bad_share() + zero.aided.bad_share() < 0.005,
             "0 ppm: {zero:?}"
         );
+        // The cases where the stretch left in is resolved (at least the aided syncs at 50
+        // and 100 ppm).
+        let mut resolved = 0;
         for ppm in [10.0, 20.0, 50.0, 100.0] {
-            let r = sync_timing_stats(ppm, snr, n, true, 8);
+            let r = sync_timing_stats(ppm, snr, n, true, true, 8);
             // The acquisition's coarse hypothesis is within one hypothesis spacing of the
             // true offset −ε f_c (482 MHz: −4.8 to −48.2 kHz).
             assert!(
@@ -1647,24 +1714,48 @@ mod tests {
                 r.coarse_err_max_hz,
                 r.search_spacing_hz
             );
-            let bias = header_stretch_bias_samples(ppm, PnMode::Pn945);
             for (what, got, base) in [
                 ("full", &r.full, &zero.full),
                 ("aided", &r.aided, &zero.aided),
             ] {
-                // The same sync as at 0 ppm, its mean moved by the sampling clock's
-                // header stretch and nothing else.
-                let (tol, se) = assert_same_sync(&format!("{ppm} ppm {what}"), got, base, bias);
-                // So the RMS less that bias is the 0 ppm RMS within the same noise.
-                let rms_less_bias =
-                    (got.std_samples().powi(2) + (got.mean_samples() - bias).powi(2)).sqrt();
+                // The same sync as at 0 ppm, its mean unmoved: the stretch is gone.
+                let (tol, se) = assert_same_sync(&format!("{ppm} ppm {what}"), got, base, 0.0);
                 assert!(
-                    (rms_less_bias - base.rms_samples()).abs() <= tol + 4.0 * se,
-                    "{ppm} ppm {what}: RMS less the stretch {rms_less_bias} against {}",
+                    (got.rms_samples() - base.rms_samples()).abs() <= tol + 4.0 * se,
+                    "{ppm} ppm {what}: RMS {} against {}",
+                    got.rms_samples(),
                     base.rms_samples()
                 );
             }
+            // Left in, the stretch moves the mean by ε (P + C/2), which the same check
+            // accepts as the shift and sees as an error where it is resolved.
+            let old = sync_timing_stats(ppm, snr, n, true, false, 8);
+            let bias = header_stretch_bias_samples(ppm, PnMode::Pn945);
+            for (what, got, base) in [
+                ("full", &old.full, &zero.full),
+                ("aided", &old.aided, &zero.aided),
+            ] {
+                if bias > 2.0 * mean_tolerance(got, base) {
+                    resolved += 1;
+                    assert!(
+                        !mean_within(got, base, 0.0),
+                        "{ppm} ppm {what}, stretch left in: mean {} against {}",
+                        got.mean_samples(),
+                        base.mean_samples()
+                    );
+                }
+                assert!(
+                    mean_within(got, base, bias),
+                    "{ppm} ppm {what}, stretch left in: mean {} against {} + {bias}",
+                    got.mean_samples(),
+                    base.mean_samples()
+                );
+            }
         }
+        assert!(
+            resolved >= 2,
+            "the stretch left in was resolved {resolved} times"
+        );
     }
 
     /// A minute into a run the receiver's sample clock has slipped `ε f_s t` samples
@@ -1680,8 +1771,8 @@ mod tests {
         // 60 s of PN945 frames (625 µs each).
         let late = 96_000;
         for ppm in [2.0, 20.0] {
-            let early = sync_timing_stats(ppm, snr, n, true, 8);
-            let r = sync_timing_stats(ppm, snr, n, true, late);
+            let early = sync_timing_stats(ppm, snr, n, true, true, 8);
+            let r = sync_timing_stats(ppm, snr, n, true, true, late);
             for (what, got, base) in [
                 ("full", &r.full, &early.full),
                 ("aided", &r.aided, &early.aided),
@@ -1695,14 +1786,14 @@ mod tests {
     fn without_its_frequency_search_the_signal_level_sync_loses_a_20_ppm_oscillator() {
         let snr = OSCILLATOR_TEST_SNR_DB;
         let n = OSCILLATOR_TEST_EPOCHS;
-        let zero = sync_timing_stats(0.0, snr, n, false, 8);
-        let off = sync_timing_stats(20.0, snr, n, false, 8);
+        let zero = sync_timing_stats(0.0, snr, n, false, true, 8);
+        let off = sync_timing_stats(20.0, snr, n, false, true, 8);
         // 20 ppm at 482 MHz is 9.64 kHz, past the PN945 header's first null (8 kHz).
         assert!(off.full.bad_share() > 0.5, "full: {:?}", off.full);
         assert!(off.aided.bad_share() > 0.5, "aided: {:?}", off.aided);
         assert!(zero.full.bad_share() + zero.aided.bad_share() < 0.005);
         // Without an oscillator error the search is never on: the same syncs, bit for bit.
-        let searching = sync_timing_stats(0.0, snr, n, true, 8);
+        let searching = sync_timing_stats(0.0, snr, n, true, true, 8);
         assert_eq!(
             (
                 searching.aided.sum_sq.to_bits(),
