@@ -49,7 +49,14 @@
 //! estimate `f̂` (coarse hypothesis plus fine estimate; the towers' carriers are exact),
 //! never the configured `ε`; at −10 dB `f̂` is within 2.2 kHz of the truth, so `ε̂` within
 //! 4.5 ppm and the stretch within 0.002 samples (`docs/validation.md`, *The world's DTMB
-//! source and its oscillator*). A wrong acquisition is kept until the next full search.
+//! source and its oscillator*). An aided sync whose strongest lag is not a path by the
+//! first-path rule (`peak_to_noise_db` below [`FirstPathConfig::noise_threshold_db`],
+//! 12 dB) re-acquires: the same block is searched again in time and frequency (up to half
+//! a frame past the window, so that no neighbouring header is in it), and that search
+//! becomes the tower's acquisition and its measurement if its own peak passes the same
+//! threshold; otherwise the aided sync stands. So a wrong acquisition is dropped at the
+//! first aided sync it makes fail, not kept until the next full search. Without an
+//! oscillator error (no acquisition is held) nothing re-acquires.
 //!
 //! Random streams (all per tower `Dnn`): `dtmb/Dnn/timing` (model draws), `dtmb/Dnn/tx`,
 //! `dtmb/Dnn/noise` (signal level), `dtmb/Dnn/tps`; shadowing `dtmb/shadowing/Dnn` from the
@@ -444,6 +451,9 @@ pub struct DtmbSource {
     /// Whether the receiver takes the header's stretch out of its timing with its own
     /// oscillator estimate (always, except in the test that shows the bias it removes).
     correct_stretch: bool,
+    /// Whether an aided sync that finds no path re-acquires the tower (always, except in
+    /// the test that shows a wrong acquisition kept without it).
+    reacquire: bool,
 }
 
 impl std::fmt::Debug for DtmbSource {
@@ -624,6 +634,7 @@ impl DtmbSource {
             warnings,
             cfo_search: true,
             correct_stretch: true,
+            reacquire: true,
         })
     }
 
@@ -1218,18 +1229,66 @@ impl DtmbSource {
                 super::fd_channel::rotate(block, 0, -a.coarse_cfo_hz / SAMPLE_RATE_HZ);
             }
         }
-        let s = rx
+        let first_path = FirstPathConfig::default();
+        let mut s = rx
             .sync(
                 block,
                 &SyncConfig {
                     search,
                     frames: k,
-                    first_path: Some(FirstPathConfig::default()),
+                    first_path: Some(first_path),
                     cfo_search_hz: if acquiring { cfo_search_hz } else { 0.0 },
                 },
             )
             .ok()?;
-        if acquiring && cfo_search_hz > 0.0 {
+        let mut acquired = acquiring;
+        // Re-acquisition: the first-path rule accepts a lag as a path only
+        // `noise_threshold_db` above the noise floor, so an aided sync whose strongest lag
+        // falls below that has no path in its window. With a carrier turned back by a
+        // wrong acquisition the header's correlation is lost (the tower is not), so the
+        // receiver searches this block again, time and frequency, as at acquisition. The
+        // block is turned forward again first: the search looks for the whole offset (the
+        // rotation's f32 rounding, about 1e-7 of the samples, is far below the noise). It
+        // searches the block only up to half a frame past the window's centre: cut for
+        // the aided window, the block also holds the next frame's header a frame after
+        // this one's, and in PN945 every header is a cyclic shift of one m-sequence, so a
+        // search over a whole frame of lags would see that header's correlation too, a
+        // few hundred lags from its start (an acquisition's block, with the header half a
+        // frame in, holds no neighbour either). The new acquisition replaces the old one only if its own peak passes the same
+        // threshold: a block in which the header is merely weak (noise, a fade) gives the
+        // search over a whole frame no path either, only a noise peak, and is no evidence
+        // against the acquisition held (the noise floor being the mean of exponential
+        // powers, noise alone passes 12 dB at one of a frame's 4800 lags about once in
+        // 1600 searches per frequency hypothesis).
+        if !acquiring
+            && self.reacquire
+            && cfo_search_hz > 0.0
+            && s.peak_to_noise_db < first_path.noise_threshold_db
+        {
+            if let Some(a) = st.acquisition.as_ref() {
+                super::fd_channel::rotate(block, 0, a.coarse_cfo_hz / SAMPLE_RATE_HZ);
+            }
+            let search_len =
+                ((k - 1) * n + mode.header_len() + offset.ceil() as usize + n / 2).min(len);
+            let r = rx
+                .sync(
+                    &block[..search_len],
+                    &SyncConfig {
+                        search: Search::Full {
+                            frame_in_superframe: Some(frame_in_superframe),
+                        },
+                        frames: k,
+                        first_path: Some(first_path),
+                        cfo_search_hz,
+                    },
+                )
+                .ok()?;
+            if r.peak_to_noise_db >= first_path.noise_threshold_db {
+                s = r;
+                acquired = true;
+            }
+        }
+        if acquired && cfo_search_hz > 0.0 {
             st.acquisition = Some(s);
         }
         // The header's stretch: the sample clock runs `1 + ε` fast, so the fine timing,
@@ -1495,6 +1554,48 @@ mod tests {
         estimate_err_max_hz: f64,
         /// The spacing of the frequency search's hypotheses, `⌊M/(2H)⌋ f_s/M` (Hz).
         search_spacing_hz: f64,
+        /// The aided syncs that found no path and re-acquired the tower.
+        reacquisitions: usize,
+    }
+
+    /// The source of [`sync_timing_stats`]: tower 1 of [`towers`] alone at signal level,
+    /// aided, the receiver oscillator `ppm` off, its paths (the direct path alone, no
+    /// scene) filled for a receiver at the origin, whose truth is returned with it.
+    fn oscillator_source(ppm: f64) -> (DtmbSource, Truth) {
+        let f = frame();
+        let rng = TrialRng::new(11, 0);
+        let cfg = DtmbSensorConfig {
+            level: DtmbLevel::Signal,
+            aided: true,
+            shadowing: ShadowingConfig {
+                sigma_db: 0.0,
+                ..ShadowingConfig::default()
+            },
+            rx_oscillator_ppm: ppm,
+            ..DtmbSensorConfig::default()
+        };
+        let mut src = DtmbSource::new(
+            cfg,
+            vec![towers(&f)[0].clone()],
+            None,
+            f.clone(),
+            clock(&rng),
+            Some(0),
+            &rng,
+            SimTime::from_seconds(5.0),
+        )
+        .unwrap();
+        let tr = truth(&f, SimTime(0), Vector3::new(0.0, 0.0, 1.5));
+        src.tower_link(0, &tr);
+        (src, tr)
+    }
+
+    /// The spacing of the frequency search's hypotheses of tower 0's receiver,
+    /// `⌊M/(2H)⌋ f_s/M` (Hz).
+    fn search_spacing_hz(src: &DtmbSource) -> f64 {
+        let h = src.towers[0].spec.pn_mode.header_len();
+        let m = src.towers[0].receiver.as_ref().unwrap().fft_len();
+        (m / (2 * h)) as f64 * SAMPLE_RATE_HZ / m as f64
     }
 
     /// The signal-level sync of tower 1 of [`towers`] (PN945, 482 MHz, line of sight, no
@@ -1519,43 +1620,15 @@ mod tests {
         correct_stretch: bool,
         first_frame: i64,
     ) -> OscillatorRun {
-        let f = frame();
-        let rng = TrialRng::new(11, 0);
-        let cfg = DtmbSensorConfig {
-            level: DtmbLevel::Signal,
-            aided: true,
-            shadowing: ShadowingConfig {
-                sigma_db: 0.0,
-                ..ShadowingConfig::default()
-            },
-            rx_oscillator_ppm: ppm,
-            ..DtmbSensorConfig::default()
-        };
-        let tower = towers(&f)[0].clone();
-        let h = tower.pn_mode.header_len();
-        let eps = ppm * 1e-6;
-        let true_cfo_hz = -eps * tower.freq_hz / (1.0 + eps);
-        let mut src = DtmbSource::new(
-            cfg.clone(),
-            vec![tower],
-            None,
-            f.clone(),
-            clock(&rng),
-            Some(0),
-            &rng,
-            SimTime::from_seconds(5.0),
-        )
-        .unwrap();
+        let (mut src, tr) = oscillator_source(ppm);
         src.cfo_search = cfo_search;
         src.correct_stretch = correct_stretch;
-        let m = src.towers[0].receiver.as_ref().unwrap().fft_len();
+        let eps = ppm * 1e-6;
+        let true_cfo_hz = -eps * src.towers[0].spec.freq_hz / (1.0 + eps);
         let mut run = OscillatorRun {
-            search_spacing_hz: (m / (2 * h)) as f64 * SAMPLE_RATE_HZ / m as f64,
+            search_spacing_hz: search_spacing_hz(&src),
             ..OscillatorRun::default()
         };
-        let tr = truth(&f, SimTime(0), Vector3::new(0.0, 0.0, 1.5));
-        // Fills the taps with the direct path alone (no scene).
-        src.tower_link(0, &tr);
         for i in 0..epochs {
             let frame_no = first_frame + (i % 10) as i64;
             let range_m = 3000.0 + 0.37 * i as f64 * METRES_PER_SAMPLE;
@@ -1566,7 +1639,11 @@ mod tests {
             // The returned error is against the arrival in the receiver's samples,
             // `offset (1 + ε)`: the slip and the stretch before the header are the
             // receiver clock's, taken out by `signal_error`.
+            let before = src.towers[0].acquisition;
             let e = src.signal_error(0, frame_no, snr_db, range_m, &[0.0], centre_off, &tr);
+            if !acquiring && src.towers[0].acquisition != before {
+                run.reacquisitions += 1;
+            }
             if acquiring {
                 run.full.add(e);
                 if let (Some(_), Some(a)) = (e, src.towers[0].acquisition.as_ref()) {
@@ -1600,7 +1677,8 @@ mod tests {
                         "SNR {snr_db:>5.1} dB search {cfo_search:>5} {ppm:>5.1} ppm | full: RMS \
                          {:.4} mean {:+.4} std {:.4} bad {:.3} ({} lost {} out of {}) | aided: \
                          RMS {:.4} mean {:+.4} std {:.4} bad {:.3} ({} lost {} out of {}) | \
-                         coarse err ≤ {:.0} Hz, estimate err ≤ {:.1} Hz, spacing {:.0} Hz",
+                         coarse err ≤ {:.0} Hz, estimate err ≤ {:.1} Hz, spacing {:.0} Hz, \
+                         {} re-acquisitions",
                         full.rms_samples(),
                         full.mean_samples(),
                         full.std_samples(),
@@ -1618,6 +1696,7 @@ mod tests {
                         r.coarse_err_max_hz,
                         r.estimate_err_max_hz,
                         r.search_spacing_hz,
+                        r.reacquisitions,
                     );
                 }
             }
@@ -1801,6 +1880,82 @@ mod tests {
             ),
             (zero.aided.sum_sq.to_bits(), zero.full.sum_sq.to_bits())
         );
+    }
+
+    /// A wrong acquisition (its carrier hypothesis four spacings off, 14.8 kHz, where the
+    /// PN945 header's correlation is down by 22 dB) is dropped at the next aided sync:
+    /// that sync finds no path above the first-path rule's noise threshold, re-acquires
+    /// on its own block, measures the header within a sample and leaves an acquisition
+    /// within one spacing of the true offset, and the nine syncs after it are good too.
+    /// Without the re-acquisition the wrong hypothesis is kept and more than half of the
+    /// ten aided syncs are lost or outliers. Where nothing is wrong (0 and 20 ppm at
+    /// −10 dB) nothing re-acquires and the syncs are the same, bit for bit.
+    #[test]
+    fn an_aided_sync_that_finds_no_path_reacquires_a_wrongly_acquired_tower() {
+        let snr = OSCILLATOR_TEST_SNR_DB;
+        let ppm = 20.0;
+        for reacquire in [true, false] {
+            let (mut src, tr) = oscillator_source(ppm);
+            src.reacquire = reacquire;
+            let spacing_hz = search_spacing_hz(&src);
+            let true_cfo_hz = -ppm * 1e-6 * 482e6 / (1.0 + ppm * 1e-6);
+            let range_m = 3000.0;
+            let e = src.signal_error(0, 8, snr, range_m, &[0.0], None, &tr);
+            assert!(e.is_some_and(|e| e.abs() < 1.0), "acquisition: {e:?}");
+            let a = src.towers[0].acquisition.as_mut().unwrap();
+            assert!((a.coarse_cfo_hz - true_cfo_hz).abs() <= spacing_hz);
+            // The wrong acquisition: its hypothesis (and whole estimate) moved.
+            a.coarse_cfo_hz += 4.0 * spacing_hz;
+            a.cfo_hz = a.cfo_hz.map(|f| f + 4.0 * spacing_hz);
+            let wrong = *a;
+            let mut bad = 0;
+            for i in 0..10 {
+                let e = src.signal_error(0, 9 + i, snr, range_m, &[0.0], Some(0.0), &tr);
+                let good = e.is_some_and(|e| e.abs() < 1.0);
+                let a = src.towers[0].acquisition.unwrap();
+                if reacquire && i == 0 {
+                    assert!(good, "first aided sync after the wrong acquisition: {e:?}");
+                    assert!(
+                        (a.coarse_cfo_hz - true_cfo_hz).abs() <= spacing_hz,
+                        "re-acquired {} Hz, true {true_cfo_hz} Hz",
+                        a.coarse_cfo_hz
+                    );
+                }
+                if !reacquire {
+                    assert_eq!(a, wrong, "without re-acquisition the acquisition is kept");
+                }
+                bad += usize::from(!good);
+            }
+            if reacquire {
+                assert_eq!(bad, 0, "after re-acquiring");
+            } else {
+                assert!(bad > 5, "kept wrong acquisition: {bad} of 10 bad");
+            }
+        }
+        // Nothing wrong, nothing changes.
+        for ppm in [0.0, 20.0] {
+            let run = |reacquire: bool| {
+                let (mut src, tr) = oscillator_source(ppm);
+                src.reacquire = reacquire;
+                let mut errors = Vec::new();
+                for i in 0..500 {
+                    let centre_off = (i % 10 != 0).then_some(0.0);
+                    let range_m = 3000.0 + 0.37 * i as f64 * METRES_PER_SAMPLE;
+                    let e = src.signal_error(
+                        0,
+                        8 + (i % 10) as i64,
+                        snr,
+                        range_m,
+                        &[0.0],
+                        centre_off,
+                        &tr,
+                    );
+                    errors.push(e.map(f64::to_bits));
+                }
+                errors
+            };
+            assert_eq!(run(true), run(false), "{ppm} ppm");
+        }
     }
 
     #[test]
