@@ -472,17 +472,16 @@ fn ber_world(a: &BerArgs) -> Result<()> {
                 "not corrected (--no-cfo-correction)".to_string()
             },
             if osc.correct && f.abs() > range {
-                if a.true_timing {
-                    " — beyond the range: the true-timing receiver has no frequency search, \
-                     so its estimate wraps and the correction fails"
-                        .to_string()
-                } else {
-                    format!(
-                        " — beyond the range: the acquiring receiver's coarse frequency \
-                         search (±{:.0} Hz) unwraps it",
-                        acquisition_search_hz(osc)
-                    )
-                }
+                format!(
+                    " — beyond the range: the {} receiver's coarse frequency search \
+                     (±{:.0} Hz) unwraps it",
+                    if a.true_timing {
+                        "true-timing"
+                    } else {
+                        "acquiring"
+                    },
+                    acquisition_search_hz(osc)
+                )
             } else {
                 String::new()
             }

@@ -233,7 +233,9 @@ pub enum DtmbCommand {
         /// With --world: give the estimating receivers the true frame start. By default
         /// they acquire it (and the frame number) from the PN headers with the ranging
         /// receiver's frame sync and start each frame 16 samples before the first path
-        /// found; the genie always has the true timing.
+        /// found; the genie always has the true timing. The true-timing receivers still
+        /// search and estimate a carrier offset (--cfo-hz, an oscillator error) as the
+        /// acquiring ones do: they are given the timing, not the carrier.
         #[arg(long)]
         true_timing: bool,
         /// With --world: a pure carrier-frequency offset in Hz (e.g. 1000 = 1.7 ppm at
