@@ -209,7 +209,7 @@
 //! from the track), linear over `|x| < D_min/2`. The offset is then the ramp
 //! `f(t) = f₀ + ḟt` (`t` from the first frame's start) and the stream turns by
 //! `2π(f₀t + ½ḟt²)`: `f₀` rides on the Doppler groups as above and the drift's `πḟt²`
-//! multiplies every received block before the noise ([`apply_cfo_ramp`], receiver time
+//! multiplies every received block before the noise (`apply_cfo_ramp`, receiver time
 //! `t = n/(f_s(1 + ε))` with a sampling-clock offset); `ḟ = 0` builds nothing of it, bit
 //! for bit. The genie knows the ramp.
 //! *The sum lags.* The sum of the headers' correlations estimates the mean frequency of

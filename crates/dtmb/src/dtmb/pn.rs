@@ -7,9 +7,9 @@
 //!
 //! | mode  | recurrence                              | seed       | layout          |
 //! |-------|-----------------------------------------|------------|-----------------|
-//! | PN420 | a[n] = a[n−1] ⊕ a[n−5] ⊕ a[n−6] ⊕ a[n−8] | 10110000   | 82 + 255 + 83   |
-//! | PN595 | a[n] = a[n−3] ⊕ a[n−10]                 | 0000000001 | 595 (no cycles) |
-//! | PN945 | a[n] = a[n−2] ⊕ a[n−7] ⊕ a[n−8] ⊕ a[n−9] | 111110111  | 217 + 511 + 217 |
+//! | PN420 | `a[n] = a[n−1] ⊕ a[n−5] ⊕ a[n−6] ⊕ a[n−8]` | 10110000   | 82 + 255 + 83   |
+//! | PN595 | `a[n] = a[n−3] ⊕ a[n−10]` | 0000000001 | 595 (no cycles) |
+//! | PN945 | `a[n] = a[n−2] ⊕ a[n−7] ⊕ a[n−8] ⊕ a[n−9]` | 111110111  | 217 + 511 + 217 |
 //!
 //! Because the sequence is periodic with period `C` (255 or 511), running it on for the
 //! whole header makes the preamble the cyclic tail of the core and the postamble its head:

@@ -767,7 +767,7 @@ impl DtmbSource {
     }
 
     /// The pseudoranges the receiver would report at `truth` without their errors: for
-    /// every tower it holds ([`DtmbSource::held_link`]), the tower's position, the
+    /// every tower it holds (`DtmbSource::held_link`), the tower's position, the
     /// geometric range as the pseudorange and the σ it reports (no range rate). What the
     /// PCRLB of a world (`world::bound`) takes as this receiver's information; `out` is
     /// cleared first.
