@@ -161,7 +161,7 @@
 //! around it ([`CfoCorrector::set_coarse_hz`]), so an offset of several ranges is
 //! estimated, not wrapped. The true-timing receiver is given the frame start, not the
 //! carrier: it runs the same search on its first two frames, seeking frame 0's header
-//! phase, and takes only its frequency (`true_timing_coarse_hz`), so it unwraps as the
+//! phase, and takes only its frequency (`search_true_timing_cfo`), so it unwraps as the
 //! acquiring receiver does.
 //! The correlation's phase is the power-weighted mean of the paths' shifts plus `f_o`: a
 //! common Doppler is corrected with the offset (no receiver can tell them apart).
@@ -1588,19 +1588,8 @@ pub fn measure_channel_point_with_cfo(
     let mut p = BerPoint::empty(snr_db, cfg.frames);
     let total = cfg.profile.interleaver_delay_frames() + cfg.frames;
     // The estimating receiver searches its offset on frames 0 and 1 (the genie knows it).
-    let search_hz = if cfg.csi != Csi::Ideal && c.cfo.is_some() {
-        acquisition_search_hz(osc)
-    } else {
-        0.0
-    };
-    let mut search = if search_hz > 0.0 {
-        Some((
-            super::receiver::Receiver::new(mode, 2 * fl)?,
-            vec![Complex32::default(); 2 * fl],
-        ))
-    } else {
-        None
-    };
+    let search_hz = acquisition_search_hz(osc);
+    let mut search = cfg.csi != Csi::Ideal && c.cfo.is_some() && search_hz > 0.0;
     // Frame k is received once frame k + 1's header is in: one frame more is sent.
     for k in 0..=total {
         let phase = mode.phase_of_frame(k % fsf);
@@ -1634,14 +1623,9 @@ pub fn measure_channel_point_with_cfo(
                 }
                 c.rx.set_true_response(&h_mid)?;
             }
-            if let Some((sync, window)) = search.as_mut() {
-                window[..fl].copy_from_slice(&y_prev);
-                window[fl..].copy_from_slice(&y);
-                let seed = true_timing_coarse_hz(sync, window, mode, cfg.h.len(), search_hz)?;
-                if let (Some(f), Some(corr)) = (seed, c.cfo.as_mut()) {
-                    corr.set_coarse_hz(f)?;
-                }
-                search = None;
+            if let (true, Some(corr)) = (std::mem::take(&mut search), c.cfo.as_mut()) {
+                let window = [&y_prev[..], &y[..]].concat();
+                search_true_timing_cfo(corr, &window, mode, cfg.h.len(), search_hz)?;
             }
             let (frame, next) = match c.cfo.as_mut() {
                 Some(corr) => corr.correct(&y_prev, &y[..hl])?,
@@ -1752,28 +1736,41 @@ pub fn acquisition_search_hz(osc: Oscillator) -> f64 {
     }
 }
 
+/// Seeds the corrector `corr` with the frame sync's estimate `r` (after a search) where
+/// the headers' own estimate cannot unwrap the offset: when the search moved the block
+/// (the cyclic modes' own estimate covers what is left within a hypothesis) and always in
+/// PN595 (its header-to-header range of ±864 Hz is less than a hypothesis). The rule of
+/// the acquiring and the true-timing receivers alike.
+fn seed_corrector(
+    corr: &mut CfoCorrector,
+    r: &super::receiver::SyncResult,
+    mode: PnMode,
+) -> Result<(), DtmbError> {
+    if r.coarse_cfo_hz != 0.0 || !mode.is_cyclic() {
+        corr.set_coarse_hz(r.cfo_estimate_hz())?;
+    }
+    Ok(())
+}
+
 /// The frequency search of the true-timing receiver: it is given the frame timing, not
-/// the carrier, so with `osc.correct` it searches the offset as the acquiring receiver
-/// does ([`acquisition_search_hz`]) on the first two frames it receives (`window`, the
-/// stream from frame 0's start, less the advance; the search seeks frame 0's header
-/// phase), and seeds its corrector with the
-/// estimate under the acquiring receiver's rule (when the search moved the block, and
-/// always in PN595, whose header-to-header range of ±864 Hz is less than a hypothesis).
-/// Only the frequency is taken: the timing stays the true one. `None` when the
-/// receiver does not correct an offset (nothing runs: the receiver without it, bit for
-/// bit) or the search did not move a cyclic mode's block.
+/// the carrier, so when it corrects an offset it searches it as the acquiring receiver
+/// does (over `search_hz`, [`acquisition_search_hz`]) on the first two frames it receives
+/// (`window`, the stream from frame 0's start, less the advance; the search seeks frame
+/// 0's header phase) and seeds its corrector `corr` by the acquiring receiver's rule
+/// ([`seed_corrector`]). Only the frequency is taken: the timing stays the true one.
 ///
 /// # Errors
 /// As [`super::receiver::Receiver::sync`], and when the header the search found is not at
 /// a frame start (more than the response and the kernel's two half-widths from one: the
 /// search failed, and its frequency is not to be trusted).
-fn true_timing_coarse_hz(
-    sync: &mut super::receiver::Receiver,
+fn search_true_timing_cfo(
+    corr: &mut CfoCorrector,
     window: &[Complex32],
     mode: PnMode,
     response_len: usize,
     search_hz: f64,
-) -> Result<Option<f64>, DtmbError> {
+) -> Result<(), DtmbError> {
+    let mut sync = super::receiver::Receiver::new(mode, window.len())?;
     let r = sync.sync(
         window,
         &super::receiver::SyncConfig {
@@ -1800,7 +1797,7 @@ fn true_timing_coarse_hz(
             ),
         });
     }
-    Ok((r.coarse_cfo_hz != 0.0 || !mode.is_cyclic()).then(|| r.cfo_hz.unwrap_or(r.coarse_cfo_hz)))
+    seed_corrector(corr, &r, mode)
 }
 
 /// What [`measure_channel_point_clocked`] measured.
@@ -1883,9 +1880,7 @@ pub fn measure_channel_point_clocked(
     let mut block_start = 0;
     let mut sync = None;
     // The true-timing receiver searches its offset on blocks 0 and 1, before frame 0.
-    let mut search = (!acquire && c.cfo.is_some() && acquisition_search_hz(osc) > 0.0)
-        .then(|| super::receiver::Receiver::new(mode, 2 * fl))
-        .transpose()?;
+    let search = !acquire && acquisition_search_hz(osc) > 0.0;
     if acquire {
         let mut timing = TrialRng::new(cfg.seed, 0).stream("dtmb/ber/timing");
         crate::dtmb::noise::add_awgn(&mut hist, c.sigma, &mut timing);
@@ -1911,20 +1906,10 @@ pub fn measure_channel_point_clocked(
         c.next_block(cfg.profile, mode, k, &mut logical, &mut hist[3 * fl..])?;
         k += 1;
         let first = (k as i64 - 4) * fl as i64;
-        if k == 2 {
-            if let Some(mut rx) = search.take() {
-                // hist = zeros, zeros, blocks 0 and 1; no frame has been received yet.
-                let seed = true_timing_coarse_hz(
-                    &mut rx,
-                    &hist[2 * fl..],
-                    mode,
-                    cfg.h.len(),
-                    acquisition_search_hz(osc),
-                )?;
-                if let (Some(f), Some(corr)) = (seed, c.cfo.as_mut()) {
-                    corr.set_coarse_hz(f)?;
-                }
-            }
+        if let (true, 2, Some(corr)) = (search, k, c.cfo.as_mut()) {
+            // hist = zeros, zeros, blocks 0 and 1; no frame has been received yet.
+            let search_hz = acquisition_search_hz(osc);
+            search_true_timing_cfo(corr, &hist[2 * fl..], mode, cfg.h.len(), search_hz)?;
         }
         if acq.is_none() {
             if let Some(sync) = sync.as_mut() {
@@ -1941,13 +1926,9 @@ pub fn measure_channel_point_clocked(
                         ..SyncConfig::default()
                     },
                 )?;
-                // The sync's estimate seeds the corrector when the search moved the
-                // block (the cyclic modes' own estimate covers what is left within a
-                // hypothesis) and always in PN595 (its header-to-header range is less
-                // than a hypothesis).
-                if search_hz > 0.0 && (r.coarse_cfo_hz != 0.0 || !mode.is_cyclic()) {
+                if search_hz > 0.0 {
                     if let Some(corr) = c.cfo.as_mut() {
-                        corr.set_coarse_hz(r.cfo_hz.unwrap_or(r.coarse_cfo_hz))?;
+                        seed_corrector(corr, &r, mode)?;
                     }
                 }
                 let start = (b as f64 + r.toa_samples).round() as i64 - advance as i64;

@@ -193,6 +193,14 @@ pub struct SyncResult {
     pub strongest_after_first_samples: usize,
 }
 
+impl SyncResult {
+    /// The sync's best carrier-offset estimate, Hz: the fine estimate (with the coarse
+    /// hypothesis in it) where the mode and block gave one, else the coarse hypothesis.
+    pub fn cfo_estimate_hz(&self) -> f64 {
+        self.cfo_hz.unwrap_or(self.coarse_cfo_hz)
+    }
+}
+
 /// Pseudorange in metres of a synchronised header: `c · (t_rx − t_emit)`, where `t_rx` is
 /// the receiver-clock time of the header's arrival (the block's first sample at
 /// `rx_time_first_sample`, plus `toa_samples / rx_sample_rate_hz`) and `t_emit` the

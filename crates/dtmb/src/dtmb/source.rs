@@ -1300,8 +1300,7 @@ impl DtmbSource {
         // corrects nothing, which keeps `ε = 0` bit for bit.
         let stretch_samples = match st.acquisition.as_ref() {
             Some(a) if cfo_search_hz > 0.0 && self.correct_stretch => {
-                let eps_hat =
-                    oscillator_error_from_cfo(a.cfo_hz.unwrap_or(a.coarse_cfo_hz), carrier_hz);
+                let eps_hat = oscillator_error_from_cfo(a.cfo_estimate_hz(), carrier_hz);
                 header_stretch_delay_samples(eps_hat, mode)
             }
             _ => 0.0,
@@ -1647,7 +1646,7 @@ mod tests {
             if acquiring {
                 run.full.add(e);
                 if let (Some(_), Some(a)) = (e, src.towers[0].acquisition.as_ref()) {
-                    let estimate_hz = a.cfo_hz.unwrap_or(a.coarse_cfo_hz);
+                    let estimate_hz = a.cfo_estimate_hz();
                     run.coarse_err_max_hz = run
                         .coarse_err_max_hz
                         .max((a.coarse_cfo_hz - true_cfo_hz).abs());
