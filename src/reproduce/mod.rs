@@ -340,6 +340,13 @@ fn protocol_and_resets(s: &Summary) -> (Vec<String>, Vec<(String, usize, f64)>) 
             protocol.push(format!("† {} keeps its own {}: {}", e.name, d.key, d.cite));
         }
     }
+    // Every row's RPE shares the world's interval; say so where it is not the usual 1 s.
+    if s.rpe_delta_s != crate::engine::trial::Scoring::DEFAULT_RPE_DELTA_S {
+        protocol.push(format!(
+            "RPE over Δ = {} s for every row (the world's `[scoring] rpe_delta_s`).",
+            s.rpe_delta_s
+        ));
+    }
     let resets = s
         .estimators
         .iter()

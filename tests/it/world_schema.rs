@@ -155,6 +155,10 @@ const BEYOND_A_SCHEMA: &[(&str, &str)] = &[
         "18-comparison-row-with-its-own-gate.toml",
         "a constraint across tables (a compared estimator's gate against [comparison])",
     ),
+    (
+        "20-rpe-interval-off-the-scoring-grid.toml",
+        "a constraint between two keys of one table (the RPE interval a multiple of 1/rate_hz)",
+    ),
 ];
 
 #[test]

@@ -20,6 +20,9 @@ errors in metres:
   rpe_segments_positions_aligned
                               as rpe_segments, on the estimate whose positions (only)
                               were moved by evo's Umeyama rotation and translation;
+  rpe_segments_13             evo's RPE over 13 frames with all pairs (i, i + 13) on
+                              each gap-free stretch, pooled: the pairs exactly 13 s
+                              apart (a world's `[scoring] rpe_delta_s = 13`);
 
 plus "rotation" (3x3, rows) and "translation" of that alignment, and "gaps" (the
 number of places where consecutive estimate epochs are more than 1.5 s apart).
@@ -54,12 +57,12 @@ def ape(ref, est):
     return m
 
 
-def rpe(ref, est):
+def rpe(ref, est, delta=1):
     m = metrics.RPE(
         metrics.PoseRelation.translation_part,
-        delta=1,
+        delta=delta,
         delta_unit=metrics.Unit.frames,
-        all_pairs=False,
+        all_pairs=delta > 1,
     )
     m.process_data((ref, est))
     return m
@@ -74,14 +77,14 @@ def sub(traj, idx):
     )
 
 
-def rpe_by_segments(ref, est):
+def rpe_by_segments(ref, est, delta=1):
     """RPE over each gap-free stretch, errors pooled into one metric-like object."""
     t = est.timestamps
     breaks = np.flatnonzero(np.diff(t) > 1.5) + 1
     errors = []
     for idx in np.split(np.arange(t.size), breaks):
-        if idx.size >= 2:
-            errors.append(rpe(sub(ref, idx), sub(est, idx)).error)
+        if idx.size > delta:
+            errors.append(rpe(sub(ref, idx), sub(est, idx), delta).error)
     pooled = metrics.RPE(metrics.PoseRelation.translation_part)
     pooled.error = np.concatenate(errors)
     return pooled, breaks.size
@@ -95,6 +98,7 @@ def main():
     out = {"ape": stats(ape(ref, est)), "rpe_frames": stats(rpe(ref, est))}
     seg, gaps = rpe_by_segments(ref, est)
     out["rpe_segments"] = stats(seg)
+    out["rpe_segments_13"] = stats(rpe_by_segments(ref, est, 13)[0])
     out["gaps"] = int(gaps)
 
     # evo's own alignment of the estimate (rotation and translation, no scale).

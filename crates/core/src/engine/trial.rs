@@ -52,6 +52,9 @@ pub struct Scoring {
     /// within this many seconds; older ones are scored as coasting (see
     /// [`EpochRecord::since_update_s`]).
     pub coast_limit_s: f64,
+    /// The interval Δ (s) of the relative pose error: each pair of scoring instants Δ
+    /// apart gives one RPE sample (`metrics::trajectory::rpe_errors`).
+    pub rpe_delta_s: f64,
 }
 
 impl Scoring {
@@ -60,12 +63,17 @@ impl Scoring {
     /// seen no measurement is a prediction, not a fix.
     pub const DEFAULT_COAST_LIMIT_S: f64 = 10.0;
 
+    /// The default RPE interval (s): the TUM benchmark's usual one second, which seed 000
+    /// also uses ("the time interval Δ was chosen as 1 second", §6.1).
+    pub const DEFAULT_RPE_DELTA_S: f64 = 1.0;
+
     /// Scoring at every scored batch of any source (the engine's behaviour for worlds that
     /// name no anchor source), with the default coast limit.
     pub fn every_batch() -> Self {
         Self {
             instants: ScoringInstants::Sources(Vec::new()),
             coast_limit_s: Self::DEFAULT_COAST_LIMIT_S,
+            rpe_delta_s: Self::DEFAULT_RPE_DELTA_S,
         }
     }
 
@@ -84,6 +92,7 @@ impl Scoring {
         Self {
             instants: ScoringInstants::Sources(anchors),
             coast_limit_s: Self::DEFAULT_COAST_LIMIT_S,
+            rpe_delta_s: Self::DEFAULT_RPE_DELTA_S,
         }
     }
 
@@ -607,6 +616,7 @@ mod tests {
                     period: SimTime(s),
                 },
                 coast_limit_s: 2.0,
+                rpe_delta_s: Scoring::DEFAULT_RPE_DELTA_S,
             },
             health: Vec::new(),
         };

@@ -47,7 +47,8 @@ pub struct EstimatorSummary {
     pub ate_m: Option<TrajectoryStats>,
     /// The ATE after a rigid (Horn) alignment of each trial's trajectory to the truth.
     pub ate_aligned_m: Option<TrajectoryStats>,
-    /// Relative pose error of the translation over Δ = 1 s, no alignment (seed 000).
+    /// Relative pose error of the translation over the summary's `rpe_delta_s` (1 s unless
+    /// the world's `[scoring]` says otherwise), no alignment (seed 000).
     pub rpe_m: Option<TrajectoryStats>,
     /// The RPE after each trial's rigid alignment.
     pub rpe_aligned_m: Option<TrajectoryStats>,
@@ -176,6 +177,8 @@ pub struct Summary {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub shard: Option<String>,
     pub duration_s: f64,
+    /// The interval Δ (s) of every estimator's RPE (`[scoring] rpe_delta_s`).
+    pub rpe_delta_s: f64,
     pub estimators: Vec<EstimatorSummary>,
     /// Distinct warnings of every trial's sources, sorted (a model used outside its
     /// validity range, …).
@@ -248,7 +251,8 @@ impl Summary {
         }
         let _ = writeln!(
             s,
-            "(metres; σ-levels: 3-D error percentiles 68.27/95.45/99.73 % over all epochs of all trials;\n ATE/RPE: mean and RMSE, TUM definitions in ECEF, no alignment, RPE over 1 s;\n avail: epochs with an estimate that used a measurement within the coast limit; coast: of all epochs, those\n available without a measurement at that instant; every estimator is scored at the same instants)"
+            "(metres; σ-levels: 3-D error percentiles 68.27/95.45/99.73 % over all epochs of all trials;\n ATE/RPE: mean and RMSE, TUM definitions in ECEF, no alignment, RPE over {} s;\n avail: epochs with an estimate that used a measurement within the coast limit; coast: of all epochs, those\n available without a measurement at that instant; every estimator is scored at the same instants)",
+            self.rpe_delta_s
         );
         if bounded {
             let _ = writeln!(

@@ -53,9 +53,10 @@ impl RunReducer {
     /// As [`RunReducer::new`], keeping `chunk` errors per metric in memory before a
     /// sorted run is spilled to disk (tests use tiny chunks).
     pub fn with_chunk(world: &World, spill_dir: &Path, chunk: usize) -> Self {
-        // The coast limit does not depend on the trial's sources (only the default
-        // instants do).
-        let coast_limit_s = world.scoring(std::iter::empty()).coast_limit_s;
+        // The coast limit and the RPE interval do not depend on the trial's sources (only
+        // the default instants do).
+        let scoring = world.scoring(std::iter::empty());
+        let (coast_limit_s, rpe_delta_s) = (scoring.coast_limit_s, scoring.rpe_delta_s);
         let segments = segments_of(world);
         Self {
             estimators: world
@@ -65,6 +66,7 @@ impl RunReducer {
                 .map(|e| {
                     let mut acc = EstimatorAcc::new(&e.name, spill_dir, chunk);
                     acc.coast_limit_s = coast_limit_s;
+                    acc.rpe_delta_s = rpe_delta_s;
                     acc.nees_dof = e.process.as_ref().map_or(3, |p| p.position_dof()) as f64;
                     acc.segments = segments
                         .iter()
@@ -120,7 +122,17 @@ impl RunReducer {
         // The PCRLB of each estimator's model over the run's truth trajectories
         // (world::bound), and each estimator's efficiency against it.
         let mut bounds = world.pcrlb(opts.seed, opts.trials);
+        let rpe_delta_s = world.scoring(std::iter::empty()).rpe_delta_s;
+        let mut warnings = self.warnings;
         for (i, acc) in self.estimators.into_iter().enumerate() {
+            if acc.ate.len() > 1 && acc.rpe.is_empty() {
+                warnings.insert(format!(
+                    "estimator \"{}\": no two of its scored estimates are {rpe_delta_s} s apart, \
+                     so it has no RPE ([scoring] rpe_delta_s should be a multiple of the \
+                     interval between scoring instants)",
+                    acc.name
+                ));
+            }
             let (mut s, cdf, rmse_vs_time) = acc.finish().map_err(|e| e.to_string())?;
             if let Some(p) = world.comparison.protocols.get(i) {
                 s.protocol = p.clone();
@@ -147,8 +159,9 @@ impl RunReducer {
                 trials: opts.trials,
                 shard: (!opts.shard.is_whole()).then(|| opts.shard.to_string()),
                 duration_s: world.duration_s,
+                rpe_delta_s,
                 estimators,
-                warnings: self.warnings.into_iter().collect(),
+                warnings: warnings.into_iter().collect(),
             },
             first: self.first,
             curves,
@@ -241,6 +254,8 @@ struct EstimatorAcc {
     coasting: usize,
     stale: usize,
     coast_limit_s: f64,
+    /// The RPE interval Δ (s), the world's `[scoring] rpe_delta_s`.
+    rpe_delta_s: f64,
     failures: usize,
     gated: u64,
     first_failures: Vec<FailureEpoch>,
@@ -279,6 +294,7 @@ impl EstimatorAcc {
             coasting: 0,
             stale: 0,
             coast_limit_s: crate::engine::trial::Scoring::DEFAULT_COAST_LIMIT_S,
+            rpe_delta_s: crate::engine::trial::Scoring::DEFAULT_RPE_DELTA_S,
             failures: 0,
             gated: 0,
             first_failures: Vec::new(),
@@ -369,7 +385,13 @@ impl EstimatorAcc {
         }
         let tr = track(trace);
         let a = ate_errors(&tr.truth, &tr.est, Alignment::None);
-        let r = rpe_errors(&tr.t_s, &tr.truth, &tr.est, 1.0, Alignment::None);
+        let r = rpe_errors(
+            &tr.t_s,
+            &tr.truth,
+            &tr.est,
+            self.rpe_delta_s,
+            Alignment::None,
+        );
         if let Some(v) = &a {
             self.ate.extend(v)?;
         }
@@ -379,7 +401,13 @@ impl EstimatorAcc {
         if let Some(v) = ate_errors(&tr.truth, &tr.est, Alignment::Rigid) {
             self.ate_al.extend(&v)?;
         }
-        if let Some(v) = rpe_errors(&tr.t_s, &tr.truth, &tr.est, 1.0, Alignment::Rigid) {
+        if let Some(v) = rpe_errors(
+            &tr.t_s,
+            &tr.truth,
+            &tr.est,
+            self.rpe_delta_s,
+            Alignment::Rigid,
+        ) {
             self.rpe_al.extend(&v)?;
         }
         let pt = &mut self.per_trial;

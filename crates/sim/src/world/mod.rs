@@ -314,6 +314,28 @@ pub fn parse_world(text: &str, path: &Path) -> Result<World, WorldError> {
             "a coast limit (s)",
         )?;
     }
+    if let Some(d) = sc.rpe_delta_s {
+        ctx.in_range(
+            "scoring.rpe_delta_s",
+            d,
+            1e-3..=86_400.0,
+            "an RPE interval (s)",
+        )?;
+        // With a fixed rate the instants are known here: an interval that is not a whole
+        // number of scoring periods would pair no two instants and leave the RPE empty.
+        if let Some(r) = sc.rate_hz {
+            let periods = d * r;
+            if periods.round() < 1.0 || (periods - periods.round()).abs() > 1e-6 {
+                return Err(ctx.err(
+                    "scoring.rpe_delta_s",
+                    format!(
+                        "expected a whole number of scoring periods (1/rate_hz = {} s), got {d} s",
+                        1.0 / r
+                    ),
+                ));
+            }
+        }
+    }
     if sc.rate_hz.is_some() && sc.sources.is_some() {
         return Err(ctx.err(
             "scoring.sources",
@@ -1418,15 +1440,20 @@ impl World {
                     period: SimTime::from_seconds(1.0 / rate_hz),
                 },
                 coast_limit_s: Scoring::DEFAULT_COAST_LIMIT_S,
+                rpe_delta_s: Scoring::DEFAULT_RPE_DELTA_S,
             },
             (Some(list), None) => Scoring {
                 instants: ScoringInstants::Sources(list.clone()),
                 coast_limit_s: Scoring::DEFAULT_COAST_LIMIT_S,
+                rpe_delta_s: Scoring::DEFAULT_RPE_DELTA_S,
             },
             (None, None) => Scoring::default_for(kinds),
         };
         if let Some(c) = sc.coast_limit_s {
             s.coast_limit_s = c;
+        }
+        if let Some(d) = sc.rpe_delta_s {
+            s.rpe_delta_s = d;
         }
         s
     }

@@ -80,6 +80,13 @@ pub struct ScoringSection {
     #[serde(default)]
     #[schemars(range(min = 0.0, max = 86_400.0))]
     pub coast_limit_s: Option<f64>,
+    /// The interval Δ (s) of the relative pose error (default 1 s, as seed 000 and the
+    /// TUM benchmark use): every pair of scoring instants Δ apart is one RPE sample, so Δ
+    /// should be a multiple of the interval between scoring instants. A world whose
+    /// paper scored static test points a walk apart sets the time between two of them.
+    #[serde(default)]
+    #[schemars(range(min = 1e-3, max = 86_400.0))]
+    pub rpe_delta_s: Option<f64>,
 }
 
 /// `[world]`: name, place, time and navigation data.
