@@ -115,6 +115,9 @@ pub enum KernelKind {
     LiuWest,
     /// On the resampled particles as they are (Musso, Oudjane & Le Gland 2001).
     Musso,
+    /// Musso's on the states the process noise drives, Liu & West's shrinkage on the
+    /// static parameters (the constant clocks).
+    MussoLiuWestStatic,
 }
 
 /// How a regularised particle filter brings an epoch's likelihood in (`[estimator.options]
@@ -161,6 +164,9 @@ impl KernelKind {
         match self {
             KernelKind::LiuWest => crate::fusion::particle::KernelPlacement::Shrunk,
             KernelKind::Musso => crate::fusion::particle::KernelPlacement::Plain,
+            KernelKind::MussoLiuWestStatic => {
+                crate::fusion::particle::KernelPlacement::ShrunkStatic
+            }
         }
     }
 }
@@ -224,8 +230,10 @@ pub struct FamilyConfig {
     pub pf_proposal: ProposalKind,
     /// The regularised and Rao-Blackwellised PF on the paper models: the kernel after a
     /// resampling is `"liu_west"` (shrunk towards the mean so that the cloud's covariance
-    /// is kept; default) or `"musso"` (added as it is: the cloud inflates by `h_opt²` of
-    /// its covariance at each resampling, as the regularised PF was defined).
+    /// is kept; default), `"musso"` (added as it is: the cloud inflates by `h_opt²` of
+    /// its covariance at each resampling, as the regularised PF was defined) or
+    /// `"musso_liu_west_static"` (Musso's on the states the process noise drives, Liu &
+    /// West's shrinkage on the model's constant clocks).
     pub pf_kernel: KernelKind,
     /// The regularised and Rao-Blackwellised PF (`filter = "pf"`, `"rbpf"`) with the prior
     /// proposal: each epoch's likelihood is brought in `"progressive"` (in stages, each the

@@ -328,6 +328,7 @@ impl<const N: usize> Core<N> {
     fn new(
         filter: PaperFilter,
         pos_cols: [Option<usize>; 3],
+        static_cols: [bool; N],
         x0: SVector<f64, N>,
         p0: SMatrix<f64, N, N>,
         rng: &mut StreamRng,
@@ -397,6 +398,7 @@ impl<const N: usize> Core<N> {
                 let pf = ParticleFilter::new(buf, resampling, neff_threshold)
                     .map_err(|e| e.to_string())?
                     .with_kernel(kernel)
+                    .with_static_components(static_cols)
                     .with_covariance_estimate(covariance)
                     .with_progressive_correction(progressive);
                 let mut pf = match variant {
@@ -676,7 +678,10 @@ where
                 );
             }
         }
-        let core = Core::new(filter, layout.pos, x0, p0, &mut rng)?;
+        // The clocks (the last N_CLOCKS states) are the model's constants when their
+        // random walk has no noise.
+        let static_cols = std::array::from_fn(|k| k >= NM && q_clock == 0.0);
+        let core = Core::new(filter, layout.pos, static_cols, x0, p0, &mut rng)?;
         let mut est = Self {
             name: name.to_string(),
             model,

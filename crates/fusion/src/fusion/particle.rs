@@ -94,6 +94,13 @@ pub enum KernelPlacement {
     /// Gland 2001, the regularised PF as they define it): the cloud's covariance grows by
     /// `h_opt²` of itself at each resampling.
     Plain,
+    /// Each kernel where its authors put it: the static parameters (the components the
+    /// process model holds constant, [`ParticleFilter::with_static_components`]: seed
+    /// 003's clocks) are shrunk as Liu & West (2001) do for the fixed parameters they
+    /// designed the shrinkage for, and the states the process noise drives get Musso's
+    /// plain kernel. A constant clock then keeps its spread across resamplings instead
+    /// of growing by `h_opt²` at each one, which nothing in its dynamics ever takes back.
+    ShrunkStatic,
 }
 
 /// Which member of the particle-filter family runs (see the module documentation).
@@ -392,6 +399,9 @@ pub struct ParticleFilter<const N: usize> {
     rb: Option<RbClocks>,
     mm: Option<MarginalMotion<N>>,
     kernel: KernelPlacement,
+    /// The components the process model holds constant (see
+    /// [`KernelPlacement::ShrunkStatic`]).
+    static_cols: [bool; N],
     /// The Gaussian filter's exact predicted moments `(μ̄, Σ̄)`, kept from
     /// [`Self::predict`] for a linearised importance function
     /// ([`Self::update_linearised`]) until the cloud is weighted or changed from outside.
@@ -462,6 +472,7 @@ impl<const N: usize> ParticleFilter<N> {
             rb: None,
             mm: None,
             kernel: KernelPlacement::Shrunk,
+            static_cols: [false; N],
             predicted: None,
             covariance: CovarianceEstimate::Weighted,
             deferred_kernel: None,
@@ -576,6 +587,14 @@ impl<const N: usize> ParticleFilter<N> {
     /// Places the regularisation kernel as `kernel` (default [`KernelPlacement::Shrunk`]).
     pub fn with_kernel(mut self, kernel: KernelPlacement) -> Self {
         self.kernel = kernel;
+        self
+    }
+
+    /// Marks the components the process model holds constant (identity transition, no
+    /// process noise): the static parameters that [`KernelPlacement::ShrunkStatic`]
+    /// shrinks.
+    pub fn with_static_components(mut self, static_cols: [bool; N]) -> Self {
+        self.static_cols = static_cols;
         self
     }
 
@@ -1612,17 +1631,22 @@ impl<const N: usize> ParticleFilter<N> {
         let (nf, nd) = (self.buf.n as f64, rank as f64);
         let h = (4.0 / (nf * (nd + 2.0))).powf(1.0 / (nd + 4.0)).min(1.0);
         let a = match self.kernel {
-            KernelPlacement::Shrunk => (1.0 - h * h).sqrt(),
+            KernelPlacement::Shrunk | KernelPlacement::ShrunkStatic => (1.0 - h * h).sqrt(),
             KernelPlacement::Plain => 1.0,
         };
         Some((mean, d * h, a))
     }
 
-    /// Particle `i` shrunk towards `mean` by `a` (sampled components only).
+    /// Particle `i` shrunk towards `mean` by `a` (the sampled components the kernel
+    /// placement shrinks).
     fn shrunk(&self, i: usize, mean: &SVector<f64, N>, a: f64) -> SVector<f64, N> {
         let mut x = self.buf.get(i);
         for k in 0..N {
-            if self.sampled[k] {
+            let shrinks = match self.kernel {
+                KernelPlacement::ShrunkStatic => self.static_cols[k],
+                _ => true,
+            };
+            if self.sampled[k] && shrinks {
                 x[k] = mean[k] + a * (x[k] - mean[k]);
             }
         }
@@ -2869,6 +2893,52 @@ mod tests {
                 "variance {k}: {ratio} vs {}",
                 1.0 + h2
             );
+        }
+    }
+
+    /// Each kernel where its authors put it: with [`KernelPlacement::ShrunkStatic`] the
+    /// static components keep their variance (Liu & West's shrinkage) and the others grow
+    /// by `1 + h_opt²` (Musso's plain kernel), from one resampling of the same cloud as
+    /// the two tests above; with no static component it is Musso's placement.
+    #[test]
+    fn the_static_shrunk_kernel_keeps_the_static_spread_and_inflates_the_rest() {
+        let n = 20_000;
+        let run = |static_cols: [bool; 4]| {
+            let mut rng = TrialRng::new(11, 2).stream("test/rpf-static");
+            let mut pf = ParticleFilter::new(
+                ParticleBuffer::<4>::new(n).unwrap(),
+                Resampling::Systematic,
+                0.5,
+            )
+            .unwrap()
+            .regularised()
+            .with_kernel(KernelPlacement::ShrunkStatic)
+            .with_static_components(static_cols);
+            let mean = SVector::<f64, 4>::new(1.0, -2.0, 3.0, 100.0);
+            let cov =
+                SMatrix::<f64, 4, 4>::from_diagonal(&SVector::<f64, 4>::new(4.0, 9.0, 1.0, 25.0));
+            pf.init_gaussian(&mean, &cov, &mut rng).unwrap();
+            let (m0, c0) = (pf.mean(), pf.covariance());
+            pf.resample_regularised(&mut rng);
+            let (m1, c1) = (pf.mean(), pf.covariance());
+            (m0, c0, m1, c1)
+        };
+        let h2 = (4.0 / (n as f64 * 6.0)).powf(2.0 / 8.0);
+        let (m0, c0, m1, c1) = run([false, false, true, true]);
+        for k in 0..4 {
+            let sd = c0[(k, k)].sqrt();
+            assert!((m1[k] - m0[k]).abs() < 0.05 * sd, "mean {k}");
+            let want = if k >= 2 { 1.0 } else { 1.0 + h2 };
+            let ratio = c1[(k, k)] / c0[(k, k)];
+            assert!(
+                (ratio - want).abs() < 0.04,
+                "variance {k}: {ratio} vs {want}"
+            );
+        }
+        let (_, c0, _, c1) = run([false; 4]);
+        for k in 0..4 {
+            let ratio = c1[(k, k)] / c0[(k, k)];
+            assert!((ratio - (1.0 + h2)).abs() < 0.04, "variance {k}: {ratio}");
         }
     }
 
