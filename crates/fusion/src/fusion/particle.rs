@@ -2830,21 +2830,41 @@ mod tests {
         }
     }
 
-    /// The regularisation kernel with the shrinkage keeps the cloud's mean and
-    /// covariance (up to Monte Carlo error) and spreads duplicated particles apart.
-    #[test]
-    fn regularised_resampling_keeps_the_moments_and_separates_duplicates() {
-        let mut rng = TrialRng::new(11, 0).stream("test/rpf");
+    /// The particles of the kernel tests below.
+    const KERNEL_TEST_PARTICLES: usize = 20_000;
+
+    /// A regularised filter with the kernel `placement` over a 4-state Gaussian cloud of
+    /// [`KERNEL_TEST_PARTICLES`] (means 1, −2, 3, 100; variances 4, 9, 1, 25), drawn from
+    /// `rng`, which is returned for the test's resampling.
+    fn kernel_test_cloud(
+        mut rng: crate::core::StreamRng,
+        placement: KernelPlacement,
+        static_cols: [bool; 4],
+    ) -> (ParticleFilter<4>, crate::core::StreamRng) {
         let mut pf = ParticleFilter::new(
-            ParticleBuffer::<4>::new(20_000).unwrap(),
+            ParticleBuffer::<4>::new(KERNEL_TEST_PARTICLES).unwrap(),
             Resampling::Systematic,
             0.5,
         )
         .unwrap()
-        .regularised();
+        .regularised()
+        .with_kernel(placement)
+        .with_static_components(static_cols);
         let mean = SVector::<f64, 4>::new(1.0, -2.0, 3.0, 100.0);
         let cov = SMatrix::<f64, 4, 4>::from_diagonal(&SVector::<f64, 4>::new(4.0, 9.0, 1.0, 25.0));
         pf.init_gaussian(&mean, &cov, &mut rng).unwrap();
+        (pf, rng)
+    }
+
+    /// The regularisation kernel with the shrinkage keeps the cloud's mean and
+    /// covariance (up to Monte Carlo error) and spreads duplicated particles apart.
+    #[test]
+    fn regularised_resampling_keeps_the_moments_and_separates_duplicates() {
+        let (mut pf, mut rng) = kernel_test_cloud(
+            TrialRng::new(11, 0).stream("test/rpf"),
+            KernelPlacement::Shrunk,
+            [false; 4],
+        );
         let (m0, c0) = (pf.mean(), pf.covariance());
         pf.resample_regularised(&mut rng);
         let (m1, c1) = (pf.mean(), pf.covariance());
@@ -2869,19 +2889,12 @@ mod tests {
     /// which is what the shrunk kernel above avoids.
     #[test]
     fn musso_kernel_inflates_the_cloud_by_the_bandwidth() {
-        let mut rng = TrialRng::new(11, 1).stream("test/rpf-musso");
-        let n = 20_000;
-        let mut pf = ParticleFilter::new(
-            ParticleBuffer::<4>::new(n).unwrap(),
-            Resampling::Systematic,
-            0.5,
-        )
-        .unwrap()
-        .regularised()
-        .with_kernel(KernelPlacement::Plain);
-        let mean = SVector::<f64, 4>::new(1.0, -2.0, 3.0, 100.0);
-        let cov = SMatrix::<f64, 4, 4>::from_diagonal(&SVector::<f64, 4>::new(4.0, 9.0, 1.0, 25.0));
-        pf.init_gaussian(&mean, &cov, &mut rng).unwrap();
+        let n = KERNEL_TEST_PARTICLES;
+        let (mut pf, mut rng) = kernel_test_cloud(
+            TrialRng::new(11, 1).stream("test/rpf-musso"),
+            KernelPlacement::Plain,
+            [false; 4],
+        );
         let c0 = pf.covariance();
         pf.resample_regularised(&mut rng);
         let c1 = pf.covariance();
@@ -2902,22 +2915,13 @@ mod tests {
     /// the two tests above; with no static component it is Musso's placement.
     #[test]
     fn the_static_shrunk_kernel_keeps_the_static_spread_and_inflates_the_rest() {
-        let n = 20_000;
+        let n = KERNEL_TEST_PARTICLES;
         let run = |static_cols: [bool; 4]| {
-            let mut rng = TrialRng::new(11, 2).stream("test/rpf-static");
-            let mut pf = ParticleFilter::new(
-                ParticleBuffer::<4>::new(n).unwrap(),
-                Resampling::Systematic,
-                0.5,
-            )
-            .unwrap()
-            .regularised()
-            .with_kernel(KernelPlacement::ShrunkStatic)
-            .with_static_components(static_cols);
-            let mean = SVector::<f64, 4>::new(1.0, -2.0, 3.0, 100.0);
-            let cov =
-                SMatrix::<f64, 4, 4>::from_diagonal(&SVector::<f64, 4>::new(4.0, 9.0, 1.0, 25.0));
-            pf.init_gaussian(&mean, &cov, &mut rng).unwrap();
+            let (mut pf, mut rng) = kernel_test_cloud(
+                TrialRng::new(11, 2).stream("test/rpf-static"),
+                KernelPlacement::ShrunkStatic,
+                static_cols,
+            );
             let (m0, c0) = (pf.mean(), pf.covariance());
             pf.resample_regularised(&mut rng);
             let (m1, c1) = (pf.mean(), pf.covariance());
