@@ -236,9 +236,9 @@ impl Column {
     }
 }
 
-/// `trials.parquet`, written a trial at a time (see [`PARQUET_SCHEMA`] for the columns),
+/// `trials.parquet`, written a trial at a time (see `PARQUET_SCHEMA` for the columns),
 /// in the same row order as [`EpochsCsv`]: trial, then the world's estimator order, then
-/// time. A row group is written every [`ROWS_PER_GROUP`] rows, so the writer holds at most
+/// time. A row group is written every `ROWS_PER_GROUP` rows, so the writer holds at most
 /// one group of columns. The bytes depend only on the trials, so a merged or resumed run
 /// writes the same file.
 pub struct TrialsParquet<W: Write + Send> {
