@@ -2,7 +2,7 @@
 //!
 //! Every error names the file, the line and column, and what was expected: syntax and type
 //! errors through the spans serde reports, value checks made after deserialisation through
-//! [`locate`], which maps a key path back to the text.
+//! [`mod@locate`], which maps a key path back to the text.
 
 pub mod bound;
 pub mod cache;
