@@ -42,6 +42,8 @@ pub struct RunReducer {
     warnings: BTreeSet<String>,
     first: Option<TrialResult>,
     last_trial: Option<u64>,
+    /// The world's RPE interval (s), which every estimator's RPE uses.
+    rpe_delta_s: f64,
 }
 
 impl RunReducer {
@@ -84,6 +86,7 @@ impl RunReducer {
             warnings: BTreeSet::new(),
             first: None,
             last_trial: None,
+            rpe_delta_s,
         }
     }
 
@@ -122,7 +125,7 @@ impl RunReducer {
         // The PCRLB of each estimator's model over the run's truth trajectories
         // (world::bound), and each estimator's efficiency against it.
         let mut bounds = world.pcrlb(opts.seed, opts.trials);
-        let rpe_delta_s = world.scoring(std::iter::empty()).rpe_delta_s;
+        let rpe_delta_s = self.rpe_delta_s;
         let mut warnings = self.warnings;
         for (i, acc) in self.estimators.into_iter().enumerate() {
             if acc.ate.len() > 1 && acc.rpe.is_empty() {
