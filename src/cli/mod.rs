@@ -113,7 +113,13 @@ pub struct ReproduceArgs {
     /// Master seed.
     #[arg(long, default_value_t = crate::reproduce::DEFAULT_SEED)]
     pub seed: u64,
-    /// Also write the tables as Markdown to this file (docs/reproductions-tables.md).
+    /// Run every paper on each of these master seeds (`1-5`, `1,3,7`) and print, per
+    /// figure, the smallest, median and largest value and on how many seeds it is within
+    /// 2×; per ordering, on how many seeds it holds; and the totals per seed.
+    #[arg(long, value_name = "LIST", conflicts_with = "seed")]
+    pub seeds: Option<String>,
+    /// Also write the tables as Markdown to this file (docs/reproductions-tables.md; with
+    /// `--seeds`, the tables across the seeds).
     #[arg(long, value_name = "FILE")]
     pub markdown: Option<PathBuf>,
     /// The directory the paper worlds' paths (`worlds/…`) are relative to.
@@ -604,6 +610,29 @@ fn cmd_reproduce(a: &ReproduceArgs) -> Result<()> {
     let threads = a.threads.unwrap_or_else(|| {
         std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
     });
+    if let Some(list) = &a.seeds {
+        let seeds = reproduce::seeds::parse_seeds(list).map_err(anyhow::Error::msg)?;
+        let mut runs = Vec::with_capacity(seeds.len());
+        for &seed in &seeds {
+            let mut results = Vec::with_capacity(papers.len());
+            for &p in &papers {
+                eprintln!("running {} ({} trials, seed {seed})", p.world, a.trials);
+                results.push(
+                    reproduce::run_paper(&a.root, p, a.trials, seed, threads.max(1))
+                        .map_err(anyhow::Error::msg)?,
+                );
+            }
+            runs.push(results);
+        }
+        let sweep = reproduce::seeds::Sweep::new(seeds, &runs).map_err(anyhow::Error::msg)?;
+        print!("{}", sweep.text());
+        if let Some(path) = &a.markdown {
+            write_atomic(path, sweep.markdown().as_bytes())
+                .with_context(|| format!("cannot write {}", path.display()))?;
+            println!("wrote {}", path.display());
+        }
+        return Ok(());
+    }
     let mut results = Vec::with_capacity(papers.len());
     for p in papers {
         eprintln!("running {} ({} trials)", p.world, a.trials);

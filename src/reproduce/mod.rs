@@ -9,6 +9,7 @@
 //! when the committed file is stale.
 
 pub mod papers;
+pub mod seeds;
 
 use crate::montecarlo::store::Shard;
 use crate::montecarlo::{run_trials, summarise, EstimatorSummary, RunOptions, Summary};

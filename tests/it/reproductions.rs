@@ -257,3 +257,87 @@ fn every_estimator_is_scored_at_the_same_instants() {
         }
     }
 }
+
+/// `hybridnav reproduce --seeds 1-2` scores each seed as the one-seed command does: its
+/// per-seed totals are the totals line of `--seed 1` and of `--seed 2` run apart (a second
+/// computation by the same scoring over separate runs), its median of two seeds is the
+/// mean of their two figures, its Markdown names every seed, and a bad list is refused.
+#[test]
+fn the_seed_sweep_matches_the_one_seed_runs() {
+    use crate::common::{hybridnav, refused, tmp_dir};
+    let out = |o: &std::process::Output| {
+        assert!(o.status.success(), "{}", crate::common::stderr(o));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let one = |seed: &str| {
+        out(&hybridnav(&[
+            "reproduce",
+            "seed002",
+            "--trials",
+            "2",
+            "--seed",
+            seed,
+        ]))
+    };
+    let dir = tmp_dir("seed-sweep");
+    let md = dir.join("seeds.md");
+    let sweep = out(&hybridnav(&[
+        "reproduce",
+        "seed002",
+        "--trials",
+        "2",
+        "--seeds",
+        "1-2",
+        "--markdown",
+        md.to_str().unwrap(),
+    ]));
+    // "6 of 8 figures within 2× of the papers; 2 of 3 claimed orderings hold" per run.
+    let totals = |text: &str| -> (String, String) {
+        let line = text
+            .lines()
+            .find(|l| l.contains("figures within 2× of the papers"))
+            .expect("totals line")
+            .to_string();
+        let w: Vec<&str> = line.split_whitespace().collect();
+        (
+            format!("{} of {} figures", w[0], w[2]),
+            format!("{} of {} orderings", w[9], w[11]),
+        )
+    };
+    for seed in ["1", "2"] {
+        let (f, o) = totals(&one(seed));
+        let want = format!("seed {seed}: {f}, {o}");
+        assert!(sweep.contains(&want), "sweep lacks {want:?}:\n{sweep}");
+    }
+    // The PDR 68 % row: the one-seed figures, and the sweep's median is their mean.
+    let pdr68 = |text: &str| -> f64 {
+        let l = text
+            .lines()
+            .find(|l| l.trim_start().starts_with("PDR") && l.contains("68 %"))
+            .expect("PDR 68 % row");
+        l.split_whitespace().nth(5).unwrap().parse().unwrap()
+    };
+    let (a, b) = (pdr68(&one("1")), pdr68(&one("2")));
+    let row = sweep
+        .lines()
+        .find(|l| l.trim_start().starts_with("PDR") && l.contains("68 %"))
+        .unwrap();
+    let cells: Vec<&str> = row.split_whitespace().collect();
+    let (lo, med, hi): (f64, f64, f64) = (
+        cells[5].parse().unwrap(),
+        cells[6].parse().unwrap(),
+        cells[7].parse().unwrap(),
+    );
+    assert_eq!((lo, hi), (a.min(b), a.max(b)), "{row}");
+    assert!(
+        (med - 0.5 * (a + b)).abs() <= 0.006,
+        "{row}: median of {a} and {b}"
+    );
+    let md = std::fs::read_to_string(&md).unwrap();
+    assert!(md.contains("master seeds 1, 2") && md.contains("| PDR | 68 % horiz. | 8.77 |"));
+    refused(
+        &["reproduce", "seed002", "--seeds", "3-1"],
+        &["--seeds", "runs backwards"],
+    );
+    refused(&["reproduce", "seed002", "--seeds", "1,1"], &["repeated"]);
+}

@@ -1,0 +1,443 @@
+//! `hybridnav reproduce --seeds A-B`: the paper tables over several master seeds.
+//!
+//! The fair-reproductions goals are stated over seeds 1–5 ("≥ 45 of the 56 figures within
+//! 2×, each paper's ordering holding … with 20 trials and seeds 1–5"), because one seed's
+//! 20 trials can put a heavy-tailed figure (a 3σ level, an RMSE) on either side of the 2×
+//! line. This module lays the runs of several seeds side by side: for every figure its
+//! smallest, median and largest simulated value and the seeds on which it is within 2×;
+//! for every ordering the seeds on which it holds; for every paper its worst reset share;
+//! and the totals per seed, on every seed and on at least one. Each seed's run is scored
+//! exactly as a one-seed `hybridnav reproduce --seed S` scores it ([`super::score`]), so
+//! the per-seed totals equal those runs' totals (tested).
+
+use super::{fmt_opt, FigureResult, OrderingResult, PaperResult};
+use std::fmt::Write as _;
+
+/// The most seeds one sweep takes (each is a full run of every selected paper).
+pub const MAX_SEEDS: usize = 64;
+
+/// Parses a seed list: `A-B` (inclusive), `A,B,C` or one seed; the seeds must be distinct.
+///
+/// # Errors
+/// An empty or malformed list, a reversed range, a repeated seed, or more than
+/// [`MAX_SEEDS`] seeds, with the text that was given.
+pub fn parse_seeds(text: &str) -> Result<Vec<u64>, String> {
+    let bad = |why: &str| {
+        Err(format!(
+            "--seeds {text:?}: {why}; expected a range A-B, a list A,B,C or one seed"
+        ))
+    };
+    let num = |s: &str| s.trim().parse::<u64>().ok();
+    let seeds: Vec<u64> = if let Some((a, b)) = text.split_once('-') {
+        let (Some(a), Some(b)) = (num(a), num(b)) else {
+            return bad("a bound is not a non-negative integer");
+        };
+        if b < a {
+            return bad("the range runs backwards");
+        }
+        if b - a >= MAX_SEEDS as u64 {
+            return bad(&format!("more than {MAX_SEEDS} seeds"));
+        }
+        (a..=b).collect()
+    } else {
+        let parts: Vec<Option<u64>> = text.split(',').map(num).collect();
+        if parts.iter().any(Option::is_none) {
+            return bad("an entry is not a non-negative integer");
+        }
+        parts.into_iter().flatten().collect()
+    };
+    if seeds.len() > MAX_SEEDS {
+        return bad(&format!("more than {MAX_SEEDS} seeds"));
+    }
+    let mut sorted = seeds.clone();
+    sorted.sort_unstable();
+    sorted.dedup();
+    if sorted.len() != seeds.len() {
+        return bad("a seed is repeated");
+    }
+    Ok(seeds)
+}
+
+/// One figure over the seeds.
+#[derive(Clone, Debug)]
+pub struct FigureAcross {
+    pub row: &'static str,
+    pub label: &'static str,
+    pub paper_m: f64,
+    /// The simulated value of each seed, in the sweep's order.
+    pub simulated_m: Vec<Option<f64>>,
+    /// Whether it counts as reproduced on each seed ([`FigureResult::within`]).
+    pub within: Vec<bool>,
+}
+
+impl FigureAcross {
+    /// Smallest, median (the mean of the middle two for an even count) and largest
+    /// simulated value over the seeds that have one.
+    pub fn spread(&self) -> Option<(f64, f64, f64)> {
+        let mut v: Vec<f64> = self.simulated_m.iter().flatten().copied().collect();
+        if v.is_empty() {
+            return None;
+        }
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        let median = if n % 2 == 1 {
+            v[n / 2]
+        } else {
+            0.5 * (v[n / 2 - 1] + v[n / 2])
+        };
+        Some((v[0], median, v[n - 1]))
+    }
+
+    /// On how many seeds the figure is within.
+    pub fn within_count(&self) -> usize {
+        self.within.iter().filter(|w| **w).count()
+    }
+}
+
+/// One paper over the seeds.
+#[derive(Clone, Debug)]
+pub struct PaperAcross {
+    pub title: &'static str,
+    pub world: &'static str,
+    pub figures: Vec<FigureAcross>,
+    /// Each claimed ordering's text on the first seed and on how many seeds it holds.
+    pub orderings: Vec<(String, usize)>,
+    /// The largest reset share of any of the world's estimators on each seed, with its
+    /// estimator (`None`: no reset on that seed).
+    pub worst_resets: Vec<Option<(String, f64)>>,
+}
+
+/// The sweep: `runs[k]` is seed `seeds[k]`'s results, every run over the same papers in
+/// the same order.
+#[derive(Clone, Debug)]
+pub struct Sweep {
+    pub seeds: Vec<u64>,
+    pub trials: u64,
+    pub papers: Vec<PaperAcross>,
+    /// Per seed: (figures within, figures, orderings holding, orderings).
+    pub totals: Vec<(usize, usize, usize, usize)>,
+}
+
+impl Sweep {
+    /// Lays the runs side by side.
+    ///
+    /// # Errors
+    /// When the runs do not hold the same papers with the same figures and orderings (a
+    /// caller's mistake, never a user's).
+    pub fn new(seeds: Vec<u64>, runs: &[Vec<PaperResult>]) -> Result<Self, String> {
+        if runs.len() != seeds.len() || runs.is_empty() {
+            return Err(format!("{} runs for {} seeds", runs.len(), seeds.len()));
+        }
+        let first = &runs[0];
+        let same = runs.iter().all(|r| {
+            r.len() == first.len()
+                && r.iter().zip(first).all(|(a, b)| {
+                    a.paper.id == b.paper.id
+                        && a.figures.len() == b.figures.len()
+                        && a.orderings.len() == b.orderings.len()
+                })
+        });
+        if !same {
+            return Err("the seeds' runs do not hold the same papers".into());
+        }
+        let papers = first
+            .iter()
+            .enumerate()
+            .map(|(pi, p0)| {
+                let figures = p0
+                    .figures
+                    .iter()
+                    .enumerate()
+                    .map(|(fi, f0)| {
+                        let per: Vec<&FigureResult> =
+                            runs.iter().map(|r| &r[pi].figures[fi]).collect();
+                        FigureAcross {
+                            row: f0.row,
+                            label: f0.metric.label(),
+                            paper_m: f0.paper_m,
+                            simulated_m: per.iter().map(|f| f.simulated_m).collect(),
+                            within: per.iter().map(|f| f.within()).collect(),
+                        }
+                    })
+                    .collect();
+                let orderings = p0
+                    .orderings
+                    .iter()
+                    .enumerate()
+                    .map(|(oi, o0)| {
+                        let held = runs.iter().filter(|r| r[pi].orderings[oi].holds()).count();
+                        (claim_text(o0), held)
+                    })
+                    .collect();
+                let worst_resets = runs
+                    .iter()
+                    .map(|r| {
+                        r[pi]
+                            .resets
+                            .iter()
+                            .max_by(|a, b| a.2.total_cmp(&b.2))
+                            .map(|(n, _, s)| (n.clone(), *s))
+                    })
+                    .collect();
+                PaperAcross {
+                    title: p0.paper.title,
+                    world: p0.paper.world,
+                    figures,
+                    orderings,
+                    worst_resets,
+                }
+            })
+            .collect();
+        let totals = runs
+            .iter()
+            .map(|r| {
+                let figs: Vec<&FigureResult> = r.iter().flat_map(|p| &p.figures).collect();
+                let ords: Vec<&OrderingResult> = r.iter().flat_map(|p| &p.orderings).collect();
+                (
+                    figs.iter().filter(|f| f.within()).count(),
+                    figs.len(),
+                    ords.iter().filter(|o| o.holds()).count(),
+                    ords.len(),
+                )
+            })
+            .collect();
+        Ok(Self {
+            seeds,
+            trials: first.first().map_or(0, |p| p.trials),
+            papers,
+            totals,
+        })
+    }
+
+    fn figures(&self) -> impl Iterator<Item = &FigureAcross> {
+        self.papers.iter().flat_map(|p| &p.figures)
+    }
+
+    /// Figures within on every seed, and on at least one.
+    pub fn figures_within(&self) -> (usize, usize) {
+        let n = self.seeds.len();
+        (
+            self.figures().filter(|f| f.within_count() == n).count(),
+            self.figures().filter(|f| f.within_count() > 0).count(),
+        )
+    }
+
+    /// Orderings that hold on every seed.
+    pub fn orderings_holding(&self) -> usize {
+        let n = self.seeds.len();
+        self.papers
+            .iter()
+            .flat_map(|p| &p.orderings)
+            .filter(|o| o.1 == n)
+            .count()
+    }
+
+    fn seed_list(&self) -> String {
+        let s: Vec<String> = self.seeds.iter().map(u64::to_string).collect();
+        s.join(", ")
+    }
+
+    fn totals_lines(&self) -> Vec<String> {
+        let n = self.seeds.len();
+        let nfig = self.figures().count();
+        let nord: usize = self.papers.iter().map(|p| p.orderings.len()).sum();
+        let per: Vec<String> = self
+            .seeds
+            .iter()
+            .zip(&self.totals)
+            .map(|(s, t)| {
+                format!(
+                    "seed {s}: {} of {} figures, {} of {} orderings",
+                    t.0, t.1, t.2, t.3
+                )
+            })
+            .collect();
+        let (every, any) = self.figures_within();
+        vec![
+            format!("Per seed: {}.", per.join("; ")),
+            format!(
+                "Within 2× on all {n} seeds: {every} of {nfig} figures; on at least one: {any}. \
+                 Orderings holding on all {n} seeds: {} of {nord}.",
+                self.orderings_holding()
+            ),
+        ]
+    }
+
+    fn resets_line(p: &PaperAcross, seeds: &[u64]) -> String {
+        let parts: Vec<String> = seeds
+            .iter()
+            .zip(&p.worst_resets)
+            .map(|(s, w)| match w {
+                Some((name, share)) => format!("seed {s} {name} {:.2} %", 100.0 * share),
+                None => format!("seed {s} none"),
+            })
+            .collect();
+        format!("Largest reset share: {}.", parts.join(", "))
+    }
+
+    /// The plain-text report.
+    pub fn text(&self) -> String {
+        let n = self.seeds.len();
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "Across master seeds {} ({} trial(s) each)\n",
+            self.seed_list(),
+            self.trials
+        );
+        for p in &self.papers {
+            let _ = writeln!(s, "{}\n{}", p.title, p.world);
+            if !p.figures.is_empty() {
+                let _ = writeln!(
+                    s,
+                    "  {:<20} {:<12} {:>10} {:>10} {:>10} {:>10} {:>8}",
+                    "row", "figure", "paper", "min", "median", "max", "within"
+                );
+                for f in &p.figures {
+                    let (lo, med, hi) = f
+                        .spread()
+                        .map_or((None, None, None), |(a, b, c)| (Some(a), Some(b), Some(c)));
+                    let _ = writeln!(
+                        s,
+                        "  {:<20} {:<12} {:>10.2} {:>10} {:>10} {:>10} {:>8}",
+                        f.row,
+                        f.label,
+                        f.paper_m,
+                        fmt_opt(lo, 2),
+                        fmt_opt(med, 2),
+                        fmt_opt(hi, 2),
+                        format!("{}/{n}", f.within_count())
+                    );
+                }
+            }
+            for (text, held) in &p.orderings {
+                let _ = writeln!(s, "  holds on {held}/{n}: {text}");
+            }
+            let _ = writeln!(s, "  {}\n", Self::resets_line(p, &self.seeds));
+        }
+        for line in self.totals_lines() {
+            let _ = writeln!(s, "{line}");
+        }
+        s
+    }
+
+    /// The same report in Markdown.
+    pub fn markdown(&self) -> String {
+        let n = self.seeds.len();
+        let mut s = format!(
+            "<!-- Generated by `hybridnav reproduce --seeds … --markdown FILE`; do not edit by hand. -->\n\n\
+             # Reproduced tables across master seeds\n\n\
+             Every paper world at {} trials on each of the master seeds {}. For each published figure: the smallest, median and largest of hybridnav's values over the seeds, and on how many seeds it is within 2× of the paper's (or at the bound, as in `reproductions-tables.md`); for each claimed ordering, on how many seeds it holds.\n\n",
+            self.trials,
+            self.seed_list()
+        );
+        for p in &self.papers {
+            let _ = writeln!(s, "## {}\n\n`{}`\n", p.title, p.world);
+            if !p.figures.is_empty() {
+                s.push_str("| row | figure | paper (m) | min (m) | median (m) | max (m) | within 2× |\n|---|---|---:|---:|---:|---:|:-:|\n");
+                for f in &p.figures {
+                    let (lo, med, hi) = f
+                        .spread()
+                        .map_or((None, None, None), |(a, b, c)| (Some(a), Some(b), Some(c)));
+                    let _ = writeln!(
+                        s,
+                        "| {} | {} | {:.2} | {} | {} | {} | {}/{n} |",
+                        f.row,
+                        f.label,
+                        f.paper_m,
+                        fmt_opt(lo, 2),
+                        fmt_opt(med, 2),
+                        fmt_opt(hi, 2),
+                        f.within_count()
+                    );
+                }
+                s.push('\n');
+            }
+            for (text, held) in &p.orderings {
+                let _ = writeln!(s, "- holds on {held}/{n}: {text}");
+            }
+            let _ = writeln!(s, "- {}\n", Self::resets_line(p, &self.seeds));
+        }
+        for line in self.totals_lines() {
+            let _ = writeln!(s, "**{line}**\n");
+        }
+        s
+    }
+}
+
+/// An ordering's claim without the values, which differ from seed to seed.
+fn claim_text(o: &OrderingResult) -> String {
+    let names: Vec<&str> = o.values.iter().map(|v| v.0).collect();
+    format!("{}: {}", o.metric.label(), names.join(" < "))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::reproduce::papers::{Metric, PAPERS};
+
+    #[test]
+    fn seed_lists() {
+        assert_eq!(parse_seeds("1-5").unwrap(), vec![1, 2, 3, 4, 5]);
+        assert_eq!(parse_seeds("7").unwrap(), vec![7]);
+        assert_eq!(parse_seeds("3, 1,9").unwrap(), vec![3, 1, 9]);
+        for bad in ["", "5-1", "1,1", "a-3", "1,,2", "-3", "0-64"] {
+            let e = parse_seeds(bad).unwrap_err();
+            assert!(e.contains("expected a range"), "{bad}: {e}");
+        }
+        assert_eq!(parse_seeds("0-63").unwrap().len(), MAX_SEEDS);
+    }
+
+    /// The sweep's arithmetic by hand: three seeds of one made-up paper result whose one
+    /// figure (paper 10 m) is 4, 12 and 30 m, so within on one seed only, median 12; an
+    /// ordering that holds on two; resets on one seed.
+    #[test]
+    fn spreads_counts_and_totals_by_hand() {
+        let paper = &PAPERS[3];
+        let run = |sim: f64, a: f64, reset: Option<f64>| {
+            vec![PaperResult {
+                paper,
+                trials: 2,
+                seed: 0,
+                figures: vec![FigureResult {
+                    row: "r",
+                    metric: Metric::Mean,
+                    paper_m: 10.0,
+                    simulated_m: Some(sim),
+                    rmse_m: Some(sim),
+                    pcrlb_m: None,
+                    deviates: false,
+                }],
+                orderings: vec![OrderingResult {
+                    metric: Metric::Mean,
+                    values: vec![("a (tight)", Some(a)), ("b", Some(2.0))],
+                }],
+                protocol: vec![],
+                resets: reset.map_or_else(Vec::new, |s| vec![("PF".to_string(), 3, s)]),
+                variants: vec![],
+                splits: vec![],
+                bounds: vec![],
+            }]
+        };
+        let runs = vec![
+            run(4.0, 1.0, None),
+            run(12.0, 1.5, Some(0.02)),
+            run(30.0, 3.0, None),
+        ];
+        let sw = Sweep::new(vec![1, 2, 3], &runs).unwrap();
+        let f = &sw.papers[0].figures[0];
+        assert_eq!(f.spread(), Some((4.0, 12.0, 30.0)));
+        assert_eq!(f.within_count(), 1);
+        assert_eq!(sw.papers[0].orderings[0], ("mean: a (tight) < b".to_string(), 2));
+        assert_eq!(sw.figures_within(), (0, 1));
+        assert_eq!(sw.orderings_holding(), 0);
+        assert_eq!(sw.totals, vec![(0, 1, 1, 1), (1, 1, 1, 1), (0, 1, 0, 1)]);
+        let text = sw.text();
+        assert!(text.contains("seed 2 PF 2.00 %") && text.contains("seed 1 none"));
+        assert!(text.contains("holds on 2/3: mean: a (tight) < b"));
+        // An even count's median is the mean of the middle two.
+        let sw2 = Sweep::new(vec![1, 2], &runs[..2]).unwrap();
+        assert_eq!(sw2.papers[0].figures[0].spread(), Some((4.0, 8.0, 12.0)));
+        assert!(Sweep::new(vec![1], &runs).is_err());
+    }
+}
