@@ -88,6 +88,15 @@ impl FigureAcross {
         Some((v[0], median, v[n - 1]))
     }
 
+    /// The spread as both reports print it: smallest, median and largest to the
+    /// centimetre, `-` where no seed has a value.
+    fn spread_cells(&self) -> [String; 3] {
+        match self.spread() {
+            Some((lo, med, hi)) => [lo, med, hi].map(|x| fmt_opt(Some(x), 2)),
+            None => [(); 3].map(|()| fmt_opt(None, 2)),
+        }
+    }
+
     /// On how many seeds the figure is within.
     pub fn within_count(&self) -> usize {
         self.within.iter().filter(|w| **w).count()
@@ -294,18 +303,13 @@ impl Sweep {
                     "row", "figure", "paper", "min", "median", "max", "within"
                 );
                 for f in &p.figures {
-                    let (lo, med, hi) = f
-                        .spread()
-                        .map_or((None, None, None), |(a, b, c)| (Some(a), Some(b), Some(c)));
+                    let [lo, med, hi] = f.spread_cells();
                     let _ = writeln!(
                         s,
-                        "  {:<20} {:<12} {:>10.2} {:>10} {:>10} {:>10} {:>8}",
+                        "  {:<20} {:<12} {:>10.2} {lo:>10} {med:>10} {hi:>10} {:>8}",
                         f.row,
                         f.label,
                         f.paper_m,
-                        fmt_opt(lo, 2),
-                        fmt_opt(med, 2),
-                        fmt_opt(hi, 2),
                         format!("{}/{n}", f.within_count())
                     );
                 }
@@ -336,18 +340,13 @@ impl Sweep {
             if !p.figures.is_empty() {
                 s.push_str("| row | figure | paper (m) | min (m) | median (m) | max (m) | within 2× |\n|---|---|---:|---:|---:|---:|:-:|\n");
                 for f in &p.figures {
-                    let (lo, med, hi) = f
-                        .spread()
-                        .map_or((None, None, None), |(a, b, c)| (Some(a), Some(b), Some(c)));
+                    let [lo, med, hi] = f.spread_cells();
                     let _ = writeln!(
                         s,
-                        "| {} | {} | {:.2} | {} | {} | {} | {}/{n} |",
+                        "| {} | {} | {:.2} | {lo} | {med} | {hi} | {}/{n} |",
                         f.row,
                         f.label,
                         f.paper_m,
-                        fmt_opt(lo, 2),
-                        fmt_opt(med, 2),
-                        fmt_opt(hi, 2),
                         f.within_count()
                     );
                 }
@@ -428,7 +427,10 @@ mod tests {
         let f = &sw.papers[0].figures[0];
         assert_eq!(f.spread(), Some((4.0, 12.0, 30.0)));
         assert_eq!(f.within_count(), 1);
-        assert_eq!(sw.papers[0].orderings[0], ("mean: a (tight) < b".to_string(), 2));
+        assert_eq!(
+            sw.papers[0].orderings[0],
+            ("mean: a (tight) < b".to_string(), 2)
+        );
         assert_eq!(sw.figures_within(), (0, 1));
         assert_eq!(sw.orderings_holding(), 0);
         assert_eq!(sw.totals, vec![(0, 1, 1, 1), (1, 1, 1, 1), (0, 1, 0, 1)]);
