@@ -217,6 +217,9 @@ pub struct PaperResult {
     /// `(estimator, PCRLB on its RMSE m, RMSE / PCRLB)` of every estimator of the world
     /// the run bounded, in the world's order.
     pub bounds: Vec<(String, f64, f64)>,
+    /// `(estimator, mean position NEES, its degrees of freedom)` of every estimator of the
+    /// world that reports a covariance, in the world's order.
+    pub consistency: Vec<(String, f64, f64)>,
 }
 
 /// One variant's rows and orderings.
@@ -297,10 +300,16 @@ pub fn score(paper: &'static Paper, s: &Summary) -> Result<PaperResult, String> 
         .iter()
         .filter_map(|e| Some((e.name.clone(), e.pcrlb_pos_rmse_m?, e.efficiency?)))
         .collect();
+    let consistency = s
+        .estimators
+        .iter()
+        .filter_map(|e| e.nees.as_ref().map(|n| (e.name.clone(), n.mean, n.dof)))
+        .collect();
     Ok(PaperResult {
         paper,
         trials: s.trials,
         seed: s.seed,
+        consistency,
         figures,
         orderings,
         protocol,
@@ -538,6 +547,7 @@ pub fn text(results: &[PaperResult]) -> String {
             .iter()
             .chain(&resets_lines(r))
             .chain(&bounds_line(r))
+            .chain(&consistency_line(r))
         {
             let _ = writeln!(s, "  {line}");
         }
@@ -576,6 +586,61 @@ fn bounds_line(r: &PaperResult) -> Vec<String> {
         .collect();
     vec![format!(
         "PCRLB on the RMSE (RMSE / PCRLB): {}.",
+        parts.join(", ")
+    )]
+}
+
+/// A filter is taken as consistent when its mean position NEES lies within this factor of
+/// its degrees of freedom (the particle-filter issue's goal, "every PF's mean NEES within
+/// 2× of its dof").
+pub const NEES_WITHIN: f64 = 2.0;
+
+/// Whether a mean NEES is within [`NEES_WITHIN`] of its degrees of freedom, either way.
+pub fn nees_consistent(mean: f64, dof: f64) -> bool {
+    let r = mean / dof;
+    (1.0 / NEES_WITHIN..=NEES_WITHIN).contains(&r)
+}
+
+/// A positive figure to three significant digits, in scientific notation from 10⁴ (a
+/// diverged filter's NEES runs to 10⁸).
+fn sig3(x: f64) -> String {
+    if !x.is_finite() || x >= 1e4 {
+        format!("{x:.2e}")
+    } else if x >= 100.0 {
+        format!("{x:.0}")
+    } else if x >= 10.0 {
+        format!("{x:.1}")
+    } else {
+        format!("{x:.2}")
+    }
+}
+
+/// One line with every estimator's mean position NEES over its degrees of freedom, marked
+/// ✗ outside [`NEES_WITHIN`] (none without an estimator that reports a covariance).
+fn consistency_line(r: &PaperResult) -> Vec<String> {
+    if r.consistency.is_empty() {
+        return Vec::new();
+    }
+    let parts: Vec<String> = r
+        .consistency
+        .iter()
+        .map(|(name, mean, dof)| {
+            let mark = if nees_consistent(*mean, *dof) {
+                ""
+            } else {
+                " ✗"
+            };
+            format!("{name} {}{mark}", sig3(mean / dof))
+        })
+        .collect();
+    let inside = r
+        .consistency
+        .iter()
+        .filter(|(_, m, d)| nees_consistent(*m, *d))
+        .count();
+    vec![format!(
+        "Mean position NEES over its degrees of freedom (1 for a consistent filter; ✗ outside ½–2, {inside} of {} inside): {}.",
+        r.consistency.len(),
         parts.join(", ")
     )]
 }
@@ -639,6 +704,7 @@ pub fn markdown(results: &[PaperResult]) -> String {
             .iter()
             .chain(&resets_lines(r))
             .chain(&bounds_line(r))
+            .chain(&consistency_line(r))
         {
             let _ = writeln!(s, "- {line}");
         }
@@ -703,6 +769,44 @@ mod tests {
                     .iter()
                     .any(|g| g.metric == f.metric && g.paper_m == f.paper_m));
             }
+        }
+    }
+
+    /// The consistency line by hand: NEES 3.3 for 3 dof is inside, 7 (2.33×) and 1.4
+    /// (0.47×) are not, and a diverged filter's 1.4e7 prints in scientific notation.
+    #[test]
+    fn the_consistency_line_marks_the_filters_outside_half_to_twice() {
+        assert!(
+            nees_consistent(3.3, 3.0) && nees_consistent(6.0, 3.0) && nees_consistent(1.5, 3.0)
+        );
+        assert!(!nees_consistent(7.0, 3.0) && !nees_consistent(1.4, 3.0));
+        let mut r = score_fixture();
+        r.consistency = vec![
+            ("EKF".into(), 3.3, 3.0),
+            ("PF-100".into(), 1.4e7, 3.0),
+            ("PF-2d".into(), 2.8, 2.0),
+        ];
+        assert_eq!(
+            consistency_line(&r),
+            vec!["Mean position NEES over its degrees of freedom (1 for a consistent filter; ✗ outside ½–2, 2 of 3 inside): EKF 1.10, PF-100 4.67e6 ✗, PF-2d 1.40.".to_string()]
+        );
+        r.consistency.clear();
+        assert!(consistency_line(&r).is_empty());
+    }
+
+    fn score_fixture() -> PaperResult {
+        PaperResult {
+            paper: &PAPERS[0],
+            trials: 1,
+            seed: 1,
+            figures: vec![],
+            orderings: vec![],
+            protocol: vec![],
+            resets: vec![],
+            variants: vec![],
+            splits: vec![],
+            bounds: vec![],
+            consistency: vec![],
         }
     }
 

@@ -114,6 +114,10 @@ pub struct PaperAcross {
     /// The largest reset share of any of the world's estimators on each seed, with its
     /// estimator (`None`: no reset on that seed).
     pub worst_resets: Vec<Option<(String, f64)>>,
+    /// Each estimator that reports a covariance (by the first seed's list) and on how many
+    /// seeds its mean position NEES is within 2× of its degrees of freedom
+    /// ([`super::nees_consistent`]).
+    pub consistent: Vec<(String, usize)>,
 }
 
 /// The sweep: `runs[k]` is seed `seeds[k]`'s results, every run over the same papers in
@@ -188,7 +192,23 @@ impl Sweep {
                             .map(|(n, _, s)| (n.clone(), *s))
                     })
                     .collect();
+                let consistent = p0
+                    .consistency
+                    .iter()
+                    .map(|(name, _, _)| {
+                        let seeds =
+                            runs.iter()
+                                .filter(|r| {
+                                    r[pi].consistency.iter().any(|(n, m, d)| {
+                                        n == name && super::nees_consistent(*m, *d)
+                                    })
+                                })
+                                .count();
+                        (name.clone(), seeds)
+                    })
+                    .collect();
                 PaperAcross {
+                    consistent,
                     title: p0.paper.title,
                     world: p0.paper.world,
                     figures,
@@ -272,6 +292,39 @@ impl Sweep {
         ]
     }
 
+    /// The estimators whose mean NEES is within 2× of its dof on every seed, on some and
+    /// on none (nothing without an estimator that reports a covariance).
+    fn consistency_line(p: &PaperAcross, n: usize) -> Option<String> {
+        if p.consistent.is_empty() {
+            return None;
+        }
+        let pick = |keep: &dyn Fn(usize) -> bool, with_count: bool| -> String {
+            let v: Vec<String> = p
+                .consistent
+                .iter()
+                .filter(|(_, k)| keep(*k))
+                .map(|(name, k)| {
+                    if with_count {
+                        format!("{name} ({k}/{n})")
+                    } else {
+                        name.clone()
+                    }
+                })
+                .collect();
+            if v.is_empty() {
+                "none".to_string()
+            } else {
+                v.join(", ")
+            }
+        };
+        Some(format!(
+            "Mean NEES within 2× of its dof on all {n} seeds: {}; on some: {}; on none: {}.",
+            pick(&|k| k == n, false),
+            pick(&|k| k > 0 && k < n, true),
+            pick(&|k| k == 0, false)
+        ))
+    }
+
     fn resets_line(p: &PaperAcross, seeds: &[u64]) -> String {
         let parts: Vec<String> = seeds
             .iter()
@@ -317,6 +370,9 @@ impl Sweep {
             for (text, held) in &p.orderings {
                 let _ = writeln!(s, "  holds on {held}/{n}: {text}");
             }
+            if let Some(line) = Self::consistency_line(p, n) {
+                let _ = writeln!(s, "  {line}");
+            }
             let _ = writeln!(s, "  {}\n", Self::resets_line(p, &self.seeds));
         }
         for line in self.totals_lines() {
@@ -354,6 +410,9 @@ impl Sweep {
             }
             for (text, held) in &p.orderings {
                 let _ = writeln!(s, "- holds on {held}/{n}: {text}");
+            }
+            if let Some(line) = Self::consistency_line(p, n) {
+                let _ = writeln!(s, "- {line}");
             }
             let _ = writeln!(s, "- {}\n", Self::resets_line(p, &self.seeds));
         }
@@ -416,6 +475,10 @@ mod tests {
                 variants: vec![],
                 splits: vec![],
                 bounds: vec![],
+                consistency: vec![
+                    ("PF".to_string(), 3.0 * a, 3.0),
+                    ("EKF".to_string(), 3.3, 3.0),
+                ],
             }]
         };
         let runs = vec![
@@ -437,6 +500,12 @@ mod tests {
         let text = sw.text();
         assert!(text.contains("seed 2 PF 2.00 %") && text.contains("seed 1 none"));
         assert!(text.contains("holds on 2/3: mean: a (tight) < b"));
+        // The PF's NEES is 3a for 3 dof: a = 1 and 1.5 are within 2×, a = 3 is not.
+        assert_eq!(
+            sw.papers[0].consistent,
+            vec![("PF".to_string(), 2), ("EKF".to_string(), 3)]
+        );
+        assert!(text.contains("on all 3 seeds: EKF; on some: PF (2/3); on none: none."));
         // An even count's median is the mean of the middle two.
         let sw2 = Sweep::new(vec![1, 2], &runs[..2]).unwrap();
         assert_eq!(sw2.papers[0].figures[0].spread(), Some((4.0, 8.0, 12.0)));
