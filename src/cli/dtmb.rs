@@ -57,6 +57,7 @@ pub struct BerArgs {
     pub at_s: f64,
     pub csi: String,
     pub no_doppler: bool,
+    pub no_delay_drift: bool,
     pub true_timing: bool,
     pub cfo_hz: Option<f64>,
     pub cfo_rate_hz_per_s: Option<f64>,
@@ -183,6 +184,7 @@ pub fn ber(a: &BerArgs) -> Result<()> {
         (a.at_s != 0.0, "--at-s"),
         (a.csi != "interpolated", "--csi"),
         (a.no_doppler, "--no-doppler"),
+        (a.no_delay_drift, "--no-delay-drift"),
         (a.true_timing, "--true-timing"),
         (a.cfo_hz.is_some(), "--cfo-hz"),
         (a.cfo_rate_hz_per_s.is_some(), "--cfo-rate-hz-per-s"),
@@ -231,8 +233,8 @@ fn ber_world(a: &BerArgs) -> Result<()> {
     use crate::dtmb::ber_channel::{
         acquisition_search_hz, cfo_range_hz, doppler_responses, frequency_response,
         measure_channel_point_clocked, measure_channel_point_synced_with_cfo,
-        measure_channel_point_with_cfo, CfoEstimator, ChannelBer, Csi, Oscillator,
-        CFO_LOOP_MEMORY_HEADERS, MAX_CFO_RATE_HZ_PER_S, SYNC_ADVANCE_SAMPLES,
+        measure_channel_point_with_cfo, with_delay_drift, CfoEstimator, ChannelBer, Csi,
+        Oscillator, CFO_LOOP_MEMORY_HEADERS, MAX_CFO_RATE_HZ_PER_S, SYNC_ADVANCE_SAMPLES,
     };
     use crate::dtmb::pn::PnMode;
     use crate::world::dtmb_iq::{tower_channel_at, DataLayerOverride, WorldIqRequest};
@@ -357,14 +359,11 @@ fn ber_world(a: &BerArgs) -> Result<()> {
         }
         osc.correct = false;
     }
-    if a.no_timing_tracking {
-        if osc.sfo_ppm == 0.0 {
-            anyhow::bail!(
-                "--no-timing-tracking needs an oscillator error: --oscillator-ppm or the \
-                 world's sensors.dtmb.rx_oscillator_ppm (--cfo-hz has no sample-clock offset)"
-            );
-        }
-        osc.track_timing = false;
+    if a.no_doppler && a.no_delay_drift {
+        anyhow::bail!(
+            "--no-delay-drift holds a moving receiver's delays while their phases turn; \
+             --no-doppler already holds the whole channel static: give one"
+        );
     }
     let with_doppler: Vec<(f64, num_complex::Complex64, f64)> = ch
         .paths
@@ -373,6 +372,38 @@ fn ber_world(a: &BerArgs) -> Result<()> {
         .map(|(&(d, g), &f)| (d, g, if a.no_doppler { 0.0 } else { f }))
         .collect();
     let (h, groups) = doppler_responses(&with_doppler)?;
+    // A receiver whose motion turns the paths also lengthens them: each group's delay
+    // drifts at −f_D/f_c, and the estimating receivers follow the frame timing.
+    let delay_drift = !a.no_delay_drift && groups.iter().any(|g| g.doppler_hz != 0.0);
+    let groups = if delay_drift {
+        with_delay_drift(&groups, ch.freq_hz)?
+    } else {
+        groups
+    };
+    if delay_drift {
+        osc.track_timing = true;
+    }
+    if a.no_timing_tracking {
+        if osc.sfo_ppm == 0.0 && !delay_drift {
+            anyhow::bail!(
+                "--no-timing-tracking needs a drifting frame timing: an oscillator error \
+                 (--oscillator-ppm or the world's sensors.dtmb.rx_oscillator_ppm; --cfo-hz \
+                 has no sample-clock offset) or a moving receiver's delay drift"
+            );
+        }
+        osc.track_timing = false;
+    }
+    // The frame timing's drift a frame that the paths' motion adds, weighted by the
+    // groups' energy (the response's centre of power moves at that rate).
+    let (e_sum, e_rate) = groups.iter().fold((0.0, 0.0), |(e, r), g| {
+        let eg: f64 = g.taps.iter().map(|x| f64::from(x.norm_sqr())).sum();
+        (e + eg, r + eg * g.delay_rate)
+    });
+    let path_drift_per_frame = if e_sum > 0.0 {
+        e_rate / e_sum * ch.mode.frame_len() as f64
+    } else {
+        0.0
+    };
     let hk = frequency_response(&h);
     let (lo, hi) = hk.iter().fold((f64::MAX, f64::MIN), |(a, b), x| {
         (a.min(x.norm_sqr()), b.max(x.norm_sqr()))
@@ -426,6 +457,25 @@ fn ber_world(a: &BerArgs) -> Result<()> {
             )
         }
     );
+    if delay_drift {
+        let rates: Vec<String> = groups
+            .iter()
+            .map(|g| format!("{:+.3e}", g.delay_rate))
+            .collect();
+        println!(
+            "# delay drift: each path's delay follows its range rate, −f_D/f_c = {} s/s by \
+             Doppler group, {:+.2e} samples a frame at the response's centre of power; {} \
+             (--no-delay-drift holds the delays)",
+            rates.join(", "),
+            path_drift_per_frame,
+            if osc.track_timing {
+                "the estimating receivers follow the frame timing from the PN headers (the \
+                 genie's stream holds the delays, which it knows)"
+            } else {
+                "the estimating receivers hold their starting timing (--no-timing-tracking)"
+            }
+        );
+    }
     if osc.sfo_ppm != 0.0 {
         println!(
             "# receiver oscillator {:+.3} ppm (from {ppm_from}): the CFO below and a sample \
@@ -508,7 +558,7 @@ fn ber_world(a: &BerArgs) -> Result<()> {
             seed,
         };
         let synced = csi != Csi::Ideal && !a.true_timing;
-        let clocked = csi != Csi::Ideal && osc.sfo_ppm != 0.0;
+        let clocked = csi != Csi::Ideal && (osc.sfo_ppm != 0.0 || delay_drift);
         let mut acquired = Vec::new();
         let mut tracks = Vec::new();
         let (points, _, per) = run_curve(&grid, |snr| {
@@ -560,12 +610,14 @@ fn ber_world(a: &BerArgs) -> Result<()> {
             // The drift the receiver measured at the grid's last (highest-SNR) point.
             println!(
                 "# CSI {}: frame timing drift measured {:+.5} ± {:.1e} samples a frame over {} \
-                 frames (the clock's +ε·F {:+.5}); frame start moved {} samples",
+                 frames (the clock's +ε·F {:+.5}, the paths' {:+.5}); frame start moved {} \
+                 samples",
                 csi.name(),
                 t.drift_samples_per_frame,
                 t.drift_std,
                 t.frames,
                 osc.sfo_ppm * 1e-6 * ch.mode.frame_len() as f64,
+                path_drift_per_frame,
                 t.shifted_samples
             );
         }

@@ -236,6 +236,14 @@ pub enum DtmbCommand {
         /// receiver's motion costs against the same paths standing still.
         #[arg(long)]
         no_doppler: bool,
+        /// With --world: hold each path's delay at its value at --at-s while its phase
+        /// turns at its Doppler (the model before the delay drift). By default a moving
+        /// receiver's paths also lengthen or shorten at their range rates, −f_D/f_c
+        /// seconds a second (0.015 samples over a 64QAM point at Kehui's 5 m/s, 2.4
+        /// samples a second at 350 km/h), and the estimating receivers follow the
+        /// frame timing's drift from the PN headers unless --no-timing-tracking.
+        #[arg(long)]
+        no_delay_drift: bool,
         /// With --world: give the estimating receivers the true frame start. By default
         /// they acquire it (and the frame number) from the PN headers with the ranging
         /// receiver's frame sync and start each frame 16 samples before the first path
@@ -502,6 +510,7 @@ pub fn run(cli: Cli) -> Result<()> {
             at_s,
             csi,
             no_doppler,
+            no_delay_drift,
             true_timing,
             cfo_hz,
             cfo_rate_hz_per_s,
@@ -524,6 +533,7 @@ pub fn run(cli: Cli) -> Result<()> {
             at_s,
             csi,
             no_doppler,
+            no_delay_drift,
             true_timing,
             cfo_hz,
             cfo_rate_hz_per_s,

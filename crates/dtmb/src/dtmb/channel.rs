@@ -16,8 +16,14 @@
 //! sample 0 leaves the antenna (a path's `delay_s` includes any receiver clock offset).
 //! The fractional delay is evaluated once per 256-sample sub-block at its centre; the
 //! SFO drift inside a sub-block (`ε · 128` samples, 0.17 ns at 10 ppm) is the only
-//! approximation. Doppler is applied as a carrier rotation; the delay rate of a moving
-//! receiver is modelled by updating the paths between calls ([`Channel::set_paths`]).
+//! approximation. Doppler is applied as a carrier rotation. The delay rate of a moving
+//! receiver is modelled either by updating the paths between calls
+//! ([`Channel::set_paths`]) or by each path's own rate `τ̇_p` ([`Path::delay_rate`]): its
+//! delay at `t_n` is `τ_p + τ̇_p t_n`, so it reads the transmitter at
+//! `u = n(1 − τ̇_p)/(1 + ε) − τ_p f_s` — a sample-clock offset of its own, evaluated per
+//! sub-block as the SFO is. Paths with a rate are run by the time-domain reference (the
+//! frequency-domain engine holds one filter for every path, whose span a spread of rates
+//! would stretch without bound).
 //!
 //! **Noise.** Complex white Gaussian noise of variance `σ² = P / 10^(SNR/10)` per sample,
 //! where `P = P_frame · Σ|g_p|²` is the nominal received power (the frame's mean power
@@ -26,7 +32,7 @@
 
 use super::fd_channel::FdChannel;
 use super::kernel::KERNEL_HALF_WIDTH;
-use super::multipath::ChannelConfig;
+use super::multipath::{ChannelConfig, MAX_DELAY_RATE};
 use super::pn::{PnMode, SAMPLE_RATE_HZ};
 use super::transmitter::SampleSource;
 use super::DtmbError;
@@ -108,6 +114,16 @@ impl Channel {
             }
             if !(p.gain.re.is_finite() && p.gain.im.is_finite() && p.doppler_hz.is_finite()) {
                 return bad("gain", format!("path {i}: gain and Doppler must be finite"));
+            }
+            if !(p.delay_rate.is_finite() && p.delay_rate.abs() <= MAX_DELAY_RATE) {
+                return bad(
+                    "delay_rate",
+                    format!(
+                        "path {i}: the delay rate must be finite and within ±{MAX_DELAY_RATE} \
+                         s/s, got {}",
+                        p.delay_rate
+                    ),
+                );
             }
         }
         if !(cfg.cfo_hz.is_finite() && cfg.sfo_ppm.is_finite() && cfg.sfo_ppm.abs() <= 1000.0) {
@@ -227,25 +243,33 @@ impl Channel {
         self.check_block(out.len())?;
         let k = KERNEL_HALF_WIDTH as i64;
         let r = 1.0 / (1.0 + self.cfg.sfo_ppm * 1e-6);
-        let (dmin, dmax) = self
+        // Path p reads the transmitter at u = n r_p − τ_p f_s, r_p = r (1 − τ̇_p) (module
+        // documentation); with no delay rate r_p is r, bit for bit.
+        let ratio = |p: &Path| r * (1.0 - p.delay_rate);
+        let len = out.len() as i64;
+        // The transmitter span every path needs, with margin for the kernel and the
+        // sub-block centring.
+        let (u_lo, u_hi) = self
             .cfg
             .paths
             .iter()
             .fold((f64::MAX, f64::MIN), |(a, b), p| {
-                (a.min(p.delay_s), b.max(p.delay_s))
+                let d = p.delay_s * SAMPLE_RATE_HZ;
+                (
+                    a.min((rx_start as f64) * ratio(p) - d),
+                    b.max(((rx_start + len) as f64) * ratio(p) - d),
+                )
             });
-        let len = out.len() as i64;
-        // The transmitter span every path needs, with margin for the kernel and the
-        // sub-block centring.
-        let lo = ((rx_start as f64) * r - dmax * SAMPLE_RATE_HZ).floor() as i64
-            - k
-            - SUB_BLOCK as i64
-            - 2;
-        let hi = (((rx_start + len) as f64) * r - dmin * SAMPLE_RATE_HZ).floor() as i64
-            + k
-            + SUB_BLOCK as i64
-            + 2;
-        let n_tx = ((hi - lo) as usize).min(self.tx.len());
+        let lo = u_lo.floor() as i64 - k - SUB_BLOCK as i64 - 2;
+        let hi = u_hi.floor() as i64 + k + SUB_BLOCK as i64 + 2;
+        let n_tx = (hi - lo) as usize;
+        if n_tx > self.tx.len() {
+            // Paths whose delays drift apart need more transmitter samples as the stream
+            // goes on: the buffers grow once to the span reached, never shrink.
+            self.tx.resize(n_tx, Complex32::default());
+            self.xr.resize(n_tx, 0.0);
+            self.xi.resize(n_tx, 0.0);
+        }
         src.generate(lo, &mut self.tx[..n_tx]);
         for (i, x) in self.tx[..n_tx].iter().enumerate() {
             self.xr[i] = x.re;
@@ -254,6 +278,7 @@ impl Channel {
         out.iter_mut().for_each(|o| *o = Complex32::default());
         let two_pi = 2.0 * std::f64::consts::PI;
         for (pi, path) in self.cfg.paths.iter().enumerate() {
+            let r_p = ratio(path);
             let f_tot = path.doppler_hz + self.cfg.cfo_hz;
             let step = Complex64::from_polar(1.0, two_pi * f_tot * r / SAMPLE_RATE_HZ);
             let step32 = Complex32::new(step.re as f32, step.im as f32);
@@ -261,7 +286,7 @@ impl Channel {
             while s < out.len() {
                 let b = SUB_BLOCK.min(out.len() - s);
                 let n_s = rx_start + s as i64;
-                let u_centre = (n_s as f64 + b as f64 / 2.0) * r - path.delay_s * SAMPLE_RATE_HZ;
+                let u_centre = (n_s as f64 + b as f64 / 2.0) * r_p - path.delay_s * SAMPLE_RATE_HZ;
                 let u_first = u_centre - b as f64 / 2.0;
                 let i_first = u_first.floor();
                 let frac = u_first - i_first;
@@ -388,6 +413,75 @@ mod tests {
         }
         // 50 ppm over a 128-sample half sub-block is 0.0064 samples of delay error.
         assert!(worst < 0.03, "worst {worst}");
+    }
+
+    /// Two paths whose delays drift apart at their own rates (±2·10⁻⁶ s/s, 600 m/s; the
+    /// extreme makes the drift several samples within the test) read the transmitter at
+    /// `u = n r (1 − τ̇_p) − τ_p f_s` on top of a 20 ppm sample clock: the output equals
+    /// the tones evaluated there, two million samples in, where the paths have moved
+    /// ±4.2 samples from their starting delays; the time-domain reference runs them, and
+    /// a rate out of range is refused.
+    #[test]
+    fn each_path_drifts_at_its_own_delay_rate() {
+        let (tau_a, tau_b) = (310.25, 352.6);
+        let (rate_a, rate_b) = (2e-6, -2e-6);
+        let fs = SAMPLE_RATE_HZ;
+        let cfg = ChannelConfig {
+            paths: vec![
+                Path::new(tau_a / fs, 1.0, 0.0, 0.0).with_delay_rate(rate_a),
+                Path::new(tau_b / fs, 0.5, 1.0, 0.0).with_delay_rate(rate_b),
+            ],
+            cfo_hz: 0.0,
+            sfo_ppm: 20.0,
+            snr_db: None,
+        };
+        let mut ch = Channel::new(cfg.clone(), PnMode::Pn945, 4096).unwrap();
+        assert!(!ch.is_frequency_domain());
+        let mut rng = TrialRng::new(1, 0).stream("t");
+        let r = 1.0 / (1.0 + 20e-6);
+        let g_b = Complex64::from_polar(0.5, 1.0);
+        let mut out = vec![Complex32::default(); 3000];
+        for start in [0i64, 2_100_000] {
+            ch.process(&mut Tones, start, &mut out, &mut rng).unwrap();
+            let mut worst = 0.0f32;
+            for (i, y) in out.iter().enumerate() {
+                let n = (start + i as i64) as f64;
+                let a = tone(n * r * (1.0 - rate_a) - tau_a);
+                let b = tone(n * r * (1.0 - rate_b) - tau_b);
+                let b = Complex32::new(g_b.re as f32, g_b.im as f32) * b;
+                worst = worst.max((y - (a + b)).norm());
+            }
+            // Within a sub-block a path's delay moves by (ε + τ̇)·128 ≈ 0.003 samples at
+            // most, against the SFO test's 0.0064.
+            assert!(worst < 0.03, "at {start}: worst {worst}");
+        }
+        // Held delays give something else once they have drifted: the test can fail.
+        let held = ChannelConfig {
+            paths: cfg.paths.iter().map(|p| p.with_delay_rate(0.0)).collect(),
+            ..cfg.clone()
+        };
+        let mut still = Channel::new(held, PnMode::Pn945, 4096).unwrap();
+        let mut out_held = vec![Complex32::default(); 3000];
+        still
+            .process(&mut Tones, 2_100_000, &mut out_held, &mut rng)
+            .unwrap();
+        let apart = out
+            .iter()
+            .zip(&out_held)
+            .map(|(a, b)| (a - b).norm())
+            .fold(0.0f32, f32::max);
+        assert!(apart > 0.5, "held and drifting agree to {apart}");
+        let too_fast = ChannelConfig {
+            paths: vec![Path::new(0.0, 1.0, 0.0, 0.0).with_delay_rate(2e-5)],
+            ..cfg
+        };
+        assert!(matches!(
+            Channel::new(too_fast, PnMode::Pn945, 4096),
+            Err(DtmbError::InvalidParameter {
+                name: "delay_rate",
+                ..
+            })
+        ));
     }
 
     /// The bench's six paths: distinct Dopplers, CFO and SFO, an SFN copy 30 µs late.

@@ -104,7 +104,9 @@ impl Plan {
     /// The plan for `cfg`, or `None` when the paths' Doppler spread or the SFO would force
     /// sub-blocks too short for the frequency domain to pay.
     fn new(cfg: &ChannelConfig) -> Option<Self> {
-        if cfg.paths.len() > MAX_FD_PATHS {
+        // Paths whose delays drift at their own rates would stretch the combined filter
+        // without bound: the time-domain reference runs them.
+        if cfg.paths.len() > MAX_FD_PATHS || cfg.paths.iter().any(|p| p.delay_rate != 0.0) {
             return None;
         }
         let (dmin, dmax) = cfg.paths.iter().fold((f64::MAX, f64::MIN), |(a, b), p| {

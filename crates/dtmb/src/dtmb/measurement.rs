@@ -399,6 +399,7 @@ pub fn signal_timing_errors(
                 delay_s: (tau + e.delay_samples) / SAMPLE_RATE_HZ,
                 gain: e.gain * rot,
                 doppler_hz: 0.0,
+                delay_rate: 0.0,
             });
         }
         let ok = match ch.as_mut() {

@@ -13,16 +13,32 @@ pub struct Path {
     pub gain: Complex64,
     /// Doppler shift of this path in hertz.
     pub doppler_hz: f64,
+    /// How fast the delay grows (s/s, the path's range rate over c): the delay at receiver
+    /// time `t` (from receiver sample 0) is `delay_s + delay_rate · t`. A receiver moving
+    /// at range rate `ṙ` along a path at carrier `f_c` sees `delay_rate = ṙ/c =
+    /// −doppler_hz/f_c`. 0 holds the delay (a channel whose paths are replaced between
+    /// calls, or a static one).
+    pub delay_rate: f64,
 }
 
+/// The largest `|delay_rate|` a channel takes: 10⁻⁵, a range rate of 3 km/s, far above any
+/// terrestrial receiver's (a 350 km/h train: 3.2·10⁻⁷).
+pub const MAX_DELAY_RATE: f64 = 1e-5;
+
 impl Path {
-    /// A path from amplitude and phase.
+    /// A path from amplitude and phase, its delay held.
     pub fn new(delay_s: f64, amplitude: f64, phase_rad: f64, doppler_hz: f64) -> Self {
         Self {
             delay_s,
             gain: Complex64::from_polar(amplitude, phase_rad),
             doppler_hz,
+            delay_rate: 0.0,
         }
+    }
+
+    /// The same path with its delay growing at `delay_rate` (s/s).
+    pub fn with_delay_rate(self, delay_rate: f64) -> Self {
+        Self { delay_rate, ..self }
     }
 }
 

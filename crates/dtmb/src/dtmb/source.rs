@@ -1083,6 +1083,7 @@ impl DtmbSource {
                     delay_s: offset + t.delay_samples,
                     gain: t.gain,
                     doppler_hz: dopplers.get(p).copied().unwrap_or(0.0),
+                    delay_rate: 0.0,
                 })
                 .collect(),
         )];
@@ -1101,6 +1102,7 @@ impl DtmbSource {
                 delay_s: offset + delta + t.delay_samples,
                 gain: t.gain * amp,
                 doppler_hz: dop_j[p],
+                delay_rate: 0.0,
             });
             match signals.iter_mut().find(|(o, _)| *o == owner) {
                 Some((_, v)) => v.extend(paths),

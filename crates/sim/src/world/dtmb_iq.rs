@@ -733,6 +733,7 @@ fn signal_paths(
                 delay_s: (off - (l.base - d)) / fs,
                 gain: g * amp,
                 doppler_hz: dop,
+                delay_rate: 0.0,
             });
         }
     }
