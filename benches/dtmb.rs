@@ -106,6 +106,26 @@ fn bench(c: &mut Criterion) {
             black_box(&out);
         })
     });
+    // The same six paths for a moving receiver whose delays drift at their range rates
+    // (−f_D/f_c at 600 MHz, up to 6.3·10⁻⁸ s/s): paths with a delay rate run in the
+    // time-domain reference, which `channel_6_paths_time_domain_reference` costs without
+    // the drift.
+    let mut drifting = six_paths();
+    for p in &mut drifting.paths {
+        *p = p.with_delay_rate(-p.doppler_hz / 600e6);
+    }
+    let mut ch_drift = Channel::new(drifting, MODE, n).unwrap();
+    assert!(!ch_drift.is_frequency_domain());
+    let mut k = 0i64;
+    g.bench_function("channel_6_paths_delay_drift", |b| {
+        b.iter(|| {
+            k += 1;
+            ch_drift
+                .process(&mut tx, k * n as i64, &mut out, &mut noise)
+                .unwrap();
+            black_box(&out);
+        })
+    });
     g.bench_function("awgn_only", |b| {
         b.iter(|| {
             hybridnav::dtmb::noise::add_awgn(&mut out, 0.3, &mut noise);
