@@ -228,7 +228,7 @@ impl Channel {
     /// The reference time-domain implementation of [`Channel::process`]: a 32-tap
     /// windowed-sinc FIR per path and sub-block, the carrier rotation per sample, and
     /// Gaussian noise from `rand_distr`'s ziggurat. Several times slower than the
-    /// frequency-domain path (2.8× per 6-path frame in `docs/performance.md`); kept as the
+    /// frequency-domain path (about 10× per 6-path frame in `docs/performance.md`); kept as the
     /// second implementation the fast path is tested against.
     ///
     /// # Errors
