@@ -714,6 +714,38 @@ pub fn markdown(results: &[PaperResult]) -> String {
     s
 }
 
+/// A figure of 10 m published and `sim` simulated (its RMSE too), for the tests.
+#[cfg(test)]
+pub(crate) fn test_figure(sim: f64) -> FigureResult {
+    FigureResult {
+        row: "r",
+        metric: Metric::Mean,
+        paper_m: 10.0,
+        simulated_m: Some(sim),
+        rmse_m: Some(sim),
+        pcrlb_m: None,
+        deviates: false,
+    }
+}
+
+/// An empty result of `paper`, for the tests to fill.
+#[cfg(test)]
+pub(crate) fn test_result(paper: &'static Paper) -> PaperResult {
+    PaperResult {
+        paper,
+        trials: 1,
+        seed: 1,
+        figures: vec![],
+        orderings: vec![],
+        protocol: vec![],
+        resets: vec![],
+        variants: vec![],
+        splits: vec![],
+        bounds: vec![],
+        consistency: vec![],
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -780,7 +812,7 @@ mod tests {
             nees_consistent(3.3, 3.0) && nees_consistent(6.0, 3.0) && nees_consistent(1.5, 3.0)
         );
         assert!(!nees_consistent(7.0, 3.0) && !nees_consistent(1.4, 3.0));
-        let mut r = score_fixture();
+        let mut r = test_result(&PAPERS[0]);
         r.consistency = vec![
             ("EKF".into(), 3.3, 3.0),
             ("PF-100".into(), 1.4e7, 3.0),
@@ -792,22 +824,6 @@ mod tests {
         );
         r.consistency.clear();
         assert!(consistency_line(&r).is_empty());
-    }
-
-    fn score_fixture() -> PaperResult {
-        PaperResult {
-            paper: &PAPERS[0],
-            trials: 1,
-            seed: 1,
-            figures: vec![],
-            orderings: vec![],
-            protocol: vec![],
-            resets: vec![],
-            variants: vec![],
-            splits: vec![],
-            bounds: vec![],
-            consistency: vec![],
-        }
     }
 
     #[test]
@@ -825,15 +841,7 @@ mod tests {
 
     #[test]
     fn within_two_and_orderings() {
-        let f = |sim: f64| FigureResult {
-            row: "r",
-            metric: Metric::Mean,
-            paper_m: 10.0,
-            simulated_m: Some(sim),
-            rmse_m: Some(sim),
-            pcrlb_m: None,
-            deviates: false,
-        };
+        let f = test_figure;
         assert!(f(5.0).within() && f(20.0).within() && f(12.0).within());
         assert!(!f(4.99).within() && !f(20.01).within());
         // A published 10 m below a 30 m bound: 37.5 m RMSE (1.25× the bound) counts, 37.6

@@ -453,33 +453,19 @@ mod tests {
     fn spreads_counts_and_totals_by_hand() {
         let paper = &PAPERS[3];
         let run = |sim: f64, a: f64, reset: Option<f64>| {
-            vec![PaperResult {
-                paper,
-                trials: 2,
-                seed: 0,
-                figures: vec![FigureResult {
-                    row: "r",
-                    metric: Metric::Mean,
-                    paper_m: 10.0,
-                    simulated_m: Some(sim),
-                    rmse_m: Some(sim),
-                    pcrlb_m: None,
-                    deviates: false,
-                }],
-                orderings: vec![OrderingResult {
-                    metric: Metric::Mean,
-                    values: vec![("a (tight)", Some(a)), ("b", Some(2.0))],
-                }],
-                protocol: vec![],
-                resets: reset.map_or_else(Vec::new, |s| vec![("PF".to_string(), 3, s)]),
-                variants: vec![],
-                splits: vec![],
-                bounds: vec![],
-                consistency: vec![
-                    ("PF".to_string(), 3.0 * a, 3.0),
-                    ("EKF".to_string(), 3.3, 3.0),
-                ],
-            }]
+            let mut r = crate::reproduce::test_result(paper);
+            r.trials = 2;
+            r.figures = vec![crate::reproduce::test_figure(sim)];
+            r.orderings = vec![OrderingResult {
+                metric: Metric::Mean,
+                values: vec![("a (tight)", Some(a)), ("b", Some(2.0))],
+            }];
+            r.resets = reset.map_or_else(Vec::new, |s| vec![("PF".to_string(), 3, s)]);
+            r.consistency = vec![
+                ("PF".to_string(), 3.0 * a, 3.0),
+                ("EKF".to_string(), 3.3, 3.0),
+            ];
+            vec![r]
         };
         let runs = vec![
             run(4.0, 1.0, None),
