@@ -337,6 +337,20 @@ impl Sweep {
         format!("Largest reset share: {}.", parts.join(", "))
     }
 
+    /// The lines under a paper's table in both reports: each ordering's seeds, who is
+    /// consistent on which seeds, and the largest reset share per seed.
+    fn paper_lines(&self, p: &PaperAcross) -> Vec<String> {
+        let n = self.seeds.len();
+        let mut lines: Vec<String> = p
+            .orderings
+            .iter()
+            .map(|(text, held)| format!("holds on {held}/{n}: {text}"))
+            .collect();
+        lines.extend(Self::consistency_line(p, n));
+        lines.push(Self::resets_line(p, &self.seeds));
+        lines
+    }
+
     /// The plain-text report.
     pub fn text(&self) -> String {
         let n = self.seeds.len();
@@ -367,13 +381,10 @@ impl Sweep {
                     );
                 }
             }
-            for (text, held) in &p.orderings {
-                let _ = writeln!(s, "  holds on {held}/{n}: {text}");
-            }
-            if let Some(line) = Self::consistency_line(p, n) {
+            for line in self.paper_lines(p) {
                 let _ = writeln!(s, "  {line}");
             }
-            let _ = writeln!(s, "  {}\n", Self::resets_line(p, &self.seeds));
+            s.push('\n');
         }
         for line in self.totals_lines() {
             let _ = writeln!(s, "{line}");
@@ -408,13 +419,10 @@ impl Sweep {
                 }
                 s.push('\n');
             }
-            for (text, held) in &p.orderings {
-                let _ = writeln!(s, "- holds on {held}/{n}: {text}");
-            }
-            if let Some(line) = Self::consistency_line(p, n) {
+            for line in self.paper_lines(p) {
                 let _ = writeln!(s, "- {line}");
             }
-            let _ = writeln!(s, "- {}\n", Self::resets_line(p, &self.seeds));
+            s.push('\n');
         }
         for line in self.totals_lines() {
             let _ = writeln!(s, "**{line}**\n");
