@@ -14,7 +14,10 @@ pub mod seeds;
 use crate::montecarlo::store::Shard;
 use crate::montecarlo::{run_trials, summarise, EstimatorSummary, RunOptions, Summary};
 use crate::world::load_world;
-use papers::{Figure, GainSplit, Metric, Ordering, Paper, Variant, GAIN_SPLITS, PAPERS, VARIANTS};
+use papers::{
+    Figure, GainSplit, Metric, Ordering, Paper, Stated, Variant, GAIN_SPLITS, PAPERS, STATED,
+    VARIANTS,
+};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -195,6 +198,54 @@ impl SplitResult {
     }
 }
 
+/// A [`Stated`] figure on a run: the estimator's horizontal RMS error at the epochs of
+/// the stated place.
+#[derive(Clone, Debug)]
+pub struct StatedResult {
+    pub stated: &'static Stated,
+    /// `None` when the run has no such epoch with an estimate (or no indoor epoch at all).
+    pub simulated_m: Option<f64>,
+}
+
+impl StatedResult {
+    /// Whether the run meets the paper's words: at most the bound, or within
+    /// [`WITHIN`] of the value.
+    pub fn met(&self) -> bool {
+        let st = self.stated;
+        self.simulated_m.is_some_and(|x| {
+            if st.at_most {
+                x <= st.paper_m
+            } else {
+                (1.0 / WITHIN..=WITHIN).contains(&(x / st.paper_m))
+            }
+        })
+    }
+
+    /// What the paper says, what the run gives, and whether it meets it.
+    fn line(&self) -> String {
+        let st = self.stated;
+        let head = format!(
+            "Stated in the text, not counted: {} horizontal RMS {} {} m, against {}",
+            st.estimator,
+            match st.place {
+                papers::Place::Outdoor => "outdoors",
+                papers::Place::Indoor => "indoors",
+            },
+            fmt_opt(self.simulated_m, 2),
+            st.quote
+        );
+        let judged = if st.at_most {
+            format!("at most {} m", st.paper_m)
+        } else {
+            match self.simulated_m {
+                Some(x) => format!("{:.2}×", x / st.paper_m),
+                None => "no value".to_string(),
+            }
+        };
+        format!("{head}: {judged} {}", tick(self.met()))
+    }
+}
+
 /// One paper's reproduction.
 #[derive(Clone, Debug)]
 pub struct PaperResult {
@@ -214,6 +265,8 @@ pub struct PaperResult {
     pub variants: Vec<VariantResult>,
     /// The paper's [`GainSplit`]s on this run.
     pub splits: Vec<SplitResult>,
+    /// The figures the paper states in its text ([`STATED`]) on this run.
+    pub stated: Vec<StatedResult>,
     /// `(estimator, PCRLB on its RMSE m, RMSE / PCRLB)` of every estimator of the world
     /// the run bounded, in the world's order.
     pub bounds: Vec<(String, f64, f64)>,
@@ -295,6 +348,27 @@ pub fn score(paper: &'static Paper, s: &Summary) -> Result<PaperResult, String> 
             })
         })
         .collect::<Result<Vec<_>, String>>()?;
+    let stated = STATED
+        .iter()
+        .filter(|st| st.paper == paper.id)
+        .map(|st| {
+            let e = s
+                .estimators
+                .iter()
+                .find(|e| e.name == st.estimator)
+                .ok_or_else(|| {
+                    format!("{} has no estimator named {:?}", paper.world, st.estimator)
+                })?;
+            Ok(StatedResult {
+                stated: st,
+                simulated_m: e
+                    .environments
+                    .iter()
+                    .find(|g| g.label == st.place.label())
+                    .and_then(|g| g.rmse_h_m),
+            })
+        })
+        .collect::<Result<Vec<_>, String>>()?;
     let bounds = s
         .estimators
         .iter()
@@ -316,6 +390,7 @@ pub fn score(paper: &'static Paper, s: &Summary) -> Result<PaperResult, String> 
         resets,
         variants,
         splits,
+        stated,
         bounds,
     })
 }
@@ -523,6 +598,9 @@ pub fn text(results: &[PaperResult]) -> String {
         for g in &r.splits {
             let _ = writeln!(s, "  {}", g.line());
         }
+        for st in &r.stated {
+            let _ = writeln!(s, "  {}", st.line());
+        }
         for v in &r.variants {
             let _ = writeln!(
                 s,
@@ -684,6 +762,9 @@ pub fn markdown(results: &[PaperResult]) -> String {
         for g in &r.splits {
             let _ = writeln!(s, "- {}", g.line());
         }
+        for st in &r.stated {
+            let _ = writeln!(s, "- {}", st.line());
+        }
         for v in &r.variants {
             let _ = writeln!(
                 s,
@@ -741,6 +822,7 @@ pub(crate) fn test_result(paper: &'static Paper) -> PaperResult {
         resets: vec![],
         variants: vec![],
         splits: vec![],
+        stated: vec![],
         bounds: vec![],
         consistency: vec![],
     }
@@ -837,6 +919,33 @@ mod tests {
             .unwrap_err()
             .contains("expected one of"));
         assert_eq!(select(&[]).unwrap().len(), PAPERS.len());
+    }
+
+    /// A stated value is met within 2×, a stated bound by anything up to it; a run with
+    /// no epoch there meets neither. (That seed 004's statements are read from the
+    /// summary's `environments` is tested on the world, `tests/it/reproductions.rs`.)
+    #[test]
+    fn stated_figures_are_met_as_the_papers_words_say() {
+        let value = &STATED[0];
+        let bound = &STATED[1];
+        assert!(!value.at_most && value.paper_m == 0.5 && value.place == papers::Place::Outdoor);
+        assert!(bound.at_most && bound.paper_m == 1.0 && bound.place == papers::Place::Indoor);
+        let r = |stated, x: Option<f64>| StatedResult {
+            stated,
+            simulated_m: x,
+        };
+        assert!(r(value, Some(0.25)).met() && r(value, Some(1.0)).met());
+        assert!(!r(value, Some(1.01)).met() && !r(value, Some(0.24)).met());
+        assert!(r(bound, Some(0.01)).met() && r(bound, Some(1.0)).met());
+        assert!(!r(bound, Some(1.001)).met() && !r(bound, None).met());
+        let line = r(value, Some(1.2)).line();
+        assert!(
+            line.contains("RE-KF horizontal RMS outdoors 1.20 m")
+                && line.contains("2.40× ✗")
+                && line.contains("0.5 m"),
+            "{line}"
+        );
+        assert!(r(bound, Some(0.8)).line().ends_with("at most 1 m ✓"));
     }
 
     #[test]

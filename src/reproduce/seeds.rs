@@ -118,6 +118,9 @@ pub struct PaperAcross {
     /// seeds its mean position NEES is within 2× of its degrees of freedom
     /// ([`super::nees_consistent`]).
     pub consistent: Vec<(String, usize)>,
+    /// The figures the paper states in its text ([`super::StatedResult`]) over the seeds,
+    /// `within` being whether each seed meets the paper's words; counted in no total.
+    pub stated: Vec<FigureAcross>,
 }
 
 /// The sweep: `runs[k]` is seed `seeds[k]`'s results, every run over the same papers in
@@ -148,6 +151,7 @@ impl Sweep {
                     a.paper.id == b.paper.id
                         && a.figures.len() == b.figures.len()
                         && a.orderings.len() == b.orderings.len()
+                        && a.stated.len() == b.stated.len()
                 })
         });
         if !same {
@@ -207,8 +211,28 @@ impl Sweep {
                         (name.clone(), seeds)
                     })
                     .collect();
+                let stated = p0
+                    .stated
+                    .iter()
+                    .enumerate()
+                    .map(|(si, s0)| {
+                        let per: Vec<&super::StatedResult> =
+                            runs.iter().map(|r| &r[pi].stated[si]).collect();
+                        FigureAcross {
+                            row: s0.stated.estimator,
+                            label: match s0.stated.place {
+                                super::papers::Place::Outdoor => "outdoors",
+                                super::papers::Place::Indoor => "indoors",
+                            },
+                            paper_m: s0.stated.paper_m,
+                            simulated_m: per.iter().map(|x| x.simulated_m).collect(),
+                            within: per.iter().map(|x| x.met()).collect(),
+                        }
+                    })
+                    .collect();
                 PaperAcross {
                     consistent,
+                    stated,
                     title: p0.paper.title,
                     world: p0.paper.world,
                     figures,
@@ -346,6 +370,18 @@ impl Sweep {
             .iter()
             .map(|(text, held)| format!("holds on {held}/{n}: {text}"))
             .collect();
+        lines.extend(p.stated.iter().map(|f| {
+            let [lo, med, hi] = f.spread_cells();
+            format!(
+                "Stated in the text, not counted: {} horizontal RMS {} {lo} / {med} / {hi} m \
+                 (smallest / median / largest) against the paper's {} m; meets the paper's \
+                 words on {}/{n}.",
+                f.row,
+                f.label,
+                f.paper_m,
+                f.within_count()
+            )
+        }));
         lines.extend(Self::consistency_line(p, n));
         lines.push(Self::resets_line(p, &self.seeds));
         lines
@@ -473,6 +509,12 @@ mod tests {
                 ("PF".to_string(), 3.0 * a, 3.0),
                 ("EKF".to_string(), 3.3, 3.0),
             ];
+            // A stated figure (0.5 m outdoors) at 1.5 × the seed's figure: met (≤ 1 m)
+            // on the first seed only.
+            r.stated = vec![crate::reproduce::StatedResult {
+                stated: &crate::reproduce::papers::STATED[0],
+                simulated_m: Some(sim / 6.0),
+            }];
             vec![r]
         };
         let runs = vec![
@@ -500,6 +542,13 @@ mod tests {
             vec![("PF".to_string(), 2), ("EKF".to_string(), 3)]
         );
         assert!(text.contains("on all 3 seeds: EKF; on some: PF (2/3); on none: none."));
+        assert!(
+            text.contains(
+                "RE-KF horizontal RMS outdoors 0.67 / 2.00 / 5.00 m (smallest / median / \
+                 largest) against the paper's 0.5 m; meets the paper's words on 1/3."
+            ),
+            "{text}"
+        );
         // An even count's median is the mean of the middle two.
         let sw2 = Sweep::new(vec![1, 2], &runs[..2]).unwrap();
         assert_eq!(sw2.papers[0].figures[0].spread(), Some((4.0, 8.0, 12.0)));

@@ -898,3 +898,112 @@ fn outputs_selects_the_files_and_changes_none_of_their_bytes() {
     );
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// Whether `(e, n)` lies inside the polygon `poly` (even–odd rule), written here apart from
+/// the scene's prism index so the summary's indoor/outdoor split is checked against a
+/// second computation.
+fn inside_polygon(poly: &[[f64; 2]], e: f64, n: f64) -> bool {
+    let mut inside = false;
+    for k in 0..poly.len() {
+        let [x0, y0] = poly[k];
+        let [x1, y1] = poly[(k + 1) % poly.len()];
+        if (y0 > n) != (y1 > n) && e < x0 + (n - y0) * (x1 - x0) / (y1 - y0) {
+            inside = !inside;
+        }
+    }
+    inside
+}
+
+/// `summary.json`'s `environments`: each estimator's errors at the epochs whose truth was
+/// outdoors and indoors. Seed 004's pedestrian crosses the teaching building; every
+/// epoch's truth is put inside or outside the world file's building footprints by the
+/// even–odd rule above, and the epoch counts and horizontal RMS must match the summary's.
+/// A world whose truth never goes indoors (Kehui, with buildings along the road) and one
+/// without a scene (seed 003) report no split.
+#[test]
+fn the_summary_splits_each_estimator_by_where_the_truth_was() {
+    use hybridnav::montecarlo::store::Shard;
+    use hybridnav::montecarlo::{run_trials, summarise, RunOptions};
+    let opts = RunOptions {
+        trials: 2,
+        seed: 1,
+        threads: 2,
+        progress: false,
+        shard: Shard::WHOLE,
+    };
+    let world = hybridnav::world::load_world(&repo().join("worlds/seed004-bupt.toml")).unwrap();
+    let results = run_trials(&world, &opts).unwrap();
+    let summary = summarise(&world, &opts, &results).unwrap();
+    let scene = world.file.scene.as_ref().expect("seed 004 has a scene");
+    let buildings: Vec<(Vec<[f64; 2]>, f64)> = scene
+        .buildings
+        .iter()
+        .map(|b| {
+            (
+                b.footprint_enu_m.clone().expect("ENU footprints"),
+                b.height_m,
+            )
+        })
+        .collect();
+    assert!(scene.indoor_zones.is_empty());
+    for (k, e) in summary.estimators.iter().enumerate() {
+        // (epochs with an estimate, sum of squared horizontal errors) outdoors and indoors.
+        let mut acc = [(0usize, 0.0f64); 2];
+        for t in &results {
+            for ep in &t.estimators[k].epochs {
+                let (Some(_), Some(eh)) = (ep.err_3d_m, ep.err_h_m) else {
+                    continue;
+                };
+                let p = world
+                    .frame
+                    .enu_of_ecef(&nalgebra::Vector3::from(ep.truth_ecef_m));
+                let indoor = buildings
+                    .iter()
+                    .any(|(poly, h)| p.z >= 0.0 && p.z < *h && inside_polygon(poly, p.x, p.y));
+                let slot = &mut acc[usize::from(indoor)];
+                slot.0 += 1;
+                slot.1 += eh * eh;
+            }
+        }
+        let labels: Vec<&str> = e.environments.iter().map(|g| g.label.as_str()).collect();
+        assert_eq!(labels, ["outdoor", "indoor"], "{}", e.name);
+        for (g, (n, sum)) in e.environments.iter().zip(acc) {
+            assert_eq!(g.epochs, n, "{} {}", e.name, g.label);
+            match g.rmse_h_m {
+                Some(r) => {
+                    let want = (sum / n as f64).sqrt();
+                    assert!(
+                        (r - want).abs() < 1e-9 * want.max(1.0),
+                        "{} {}: {r} against {want}",
+                        e.name,
+                        g.label
+                    );
+                }
+                None => assert_eq!(n, 0, "{} {}", e.name, g.label),
+            }
+        }
+    }
+    // The walk spends about 46 of its 354 s inside the teaching building.
+    let re_kf = summary
+        .estimators
+        .iter()
+        .find(|e| e.name == "RE-KF")
+        .unwrap();
+    let indoor = re_kf.environments[1].epochs;
+    assert!(
+        (80..=100).contains(&indoor),
+        "indoor epochs over 2 trials: {indoor}"
+    );
+    for (name, trials) in [
+        ("worlds/seed000-kehui.toml", 1),
+        ("worlds/seed003-seamless.toml", 1),
+    ] {
+        let w = hybridnav::world::load_world(&repo().join(name)).unwrap();
+        let o = RunOptions { trials, ..opts };
+        let s = summarise(&w, &o, &run_trials(&w, &o).unwrap()).unwrap();
+        assert!(
+            s.estimators.iter().all(|e| e.environments.is_empty()),
+            "{name}"
+        );
+    }
+}

@@ -77,6 +77,11 @@ pub struct EstimatorSummary {
     /// without shielding windows.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub segments: Vec<SegmentStats>,
+    /// The errors at the epochs whose truth was outdoors and at those whose truth was
+    /// indoors (inside a building or an indoor zone of the world's `[scene]`), labelled
+    /// `"outdoor"` and `"indoor"`; empty for a world whose truth never goes indoors.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub environments: Vec<SegmentStats>,
 }
 
 impl EstimatorSummary {
@@ -261,7 +266,18 @@ impl Summary {
             );
         }
         self.protocol_notes(&mut s);
-        self.segment_table(&mut s, w);
+        self.segment_table(
+            &mut s,
+            w,
+            "3-D error by segment (m; rmse and 2σ, the 95.45 % percentile, of the epochs inside):",
+            |e| &e.segments,
+        );
+        self.segment_table(
+            &mut s,
+            w,
+            "3-D error by where the truth was (m; rmse and 2σ of the epochs outdoors and indoors):",
+            |e| &e.environments,
+        );
         s
     }
 
@@ -305,25 +321,27 @@ impl Summary {
         }
     }
 
-    /// The RMS 3-D error of each estimator inside each shielding window and outside them
-    /// (nothing for a world without windows).
-    fn segment_table(&self, s: &mut String, w: usize) {
+    /// The RMS 3-D error of each estimator in each segment `of` gives it (the shielding
+    /// windows and the rest, or outdoors and indoors; nothing for a world without them).
+    fn segment_table(
+        &self,
+        s: &mut String,
+        w: usize,
+        heading: &str,
+        of: impl Fn(&EstimatorSummary) -> &Vec<SegmentStats>,
+    ) {
         use std::fmt::Write;
-        let Some(first) = self.estimators.iter().find(|e| !e.segments.is_empty()) else {
+        let Some(first) = self.estimators.iter().map(&of).find(|g| !g.is_empty()) else {
             return;
         };
         // Each segment is two columns, rmse and 2σ, under its label.
         let widths: Vec<usize> = first
-            .segments
             .iter()
             .map(|g| g.label.chars().count().max(15))
             .collect();
-        let _ = writeln!(
-            s,
-            "\n3-D error by segment (m; rmse and 2σ, the 95.45 % percentile, of the epochs inside):"
-        );
+        let _ = writeln!(s, "\n{heading}");
         let _ = write!(s, "{:<w$}", "");
-        for (g, cw) in first.segments.iter().zip(&widths) {
+        for (g, cw) in first.iter().zip(&widths) {
             let _ = write!(s, "  {:>cw$}", g.label);
         }
         let _ = writeln!(s);
@@ -335,7 +353,7 @@ impl Summary {
         let f = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |x| format!("{x:.2}"));
         for e in &self.estimators {
             let _ = write!(s, "{:<w$}", e.name);
-            for (g, cw) in e.segments.iter().zip(&widths) {
+            for (g, cw) in of(e).iter().zip(&widths) {
                 let x = g.error_3d_m.as_ref();
                 let cell = format!("{:>7} {:>7}", f(x.map(|x| x.rmse)), f(x.map(|x| x.sigma2)));
                 let _ = write!(s, "  {cell:>cw$}");

@@ -287,7 +287,11 @@ impl Scene {
         Ok(self.indoor_at(p))
     }
 
-    fn indoor_at(&self, p: &Vector3<f64>) -> Option<Indoor> {
+    /// Where a point `p` (ENU, m) is: inside a building (`ground ≤ z < roof`, footprint
+    /// closed), inside an indoor zone, or outdoors (`None`). Unlike
+    /// [`Scene::check_receiver`] it takes any point, as the run's reduction does when it
+    /// splits each estimator's errors by where the truth was.
+    pub fn indoor_at(&self, p: &Vector3<f64>) -> Option<Indoor> {
         if let Some(b) = self.building_at(p) {
             return Some(Indoor::Building(b));
         }

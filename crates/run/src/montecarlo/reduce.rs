@@ -44,6 +44,33 @@ pub struct RunReducer {
     last_trial: Option<u64>,
     /// The world's RPE interval (s), which every estimator's RPE uses.
     rpe_delta_s: f64,
+    /// Tells indoor truth from outdoor (worlds with buildings or indoor zones).
+    places: Option<Places>,
+}
+
+/// Where the truth of an epoch was: indoors (inside a building or an indoor zone of the
+/// world's scene) or outdoors. Papers that test indoors and out state their accuracy for
+/// each (seed 004: "indoor better than 1 m, outdoor 0.5 m"), so each estimator's errors
+/// are also reduced per place.
+struct Places {
+    scene: std::sync::Arc<crate::propagation::Scene>,
+    frame: crate::core::geodesy::EnuFrame,
+}
+
+impl Places {
+    /// The world's places, when it has a scene (a truth that never goes indoors gives
+    /// no split, [`EstimatorAcc::finish`]).
+    fn of(world: &World) -> Option<Self> {
+        world.scene.as_ref().map(|scene| Self {
+            scene: scene.clone(),
+            frame: world.frame.clone(),
+        })
+    }
+
+    fn indoor(&self, truth_ecef_m: &[f64; 3]) -> bool {
+        let enu = self.frame.enu_of_ecef(&Vector3::from(*truth_ecef_m));
+        self.scene.indoor_at(&enu).is_some()
+    }
 }
 
 impl RunReducer {
@@ -73,11 +100,8 @@ impl RunReducer {
                     acc.segments = segments
                         .iter()
                         .map(|(label, window_s)| SegmentAcc {
-                            label: label.clone(),
                             window_s: *window_s,
-                            e3: SortedSpill::with_chunk(spill_dir, chunk),
-                            n: 0,
-                            sum_eh_m2: 0.0,
+                            ..SegmentAcc::new(label, spill_dir, chunk)
                         })
                         .collect();
                     acc
@@ -87,6 +111,7 @@ impl RunReducer {
             first: None,
             last_trial: None,
             rpe_delta_s,
+            places: Places::of(world),
         }
     }
 
@@ -105,7 +130,8 @@ impl RunReducer {
         self.last_trial = Some(t.trial);
         for (k, acc) in self.estimators.iter_mut().enumerate() {
             if let Some(trace) = t.estimators.get(k) {
-                acc.push(t.trial, trace).map_err(|e| e.to_string())?;
+                acc.push(t.trial, trace, self.places.as_ref())
+                    .map_err(|e| e.to_string())?;
             }
         }
         self.warnings.extend(t.warnings.iter().cloned());
@@ -183,6 +209,16 @@ struct SegmentAcc {
 }
 
 impl SegmentAcc {
+    fn new(label: &str, dir: &Path, chunk: usize) -> Self {
+        Self {
+            label: label.to_string(),
+            window_s: None,
+            e3: SortedSpill::with_chunk(dir, chunk),
+            n: 0,
+            sum_eh_m2: 0.0,
+        }
+    }
+
     fn contains(&self, t_s: f64) -> bool {
         self.window_s.is_some_and(|[a, b]| t_s >= a && t_s < b)
     }
@@ -279,6 +315,12 @@ struct EstimatorAcc {
     trial_errs: Vec<f64>,
     /// The shielding windows and the rest of the time line ([`segments_of`]).
     segments: Vec<SegmentAcc>,
+    /// The epochs whose truth was outdoors and indoors ([`Places`]), and how many epochs
+    /// (with an estimate or not) were indoors: a world whose truth never goes indoors
+    /// reports no split.
+    outdoor: SegmentAcc,
+    indoor: SegmentAcc,
+    indoor_epochs: usize,
 }
 
 impl EstimatorAcc {
@@ -312,10 +354,18 @@ impl EstimatorAcc {
             per_trial: PerTrial::default(),
             trial_errs: Vec::new(),
             segments: Vec::new(),
+            outdoor: SegmentAcc::new("outdoor", dir, chunk),
+            indoor: SegmentAcc::new("indoor", dir, chunk),
+            indoor_epochs: 0,
         }
     }
 
-    fn push(&mut self, trial: u64, trace: &EstimatorTrace) -> std::io::Result<()> {
+    fn push(
+        &mut self,
+        trial: u64,
+        trace: &EstimatorTrace,
+        places: Option<&Places>,
+    ) -> std::io::Result<()> {
         self.trial_errs.clear();
         // One NEES per time per trial: the last record of an instant with several batches
         // (GNSS and FM at the same second), as the TUM tracks below keep.
@@ -325,6 +375,10 @@ impl EstimatorAcc {
         for ep in &trace.epochs {
             self.epochs += 1;
             self.gated += u64::from(ep.rejected_gate);
+            let indoor = places.map(|p| p.indoor(&ep.truth_ecef_m));
+            if indoor == Some(true) {
+                self.indoor_epochs += 1;
+            }
             if ep.numerical_failure {
                 self.failures += 1;
                 if self.first_failures.len() < FAILURES_LISTED {
@@ -347,6 +401,11 @@ impl EstimatorAcc {
                         if !inside {
                             outside.add(a, b)?;
                         }
+                    }
+                    match indoor {
+                        Some(true) => self.indoor.add(a, b)?,
+                        Some(false) => self.outdoor.add(a, b)?,
+                        None => {}
                     }
                     match ep.since_update_s {
                         Some(age) if age <= self.coast_limit_s => {
@@ -492,6 +551,11 @@ impl EstimatorAcc {
                 .into_iter()
                 .map(SegmentAcc::finish)
                 .collect::<std::io::Result<_>>()?,
+            environments: if self.indoor_epochs > 0 {
+                vec![self.outdoor.finish()?, self.indoor.finish()?]
+            } else {
+                Vec::new()
+            },
         };
         let rmse_vs_time = self
             .sq_err_by_t

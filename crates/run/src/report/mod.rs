@@ -260,24 +260,44 @@ fn table(h: &mut String, s: &Summary) {
         s.rpe_delta_s
     );
     flags(h, s);
-    segments(h, s);
+    segments(
+        h,
+        s,
+        "By segment",
+        |e| &e.segments,
+        "The 3-D error of the epochs inside each <code>[[shielding]]</code> window of the world and of those outside every window: where each source helps.",
+    );
+    segments(
+        h,
+        s,
+        "Outdoors and indoors",
+        |e| &e.environments,
+        "The 3-D error of the epochs whose truth was outside every building and indoor zone of the world's <code>[scene]</code>, and of those whose truth was inside one.",
+    );
     across(h, s);
 }
 
-/// The 3-D error inside each shielding window and outside them (worlds with windows).
-fn segments(h: &mut String, s: &Summary) {
-    let Some(first) = s.estimators.iter().find(|e| !e.segments.is_empty()) else {
+/// The 3-D error in each segment `of` gives an estimator (the shielding windows and the
+/// rest, or outdoors and indoors), under `title`, with `about` below the table.
+fn segments(
+    h: &mut String,
+    s: &Summary,
+    title: &str,
+    of: impl Fn(&crate::montecarlo::EstimatorSummary) -> &Vec<crate::metrics::summary::SegmentStats>,
+    about: &str,
+) {
+    let Some(first) = s.estimators.iter().map(&of).find(|g| !g.is_empty()) else {
         return;
     };
-    h.push_str("<h3>By segment</h3>\n<table><tr><th>estimator</th>");
-    for g in &first.segments {
+    let _ = write!(h, "<h3>{title}</h3>\n<table><tr><th>estimator</th>");
+    for g in first {
         let _ = write!(h, "<th>{} RMSE</th><th>2σ</th>", escape(&g.label));
     }
     h.push_str("</tr>\n");
     for e in &s.estimators {
         h.push_str("<tr>");
         h.push_str(&name_cell(e));
-        for g in &e.segments {
+        for g in of(e) {
             let x = g.error_3d_m.as_ref();
             let _ = write!(
                 h,
@@ -288,7 +308,7 @@ fn segments(h: &mut String, s: &Summary) {
         }
         h.push_str("</tr>\n");
     }
-    h.push_str("</table>\n<p class=\"meta\">Metres. The 3-D error of the epochs inside each <code>[[shielding]]</code> window of the world and of those outside every window: where each source helps.</p>\n");
+    let _ = writeln!(h, "</table>\n<p class=\"meta\">Metres. {about}</p>");
 }
 
 /// The footnotes of the flags, naming each flagged estimator and what happened.
