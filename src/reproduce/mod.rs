@@ -227,10 +227,7 @@ impl StatedResult {
         let head = format!(
             "Stated in the text, not counted: {} horizontal RMS {} {} m, against {}",
             st.estimator,
-            match st.place {
-                papers::Place::Outdoor => "outdoors",
-                papers::Place::Indoor => "indoors",
-            },
+            st.place.adverb(),
             fmt_opt(self.simulated_m, 2),
             st.quote
         );

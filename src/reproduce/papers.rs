@@ -327,6 +327,14 @@ impl Place {
             Place::Indoor => "indoor",
         }
     }
+
+    /// "outdoors" or "indoors", as the reports print it.
+    pub fn adverb(self) -> &'static str {
+        match self {
+            Place::Outdoor => "outdoors",
+            Place::Indoor => "indoors",
+        }
+    }
 }
 
 /// A figure a paper states in its text rather than in a table: the horizontal RMS error

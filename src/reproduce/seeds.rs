@@ -220,10 +220,7 @@ impl Sweep {
                             runs.iter().map(|r| &r[pi].stated[si]).collect();
                         FigureAcross {
                             row: s0.stated.estimator,
-                            label: match s0.stated.place {
-                                super::papers::Place::Outdoor => "outdoors",
-                                super::papers::Place::Indoor => "indoors",
-                            },
+                            label: s0.stated.place.adverb(),
                             paper_m: s0.stated.paper_m,
                             simulated_m: per.iter().map(|x| x.simulated_m).collect(),
                             within: per.iter().map(|x| x.met()).collect(),
