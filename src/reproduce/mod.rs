@@ -8,6 +8,7 @@
 //! trials and seed, generated and never edited by hand; a test regenerates them and fails
 //! when the committed file is stale.
 
+pub mod paired;
 pub mod papers;
 pub mod seeds;
 
@@ -121,6 +122,10 @@ pub struct OrderingResult {
     pub metric: Metric,
     /// `(estimator, simulated value)` in the claimed ascending order.
     pub values: Vec<(&'static str, Option<f64>)>,
+    /// For each adjacent pair of `values`, the split of the run's trials
+    /// ([`paired::PairedSign`]); empty when the trials were not at hand (a summary read
+    /// back), `None` for a pair without per-trial values.
+    pub paired: Vec<Option<paired::PairedSign>>,
 }
 
 impl OrderingResult {
@@ -470,6 +475,7 @@ fn score_rows(
         .iter()
         .map(|o| {
             Ok(OrderingResult {
+                paired: Vec::new(),
                 metric: o.metric,
                 values: o
                     .ascending
@@ -533,7 +539,13 @@ pub fn run_paper(
     };
     let results = run_trials(&world, &opts)?;
     let summary = summarise(&world, &opts, &results)?;
-    score(paper, &summary)
+    let mut scored = score(paper, &summary)?;
+    let names: Vec<String> = summary.estimators.iter().map(|e| e.name.clone()).collect();
+    paired::pair(&mut scored.orderings, &results, &names);
+    for v in &mut scored.variants {
+        paired::pair(&mut v.orderings, &results, &names);
+    }
+    Ok(scored)
 }
 
 /// Metres to the millimetre; a difference that rounds to zero prints as 0.000, not −0.000.
@@ -556,12 +568,49 @@ fn tick(ok: bool) -> &'static str {
 fn ordering_text(o: &OrderingResult) -> String {
     let names: Vec<&str> = o.values.iter().map(|v| v.0).collect();
     let vals: Vec<String> = o.values.iter().map(|v| fmt_opt(v.1, 2)).collect();
-    format!(
+    let mut text = format!(
         "{}: {} ({})",
         o.metric.label(),
         names.join(" < "),
         vals.join(" < ")
-    )
+    );
+    let pairs: Vec<String> = o
+        .values
+        .windows(2)
+        .zip(&o.paired)
+        .filter_map(|(w, p)| {
+            let p = p.as_ref()?;
+            let n = p.holds + p.reversed + p.ties;
+            let ties = if p.ties > 0 {
+                format!(", {} tied", p.ties)
+            } else {
+                String::new()
+            };
+            Some(format!(
+                "{} < {} in {} of {n} trials, reversed in {}{ties} (sign test p = {})",
+                w[0].0,
+                w[1].0,
+                p.holds,
+                p.reversed,
+                p_value(p.p)
+            ))
+        })
+        .collect();
+    if !pairs.is_empty() {
+        let _ = write!(text, "; trial by trial: {}", pairs.join("; "));
+    }
+    text
+}
+
+/// A p-value to two significant digits, in scientific notation below 0.01.
+fn p_value(p: f64) -> String {
+    if p < 1e-2 {
+        format!("{p:.1e}")
+    } else if p < 0.1 {
+        format!("{p:.3}")
+    } else {
+        format!("{p:.2}")
+    }
 }
 
 /// The plain-text tables printed by `hybridnav reproduce`.
@@ -960,6 +1009,7 @@ mod tests {
         assert!(!b(37.6, 30.0).within());
         assert!(!b(25.0, 8.0).within() && !b(25.0, 8.0).at_bound());
         let o = |a: f64, b: f64| OrderingResult {
+            paired: vec![],
             metric: Metric::Mean,
             values: vec![("a", Some(a)), ("b", Some(b))],
         };

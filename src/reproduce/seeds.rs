@@ -498,6 +498,7 @@ mod tests {
             r.trials = 2;
             r.figures = vec![crate::reproduce::test_figure(sim)];
             r.orderings = vec![OrderingResult {
+                paired: vec![],
                 metric: Metric::Mean,
                 values: vec![("a (tight)", Some(a)), ("b", Some(2.0))],
             }];

@@ -365,3 +365,72 @@ fn the_seed_sweep_matches_the_one_seed_runs() {
     );
     refused(&["reproduce", "seed002", "--seeds", "1,1"], &["repeated"]);
 }
+
+/// The paired comparisons under each claimed ordering take each trial's own value of the
+/// ordering's metric (`reproduce::paired::trial_metric`). With one trial that value is the
+/// summary's pooled one, which the run's reducer computes on its own path (a sorted spill
+/// per statistic, the TUM tracks): every metric of every estimator of Beihang and Lianhua
+/// must agree to 1e-9. And `pair` splits every trial of a two-trial run into holds,
+/// reversed or tied.
+#[test]
+fn the_trial_by_trial_metric_is_the_summarys_on_one_trial() {
+    use hybridnav::reproduce::paired::{pair, trial_metric};
+    use hybridnav::reproduce::papers::Metric::*;
+    use hybridnav::reproduce::{metric_of, OrderingResult};
+    for world in ["worlds/seed000-beihang.toml", "worlds/seed002-lianhua.toml"] {
+        let w = load_world(&crate::common::repo().join(world)).unwrap();
+        let opts = RunOptions {
+            trials: 2,
+            seed: 1,
+            threads: 2,
+            progress: false,
+            shard: Shard::WHOLE,
+        };
+        let trials = run_trials(&w, &opts).unwrap();
+        let one = RunOptions { trials: 1, ..opts };
+        let s = summarise(&w, &one, &trials[..1]).unwrap();
+        let mut compared = 0;
+        for (k, e) in s.estimators.iter().enumerate() {
+            for m in [
+                Sigma1,
+                Sigma2,
+                Sigma3,
+                Mean,
+                Std,
+                Rmse,
+                Horizontal1,
+                Horizontal2,
+                AteMean,
+                AteRmse,
+            ] {
+                let pooled = metric_of(e, m);
+                let own = trial_metric(&trials[0].estimators[k], m);
+                match (pooled, own) {
+                    (Some(a), Some(b)) => {
+                        assert!(
+                            (a - b).abs() <= 1e-9 * a.abs().max(1.0),
+                            "{world} {} {m:?}: {a} against {b}",
+                            e.name
+                        );
+                        compared += 1;
+                    }
+                    (a, b) => assert_eq!(a.is_some(), b.is_some(), "{world} {} {m:?}", e.name),
+                }
+            }
+            assert_eq!(trial_metric(&trials[0].estimators[k], RpeMean), None);
+        }
+        assert!(compared >= 30, "{world}: {compared}");
+        let names: Vec<String> = s.estimators.iter().map(|e| e.name.clone()).collect();
+        let mut o = [OrderingResult {
+            metric: Sigma2,
+            values: vec![
+                (s.estimators[0].name.clone().leak(), None),
+                (s.estimators[1].name.clone().leak(), None),
+            ],
+            paired: Vec::new(),
+        }];
+        pair(&mut o, &trials, &names);
+        let p = o[0].paired[0].expect("a pair with per-trial values");
+        assert_eq!(p.holds + p.reversed + p.ties, 2);
+    }
+}
