@@ -574,6 +574,16 @@ fn ordering_text(o: &OrderingResult) -> String {
         names.join(" < "),
         vals.join(" < ")
     );
+    if let Some(pairs) = paired_text(o) {
+        let _ = write!(text, "; trial by trial: {pairs}");
+    }
+    text
+}
+
+/// Each adjacent pair of an ordering with its split of the trials, "A < B in k of n
+/// trials, reversed in r[, t tied] (sign test p = …)", joined by "; "; `None` without
+/// one.
+fn paired_text(o: &OrderingResult) -> Option<String> {
     let pairs: Vec<String> = o
         .values
         .windows(2)
@@ -596,10 +606,7 @@ fn ordering_text(o: &OrderingResult) -> String {
             ))
         })
         .collect();
-    if !pairs.is_empty() {
-        let _ = write!(text, "; trial by trial: {}", pairs.join("; "));
-    }
-    text
+    (!pairs.is_empty()).then(|| pairs.join("; "))
 }
 
 /// A p-value to two significant digits, in scientific notation below 0.01.

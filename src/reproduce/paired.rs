@@ -56,6 +56,25 @@ impl PairedSign {
     }
 }
 
+impl PairedSign {
+    /// The splits of independent runs (the same pair on several master seeds) taken
+    /// together: their counts add, and the test is of the sum.
+    pub fn pooled<'a>(parts: impl IntoIterator<Item = &'a PairedSign>) -> Self {
+        let (mut holds, mut reversed, mut ties) = (0, 0, 0);
+        for p in parts {
+            holds += p.holds;
+            reversed += p.reversed;
+            ties += p.ties;
+        }
+        Self {
+            holds,
+            reversed,
+            ties,
+            p: sign_test_p(holds, holds + reversed),
+        }
+    }
+}
+
 /// The two-sided exact sign test: the probability, under `X ~ Binomial(n, ½)`, of a
 /// split at least as uneven as `k` of `n`, `min(1, 2 · P(X ≤ min(k, n − k)))`; 1 for
 /// `n = 0`.
@@ -178,5 +197,9 @@ mod tests {
         ]);
         assert_eq!((s.holds, s.reversed, s.ties), (2, 1, 2));
         assert_eq!(s.p, sign_test_p(2, 3));
+        let t = PairedSign::of([(Some(1.0), Some(2.0)), (Some(1.0), Some(3.0))]);
+        let both = PairedSign::pooled([&s, &t]);
+        assert_eq!((both.holds, both.reversed, both.ties), (4, 1, 2));
+        assert_eq!(both.p, sign_test_p(4, 5));
     }
 }

@@ -10,6 +10,7 @@
 //! exactly as a one-seed `hybridnav reproduce --seed S` scores it ([`super::score`]), so
 //! the per-seed totals equal those runs' totals (tested).
 
+use super::paired::PairedSign;
 use super::{fmt_opt, FigureResult, OrderingResult, PaperResult};
 use std::fmt::Write as _;
 
@@ -111,6 +112,9 @@ pub struct PaperAcross {
     pub figures: Vec<FigureAcross>,
     /// Each claimed ordering's text on the first seed and on how many seeds it holds.
     pub orderings: Vec<(String, usize)>,
+    /// Each claimed ordering's pairs trial by trial, the seeds' splits taken together
+    /// ([`super::paired::PairedSign::pooled`]); `None` where a seed has no split.
+    pub orderings_paired: Vec<Option<String>>,
     /// The largest reset share of any of the world's estimators on each seed, with its
     /// estimator (`None`: no reset on that seed).
     pub worst_resets: Vec<Option<(String, f64)>>,
@@ -186,6 +190,26 @@ impl Sweep {
                         (claim_text(o0), held)
                     })
                     .collect();
+                let orderings_paired = p0
+                    .orderings
+                    .iter()
+                    .enumerate()
+                    .map(|(oi, o0)| {
+                        let pooled = (0..o0.paired.len())
+                            .map(|j| {
+                                let parts: Option<Vec<&PairedSign>> = runs
+                                    .iter()
+                                    .map(|r| r[pi].orderings[oi].paired.get(j)?.as_ref())
+                                    .collect();
+                                parts.map(PairedSign::pooled)
+                            })
+                            .collect();
+                        super::paired_text(&OrderingResult {
+                            paired: pooled,
+                            ..o0.clone()
+                        })
+                    })
+                    .collect();
                 let worst_resets = runs
                     .iter()
                     .map(|r| {
@@ -234,6 +258,7 @@ impl Sweep {
                     world: p0.paper.world,
                     figures,
                     orderings,
+                    orderings_paired,
                     worst_resets,
                 }
             })
@@ -365,7 +390,13 @@ impl Sweep {
         let mut lines: Vec<String> = p
             .orderings
             .iter()
-            .map(|(text, held)| format!("holds on {held}/{n}: {text}"))
+            .zip(&p.orderings_paired)
+            .map(|((text, held), paired)| match paired {
+                Some(pairs) => format!(
+                    "holds on {held}/{n}: {text}; trial by trial over the {n} seeds: {pairs}"
+                ),
+                None => format!("holds on {held}/{n}: {text}"),
+            })
             .collect();
         lines.extend(p.stated.iter().map(|f| {
             let [lo, med, hi] = f.spread_cells();
@@ -498,7 +529,10 @@ mod tests {
             r.trials = 2;
             r.figures = vec![crate::reproduce::test_figure(sim)];
             r.orderings = vec![OrderingResult {
-                paired: vec![],
+                paired: vec![Some(super::super::paired::PairedSign::of([
+                    (Some(1.0), Some(2.0)),
+                    (Some(a), Some(2.0)),
+                ]))],
                 metric: Metric::Mean,
                 values: vec![("a (tight)", Some(a)), ("b", Some(2.0))],
             }];
@@ -533,7 +567,15 @@ mod tests {
         assert_eq!(sw.totals, vec![(0, 1, 1, 1), (1, 1, 1, 1), (0, 1, 0, 1)]);
         let text = sw.text();
         assert!(text.contains("seed 2 PF 2.00 %") && text.contains("seed 1 none"));
-        assert!(text.contains("holds on 2/3: mean: a (tight) < b"));
+        // Each seed's two trials: the first holds, the second holds for a = 1 and 1.5 and
+        // is reversed for a = 3; over the seeds 5 hold and 1 is reversed.
+        assert!(
+            text.contains(
+                "holds on 2/3: mean: a (tight) < b; trial by trial over the 3 seeds: a (tight) \
+                 < b in 5 of 6 trials, reversed in 1 (sign test p = 0.22)"
+            ),
+            "{text}"
+        );
         // The PF's NEES is 3a for 3 dof: a = 1 and 1.5 are within 2×, a = 3 is not.
         assert_eq!(
             sw.papers[0].consistent,
