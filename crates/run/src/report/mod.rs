@@ -283,7 +283,9 @@ fn segments(
     h: &mut String,
     s: &Summary,
     title: &str,
-    of: impl Fn(&crate::montecarlo::EstimatorSummary) -> &Vec<crate::metrics::summary::SegmentStats>,
+    of: impl Fn(
+        &crate::metrics::summary::EstimatorSummary,
+    ) -> &Vec<crate::metrics::summary::SegmentStats>,
     about: &str,
 ) {
     let Some(first) = s.estimators.iter().map(&of).find(|g| !g.is_empty()) else {
