@@ -44,7 +44,7 @@ pub struct RunReducer {
     last_trial: Option<u64>,
     /// The world's RPE interval (s), which every estimator's RPE uses.
     rpe_delta_s: f64,
-    /// Tells indoor truth from outdoor (worlds with buildings or indoor zones).
+    /// Tells indoor truth from outdoor (worlds with a scene).
     places: Option<Places>,
 }
 
