@@ -73,8 +73,7 @@ impl FigureResult {
 
     /// Whether simulated / published lies within [1/[`WITHIN`], [`WITHIN`]].
     fn in_band(&self) -> bool {
-        self.ratio()
-            .is_some_and(|r| (1.0 / WITHIN..=WITHIN).contains(&r))
+        self.ratio().is_some_and(|r| within_factor(r, WITHIN))
     }
 
     /// Whether the published figure lies below the bound (no estimator of the model can
@@ -221,7 +220,7 @@ impl StatedResult {
             if st.at_most {
                 x <= st.paper_m
             } else {
-                (1.0 / WITHIN..=WITHIN).contains(&(x / st.paper_m))
+                within_factor(x / st.paper_m, WITHIN)
             }
         })
     }
@@ -729,7 +728,12 @@ pub const NEES_WITHIN: f64 = 2.0;
 /// Whether a mean NEES is within [`NEES_WITHIN`] of its degrees of freedom, either way.
 pub fn nees_consistent(mean: f64, dof: f64) -> bool {
     let r = mean / dof;
-    (1.0 / NEES_WITHIN..=NEES_WITHIN).contains(&r)
+    within_factor(r, NEES_WITHIN)
+}
+
+/// Whether a ratio lies within `factor` of 1 either way, `[1/factor, factor]`.
+fn within_factor(ratio: f64, factor: f64) -> bool {
+    (1.0 / factor..=factor).contains(&ratio)
 }
 
 /// A positive figure to three significant digits, in scientific notation from 10⁴ (a

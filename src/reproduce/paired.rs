@@ -147,19 +147,30 @@ pub fn trial_metric(trace: &EstimatorTrace, metric: Metric) -> Option<f64> {
 /// world's estimator names, in the order of each trial's traces).
 pub fn pair(orderings: &mut [OrderingResult], trials: &[TrialResult], names: &[String]) {
     for o in orderings {
-        let index = |n: &str| names.iter().position(|x| x == n);
-        o.paired = o
+        if o.metric == Metric::RpeMean || o.metric == Metric::RpeRmse {
+            o.paired = vec![None; o.values.len().saturating_sub(1)];
+            continue;
+        }
+        // Each estimator of the claim, its value in every trial (`None` for a name the
+        // world lacks), taken once though the middle one of `a < b < c` is in two pairs.
+        let per_trial: Vec<Option<Vec<Option<f64>>>> = o
             .values
+            .iter()
+            .map(|(name, _)| {
+                let k = names.iter().position(|x| x == name)?;
+                Some(
+                    trials
+                        .iter()
+                        .map(|t| t.estimators.get(k).and_then(|e| trial_metric(e, o.metric)))
+                        .collect(),
+                )
+            })
+            .collect();
+        o.paired = per_trial
             .windows(2)
             .map(|w| {
-                let (a, b) = (index(w[0].0)?, index(w[1].0)?);
-                if o.metric == Metric::RpeMean || o.metric == Metric::RpeRmse {
-                    return None;
-                }
-                Some(PairedSign::of(trials.iter().map(|t| {
-                    let v = |k: usize| t.estimators.get(k).and_then(|e| trial_metric(e, o.metric));
-                    (v(a), v(b))
-                })))
+                let (a, b) = (w[0].as_ref()?, w[1].as_ref()?);
+                Some(PairedSign::of(a.iter().copied().zip(b.iter().copied())))
             })
             .collect();
     }

@@ -383,7 +383,8 @@ impl Sweep {
         format!("Largest reset share: {}.", parts.join(", "))
     }
 
-    /// The lines under a paper's table in both reports: each ordering's seeds, who is
+    /// The lines under a paper's table in both reports: each ordering's seeds (with its
+    /// pairs over all the seeds' trials), the figures stated in the paper's text, who is
     /// consistent on which seeds, and the largest reset share per seed.
     fn paper_lines(&self, p: &PaperAcross) -> Vec<String> {
         let n = self.seeds.len();

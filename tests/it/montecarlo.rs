@@ -922,15 +922,8 @@ fn inside_polygon(poly: &[[f64; 2]], e: f64, n: f64) -> bool {
 /// without a scene (seed 003) report no split.
 #[test]
 fn the_summary_splits_each_estimator_by_where_the_truth_was() {
-    use hybridnav::montecarlo::store::Shard;
     use hybridnav::montecarlo::{run_trials, summarise, RunOptions};
-    let opts = RunOptions {
-        trials: 2,
-        seed: 1,
-        threads: 2,
-        progress: false,
-        shard: Shard::WHOLE,
-    };
+    let opts = crate::common::run_options(2, 1);
     let world = hybridnav::world::load_world(&repo().join("worlds/seed004-bupt.toml")).unwrap();
     let results = run_trials(&world, &opts).unwrap();
     let summary = summarise(&world, &opts, &results).unwrap();

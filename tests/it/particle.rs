@@ -544,16 +544,10 @@ fn the_few_particle_goals_hold_on_the_paper_worlds() {
 /// the EKF, efficient on this nearly linear model, stays within 1.5× of it there.
 #[test]
 fn the_rmse_against_time_lies_on_or_above_its_bound() {
-    use hybridnav::montecarlo::{reduce::RunReducer, run_trials, store::Shard, RunOptions};
+    use hybridnav::montecarlo::{reduce::RunReducer, run_trials};
     let world = hybridnav::world::load_world(&repo().join("worlds/seed003-seamless.toml"))
         .expect("seed 003 world");
-    let opts = RunOptions {
-        trials: 4,
-        seed: 3,
-        threads: 2,
-        progress: false,
-        shard: Shard::WHOLE,
-    };
+    let opts = crate::common::run_options(4, 3);
     let trials = run_trials(&world, &opts).expect("trials");
     let spill = crate::common::tmp_dir("rmse-vs-time");
     std::fs::create_dir_all(&spill).unwrap();
@@ -641,16 +635,10 @@ fn the_rmse_against_time_lies_on_or_above_its_bound() {
 /// seed 001 row and 3 for seed 003's 3-D rows.
 #[test]
 fn planar_filters_report_a_two_degree_of_freedom_nees() {
-    use hybridnav::montecarlo::{reduce::RunReducer, run_trials, store::Shard, RunOptions};
+    use hybridnav::montecarlo::{reduce::RunReducer, run_trials};
     for (file, dof) in [("seed001-pf2d.toml", 2.0), ("seed003-seamless.toml", 3.0)] {
         let world = hybridnav::world::load_world(&repo().join("worlds").join(file)).unwrap();
-        let opts = RunOptions {
-            trials: 2,
-            seed: 5,
-            threads: 2,
-            progress: false,
-            shard: Shard::WHOLE,
-        };
+        let opts = crate::common::run_options(2, 5);
         let trials = run_trials(&world, &opts).expect("trials");
         if dof == 2.0 {
             let mut checked = 0;

@@ -2,7 +2,7 @@
 //! against the estimators that run it, on seed 000's Kehui world.
 
 use crate::common::repo;
-use hybridnav::montecarlo::{reduce::RunReducer, run_trials, store::Shard, RunOptions};
+use hybridnav::montecarlo::{reduce::RunReducer, run_trials, RunOptions};
 
 /// Seed 000's world `site` with three filter-family EKF rows appended (the world files
 /// run `ekf11` rows, which share the model): GPS alone, GPS + BDS, GPS + BDS + DTMB.
@@ -23,13 +23,7 @@ fn seed000_with_family_rows(site: &str) -> hybridnav::world::World {
 
 /// `trials` trials of seed 1 on two threads, unsharded, without a progress bar.
 fn options(trials: u64) -> RunOptions {
-    RunOptions {
-        trials,
-        seed: 1,
-        threads: 2,
-        progress: false,
-        shard: Shard::WHOLE,
-    }
+    crate::common::run_options(trials, 1)
 }
 
 /// The estimators' names, in the world's order.

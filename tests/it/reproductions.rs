@@ -2,19 +2,12 @@
 //! full tables, with more trials, are in docs/reproductions.md; seeds 001 and 003 are in
 //! `reproductions_abstract`).
 
-use hybridnav::montecarlo::store::Shard;
 use hybridnav::montecarlo::{run_trials, summarise, RunOptions, Summary};
 use hybridnav::world::load_world;
 
 fn run(world: &str, trials: u64, seed: u64) -> Summary {
     let w = load_world(&crate::common::repo().join(world)).expect("world loads");
-    let opts = RunOptions {
-        trials,
-        seed,
-        threads: 2,
-        progress: false,
-        shard: Shard::WHOLE,
-    };
+    let opts = crate::common::run_options(trials, seed);
     let r = run_trials(&w, &opts).expect("trials run");
     summarise(&w, &opts, &r).expect("summary")
 }
@@ -379,13 +372,7 @@ fn the_trial_by_trial_metric_is_the_summarys_on_one_trial() {
     use hybridnav::reproduce::{metric_of, OrderingResult};
     for world in ["worlds/seed000-beihang.toml", "worlds/seed002-lianhua.toml"] {
         let w = load_world(&crate::common::repo().join(world)).unwrap();
-        let opts = RunOptions {
-            trials: 2,
-            seed: 1,
-            threads: 2,
-            progress: false,
-            shard: Shard::WHOLE,
-        };
+        let opts = crate::common::run_options(2, 1);
         let trials = run_trials(&w, &opts).unwrap();
         let one = RunOptions { trials: 1, ..opts };
         let s = summarise(&w, &one, &trials[..1]).unwrap();
