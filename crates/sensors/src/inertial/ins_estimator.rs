@@ -16,6 +16,7 @@ use super::source::local_earth_of;
 use super::strapdown::NavState;
 use super::{velocity_noise_var_enu, LocalEarth};
 use crate::core::config::check_range;
+use crate::core::stats::chi2;
 use crate::core::{ConfigIssue, EnuFrame, GpsTime, System};
 use crate::fusion::wls::{self, WlsOptions};
 use crate::measurement::{
@@ -80,16 +81,40 @@ const MAX_DIFFERENCE_INTERVAL_S: f64 = 2.0;
 /// Fixes kept for the position-only initialisation.
 const INIT_RING: usize = 16;
 
+/// The position-only initialisation's quadratic fit is refused when its horizontal
+/// residuals exceed this quantile of their χ² distribution (the 0.999 of the filters'
+/// gates, e.g. `CHI2_3DOF_P999` in the family EKF).
+const INIT_FIT_CONFIDENCE: f64 = 0.999;
+
+/// A weighted least-squares fit of p(τ) = p₀ + v τ + ½ a τ² ([`quadratic_fit`]).
+#[derive(Clone, Copy, Debug)]
+struct QuadraticFit {
+    /// Velocity and acceleration at τ = 0.
+    v: Vector3<f64>,
+    a: Vector3<f64>,
+    /// Their variances, the same on every axis.
+    var_v: f64,
+    var_a: f64,
+    /// The weighted residual sum of squares of the two horizontal axes,
+    /// `Σᵢ (‖pᵢ − p̂(τᵢ)‖²_EN) / σᵢ²`, and its degrees of freedom `2 (n − 3)`: a χ² when the
+    /// fixes' errors are as reported and the track is a parabola over the window.
+    chi2_h: f64,
+    dof_h: usize,
+}
+
 /// Weighted least-squares fit of p(τ) = p₀ + v τ + ½ a τ² to positions at times τ ≤ 0
-/// relative to now (each with its variance), spanning at least `min_span_s`: returns
-/// (v, a, var v, var a) at τ = 0, the same variances on every axis. Does not allocate.
+/// relative to now (each with its variance), spanning at least `min_span_s`. Does not
+/// allocate.
 fn quadratic_fit(
     pts: impl Iterator<Item = (f64, Vector3<f64>, f64)>,
     min_span_s: f64,
-) -> Option<(Vector3<f64>, Vector3<f64>, f64, f64)> {
+) -> Option<QuadraticFit> {
     let mut n = Matrix3::<f64>::zeros();
     let mut rhs = Matrix3::<f64>::zeros();
-    let (mut count, mut earliest) = (0, 0.0f64);
+    // Σ p²/σ² per axis: with the normal equations it gives the residual sum of squares
+    // without a second pass, `Σ p²/σ² − x̂ᵀ N x̂` for each axis.
+    let mut spp = Vector3::<f64>::zeros();
+    let (mut count, mut earliest) = (0usize, 0.0f64);
     for (tau, p, var) in pts {
         if !(var.is_finite() && var > 0.0 && tau.is_finite()) {
             continue;
@@ -97,6 +122,7 @@ fn quadratic_fit(
         let h = Vector3::new(1.0, tau, 0.5 * tau * tau);
         n += h * h.transpose() / var;
         rhs += h * p.transpose() / var;
+        spp += p.component_mul(&p) / var;
         count += 1;
         earliest = earliest.min(tau);
     }
@@ -108,8 +134,18 @@ fn quadratic_fit(
     let inv = chol.inverse();
     let v = x.row(1).transpose();
     let a = x.row(2).transpose();
+    let chi2_h = (0..2)
+        .map(|axis| (spp[axis] - x.column(axis).dot(&rhs.column(axis))).max(0.0))
+        .sum();
     (inv[(1, 1)] > 0.0 && inv[(2, 2)] > 0.0 && v.iter().chain(a.iter()).all(|e| e.is_finite()))
-        .then_some((v, a, inv[(1, 1)], inv[(2, 2)]))
+        .then_some(QuadraticFit {
+            v,
+            a,
+            var_v: inv[(1, 1)],
+            var_a: inv[(2, 2)],
+            chi2_h,
+            dof_h: 2 * (count - 3),
+        })
 }
 
 /// How the INS takes its radio measurements.
@@ -158,7 +194,8 @@ pub struct InsFilterConfig {
     #[serde(default = "d_max_lag")]
     pub max_fix_lag_s: f64,
     /// Position-only initialisation: the fixes of the last `init_window_s` seconds (at most
-    /// 16) give the initial velocity and acceleration by a quadratic fit (s); default 5.
+    /// 16) give the initial velocity and acceleration by a quadratic fit, used only when
+    /// its horizontal residuals pass a χ² test at 0.999 against the fixes' σ (s); default 5.
     #[serde(default = "d_window")]
     pub init_window_s: f64,
     /// The filter on the error state: `"builtin"` (default, [`InsEkf`]), or seed 004's
@@ -422,7 +459,8 @@ fn triad(
 /// * position: the fix, moved to the last IMU sample time with the fix velocity;
 /// * velocity: the GNSS velocity from range rates, or (position-only sources) a weighted
 ///   quadratic fit to the fixes of the last `init_window_s` (at least 3, spanning ≥ 20 % of
-///   the window);
+///   the window) whose horizontal residuals pass the χ² test at 0.999 (`2 (n − 3)` degrees
+///   of freedom; a window with a fix far off its reported σ waits for the next);
 /// * attitude: TRIAD on the mean specific force f̄^b since the previous fix against
 ///   f^n = a^n − g^n + 2 ω_ie × v (a^n from the change of two consecutive GNSS velocities,
 ///   or from the quadratic fit), with the
@@ -847,10 +885,25 @@ impl InsEstimator {
                     .flatten()
                     .filter(|(t, _, _)| fix.t_s - *t <= window && *t <= fix.t_s)
                     .map(|(t, p, var)| (*t - fix.t_s, *p, *var));
-                let Some((v, a, var_v, var_a)) = quadratic_fit(pts, 0.2 * window) else {
+                let Some(fit) = quadratic_fit(pts, 0.2 * window) else {
                     return;
                 };
-                (v, Matrix3::identity() * var_v, a, var_a.sqrt())
+                // A window whose fixes the parabola does not describe within their
+                // reported σ (an NLOS fix metres off) gives a velocity and acceleration
+                // wrong by more than their variances say: wait for one it describes,
+                // tested at the 0.999 quantile as the filters' gates are. (A smooth corner
+                // within the window still fits; the unit test shows both.)
+                if fit.dof_h > 0
+                    && fit.chi2_h > chi2::quantile(INIT_FIT_CONFIDENCE, fit.dof_h as f64)
+                {
+                    return;
+                }
+                (
+                    fit.v,
+                    Matrix3::identity() * fit.var_v,
+                    fit.a,
+                    fit.var_a.sqrt(),
+                )
             }
         };
         let speed = v.x.hypot(v.y);
@@ -1309,7 +1362,16 @@ mod tests {
             let tau = -(i as f64);
             (tau, p0 + v * tau + a * (0.5 * tau * tau), 2.0)
         });
-        let (ve, ae, var_v, var_a) = quadratic_fit(pts, 1.0).unwrap();
+        let QuadraticFit {
+            v: ve,
+            a: ae,
+            var_v,
+            var_a,
+            chi2_h,
+            dof_h,
+        } = quadratic_fit(pts, 1.0).unwrap();
+        // Exact data: no residual, 2 (5 − 3) horizontal degrees of freedom.
+        assert!(chi2_h < 1e-9 && dof_h == 4, "{chi2_h} {dof_h}");
         assert!((ve - v).norm() < 1e-9 && (ae - a).norm() < 1e-9);
         // Independent: invert HᵀH for H rows [1, τ, τ²/2] by hand-built 3×3 and compare.
         let mut hth = Matrix3::zeros();
@@ -1323,6 +1385,85 @@ mod tests {
         // Too short a span or too few points: no fit.
         let few = (0..2).map(|i| (-(i as f64), p0, 1.0));
         assert!(quadratic_fit(few, 1.0).is_none());
+    }
+
+    #[test]
+    fn the_quadratic_fit_residual_is_the_two_pass_one_and_refuses_a_fix_off_its_sigma() {
+        // Noisy fixes on a parabola: the one-pass residual equals the residuals recomputed
+        // from the fitted p₀, v, a (p₀ by a second solve here), on the horizontal axes.
+        let v = Vector3::new(1.2, 0.4, 0.0);
+        let a = Vector3::new(0.1, -0.2, 0.0);
+        let noise = [0.3, -0.5, 0.2, 0.6, -0.1, -0.4, 0.25];
+        let pts: Vec<(f64, Vector3<f64>, f64)> = (0..7)
+            .map(|i| {
+                let tau = -(i as f64);
+                let e = Vector3::new(noise[i], -noise[6 - i], 0.1 * noise[i]);
+                (
+                    tau,
+                    Vector3::new(500.0, -300.0, 2.0) + v * tau + a * (0.5 * tau * tau) + e,
+                    0.25,
+                )
+            })
+            .collect();
+        let fit = quadratic_fit(pts.iter().copied(), 1.0).unwrap();
+        let mut hth = Matrix3::zeros();
+        let mut hp = Matrix3::zeros();
+        for (tau, p, _) in &pts {
+            let h = Vector3::new(1.0, *tau, 0.5 * tau * tau);
+            hth += h * h.transpose();
+            hp += h * p.transpose();
+        }
+        let x = hth.try_inverse().unwrap() * hp;
+        let two_pass: f64 = pts
+            .iter()
+            .map(|(tau, p, var)| {
+                let h = Vector3::new(1.0, *tau, 0.5 * tau * tau);
+                let r = p - x.transpose() * h;
+                (r.x * r.x + r.y * r.y) / var
+            })
+            .sum();
+        assert!(
+            (fit.chi2_h - two_pass).abs() < 1e-6 * two_pass.max(1.0),
+            "{} {two_pass}",
+            fit.chi2_h
+        );
+        assert_eq!(fit.dof_h, 8);
+        // A straight walk at 1.3 m/s with fixes of σ 0.3 m, one of them 4 m off (an NLOS
+        // fix): refused at the 0.999 quantile, and accepted without that fix.
+        let walk = |outlier_m: f64| {
+            (0..6).map(move |i| {
+                let tau = -(i as f64);
+                let off = if i == 2 { outlier_m } else { 0.0 };
+                (tau, Vector3::new(1.3 * tau, off, 0.0), 0.09)
+            })
+        };
+        let limit = |fit: &QuadraticFit| chi2::quantile(INIT_FIT_CONFIDENCE, fit.dof_h as f64);
+        let bad = quadratic_fit(walk(4.0), 1.0).unwrap();
+        assert!(
+            bad.chi2_h > limit(&bad),
+            "{} over {} dof",
+            bad.chi2_h,
+            bad.dof_h
+        );
+        let good = quadratic_fit(walk(0.0), 1.0).unwrap();
+        assert!(good.chi2_h < 1e-9);
+        // What the test cannot see: a corner inside the window (east at 1.3 m/s, then
+        // north) fits a parabola to within σ 0.3 m (χ² 4.6 over 6 dof), though the velocity
+        // at its end is the parabola's, between the two legs.
+        let corner = quadratic_fit(
+            (0..6).map(|i| {
+                let tau = -(i as f64);
+                let p = if tau <= -2.0 {
+                    Vector3::new(1.3 * (tau + 2.0), 0.0, 0.0)
+                } else {
+                    Vector3::new(0.0, 1.3 * (tau + 2.0), 0.0)
+                };
+                (tau, p, 0.09)
+            }),
+            1.0,
+        )
+        .unwrap();
+        assert!(corner.chi2_h < limit(&corner));
     }
 
     #[test]
