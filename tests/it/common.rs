@@ -84,8 +84,6 @@ pub fn refused(args: &[&str], needles: &[&str]) -> String {
     e
 }
 
-/// Runs `hybridnav run WORLD --quiet --outputs summary --out OUT` with `extra` arguments
-/// (trials, seed …), asserts that it succeeded, and returns its `summary.json`.
 /// The options of a whole (unsharded) in-process run on two threads, without a progress
 /// bar: what the tests that call `run_trials` directly use.
 pub fn run_options(trials: u64, seed: u64) -> hybridnav::montecarlo::RunOptions {
@@ -98,6 +96,8 @@ pub fn run_options(trials: u64, seed: u64) -> hybridnav::montecarlo::RunOptions 
     }
 }
 
+/// Runs `hybridnav run WORLD --quiet --outputs summary --out OUT` with `extra` arguments
+/// (trials, seed …), asserts that it succeeded, and returns its `summary.json`.
 pub fn run_summary(world: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
     let mut args = vec![
         "run",

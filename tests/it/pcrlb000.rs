@@ -1,7 +1,7 @@
 //! The PCRLB of seed 000's 12-state model (`world::bound`, `fusion::pcrlb::PvaClockBound`)
 //! against the estimators that run it, on seed 000's Kehui world.
 
-use crate::common::repo;
+use crate::common::{repo, run_options};
 use hybridnav::montecarlo::{reduce::RunReducer, run_trials, RunOptions};
 
 /// Seed 000's world `site` with three filter-family EKF rows appended (the world files
@@ -19,11 +19,6 @@ fn seed000_with_family_rows(site: &str) -> hybridnav::world::World {
         ));
     }
     hybridnav::world::parse_world(&text, &path).expect("world with family rows")
-}
-
-/// `trials` trials of seed 1 on two threads, unsharded, without a progress bar.
-fn options(trials: u64) -> RunOptions {
-    crate::common::run_options(trials, 1)
 }
 
 /// The estimators' names, in the world's order.
@@ -86,7 +81,7 @@ fn rms_over(curve: &[(f64, f64)], lo: f64, hi: f64) -> f64 {
 #[test]
 fn pcrlb_of_seed000_kehui_against_the_family_ekf() {
     let world = seed000_with_family_rows("kehui");
-    let opts = options(4);
+    let opts = run_options(4, 1);
     let flagged = world.pva_clock_pcrlb(opts.seed, opts.trials);
     let names = row_names(&world);
     let reduced = run_and_reduce(&world, &opts);
@@ -156,7 +151,7 @@ fn pcrlb_of_seed000_kehui_against_the_family_ekf() {
 fn pcrlb_of_seed004_range_rows() {
     let path = repo().join("worlds/seed004-bupt.toml");
     let world = hybridnav::world::load_world(&path).expect("seed 004 world");
-    let opts = options(2);
+    let opts = run_options(2, 1);
     let bounds = world.pcrlb(opts.seed, opts.trials);
     let names = row_names(&world);
     let bounded: Vec<&str> = names
@@ -300,7 +295,7 @@ fn the_watch_leaves_a_loose_ins_gating_noisy_fixes_alone() {
         "both edits applied"
     );
     let world = hybridnav::world::parse_world(&white, &path).expect("white-error world");
-    let reduced = run_and_reduce(&world, &options(1));
+    let reduced = run_and_reduce(&world, &run_options(1, 1));
     for est in &reduced.summary.estimators {
         if ["EKF", "CKF", "RE-KF"].contains(&est.name.as_str()) {
             let rmse = est.error_3d_m.as_ref().expect("an estimate").rmse;
