@@ -351,7 +351,7 @@ fn bad_particle_filter_input_is_refused_with_its_place_and_range() {
         (
             "name = \"GPF-100\"\nfilter = \"gpf\"\noptions = { particles = 100 }",
             "name = \"GPF-100\"\nfilter = \"gpf\"\noptions = { particles = 0 }",
-            ":166:25:",
+            ":181:25:",
             "expected 2 to 1 000 000",
         ),
         (
@@ -363,13 +363,13 @@ fn bad_particle_filter_input_is_refused_with_its_place_and_range() {
         (
             "name = \"GPF-100\"\nfilter = \"gpf\"\noptions = { particles = 100 }",
             "name = \"GPF-100\"\nfilter = \"gpf\"\noptions = { particles = 100, gpf_covariance = \"biased\" }",
-            ":166:",
+            ":181:",
             "expected `weighted` or `unbiased`",
         ),
         (
             "filter = \"gpf\"\noptions = { particles = 500",
             "filter = \"gpf\"\nprocess = { model = \"pva_clock\" }\noptions = { particles = 500",
-            ":171:10:",
+            ":186:10:",
             "runs on a paper process model",
         ),
         // Progressive correction splits the bootstrap weighting of the regularised and
@@ -487,10 +487,18 @@ fn a_run_reports_the_worlds_bound_in_its_summary_and_report() {
 /// PF with the unbiased covariance at 20 particles within 1.3× (1.25×), and the
 /// regularised PF with the linearised proposal, Musso et al.'s kernel and the paper's
 /// resampling test (θ = 1) at 20 particles within 1.3× (1.22×).
+///
+/// The defaults of `filter = "pf"` and `"rbpf"` (the linearised proposal, Liu & West's
+/// kernel, a resampling at every epoch) are held to the goal's accuracy at both of seed
+/// 003's counts, 100 particles within 1.5× (1.43× and 1.39×) and 500 within 1.2× (1.05×,
+/// 1.01×), with no reset at 500, and to the ordering PF-500 < PF-100 < SIR-100; their
+/// NEES is checked at 500 only: with 100 particles they are over-confident (mean NEES
+/// 13.9 and 17.6 for 3 dof, docs/reproductions.md).
 #[test]
 fn the_few_particle_goals_hold_on_the_paper_worlds() {
     // (world file, trials, [(row, largest RMSE / PCRLB)]).
     type Case<'a> = (&'a str, &'a str, &'a [(&'a str, f64)]);
+    const DEFAULTS_AT_100: [&str; 2] = ["RPF-100", "RBPF-100"];
     let cases: [Case; 2] = [
         (
             "seed003-seamless.toml",
@@ -500,6 +508,8 @@ fn the_few_particle_goals_hold_on_the_paper_worlds() {
                 ("GPF-500-lin", 1.2),
                 ("RPF-500", 1.2),
                 ("RBPF-500", 1.2),
+                ("RPF-100", 1.5),
+                ("RBPF-100", 1.5),
                 ("RBPF-100-lin-Musso-theta1", 1.5),
                 ("RBPF-100-Musso", 1.5),
                 ("RPF-100-Musso-LW-static", 1.5),
@@ -538,8 +548,11 @@ fn the_few_particle_goals_hold_on_the_paper_worlds() {
             let dof = e["nees"]["dof"].as_f64().unwrap();
             eprintln!("{file} {name}: rmse/PCRLB {eff:.3}, mean NEES {nees:.2} (dof {dof})");
             assert!(eff <= *limit, "{file} {name}: {eff} > {limit}");
-            assert!(nees <= 2.0 * dof, "{file} {name}: NEES {nees}, dof {dof}");
-            assert_eq!(e["numerical_failures"].as_u64(), Some(0), "{file} {name}");
+            // The defaults with 100 particles meet the accuracy goal only (above).
+            if !DEFAULTS_AT_100.contains(name) {
+                assert!(nees <= 2.0 * dof, "{file} {name}: NEES {nees}, dof {dof}");
+                assert_eq!(e["numerical_failures"].as_u64(), Some(0), "{file} {name}");
+            }
         }
         if file.starts_with("seed003") {
             // Issue 23's ordering, each recipe at both particle counts.
@@ -551,6 +564,8 @@ fn the_few_particle_goals_hold_on_the_paper_worlds() {
                     "RPF-100-lin-Musso-LW-static-theta1",
                 ),
                 ("RBPF-500-lin-Musso-theta1", "RBPF-100-lin-Musso-theta1"),
+                ("RPF-500", "RPF-100"),
+                ("RBPF-500", "RBPF-100"),
             ] {
                 let (pf500, pf100) = (rmse(r500), rmse(r100));
                 assert!(

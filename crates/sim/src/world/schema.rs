@@ -498,12 +498,12 @@ impl EstimatorSpec {
                     FilterKind::Gpf => PfVariant::Gaussian,
                     _ => PfVariant::Regularised,
                 };
-                let linearised =
-                    cfg.pf_proposal == crate::fusion::family::ProposalKind::Linearised;
+                let proposal = cfg.pf_proposal_for(variant);
+                let linearised = proposal == crate::fusion::family::ProposalKind::Linearised;
                 PaperFilter::Pf {
                     particles: cfg.particles,
                     resampling: cfg.resampling.scheme(),
-                    neff_threshold: cfg.neff_threshold,
+                    neff_threshold: cfg.neff_threshold_for(variant, proposal),
                     variant,
                     linearised,
                     kernel: cfg.pf_kernel.placement(),
