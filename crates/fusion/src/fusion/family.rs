@@ -170,12 +170,12 @@ impl FamilyConfig {
     ///
     /// Why linearised for those two: on seed 003 (`worlds/seed003-seamless.toml`, 50
     /// trials, master seeds 1–5) the regularised PF with Liu & West's kernel, drawing
-    /// from the linearised proposal and resampling at every epoch, is at 1.38–1.55× of
-    /// the PCRLB with 100 particles, where the same filter drawing from the prior (with
-    /// progressive correction) is at 3.1–4.2× and loses the track 21–36 times; with 500
-    /// and 2000 particles the two are equally efficient (1.02–1.08× against 1.03–1.07×;
-    /// 1.00× each). Seed 001 (10 and 20 particles) moves the same way.
-    /// `docs/reproductions.md`, "The linearised proposal as the default".
+    /// from the linearised proposal and resampling at every epoch, is at 1.38–1.87× of
+    /// the PCRLB with 100 particles and loses 0–8 tracks, where the same filter drawing
+    /// from the prior (with progressive correction, on N_eff < N/2) is at 2.6–3.6× and
+    /// loses 16–34; with 500 and 2000 particles the two are equally efficient
+    /// (1.03–1.08× against 1.03–1.07×; 1.00× each). Seed 001 (10 and 20 particles) moves
+    /// the same way. `docs/reproductions.md`, "The linearised proposal as the default".
     pub fn pf_proposal_for(&self, variant: PfVariant) -> ProposalKind {
         self.pf_proposal.unwrap_or(match variant {
             PfVariant::Regularised | PfVariant::RaoBlackwellised => ProposalKind::Linearised,
@@ -195,15 +195,10 @@ impl FamilyConfig {
     ///
     /// [`ParticleFilter::update_linearised`]: crate::fusion::particle::ParticleFilter::update_linearised
     pub fn neff_threshold_for(&self, variant: PfVariant, proposal: ProposalKind) -> f64 {
-        self.neff_threshold.unwrap_or(
-            match (variant, proposal) {
-                (
-                    PfVariant::Regularised | PfVariant::RaoBlackwellised,
-                    ProposalKind::Linearised,
-                ) => 1.0,
-                _ => DEFAULT_NEFF_THRESHOLD,
-            },
-        )
+        self.neff_threshold.unwrap_or(match (variant, proposal) {
+            (PfVariant::Regularised | PfVariant::RaoBlackwellised, ProposalKind::Linearised) => 1.0,
+            _ => DEFAULT_NEFF_THRESHOLD,
+        })
     }
 }
 
@@ -1072,7 +1067,11 @@ impl Estimator for FamilyEstimator {
         }
         if let Core::Pf(p) = core {
             let q = self.model.q(&p.pf.mean(), dt.max(1e-3));
-            regularise(p, self.cfg.neff_threshold.unwrap_or(DEFAULT_NEFF_THRESHOLD), &q);
+            regularise(
+                p,
+                self.cfg.neff_threshold.unwrap_or(DEFAULT_NEFF_THRESHOLD),
+                &q,
+            );
         }
         let (x, p) = core.moments();
         if !self.usable(&x, &p) || self.lost(&x, batch.source, batch.t) {
