@@ -494,8 +494,9 @@ fn a_run_reports_the_worlds_bound_in_its_summary_and_report() {
 /// SIR-100, and at 100 particles to beating the former default, the prior proposal with
 /// progressive correction on N_eff < N/2 (`RPF-100-prior`). With 100 particles they are
 /// not held to 1.5× nor to the NEES band: over master seeds 1–5 (50 trials) they are at
-/// 1.38–1.87× (RPF-100) and 1.36–1.95× (RBPF-100), mean NEES 11–96 for 3 dof, with a few
-/// lost tracks (docs/reproductions.md, "The linearised proposal as the default").
+/// 1.27–1.65× (RPF-100) and 1.22–1.65× (RBPF-100), mean NEES 7.7–34 for 3 dof, with a few
+/// lost tracks (docs/reproductions.md, "The linearised proposal as the default" and "The
+/// unbiased covariance in Liu & West's kernel").
 #[test]
 fn the_few_particle_goals_hold_on_the_paper_worlds() {
     // (world file, trials, [(row, largest RMSE / PCRLB)]).

@@ -170,11 +170,11 @@ impl FamilyConfig {
     ///
     /// Why linearised for those two: on seed 003 (`worlds/seed003-seamless.toml`, 50
     /// trials, master seeds 1–5) the regularised PF with Liu & West's kernel, drawing
-    /// from the linearised proposal and resampling at every epoch, is at 1.38–1.87× of
-    /// the PCRLB with 100 particles and loses 0–8 tracks, where the same filter drawing
-    /// from the prior (with progressive correction, on N_eff < N/2) is at 2.6–3.6× and
-    /// loses 16–34; with 500 and 2000 particles the two are equally efficient
-    /// (1.03–1.08× against 1.03–1.07×; 1.00× each). Seed 001 (10 and 20 particles) moves
+    /// from the linearised proposal and resampling at every epoch, is at 1.27–1.65× of
+    /// the PCRLB with 100 particles and loses 0–3 tracks, where the same filter drawing
+    /// from the prior (with progressive correction, on N_eff < N/2) is at 2.4–3.1× and
+    /// loses 10–23; with 500 and 2000 particles the two are equally efficient
+    /// (1.02–1.07× against 1.03–1.07×; 1.00× each). Seed 001 (10 and 20 particles) moves
     /// the same way. `docs/reproductions.md`, "The linearised proposal as the default".
     pub fn pf_proposal_for(&self, variant: PfVariant) -> ProposalKind {
         self.pf_proposal.unwrap_or(match variant {

@@ -88,7 +88,9 @@ pub enum Resampling {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum KernelPlacement {
     /// Each particle is first shrunk towards the cloud's mean so that the jittered cloud
-    /// keeps the weighted cloud's covariance (Liu & West 2001): no inflation.
+    /// keeps the posterior covariance the weighted cloud estimates (Liu & West 2001): no
+    /// inflation. The estimate is the unbiased one, the weighted covariance over
+    /// `1 − Σ w_i²` (see [`ParticleFilter::resample_regularised`]).
     Shrunk,
     /// The jitter is added to the resampled particles as they are (Musso, Oudjane & Le
     /// Gland 2001, the regularised PF as they define it): the cloud's covariance grows by
@@ -1489,7 +1491,7 @@ impl<const N: usize> ParticleFilter<N> {
 
     /// The effective sample size `1 / Σ w_i²` of the current weights.
     pub fn n_eff(&self) -> f64 {
-        1.0 / self.buf.weights.iter().map(|w| w * w).sum::<f64>()
+        1.0 / self.weight_square_sum()
     }
 
     /// Resamples now with the configured scheme; the weights become `1/N`.
@@ -1576,7 +1578,21 @@ impl<const N: usize> ParticleFilter<N> {
     /// [`KernelPlacement::Plain`] they are not (`a = 1`), as Musso et al. define the
     /// filter. The inflation is what keeps a cloud of a few dozen particles from
     /// collapsing: resampling loses about `1/N` of the cloud's spread each time, and the
-    /// shrunk kernel does not give it back (docs/reproductions.md, seed 001).
+    /// shrunk kernel as stated does not give it back (docs/reproductions.md, seed 001).
+    ///
+    /// Liu & West's mixture keeps `V`, the posterior covariance; the weighted covariance
+    /// `Σ w_i (x_i − x̄)(x_i − x̄)ᵀ` of normalised weights estimates it with expectation
+    /// `(1 − Σ w_i²) V` (the reliability-weights correction; as the Gaussian PF's
+    /// [`CovarianceEstimate::Unbiased`]). So [`KernelPlacement::Shrunk`] takes
+    /// `D Dᵀ = Σ w_i (x_i − x̄)(x_i − x̄)ᵀ / (1 − Σ w_i²)` and
+    /// `a = √((1 − h²) / (1 − Σ w_i²))`, which keeps the jittered cloud's covariance at
+    /// that estimate (`a²` times the resampled cloud's, about the weighted covariance,
+    /// plus `h² D Dᵀ`): an epoch whose weights leave few particles effective is given back
+    /// the spread its weighting took, which is what the uncorrected shrinkage lost (seed
+    /// 003, 100 particles, the default RPF-100 over seeds 1–5: 1.27–1.65× of the PCRLB
+    /// against 1.38–1.87×; docs/reproductions.md, "The unbiased covariance in Liu & West's
+    /// kernel"). The placements with Musso's
+    /// kernel keep the weighted covariance, as Musso et al. define it.
     pub fn resample_regularised<R: Rng + ?Sized>(&mut self, rng: &mut R) {
         let Some((mean, g, a)) = self.resample_and_kernel(rng) else {
             return;
@@ -1620,7 +1636,18 @@ impl<const N: usize> ParticleFilter<N> {
         &mut self,
         rng: &mut R,
     ) -> Option<(SVector<f64, N>, SMatrix<f64, N, N>, f64)> {
-        let cov = self.mask(&self.sample_covariance());
+        // Liu & West's shrinkage keeps the unbiased estimate of the posterior covariance
+        // (see `resample_regularised`); `unbiased` is its divisor 1 − Σ w_i².
+        let unbiased = match self.kernel {
+            KernelPlacement::Shrunk => 1.0 - self.weight_square_sum(),
+            KernelPlacement::Plain | KernelPlacement::ShrunkStatic => 1.0,
+        };
+        if unbiased <= 0.0 {
+            // All the weight on one particle: the cloud has no spread to estimate.
+            self.resample(rng);
+            return None;
+        }
+        let cov = self.mask(&self.sample_covariance()) / unbiased;
         let mean = self.mean();
         self.resample(rng);
         let d = psd_factor(&cov).ok()?;
@@ -1631,7 +1658,9 @@ impl<const N: usize> ParticleFilter<N> {
         let (nf, nd) = (self.buf.n as f64, rank as f64);
         let h = (4.0 / (nf * (nd + 2.0))).powf(1.0 / (nd + 4.0)).min(1.0);
         let a = match self.kernel {
-            KernelPlacement::Shrunk | KernelPlacement::ShrunkStatic => (1.0 - h * h).sqrt(),
+            KernelPlacement::Shrunk | KernelPlacement::ShrunkStatic => {
+                ((1.0 - h * h) / unbiased).sqrt()
+            }
             KernelPlacement::Plain => 1.0,
         };
         Some((mean, d * h, a))
@@ -1689,7 +1718,7 @@ impl<const N: usize> ParticleFilter<N> {
         match self.covariance {
             CovarianceEstimate::Weighted => p,
             CovarianceEstimate::Unbiased => {
-                let sum_sq: f64 = self.buf.weights.iter().map(|w| w * w).sum();
+                let sum_sq = self.weight_square_sum();
                 // A single particle carries all the weight: nothing to correct.
                 if sum_sq < 1.0 {
                     p / (1.0 - sum_sq)
@@ -1698,6 +1727,11 @@ impl<const N: usize> ParticleFilter<N> {
                 }
             }
         }
+    }
+
+    /// `Σ w_i²` of the normalised weights (`1 / N_eff`).
+    fn weight_square_sum(&self) -> f64 {
+        self.buf.weights.iter().map(|w| w * w).sum()
     }
 
     /// The covariance of the estimate: the cloud's weighted covariance (the Gaussian
@@ -2884,6 +2918,37 @@ mod tests {
         );
     }
 
+    /// With uneven weights the shrunk kernel keeps the unbiased estimate of the posterior
+    /// covariance, the weighted covariance over `1 − Σ w_i²`, not the weighted covariance
+    /// itself: two particles carrying 0.3 of the weight each (`Σ w_i² ≈ 0.18`) leave the
+    /// jittered cloud with 1/0.82 = 1.22 times the weighted variance, each computed here
+    /// from the cloud before the resampling.
+    #[test]
+    fn the_shrunk_kernel_keeps_the_unbiased_covariance_of_uneven_weights() {
+        let (mut pf, mut rng) = kernel_test_cloud(
+            TrialRng::new(11, 2).stream("test/rpf-unbiased"),
+            KernelPlacement::Shrunk,
+            [false; 4],
+        );
+        let n = KERNEL_TEST_PARTICLES;
+        let rest = 0.4 / (n - 2) as f64;
+        for (i, w) in pf.buf.weights.iter_mut().enumerate() {
+            *w = if i < 2 { 0.3 } else { rest };
+        }
+        let sum_sq: f64 = pf.buf.weights.iter().map(|w| w * w).sum();
+        let weighted = pf.covariance();
+        pf.resample_regularised(&mut rng);
+        let after = pf.covariance();
+        for k in 0..4 {
+            let ratio = after[(k, k)] / weighted[(k, k)];
+            let expected = 1.0 / (1.0 - sum_sq);
+            assert!(
+                (ratio / expected - 1.0).abs() < 0.05,
+                "state {k}: variance {ratio} of the weighted one, expected {expected}"
+            );
+        }
+    }
+
     /// Musso's placement adds the kernel to the resampled cloud as it is: the variance
     /// grows by the factor `1 + h_opt²` (`h_opt` of 4 sampled dimensions and N = 20 000),
     /// which is what the shrunk kernel above avoids.
@@ -3354,8 +3419,11 @@ mod tests {
     /// Progressive correction against the conjugate posterior: a prior `N(0, 10² I)` and
     /// a direct measurement 2.5 σ out in its tail with σ = 0.5 m (the likelihood 20 times
     /// narrower than the cloud). All at once, 2 000 particles leave a handful effective;
-    /// in stages the cloud reaches the analytic posterior `N(z·100/100.25, 0.2494 I)`. A
-    /// likelihood as wide as the cloud is the single update, bit for bit.
+    /// in stages the cloud reaches the analytic posterior `N(z·100/100.25, 0.2494 I)`:
+    /// over 20 seeds its mean is within 0.15 posterior σ in RMS (0.09 measured over 60
+    /// seeds; a single run's error is a draw of that spread, so the bound is on the RMS)
+    /// and each run's variance within 0.75–1.33 of the posterior's. A likelihood as wide
+    /// as the cloud is the single update, bit for bit.
     #[test]
     fn progressive_correction_reaches_the_conjugate_posterior() {
         let n = 2000;
@@ -3383,17 +3451,16 @@ mod tests {
             .unwrap();
             (pf, rng)
         };
-        let (mut worst_pc, mut worst_single) = (0.0f64, 0.0f64);
-        for seed in 0..5 {
+        let (mut sq_pc, mut sq_single) = (0.0f64, 0.0f64);
+        let seeds = 20;
+        for seed in 0..seeds {
             let (mut pf, mut rng) = new_pf(true, seed);
             let up = pf.update_soa(&lik, &mut rng);
             assert!(!up.degenerate);
             let (m, c) = (pf.mean(), pf.covariance());
             for k in 0..2 {
                 let post_mean = lik.z[k] * prior_var / (prior_var + lik.sigma * lik.sigma);
-                let err = (m[k] - post_mean).abs() / post_var.sqrt();
-                worst_pc = worst_pc.max(err);
-                assert!(err < 0.15, "seed {seed}, state {k}: mean {} σ off", err);
+                sq_pc += ((m[k] - post_mean) / post_var.sqrt()).powi(2);
                 let ratio = c[(k, k)] / post_var;
                 assert!(
                     (0.75..1.33).contains(&ratio),
@@ -3405,14 +3472,17 @@ mod tests {
             let m = single.mean();
             for k in 0..2 {
                 let post_mean = lik.z[k] * prior_var / (prior_var + lik.sigma * lik.sigma);
-                worst_single = worst_single.max((m[k] - post_mean).abs() / post_var.sqrt());
+                sq_single += ((m[k] - post_mean) / post_var.sqrt()).powi(2);
             }
         }
+        let rms_pc = (sq_pc / (2 * seeds) as f64).sqrt();
+        let rms_single = (sq_single / (2 * seeds) as f64).sqrt();
+        assert!(rms_pc < 0.15, "progressive: mean {rms_pc} σ off in RMS");
         // The single update's error, for scale: the same seeds leave it several times
         // further from the posterior mean.
         assert!(
-            worst_single > 2.0 * worst_pc,
-            "single {worst_single} σ, progressive {worst_pc} σ"
+            rms_single > 2.0 * rms_pc,
+            "single {rms_single} σ, progressive {rms_pc} σ"
         );
 
         // One stage when the full likelihood keeps N_eff ≥ ½ N: bit for bit.
