@@ -111,7 +111,8 @@ pub enum ProposalKind {
 )]
 #[serde(rename_all = "snake_case")]
 pub enum KernelKind {
-    /// Shrunk towards the mean first: the cloud's covariance is kept (Liu & West 2001).
+    /// Shrunk towards the mean first: the cloud's covariance is kept (Liu & West 2001), as
+    /// its unbiased estimate from the weighted cloud.
     LiuWest,
     /// On the resampled particles as they are (Musso, Oudjane & Le Gland 2001).
     Musso,
@@ -276,8 +277,8 @@ pub struct FamilyConfig {
     /// ran it, and the marginalised PF draws from its exact prediction).
     pub pf_proposal: Option<ProposalKind>,
     /// The regularised and Rao-Blackwellised PF on the paper models: the kernel after a
-    /// resampling is `"liu_west"` (shrunk towards the mean so that the cloud's covariance
-    /// is kept; default), `"musso"` (added as it is: the cloud inflates by `h_opt²` of
+    /// resampling is `"liu_west"` (shrunk towards the mean so that the cloud keeps its
+    /// covariance, the weighted cloud's over `1 − Σ w_i²`, its unbiased estimate; default), `"musso"` (added as it is: the cloud inflates by `h_opt²` of
     /// its covariance at each resampling, as the regularised PF was defined) or
     /// `"musso_liu_west_static"` (Musso's on the states the process noise drives, Liu &
     /// West's shrinkage on the model's constant clocks).
