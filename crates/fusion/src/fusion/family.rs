@@ -273,13 +273,15 @@ pub struct FamilyConfig {
     /// Gaussian PF, the EKF update of its predicted Gaussian as the GPF's importance
     /// function; [`crate::fusion::particle::ParticleFilter::update_linearised`]). Not for
     /// the marginalised PF. Default: `"linearised"` for the regularised and
-    /// Rao-Blackwellised PF (`"pf"`, `"rbpf"`), `"prior"` for the others (`"sir"` is the bootstrap filter by definition, the GPF as Kotecha & Djurić
-    /// ran it, and the marginalised PF draws from its exact prediction).
+    /// Rao-Blackwellised PF (`"pf"`, `"rbpf"`), `"prior"` for the others (`"sir"` is the
+    /// bootstrap filter by definition, the GPF as Kotecha & Djurić ran it, and the
+    /// marginalised PF draws from its exact prediction).
     pub pf_proposal: Option<ProposalKind>,
     /// The regularised and Rao-Blackwellised PF on the paper models: the kernel after a
     /// resampling is `"liu_west"` (shrunk towards the mean so that the cloud keeps its
-    /// covariance, the weighted cloud's over `1 − Σ w_i²`, its unbiased estimate; default), `"musso"` (added as it is: the cloud inflates by `h_opt²` of
-    /// its covariance at each resampling, as the regularised PF was defined) or
+    /// covariance, the weighted cloud's over `1 − Σ w_i²`, its unbiased estimate;
+    /// default), `"musso"` (added as it is: the cloud inflates by `h_opt²` of its
+    /// covariance at each resampling, as the regularised PF was defined) or
     /// `"musso_liu_west_static"` (Musso's on the states the process noise drives, Liu &
     /// West's shrinkage on the model's constant clocks).
     pub pf_kernel: KernelKind,

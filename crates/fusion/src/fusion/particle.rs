@@ -1591,8 +1591,8 @@ impl<const N: usize> ParticleFilter<N> {
     /// the spread its weighting took, which is what the uncorrected shrinkage lost (seed
     /// 003, 100 particles, the default RPF-100 over seeds 1–5: 1.27–1.65× of the PCRLB
     /// against 1.38–1.87×; docs/reproductions.md, "The unbiased covariance in Liu & West's
-    /// kernel"). The placements with Musso's
-    /// kernel keep the weighted covariance, as Musso et al. define it.
+    /// kernel"). The placements with Musso's kernel keep the weighted covariance, as
+    /// Musso et al. define it.
     pub fn resample_regularised<R: Rng + ?Sized>(&mut self, rng: &mut R) {
         let Some((mean, g, a)) = self.resample_and_kernel(rng) else {
             return;
