@@ -293,6 +293,36 @@ fn bench_pf(c: &mut Criterion) {
                 )
             })
         });
+        // The paper models' default Rao-Blackwellised PF (`filter = "rbpf"`): the same
+        // epoch with a resampling and the Liu-West kernel at every epoch (θ = 1), so each
+        // iteration also resamples, factors the kernel and shrinks the cloud.
+        let mut rbpf_default = ParticleFilter::new(
+            ParticleBuffer::<4>::new(n).expect("n > 0"),
+            Resampling::Systematic,
+            1.0,
+        )
+        .expect("valid threshold")
+        .rao_blackwellised(std::array::from_fn(|s| {
+            (s == System::Gps.index()).then_some(3)
+        }))
+        .expect("one clock column");
+        rbpf_default
+            .init_gaussian(&truth, &prior, &mut rng)
+            .expect("valid prior");
+        rbpf_default.set_clock_prior(System::Gps.index(), truth[3], 100.0);
+        group.bench_function(
+            format!("rao-blackwellised linearised epoch, resampled N={n}"),
+            |b| {
+                b.iter(|| {
+                    rbpf_default.propagate(&RandomWalk, 1.0).expect("valid");
+                    black_box(
+                        rbpf_default
+                            .update_linearised(&q_rb, &lik, &mut rng)
+                            .expect("valid"),
+                    )
+                })
+            },
+        );
         // The Gaussian PF on the same state and ranges: its prediction factors the
         // cloud's weighted covariance and redraws every particle from the predicted
         // Gaussian; the update weights them (no resampling).
