@@ -15,7 +15,7 @@
 //! Run: `cargo bench --bench filters -- --warm-up-time 1 --measurement-time 3`.
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
-use hybridnav::core::{System, TrialRng};
+use hybridnav::core::{StreamRng, System, TrialRng};
 use hybridnav::fusion::ekf11::{Ekf11, Ekf11Config, N_STATES};
 use hybridnav::fusion::kalman::Ekf;
 use hybridnav::fusion::models::{
@@ -230,19 +230,24 @@ fn bench_pf(c: &mut Criterion) {
                 },
             );
         }
-        let mut rbpf = ParticleFilter::new(
-            ParticleBuffer::<4>::new(n).expect("n > 0"),
-            Resampling::Systematic,
-            0.5,
-        )
-        .expect("valid threshold")
-        .rao_blackwellised(std::array::from_fn(|s| {
-            (s == System::Gps.index()).then_some(3)
-        }))
-        .expect("one clock column");
-        rbpf.init_gaussian(&truth, &prior, &mut rng)
-            .expect("valid prior");
-        rbpf.set_clock_prior(System::Gps.index(), truth[3], 100.0);
+        // A Rao-Blackwellised filter (the GPS clock in column 3) resampling below θ·N,
+        // started from the prior cloud and clock prior.
+        let rb_started = |theta: f64, rng: &mut StreamRng| {
+            let mut f = ParticleFilter::new(
+                ParticleBuffer::<4>::new(n).expect("n > 0"),
+                Resampling::Systematic,
+                theta,
+            )
+            .expect("valid threshold")
+            .rao_blackwellised(std::array::from_fn(|s| {
+                (s == System::Gps.index()).then_some(3)
+            }))
+            .expect("one clock column");
+            f.init_gaussian(&truth, &prior, rng).expect("valid prior");
+            f.set_clock_prior(System::Gps.index(), truth[3], 100.0);
+            f
+        };
+        let mut rbpf = rb_started(0.5, &mut rng);
         group.bench_function(format!("rao-blackwellised epoch N={n}"), |b| {
             b.iter(|| {
                 rbpf.predict(&RandomWalk, 1.0, &mut rng).expect("valid");
@@ -296,20 +301,7 @@ fn bench_pf(c: &mut Criterion) {
         // The paper models' default Rao-Blackwellised PF (`filter = "rbpf"`): the same
         // epoch with a resampling and the Liu-West kernel at every epoch (θ = 1), so each
         // iteration also resamples, factors the kernel and shrinks the cloud.
-        let mut rbpf_default = ParticleFilter::new(
-            ParticleBuffer::<4>::new(n).expect("n > 0"),
-            Resampling::Systematic,
-            1.0,
-        )
-        .expect("valid threshold")
-        .rao_blackwellised(std::array::from_fn(|s| {
-            (s == System::Gps.index()).then_some(3)
-        }))
-        .expect("one clock column");
-        rbpf_default
-            .init_gaussian(&truth, &prior, &mut rng)
-            .expect("valid prior");
-        rbpf_default.set_clock_prior(System::Gps.index(), truth[3], 100.0);
+        let mut rbpf_default = rb_started(1.0, &mut rng);
         group.bench_function(
             format!("rao-blackwellised linearised epoch, resampled N={n}"),
             |b| {

@@ -573,11 +573,8 @@ fn the_few_particle_goals_hold_on_the_paper_worlds() {
             // The defaults at 100 particles against the former default.
             let former = rmse("RPF-100-prior");
             for r100 in ["RPF-100", "RBPF-100"] {
-                assert!(
-                    rmse(r100) < former,
-                    "{r100} {} ≥ RPF-100-prior {former}",
-                    rmse(r100)
-                );
+                let pf100 = rmse(r100);
+                assert!(pf100 < former, "{r100} {pf100} ≥ RPF-100-prior {former}");
             }
         }
         let _ = std::fs::remove_dir_all(&out);
