@@ -112,7 +112,8 @@ pub enum ProposalKind {
 #[serde(rename_all = "snake_case")]
 pub enum KernelKind {
     /// Shrunk towards the mean first: the cloud's covariance is kept (Liu & West 2001), as
-    /// its unbiased estimate from the weighted cloud.
+    /// its unbiased estimate from the weighted cloud, with the bandwidth sized by the
+    /// weighted cloud's effective sample size.
     LiuWest,
     /// On the resampled particles as they are (Musso, Oudjane & Le Gland 2001).
     Musso,
