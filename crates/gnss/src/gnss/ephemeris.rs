@@ -288,7 +288,7 @@ impl Ephemeris {
     }
 
     /// Why this record cannot describe a real orbit, or `None` when every element lies in
-    /// the range the broadcast message can carry ([`ElementBounds`]): a non-finite
+    /// the range the broadcast message can carry (`ElementBounds`): a non-finite
     /// number, an eccentricity or semi-major axis out of range, a perigee inside the
     /// Earth, or a harmonic correction larger than its field allows. Such records come
     /// from corrupted files; evaluated, they put satellites anywhere (Crs = 1e30 m gives a

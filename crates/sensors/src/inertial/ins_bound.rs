@@ -75,7 +75,7 @@ use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 /// The clocks of a least-squares fix (loose coupling) and the layout of the epoch
 /// information: `[r (3), v (3), b_gps_dtmb, b_bds, b_tcofdm, ḃ]`, ECEF.
 const N_EPOCH: usize = 10;
-/// The epoch information over [`N_EPOCH`] states.
+/// The epoch information over `N_EPOCH` (10) states.
 pub type EpochInfo = SMatrix<f64, N_EPOCH, N_EPOCH>;
 /// Index of a system's clock in [`EpochInfo`].
 fn clock_of(sys: System) -> usize {

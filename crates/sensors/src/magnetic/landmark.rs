@@ -28,7 +28,7 @@
 //! length also removes most of the difference in walking speed.
 //!
 //! Dynamic time warping (Sakoe & Chiba 1978) with the absolute difference as local cost
-//! and a Sakoe–Chiba band is the baseline matcher (seed 002 ref. [32]); the library keeps
+//! and a Sakoe–Chiba band is the baseline matcher (seed 002 ref. \[32\]); the library keeps
 //! every survey template with its landmark label and reports, per label, the best distance
 //! under a threshold. Candidates are then filtered by §4.1:
 //!

@@ -142,7 +142,7 @@ pub const PIECE_SAMPLES: usize = 2048;
 /// so a caller can add every replica to one cache-sized piece before moving to the next.
 ///
 /// The code phase runs as a 64-bit fixed-point chip count (integer chips above
-/// [`CHIP_FRAC_BITS`] fraction bits): an integer add and compare per sample instead of a
+/// `CHIP_FRAC_BITS` fraction bits): an integer add and compare per sample instead of a
 /// float add and a float-to-index conversion, and the chip's sign picks the signed
 /// amplitude from a two-entry table.
 #[derive(Clone, Copy, Debug)]
