@@ -1651,11 +1651,17 @@ impl<const N: usize> ParticleFilter<N> {
         &mut self,
         rng: &mut R,
     ) -> Option<(SVector<f64, N>, SMatrix<f64, N, N>, f64)> {
-        // Liu & West's shrinkage keeps the unbiased estimate of the posterior covariance
-        // (see `resample_regularised`); `unbiased` is its divisor 1 − Σ w_i².
-        let unbiased = match self.kernel {
-            KernelPlacement::Shrunk => 1.0 - self.weight_square_sum(),
-            KernelPlacement::Plain | KernelPlacement::ShrunkStatic => 1.0,
+        // Liu & West's shrinkage keeps the unbiased estimate of the posterior covariance,
+        // whose divisor is `unbiased` = 1 − Σ w_i², and its mixture is a kernel density of
+        // the weighted cloud, whose size is Kish's N_eff = 1 / Σ w_i² (see
+        // `resample_regularised`); Musso's kernels smooth the N resampled particles with
+        // the weighted covariance, as their authors define them.
+        let (unbiased, sample_size) = match self.kernel {
+            KernelPlacement::Shrunk => {
+                let sum_sq = self.weight_square_sum();
+                (1.0 - sum_sq, 1.0 / sum_sq)
+            }
+            KernelPlacement::Plain | KernelPlacement::ShrunkStatic => (1.0, self.buf.n as f64),
         };
         if unbiased <= 0.0 {
             // All the weight on one particle: the cloud has no spread to estimate.
@@ -1664,13 +1670,6 @@ impl<const N: usize> ParticleFilter<N> {
         }
         let cov = self.mask(&self.sample_covariance()) / unbiased;
         let mean = self.mean();
-        // The bandwidth's sample size: Liu & West's mixture is a kernel density of the
-        // weighted cloud, whose size is Kish's `N_eff`; Musso's kernels smooth the N
-        // resampled particles, as their authors define them.
-        let sample_size = match self.kernel {
-            KernelPlacement::Shrunk => self.n_eff(),
-            KernelPlacement::Plain | KernelPlacement::ShrunkStatic => self.buf.n as f64,
-        };
         self.resample(rng);
         let d = psd_factor(&cov).ok()?;
         let rank = (0..N).filter(|&k| d[(k, k)] != 0.0).count();
@@ -2987,27 +2986,28 @@ mod tests {
             KernelPlacement::Shrunk,
             [false; 4],
         );
-        let carriers = 8;
+        const CARRIERS: usize = 8;
         for (i, w) in pf.buf.weights.iter_mut().enumerate() {
-            *w = if i < carriers {
-                1.0 / carriers as f64
+            *w = if i < CARRIERS {
+                1.0 / CARRIERS as f64
             } else {
                 0.0
             };
         }
-        let before: Vec<SVector<f64, 4>> = (0..carriers).map(|i| pf.buf.get(i)).collect();
-        let centre = before.iter().sum::<SVector<f64, 4>>() / carriers as f64;
+        let before: Vec<SVector<f64, 4>> = (0..CARRIERS).map(|i| pf.buf.get(i)).collect();
+        let centre = before.iter().sum::<SVector<f64, 4>>() / CARRIERS as f64;
         let sample_var = |k: usize| {
             before
                 .iter()
                 .map(|x| (x[k] - centre[k]).powi(2))
                 .sum::<f64>()
-                / (carriers - 1) as f64
+                / (CARRIERS - 1) as f64
         };
         pf.resample_regularised(&mut rng);
-        let h2 = (4.0_f64 / (carriers as f64 * 6.0)).powf(2.0 / 8.0);
+        let h2 = (4.0_f64 / (CARRIERS as f64 * 6.0)).powf(2.0 / 8.0);
         for k in 0..4 {
-            let (mut sum, mut sum_sq, mut count) = ([0.0; 8], [0.0; 8], [0usize; 8]);
+            let (mut sum, mut sum_sq) = ([0.0; CARRIERS], [0.0; CARRIERS]);
+            let mut count = [0usize; CARRIERS];
             for (i, &parent) in pf.buf.idx.iter().enumerate() {
                 let x = pf.buf.get(i)[k];
                 sum[parent] += x;
@@ -3015,7 +3015,7 @@ mod tests {
                 count[parent] += 1;
             }
             let (mut within, mut dof) = (0.0, 0usize);
-            for p in 0..carriers {
+            for p in 0..CARRIERS {
                 let c = count[p] as f64;
                 within += sum_sq[p] - sum[p] * sum[p] / c;
                 dof += count[p] - 1;
