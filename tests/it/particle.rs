@@ -489,15 +489,17 @@ fn a_run_reports_the_worlds_bound_in_its_summary_and_report() {
 /// resampling test (θ = 1) at 20 particles within 1.3× (1.22×).
 ///
 /// The defaults of `filter = "pf"` and `"rbpf"` (the linearised proposal, Liu & West's
-/// kernel, a resampling at every epoch) are held to the goal at 500 particles (within
-/// 1.2×: 1.05× and 1.01×, NEES within 2 dof, no reset), to the ordering PF-500 < PF-100 <
-/// SIR-100, and at 100 particles to the goal's 1.5× (1.23× and 1.13×) and to beating the
-/// former default, the prior proposal with progressive correction on N_eff < N/2
-/// (`RPF-100-prior`). With 100 particles they are not held to the NEES band: over master
-/// seeds 1–5 (50 trials) they are at 1.22–1.37× (RPF-100) and 1.18–1.45× (RBPF-100), mean
-/// NEES 6.3–16 for 3 dof, with up to two lost tracks (docs/reproductions.md, "The
-/// linearised proposal as the default", "The unbiased covariance in Liu & West's kernel"
-/// and "The kernel sized by the effective sample size").
+/// kernel, a resampling at every epoch) are held to every goal: at 500 particles within
+/// 1.2× (1.04× and 1.01×), at 100 within 1.5× (1.17× and 1.12×), each with its mean NEES
+/// within twice its dof (1.77 and 1.65 times it at 100) and no reset, the ordering
+/// PF-500 < PF-100 < SIR-100, and beating the former default at 100, the prior proposal
+/// with progressive correction on N_eff < N/2 (`RPF-100-prior`); on seed 001 the
+/// regularised and Rao-Blackwellised PF-20 within 1.3× (1.15× and 1.16×). Over master
+/// seeds 1–5 (seed 003 50 trials, seed 001 200) they are at 1.18–1.27× (RPF-100),
+/// 1.11–1.22× (RBPF-100), mean NEES 4.7–6.9 for 3 dof, and 1.15–1.18× (RPF-20), NEES
+/// 1.3–1.4 for 2 (docs/reproductions.md, "The linearised proposal as the default", "The
+/// unbiased covariance in Liu & West's kernel", "The kernel sized by the effective sample
+/// size" and "The kernel carries the Monte Carlo error").
 #[test]
 fn the_few_particle_goals_hold_on_the_paper_worlds() {
     // (world file, trials, [(row, largest RMSE / PCRLB)]).
@@ -511,6 +513,8 @@ fn the_few_particle_goals_hold_on_the_paper_worlds() {
                 ("GPF-500-lin", 1.2),
                 ("RPF-500", 1.2),
                 ("RBPF-500", 1.2),
+                ("RPF-100", 1.5),
+                ("RBPF-100", 1.5),
                 ("RBPF-100-lin-Musso-theta1", 1.5),
                 ("RBPF-100-Musso", 1.5),
                 ("RPF-100-Musso-LW-static", 1.5),
@@ -525,6 +529,8 @@ fn the_few_particle_goals_hold_on_the_paper_worlds() {
             &[
                 ("GPF-20-lin-unbiased", 1.3),
                 ("RPF-20-lin-Musso-theta1", 1.3),
+                ("RPF-20", 1.3),
+                ("RBPF-20", 1.3),
             ],
         ),
     ];
@@ -571,14 +577,11 @@ fn the_few_particle_goals_hold_on_the_paper_worlds() {
                     "{r500} {pf500} < {r100} {pf100} < SIR-100 {sir100} fails"
                 );
             }
-            // The defaults at 100 particles: the goal's 1.5×, and against the former
-            // default.
+            // The defaults at 100 particles (held to the goal's 1.5× above) against the
+            // former default.
             let former = rmse("RPF-100-prior");
             for r100 in ["RPF-100", "RBPF-100"] {
                 let pf100 = rmse(r100);
-                let eff = row(r100)["efficiency"].as_f64().unwrap();
-                eprintln!("{file} {r100}: rmse/PCRLB {eff:.3}");
-                assert!(eff <= 1.5, "{r100}: {eff} > 1.5");
                 assert!(pf100 < former, "{r100} {pf100} ≥ RPF-100-prior {former}");
             }
         }
