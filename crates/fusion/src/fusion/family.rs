@@ -113,7 +113,8 @@ pub enum ProposalKind {
 pub enum KernelKind {
     /// Shrunk towards the mean first: the cloud's covariance is kept (Liu & West 2001), as
     /// its unbiased estimate from the weighted cloud, with the bandwidth sized by the
-    /// weighted cloud's effective sample size.
+    /// weighted cloud's effective sample size, and grown by the Monte Carlo error of the
+    /// cloud's mean (`1/N_eff + 1/N` of it).
     LiuWest,
     /// On the resampled particles as they are (Musso, Oudjane & Le Gland 2001).
     Musso,
@@ -280,8 +281,8 @@ pub struct FamilyConfig {
     pub pf_proposal: Option<ProposalKind>,
     /// The regularised and Rao-Blackwellised PF on the paper models: the kernel after a
     /// resampling is `"liu_west"` (shrunk towards the mean so that the cloud keeps its
-    /// covariance, the weighted cloud's over `1 − Σ w_i²`, its unbiased estimate;
-    /// default), `"musso"` (added as it is: the cloud inflates by `h_opt²` of its
+    /// covariance, the weighted cloud's over `1 − Σ w_i²`, its unbiased estimate, plus
+    /// the Monte Carlo error of its mean, `1/N_eff + 1/N` of it; default), `"musso"` (added as it is: the cloud inflates by `h_opt²` of its
     /// covariance at each resampling, as the regularised PF was defined) or
     /// `"musso_liu_west_static"` (Musso's on the states the process noise drives, Liu &
     /// West's shrinkage on the model's constant clocks).

@@ -1623,7 +1623,7 @@ impl<const N: usize> ParticleFilter<N> {
     /// the filter's own Monte Carlo error. Without it that error accumulates unseen in
     /// the directions the ranges reach only through the dynamics, and the cloud grows
     /// over-confident (seed 003, the default RPF-100 over seeds 1–5: mean NEES 5.3–6.9
-    /// for 3 dof against 6.8–11.6; seed 001's RPF-20 over 200 trials 1.14–1.18× of the
+    /// for 3 dof against 6.8–11.6; seed 001's RPF-20 over 200 trials 1.15–1.18× of the
     /// PCRLB, NEES 1.3–1.4 for 2 dof, against 1.26–1.40× and 2.7–4.8;
     /// docs/reproductions.md, "The kernel carries the Monte Carlo error"). The terms
     /// vanish as `1/N`: with 2000 particles and even weights they add 0.1 %.
