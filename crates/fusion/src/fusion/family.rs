@@ -282,8 +282,9 @@ pub struct FamilyConfig {
     /// The regularised and Rao-Blackwellised PF on the paper models: the kernel after a
     /// resampling is `"liu_west"` (shrunk towards the mean so that the cloud keeps its
     /// covariance, the weighted cloud's over `1 − Σ w_i²`, its unbiased estimate, plus
-    /// the Monte Carlo error of its mean, `1/N_eff + 1/N` of it; default), `"musso"` (added as it is: the cloud inflates by `h_opt²` of its
-    /// covariance at each resampling, as the regularised PF was defined) or
+    /// the Monte Carlo error of its mean, `1/N_eff + 1/N` of it; default), `"musso"`
+    /// (added as it is: the cloud inflates by `h_opt²` of its covariance at each
+    /// resampling, as the regularised PF was defined) or
     /// `"musso_liu_west_static"` (Musso's on the states the process noise drives, Liu &
     /// West's shrinkage on the model's constant clocks).
     pub pf_kernel: KernelKind,

@@ -1671,16 +1671,19 @@ impl<const N: usize> ParticleFilter<N> {
         rng: &mut R,
     ) -> Option<(SVector<f64, N>, SMatrix<f64, N, N>, f64)> {
         // Liu & West's shrinkage keeps the unbiased estimate of the posterior covariance,
-        // whose divisor is `unbiased` = 1 − Σ w_i², and its mixture is a kernel density of
-        // the weighted cloud, whose size is Kish's N_eff = 1 / Σ w_i² (see
-        // `resample_regularised`); Musso's kernels smooth the N resampled particles with
-        // the weighted covariance, as their authors define them.
-        let (unbiased, sample_size) = match self.kernel {
+        // whose divisor is `unbiased` = 1 − Σ w_i²; its mixture is a kernel density of the
+        // weighted cloud, whose size is Kish's N_eff = 1 / Σ w_i²; and its cloud carries
+        // the Monte Carlo error of its mean, `monte_carlo` = 1/N_eff + 1/N of the
+        // covariance (see `resample_regularised`). Musso's kernels smooth the N resampled
+        // particles with the weighted covariance, as their authors define them.
+        let n = self.buf.n as f64;
+        let (unbiased, sample_size, monte_carlo) = match self.kernel {
             KernelPlacement::Shrunk => {
                 let sum_sq = self.weight_square_sum();
-                (1.0 - sum_sq, 1.0 / sum_sq)
+                let n_eff = 1.0 / sum_sq;
+                (1.0 - sum_sq, n_eff, 1.0 / n_eff + 1.0 / n)
             }
-            KernelPlacement::Plain | KernelPlacement::ShrunkStatic => (1.0, self.buf.n as f64),
+            KernelPlacement::Plain | KernelPlacement::ShrunkStatic => (1.0, n, 0.0),
         };
         if unbiased <= 0.0 {
             // All the weight on one particle: the cloud has no spread to estimate.
@@ -1704,13 +1707,6 @@ impl<const N: usize> ParticleFilter<N> {
                 ((1.0 - h * h) / unbiased).sqrt()
             }
             KernelPlacement::Plain => 1.0,
-        };
-        // Liu & West's cloud also carries the Monte Carlo error of the estimate it stands
-        // for, `1/N_eff + 1/N` of the covariance (see `resample_regularised`); Musso's
-        // kernels are their authors' as they define them.
-        let monte_carlo = match self.kernel {
-            KernelPlacement::Shrunk => 1.0 / sample_size + 1.0 / self.buf.n as f64,
-            KernelPlacement::Plain | KernelPlacement::ShrunkStatic => 0.0,
         };
         Some((mean, d * (h * h + monte_carlo).sqrt(), a))
     }
