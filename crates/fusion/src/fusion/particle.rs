@@ -151,6 +151,9 @@ pub struct ParticleBuffer<const N: usize> {
     /// The cumulative weights, then the copy of a column during resampling.
     scratch: Vec<f64>,
     idx: Vec<usize>,
+    /// The linearised proposal's component means `x_i + G ν_i`, laid out as `cols`
+    /// (see [`ParticleFilter::update_linearised`]).
+    centres: Vec<f64>,
 }
 
 impl<const N: usize> ParticleBuffer<N> {
@@ -171,6 +174,7 @@ impl<const N: usize> ParticleBuffer<N> {
             log_lik: vec![0.0; n],
             scratch: vec![0.0; n],
             idx: vec![0; n],
+            centres: vec![0.0; N * n],
         })
     }
 
@@ -416,6 +420,10 @@ pub struct ParticleFilter<const N: usize> {
     /// [`Self::propagate`]), which the next proposal conditions on the epoch's ranges
     /// together with `Q` instead of jittering the resampled cloud blindly.
     deferred_kernel: Option<SMatrix<f64, N, N>>,
+    /// During a linearised update of the regularised filter: the proposal's conditional
+    /// covariance `Σ` (sampled components), the within-component part of the posterior
+    /// mixture whose component means are the buffer's `centres`.
+    centred: Option<SMatrix<f64, N, N>>,
     /// The regularised filter with the prior proposal: bring each epoch's likelihood in
     /// by progressive correction ([`Self::with_progressive_correction`]).
     progressive: bool,
@@ -479,6 +487,7 @@ impl<const N: usize> ParticleFilter<N> {
             predicted: None,
             covariance: CovarianceEstimate::Weighted,
             deferred_kernel: None,
+            centred: None,
             progressive: false,
             stage: None,
         })
@@ -750,6 +759,7 @@ impl<const N: usize> ParticleFilter<N> {
         }
         self.predicted = None;
         self.deferred_kernel = None;
+        self.centred = None;
         if let Some(mm) = &self.mm {
             // The positions from their marginal, the motion states' Kalman means from
             // their conditional given each particle's positions.
@@ -1082,6 +1092,9 @@ impl<const N: usize> ParticleFilter<N> {
             let x = self.buf.get(i);
             let nu = range_residuals(lik, &x);
             let mut y = x + gain * nu;
+            for k in 0..N {
+                self.buf.centres[k * self.buf.n + i] = y[k];
+            }
             if noisy {
                 let w = SVector::<f64, N>::from_fn(|_, _| rng.sample(StandardNormal));
                 y += g * w;
@@ -1102,7 +1115,12 @@ impl<const N: usize> ParticleFilter<N> {
             rb_update::<N>(rb, lik, &mut b.cols, &mut b.log_lik);
             b.log_lik.copy_from_slice(&b.scratch);
         }
-        Ok(self.finish_update(rng, true))
+        // The weights depend on the centres alone, so the resampling's kernel takes the
+        // posterior mixture's moments from them and `Σ` (`resample_and_kernel`).
+        self.centred = Some(self.mask(&((sigma + sigma.transpose()) * 0.5)));
+        let update = self.finish_update(rng, true);
+        self.centred = None;
+        Ok(update)
     }
 
     /// The Gaussian filter's measurement update with the linearised importance function:
@@ -1690,8 +1708,23 @@ impl<const N: usize> ParticleFilter<N> {
             self.resample(rng);
             return None;
         }
-        let cov = self.mask(&self.sample_covariance()) / unbiased;
-        let mean = self.mean();
+        // After a linearised proposal, the Rao-Blackwellised moments of its posterior
+        // mixture (see `resample_regularised`): the centres' weighted mean, and `Σ` plus
+        // the centres' unbiased covariance; the weighted mean's error is then the
+        // centres' covariance over N_eff.
+        let (mean, cov, mc_cov) = match self.centred {
+            Some(sigma) if self.kernel == KernelPlacement::Shrunk => {
+                let (m, c) = self.centre_moments();
+                let between = self.mask(&c) / unbiased;
+                let v = between + sigma;
+                (m, v, Some(between * (1.0 - unbiased) + v / n))
+            }
+            _ => (
+                self.mean(),
+                self.mask(&self.sample_covariance()) / unbiased,
+                None,
+            ),
+        };
         self.resample(rng);
         let d = psd_factor(&cov).ok()?;
         let rank = (0..N).filter(|&k| d[(k, k)] != 0.0).count();
@@ -1708,7 +1741,38 @@ impl<const N: usize> ParticleFilter<N> {
             }
             KernelPlacement::Plain => 1.0,
         };
-        Some((mean, d * (h * h + monte_carlo).sqrt(), a))
+        let kernel = match mc_cov {
+            Some(mc) => psd_factor(&(cov * (h * h) + mc)).ok()?,
+            None => d * (h * h + monte_carlo).sqrt(),
+        };
+        Some((mean, kernel, a))
+    }
+
+    /// The weighted mean and weighted covariance `Σ w_i (c_i − c̄)(c_i − c̄)ᵀ` of the
+    /// linearised proposal's component means `c_i` (the buffer's `centres`).
+    fn centre_moments(&self) -> (SVector<f64, N>, SMatrix<f64, N, N>) {
+        let b = &self.buf;
+        let n = b.n;
+        let col = |k: usize| &b.centres[k * n..(k + 1) * n];
+        let m = SVector::<f64, N>::from_fn(|k, _| {
+            col(k).iter().zip(&b.weights).map(|(x, w)| x * w).sum()
+        });
+        let mut c = SMatrix::<f64, N, N>::zeros();
+        for k in 0..N {
+            for l in 0..=k {
+                let (ck, cl) = (col(k), col(l));
+                let (mk, ml) = (m[k], m[l]);
+                let v: f64 = ck
+                    .iter()
+                    .zip(cl)
+                    .zip(&b.weights)
+                    .map(|((x, y), w)| w * (x - mk) * (y - ml))
+                    .sum();
+                c[(k, l)] = v;
+                c[(l, k)] = v;
+            }
+        }
+        (m, c)
     }
 
     /// Particle `i` shrunk towards `mean` by `a` (the sampled components the kernel
