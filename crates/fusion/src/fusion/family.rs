@@ -114,7 +114,9 @@ pub enum KernelKind {
     /// Shrunk towards the mean first: the cloud's covariance is kept (Liu & West 2001), as
     /// its unbiased estimate from the weighted cloud, with the bandwidth sized by the
     /// weighted cloud's effective sample size, and grown by the Monte Carlo error of the
-    /// cloud's mean (`1/N_eff + 1/N` of it).
+    /// cloud's mean (`1/N_eff + 1/N` of it). After the linearised proposal, the moments
+    /// are the posterior mixture's, from the proposal's centres and its conditional
+    /// covariance (the draws' noise integrated out).
     LiuWest,
     /// On the resampled particles as they are (Musso, Oudjane & Le Gland 2001).
     Musso,
@@ -282,7 +284,9 @@ pub struct FamilyConfig {
     /// The regularised and Rao-Blackwellised PF on the paper models: the kernel after a
     /// resampling is `"liu_west"` (shrunk towards the mean so that the cloud keeps its
     /// covariance, the weighted cloud's over `1 − Σ w_i²`, its unbiased estimate, plus
-    /// the Monte Carlo error of its mean, `1/N_eff + 1/N` of it; default), `"musso"`
+    /// the Monte Carlo error of its mean, `1/N_eff + 1/N` of it; after the linearised
+    /// proposal, the posterior mixture's moments from the proposal's centres and
+    /// conditional covariance; default), `"musso"`
     /// (added as it is: the cloud inflates by `h_opt²` of its covariance at each
     /// resampling, as the regularised PF was defined) or
     /// `"musso_liu_west_static"` (Musso's on the states the process noise drives, Liu &
