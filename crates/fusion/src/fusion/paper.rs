@@ -202,11 +202,33 @@ impl ProcessSpec {
         }
     }
 
-    /// The degrees of freedom of the model's position NEES: 2 for the 2-D model, whose
-    /// estimate lies on the truth's plane (its vertical error is zero by construction and
-    /// its vertical variance the fixed [`PLANE_VARIANCE_M2`]), so that a consistent
-    /// filter's NEES is χ² with 2 degrees of freedom; 3 otherwise.
+    /// The degrees of freedom of the model's position NEES: the position axes along which
+    /// the estimate can err. The 2-D model's estimate lies on the truth's plane (its
+    /// vertical error is zero by construction and its vertical variance the fixed
+    /// [`PLANE_VARIANCE_M2`]), and its x moves uniformly without process noise (seed 001
+    /// §2), so x is known whenever the prior gives x and ẋ no spread, as the paper's
+    /// `P(0) = Q(T)` does: every filter then carries X(0)'s x exactly, its east error is
+    /// zero (its NEES term, against the covariance floor, below 10⁻¹⁰), and a consistent
+    /// filter's NEES is χ² with 1 degree of freedom; with an `initial_sigma` on x or ẋ, 2.
+    /// The 3-D models: 3.
     pub fn position_dof(&self) -> usize {
+        match self {
+            ProcessSpec::Singer2d { initial_sigma, .. } => {
+                let x_known = initial_sigma.is_none_or(|s| s[0] == 0.0 && s[1] == 0.0);
+                if x_known {
+                    1
+                } else {
+                    2
+                }
+            }
+            ProcessSpec::PvaClock {} | ProcessSpec::PlaneTurning { .. } => 3,
+        }
+    }
+
+    /// [`Self::position_dof`] once the estimator has been reset in a trial: the restart
+    /// from a least-squares fix of the epoch's ranges places x with the fix's error, so
+    /// the 2-D model's x can err from then on (2); the 3-D models keep 3.
+    pub fn position_dof_after_restart(&self) -> usize {
         match self {
             ProcessSpec::Singer2d { .. } => 2,
             ProcessSpec::PvaClock {} | ProcessSpec::PlaneTurning { .. } => 3,
@@ -1213,6 +1235,27 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The 2-D model's NEES counts x only when the prior lets x err; the 3-D models count
+    /// three axes.
+    #[test]
+    fn the_position_dof_counts_the_axes_that_can_err() {
+        let spec = |s: &str| toml::from_str::<ProcessSpec>(s).unwrap();
+        assert_eq!(spec("model = \"singer_2d\"").position_dof(), 1);
+        let zero_x = "model = \"singer_2d\"\ninitial_sigma = [0.0, 0.0, 1.0, 1.0, 1.0]";
+        assert_eq!(spec(zero_x).position_dof(), 1);
+        let with_x = "model = \"singer_2d\"\ninitial_sigma = [0.0, 0.5, 1.0, 1.0, 1.0]";
+        assert_eq!(spec(with_x).position_dof(), 2);
+        assert_eq!(spec("model = \"plane_turning\"").position_dof(), 3);
+        assert_eq!(
+            spec("model = \"singer_2d\"").position_dof_after_restart(),
+            2
+        );
+        assert_eq!(
+            spec("model = \"plane_turning\"").position_dof_after_restart(),
+            3
+        );
+    }
 
     /// The clock-augmented model leaves the motion block to the motion model and adds a
     /// random walk to each clock.

@@ -1740,7 +1740,11 @@ impl<const N: usize> ParticleFilter<N> {
                 // A Kalman-carried clock is each particle's Kalman mean at its drawn
                 // position, which the shrink does not move: the positions then shrink
                 // towards the drawn cloud's mean, with which those clocks agree.
-                let m = if self.rb.is_some() { self.mean() } else { centre };
+                let m = if self.rb.is_some() {
+                    self.mean()
+                } else {
+                    centre
+                };
                 (m, v, Some(between * (1.0 - unbiased) + v / n))
             }
             _ => (

@@ -97,6 +97,11 @@ impl RunReducer {
                     acc.coast_limit_s = coast_limit_s;
                     acc.rpe_delta_s = rpe_delta_s;
                     acc.nees_dof = e.process.as_ref().map_or(3, |p| p.position_dof()) as f64;
+                    acc.nees_dof_restarted = e
+                        .process
+                        .as_ref()
+                        .map_or(3, |p| p.position_dof_after_restart())
+                        as f64;
                     acc.segments = segments
                         .iter()
                         .map(|(label, window_s)| SegmentAcc {
@@ -300,8 +305,11 @@ struct EstimatorAcc {
     first_failures: Vec<FailureEpoch>,
     nees_sum: f64,
     nees_n: usize,
-    /// The degrees of freedom of the position NEES (2 for an estimate on a plane).
+    /// The degrees of freedom of the position NEES (1 for seed 001's plane, whose x is
+    /// known), and after the estimator's first reset in a trial (a restart from least
+    /// squares can leave an axis in error that the prior knew exactly).
     nees_dof: f64,
+    nees_dof_restarted: f64,
     modes: BTreeMap<String, usize>,
     moded: usize,
     /// Per epoch time (its bits: positive times order as their bits do), across trials.
@@ -346,6 +354,7 @@ impl EstimatorAcc {
             nees_sum: 0.0,
             nees_n: 0,
             nees_dof: 3.0,
+            nees_dof_restarted: 3.0,
             modes: BTreeMap::new(),
             moded: 0,
             nees_by_t: BTreeMap::new(),
@@ -369,10 +378,14 @@ impl EstimatorAcc {
         self.trial_errs.clear();
         // One NEES per time per trial: the last record of an instant with several batches
         // (GNSS and FM at the same second), as the TUM tracks below keep.
-        let mut trial_nees: BTreeMap<u64, f64> = BTreeMap::new();
+        let mut trial_nees: BTreeMap<u64, (f64, f64)> = BTreeMap::new();
+        let mut nees_dof = self.nees_dof;
         let mut trial_nis: BTreeMap<u64, (f64, usize)> = BTreeMap::new();
         let mut trial_sq: BTreeMap<u64, f64> = BTreeMap::new();
         for ep in &trace.epochs {
+            if ep.numerical_failure {
+                nees_dof = self.nees_dof_restarted;
+            }
             self.epochs += 1;
             self.gated += u64::from(ep.rejected_gate);
             let indoor = places.map(|p| p.indoor(&ep.truth_ecef_m));
@@ -421,7 +434,7 @@ impl EstimatorAcc {
             if let Some(n) = ep.nees_pos {
                 self.nees_sum += n;
                 self.nees_n += 1;
-                trial_nees.insert(ep.t_s.to_bits(), n);
+                trial_nees.insert(ep.t_s.to_bits(), (n, nees_dof));
             }
             if let Some(n) = ep.nis {
                 // Several batches at one instant: their NIS add, as do their dimensions.
@@ -434,8 +447,8 @@ impl EstimatorAcc {
                 self.moded += 1;
             }
         }
-        for (t, n) in trial_nees {
-            self.nees_by_t.entry(t).or_default().push(n, self.nees_dof);
+        for (t, (n, dof)) in trial_nees {
+            self.nees_by_t.entry(t).or_default().push(n, dof);
         }
         for (t, (n, dof)) in trial_nis {
             self.nis_by_t.entry(t).or_default().push(n, dof as f64);
