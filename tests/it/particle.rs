@@ -490,16 +490,17 @@ fn a_run_reports_the_worlds_bound_in_its_summary_and_report() {
 ///
 /// The defaults of `filter = "pf"` and `"rbpf"` (the linearised proposal, Liu & West's
 /// kernel, a resampling at every epoch) are held to every goal: at 500 particles within
-/// 1.2× (1.04× and 1.01×), at 100 within 1.5× (1.17× and 1.12×), each with its mean NEES
-/// within twice its dof (1.77 and 1.65 times it at 100) and no reset, the ordering
+/// 1.2× (1.01× and 1.00×), at 100 within 1.5× (1.09× and 1.05×), each with its mean NEES
+/// within twice its dof (1.21 and 1.15 times it at 100) and no reset, the ordering
 /// PF-500 < PF-100 < SIR-100, and beating the former default at 100, the prior proposal
 /// with progressive correction on N_eff < N/2 (`RPF-100-prior`); on seed 001 the
-/// regularised and Rao-Blackwellised PF-20 within 1.3× (1.15× and 1.16×). Over master
-/// seeds 1–5 (seed 003 50 trials, seed 001 200) they are at 1.18–1.27× (RPF-100),
-/// 1.11–1.22× (RBPF-100), mean NEES 4.7–6.9 for 3 dof, and 1.15–1.18× (RPF-20), NEES
-/// 1.3–1.4 for 2 (docs/reproductions.md, "The linearised proposal as the default", "The
-/// unbiased covariance in Liu & West's kernel", "The kernel sized by the effective sample
-/// size" and "The kernel carries the Monte Carlo error").
+/// regularised and Rao-Blackwellised PF-20 within 1.3× (1.08× and 1.10×, NEES 0.93 and
+/// 0.99 for their 1 dof). Over master seeds 1–5 (seed 003 50 trials, seed 001 200) they
+/// are at 1.07–1.10× (RPF-100), 1.05–1.10× (RBPF-100), mean NEES 3.4–3.8 for 3 dof, and
+/// 1.07–1.11× (RPF-20, RBPF-20), NEES 0.93–0.99 for 1 (docs/reproductions.md, "The
+/// linearised proposal as the default", "The unbiased covariance in Liu & West's kernel",
+/// "The kernel sized by the effective sample size", "The kernel carries the Monte Carlo
+/// error" and "The kernel from the centres of the linearised proposal").
 #[test]
 fn the_few_particle_goals_hold_on_the_paper_worlds() {
     // (world file, trials, [(row, largest RMSE / PCRLB)]).

@@ -1642,7 +1642,7 @@ impl<const N: usize> ParticleFilter<N> {
     /// the directions the ranges reach only through the dynamics, and the cloud grows
     /// over-confident (seed 003, the default RPF-100 over seeds 1–5: mean NEES 5.3–6.9
     /// for 3 dof against 6.8–11.6; seed 001's RPF-20 over 200 trials 1.15–1.18× of the
-    /// PCRLB, NEES 1.3–1.4 for 2 dof, against 1.26–1.40× and 2.7–4.8;
+    /// PCRLB, NEES 1.3–1.4 for the 2 dof then counted, against 1.26–1.40× and 2.7–4.8;
     /// docs/reproductions.md, "The kernel carries the Monte Carlo error"). The terms
     /// vanish as `1/N`: with 2000 particles and even weights they add 0.1 %.
     ///
@@ -1779,28 +1779,7 @@ impl<const N: usize> ParticleFilter<N> {
     /// The weighted mean and weighted covariance `Σ w_i (c_i − c̄)(c_i − c̄)ᵀ` of the
     /// linearised proposal's component means `c_i` (the buffer's `centres`).
     fn centre_moments(&self) -> (SVector<f64, N>, SMatrix<f64, N, N>) {
-        let b = &self.buf;
-        let n = b.n;
-        let col = |k: usize| &b.centres[k * n..(k + 1) * n];
-        let m = SVector::<f64, N>::from_fn(|k, _| {
-            col(k).iter().zip(&b.weights).map(|(x, w)| x * w).sum()
-        });
-        let mut c = SMatrix::<f64, N, N>::zeros();
-        for k in 0..N {
-            for l in 0..=k {
-                let (ck, cl) = (col(k), col(l));
-                let (mk, ml) = (m[k], m[l]);
-                let v: f64 = ck
-                    .iter()
-                    .zip(cl)
-                    .zip(&b.weights)
-                    .map(|((x, y), w)| w * (x - mk) * (y - ml))
-                    .sum();
-                c[(k, l)] = v;
-                c[(l, k)] = v;
-            }
-        }
-        (m, c)
+        weighted_moments(&self.buf.centres, &self.buf.weights)
     }
 
     /// Particle `i` shrunk towards `mean` by `a` (the sampled components the kernel
@@ -1829,24 +1808,7 @@ impl<const N: usize> ParticleFilter<N> {
 
     /// The weighted covariance of the cloud, `Σ w_i (x_i − x̂)(x_i − x̂)ᵀ`, column by column.
     fn sample_covariance(&self) -> SMatrix<f64, N, N> {
-        let m = self.mean();
-        let b = &self.buf;
-        let mut p = SMatrix::<f64, N, N>::zeros();
-        for k in 0..N {
-            for l in 0..=k {
-                let (ck, cl) = (b.column(k), b.column(l));
-                let (mk, ml) = (m[k], m[l]);
-                let s: f64 = ck
-                    .iter()
-                    .zip(cl)
-                    .zip(&b.weights)
-                    .map(|((x, y), w)| w * (x - mk) * (y - ml))
-                    .sum();
-                p[(k, l)] = s;
-                p[(l, k)] = s;
-            }
-        }
-        p
+        weighted_moments(&self.buf.cols, &self.buf.weights).1
     }
 
     /// The Gaussian filter's covariance from the weighted cloud, by its estimator.
@@ -1911,6 +1873,33 @@ impl<const N: usize> ParticleFilter<N> {
         let rb = self.rb.as_ref()?;
         rb.cols.get(s).copied().flatten().map(|_| rb.var_m2[s])
     }
+}
+
+/// The weighted mean `Σ w_i x_i` and covariance `Σ w_i (x_i − x̄)(x_i − x̄)ᵀ` of the
+/// `n = weights.len()` points whose component `k` is `cols[k·n .. (k+1)·n]`, column by
+/// column.
+fn weighted_moments<const N: usize>(
+    cols: &[f64],
+    weights: &[f64],
+) -> (SVector<f64, N>, SMatrix<f64, N, N>) {
+    let n = weights.len();
+    let col = |k: usize| &cols[k * n..(k + 1) * n];
+    let m = SVector::<f64, N>::from_fn(|k, _| col(k).iter().zip(weights).map(|(x, w)| x * w).sum());
+    let mut p = SMatrix::<f64, N, N>::zeros();
+    for k in 0..N {
+        for l in 0..=k {
+            let (mk, ml) = (m[k], m[l]);
+            let s: f64 = col(k)
+                .iter()
+                .zip(col(l))
+                .zip(weights)
+                .map(|((x, y), w)| w * (x - mk) * (y - ml))
+                .sum();
+            p[(k, l)] = s;
+            p[(l, k)] = s;
+        }
+    }
+    (m, p)
 }
 
 /// The largest exponent `λ ∈ (0, max]` whose tempered weights keep `n_eff(λ) ≥ target`
