@@ -1657,13 +1657,13 @@ impl<const N: usize> ParticleFilter<N> {
     /// drawn cloud's mean instead of `c̄`: its Kalman-carried clocks are each particle's
     /// Kalman mean at its drawn position, and the shrink does not move them; towards `c̄`
     /// the positions and clocks disagree, which the linear test below shows as a clock
-    /// mean off the Kalman filter's by up to 6 standard errors.) The sample moments of the drawn cloud have the same
-    /// expectation, but the draws carry `Σ`, most of `V` when the ranges are precise, and
-    /// their noise in the kernel's covariance and in the next proposal's gain is what
-    /// left 100 particles over-confident on seed 003 (unit test
-    /// `the_linearised_posterior_moments_come_from_the_centres`: 64× less scatter; the
-    /// default RPF-100 over seeds 1–5: 1.07–1.10× of the PCRLB, mean NEES 3.4–3.7 for 3
-    /// dof, against 1.18–1.27× and 5.3–7.0; docs/reproductions.md, "The kernel from the
+    /// mean off the Kalman filter's by up to 6 standard errors.) The sample moments of
+    /// the drawn cloud have the same expectation, but the draws carry `Σ`, most of `V`
+    /// when the ranges are precise, and their noise in the kernel's covariance and in the
+    /// next proposal's gain is what left 100 particles over-confident on seed 003 (unit
+    /// test `the_linearised_posterior_moments_come_from_the_centres`: 64× less scatter;
+    /// the default RPF-100 over seeds 1–5: 1.07–1.10× of the PCRLB, mean NEES 3.4–3.7 for
+    /// 3 dof, against 1.18–1.27× and 5.3–7.0; docs/reproductions.md, "The kernel from the
     /// centres of the linearised proposal").
     pub fn resample_regularised<R: Rng + ?Sized>(&mut self, rng: &mut R) {
         let Some((mean, g, a)) = self.resample_and_kernel(rng) else {
@@ -2766,10 +2766,6 @@ mod tests {
         }
     }
 
-    /// With the position known, the clock is linear-Gaussian and the linearised proposal
-    /// is the exact optimal one: the weighted cloud's clock mean and variance follow the
-    /// textbook Kalman filter up to Monte Carlo error (4 standard errors of the prior
-    /// sample's mean).
     /// After a linearised proposal the posterior is the mixture `Σ w_i N(c_i, Σ)`, whose
     /// weights depend on the centres `c_i` alone; its covariance `Σ + cov_w(c)` is the
     /// drawn cloud's weighted covariance with the draws' noise integrated out (Casella &
@@ -2838,6 +2834,10 @@ mod tests {
         assert!(v_rb < 0.1 * v_plain, "scatter {v_rb} vs {v_plain}");
     }
 
+    /// With the position known, the clock is linear-Gaussian and the linearised proposal
+    /// is the exact optimal one: the weighted cloud's clock mean and variance follow the
+    /// textbook Kalman filter up to Monte Carlo error (4 standard errors of the prior
+    /// sample's mean).
     #[test]
     fn linearised_proposal_follows_the_kalman_filter_on_a_linear_clock() {
         let mut truth =
