@@ -503,37 +503,37 @@ fn a_run_reports_the_worlds_bound_in_its_summary_and_report() {
 /// error" and "The kernel from the centres of the linearised proposal").
 #[test]
 fn the_few_particle_goals_hold_on_the_paper_worlds() {
-    // (world file, trials, [(row, largest RMSE / PCRLB)]).
-    type Case<'a> = (&'a str, &'a str, &'a [(&'a str, f64)]);
+    // (world file, trials, [(row, largest RMSE / PCRLB, NEES held to 2× its dof)]).
+    type Case<'a> = (&'a str, &'a str, &'a [(&'a str, f64, bool)]);
     let cases: [Case; 2] = [
         (
             "seed003-seamless.toml",
             "20",
             &[
-                ("GPF-100-lin", 1.5),
-                ("GPF-500-lin", 1.2),
-                ("RPF-500", 1.2),
-                ("RBPF-500", 1.2),
-                ("RPF-100", 1.5),
-                ("RBPF-100", 1.5),
-                ("RBPF-100-lin-Musso-theta1", 1.5),
-                ("RBPF-100-Musso", 1.5),
-                ("RPF-100-Musso-LW-static", 1.5),
-                ("RPF-100-lin-Musso-LW-static-theta1", 1.5),
-                ("RPF-500-lin-Musso-LW-static", 1.2),
-                ("RBPF-500-lin-Musso-theta1", 1.2),
+                ("GPF-100-lin", 1.5, true),
+                ("GPF-500-lin", 1.2, true),
+                ("RPF-500", 1.2, true),
+                ("RBPF-500", 1.2, true),
+                ("RPF-100", 1.5, true),
+                ("RBPF-100", 1.5, true),
+                ("RBPF-100-lin-Musso-theta1", 1.5, true),
+                ("RBPF-100-Musso", 1.5, true),
+                ("RPF-100-Musso-LW-static", 1.5, true),
+                ("RPF-100-lin-Musso-LW-static-theta1", 1.5, true),
+                ("RPF-500-lin-Musso-LW-static", 1.2, true),
+                ("RBPF-500-lin-Musso-theta1", 1.2, true),
             ],
         ),
         (
             "seed001-pf2d.toml",
             "200",
             &[
-                // Within 1.3× of the bound, but over-confident (mean NEES 2.3 for its one
-                // degree of freedom): its NEES is not held to the goal below.
-                ("GPF-20-lin-unbiased", 1.3),
-                ("RPF-20-lin-Musso-theta1", 1.3),
-                ("RPF-20", 1.3),
-                ("RBPF-20", 1.3),
+                // Within 1.3× of the bound, but over-confident (mean NEES 2.3–2.6 for its one
+                // degree of freedom): its NEES is not held to the goal.
+                ("GPF-20-lin-unbiased", 1.3, false),
+                ("RPF-20-lin-Musso-theta1", 1.3, true),
+                ("RPF-20", 1.3, true),
+                ("RBPF-20", 1.3, true),
             ],
         ),
     ];
@@ -551,14 +551,14 @@ fn the_few_particle_goals_hold_on_the_paper_worlds() {
                 .find(|e| e["name"] == name)
                 .unwrap_or_else(|| panic!("{file} has no row {name}"))
         };
-        for (name, limit) in rows {
+        for (name, limit, consistent) in rows {
             let e = row(name);
             let eff = e["efficiency"].as_f64().unwrap();
             let nees = e["nees"]["mean"].as_f64().unwrap();
             let dof = e["nees"]["dof"].as_f64().unwrap();
             eprintln!("{file} {name}: rmse/PCRLB {eff:.3}, mean NEES {nees:.2} (dof {dof})");
             assert!(eff <= *limit, "{file} {name}: {eff} > {limit}");
-            if *name != "GPF-20-lin-unbiased" {
+            if *consistent {
                 assert!(nees <= 2.0 * dof, "{file} {name}: NEES {nees}, dof {dof}");
             }
             assert_eq!(e["numerical_failures"].as_u64(), Some(0), "{file} {name}");

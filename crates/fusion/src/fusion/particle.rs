@@ -759,7 +759,6 @@ impl<const N: usize> ParticleFilter<N> {
         }
         self.predicted = None;
         self.deferred_kernel = None;
-        self.centred = None;
         if let Some(mm) = &self.mm {
             // The positions from their marginal, the motion states' Kalman means from
             // their conditional given each particle's positions.
