@@ -118,10 +118,13 @@ pub enum KernelKind {
     /// are the posterior mixture's, from the proposal's centres and its conditional
     /// covariance (the draws' noise integrated out).
     LiuWest,
-    /// On the resampled particles as they are (Musso, Oudjane & Le Gland 2001).
+    /// On the resampled particles as they are (Musso, Oudjane & Le Gland 2001), shaped by
+    /// the weighted cloud's covariance (after the linearised proposal, its expectation
+    /// given the proposal's centres, the draws' noise integrated out).
     Musso,
     /// Musso's on the states the process noise drives, Liu & West's shrinkage on the
-    /// static parameters (the constant clocks).
+    /// static parameters (the constant clocks); after the linearised proposal, shaped as
+    /// `Musso` is.
     MussoLiuWestStatic,
 }
 
@@ -288,7 +291,8 @@ pub struct FamilyConfig {
     /// proposal, the posterior mixture's moments from the proposal's centres and
     /// conditional covariance; default), `"musso"`
     /// (added as it is: the cloud inflates by `h_opt²` of its covariance at each
-    /// resampling, as the regularised PF was defined) or
+    /// resampling, as the regularised PF was defined; after the linearised proposal the
+    /// covariance is the weighted cloud's expected one given the proposal's centres) or
     /// `"musso_liu_west_static"` (Musso's on the states the process noise drives, Liu &
     /// West's shrinkage on the model's constant clocks).
     pub pf_kernel: KernelKind,

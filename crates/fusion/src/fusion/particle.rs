@@ -1664,6 +1664,18 @@ impl<const N: usize> ParticleFilter<N> {
     /// the default RPF-100 over seeds 1–5: 1.07–1.10× of the PCRLB, mean NEES 3.4–3.7 for
     /// 3 dof, against 1.18–1.27× and 5.3–7.0; docs/reproductions.md, "The kernel from the
     /// centres of the linearised proposal").
+    ///
+    /// Musso's placements ([`KernelPlacement::Plain`], [`KernelPlacement::ShrunkStatic`])
+    /// take their `D Dᵀ`, the weighted covariance of the cloud, the same way after a
+    /// linearised proposal: given the centres, the draws `x_i = c_i + G ε_i` give it the
+    /// expectation `Σ w_i (c_i − c̄)(c_i − c̄)ᵀ + (1 − Σ w_i²) Σ`, which is used in its
+    /// place (and `c̄` as the mean the static components shrink towards). It is the
+    /// covariance Musso et al. define, with the draws' noise integrated out; their
+    /// bandwidth and inflation are unchanged. Without it the rows with the linearised
+    /// proposal and Musso's kernel were over-confident on some seeds (seed 003,
+    /// RPF-100-lin-Musso-LW-static over seeds 1–5: mean NEES 3.5–17.7 for 3 dof, with it
+    /// 3.2–4.2; seed 001's RPF-20-lin-Musso-theta1 0.8 on every seed against 0.9–5.5;
+    /// docs/reproductions.md, "Musso's kernel from the centres").
     pub fn resample_regularised<R: Rng + ?Sized>(&mut self, rng: &mut R) {
         let Some((mean, g, a)) = self.resample_and_kernel(rng) else {
             return;
@@ -1728,14 +1740,14 @@ impl<const N: usize> ParticleFilter<N> {
             return None;
         }
         // After a linearised proposal, the Rao-Blackwellised moments of its posterior
-        // mixture (see `resample_regularised`): the centres' weighted mean, and `Σ` plus
-        // the centres' unbiased covariance; the mean's error is then the centres' share
-        // over N_eff, plus the covariance over N for the new draws.
+        // mixture (see `resample_regularised`): the centres' weighted mean, and for Liu &
+        // West `Σ` plus the centres' unbiased covariance, the mean's error then being the
+        // centres' share over N_eff plus the covariance over N for the new draws; for
+        // Musso's placements the weighted covariance with the draws integrated out,
+        // `cov_w(c) + (1 − Σ w_i²) Σ`.
         let (mean, cov, mc_cov) = match self.centred {
-            Some(sigma) if self.kernel == KernelPlacement::Shrunk => {
+            Some(sigma) => {
                 let (centre, c) = self.centre_moments();
-                let between = self.mask(&c) / unbiased;
-                let v = between + sigma;
                 // A Kalman-carried clock is each particle's Kalman mean at its drawn
                 // position, which the shrink does not move: the positions then shrink
                 // towards the drawn cloud's mean, with which those clocks agree.
@@ -1744,9 +1756,19 @@ impl<const N: usize> ParticleFilter<N> {
                 } else {
                     centre
                 };
-                (m, v, Some(between * (1.0 - unbiased) + v / n))
+                match self.kernel {
+                    KernelPlacement::Shrunk => {
+                        let between = self.mask(&c) / unbiased;
+                        let v = between + sigma;
+                        (m, v, Some(between * (1.0 - unbiased) + v / n))
+                    }
+                    KernelPlacement::Plain | KernelPlacement::ShrunkStatic => {
+                        let spread = 1.0 - self.weight_square_sum();
+                        (m, self.mask(&c) + sigma * spread, None)
+                    }
+                }
             }
-            _ => (
+            None => (
                 self.mean(),
                 self.mask(&self.sample_covariance()) / unbiased,
                 None,
@@ -2770,7 +2792,10 @@ mod tests {
     /// drawn cloud's weighted covariance with the draws' noise integrated out (Casella &
     /// Robert 1996). On the linear clock, over 4000 ten-particle epochs, both estimates
     /// (each divided by `1 − Σ w²`) average to the Kalman filter's posterior variance, and
-    /// the Rao-Blackwellised one scatters much less.
+    /// the Rao-Blackwellised one scatters much less. Musso's kernel, which takes the
+    /// weighted covariance itself, gets `cov_w(c) + (1 − Σ w²) Σ`: the drawn cloud's
+    /// weighted covariance averages to it (the weights do not depend on the draws), and
+    /// it scatters much less.
     #[test]
     fn the_linearised_posterior_moments_come_from_the_centres() {
         let truth = KnownPositionClock::new(TrialRng::new(9, 1).stream("test/centres/noise"));
@@ -2785,8 +2810,14 @@ mod tests {
         let mut lik = PseudorangeLikelihood::with_capacity(3);
         let mut noise = TrialRng::new(9, 2).stream("test/centres/ranges");
         let mut rng = TrialRng::new(9, 0).stream("test/centres");
+        let mut resampling = TrialRng::new(9, 3).stream("test/centres/resampling");
+        let mut sigma_m = SMatrix::<f64, 4, 4>::zeros();
+        sigma_m[(3, 3)] = sigma;
+        // Musso's bandwidth for one dimension (the clock) and ten particles.
+        let h2 = (4.0f64 / (10.0 * 3.0)).powf(2.0 / 5.0);
         let reps = 4000;
         let (mut rb, mut plain) = (Vec::with_capacity(reps), Vec::with_capacity(reps));
+        let mut musso = Vec::with_capacity(reps);
         for _ in 0..reps {
             // The truth's clock drawn from the filter's own predictive, so that the
             // Kalman variance is the posterior's on average.
@@ -2810,6 +2841,14 @@ mod tests {
             let unbiased = 1.0 - pf.weight_square_sum();
             rb.push(sigma + pf.centre_moments().1[(3, 3)] / unbiased);
             plain.push(pf.sample_covariance()[(3, 3)] / unbiased);
+            // Musso's kernel as the linearised update's resampling would size it: `D Dᵀ`
+            // is the kernel `h² D Dᵀ` over h², against the drawn cloud's weighted
+            // covariance (both undivided).
+            let cloud = pf.sample_covariance()[(3, 3)];
+            let mut pf = pf.with_kernel(KernelPlacement::Plain);
+            pf.centred = Some(sigma_m);
+            let (_, g, _) = pf.resample_and_kernel(&mut resampling).unwrap();
+            musso.push(((g * g.transpose())[(3, 3)] / h2, cloud));
         }
         let stats = |v: &[f64]| {
             let m = v.iter().sum::<f64>() / v.len() as f64;
@@ -2831,6 +2870,22 @@ mod tests {
         // The draws carry Σ / V = 7/8 of the variance: integrated out, the estimate's
         // scatter falls by far more than the factor asserted (measured 64×).
         assert!(v_rb < 0.1 * v_plain, "scatter {v_rb} vs {v_plain}");
+        // Musso's: the paired difference averages to zero within 4 standard errors, and
+        // the centres' estimate scatters less than a tenth as much as the cloud's.
+        let diff: Vec<f64> = musso.iter().map(|(m, c)| m - c).collect();
+        let (m_diff, v_diff) = stats(&diff);
+        let musso_k: Vec<f64> = musso.iter().map(|(m, _)| *m).collect();
+        let cloud: Vec<f64> = musso.iter().map(|(_, c)| *c).collect();
+        let ((_, v_musso), (m_cloud, v_cloud)) = (stats(&musso_k), stats(&cloud));
+        let se = (v_diff / reps as f64).sqrt();
+        assert!(
+            m_diff.abs() < 4.0 * se,
+            "Musso: {m_diff} (se {se}) of {m_cloud}"
+        );
+        assert!(
+            v_musso < 0.1 * v_cloud,
+            "Musso scatter {v_musso} vs {v_cloud}"
+        );
     }
 
     /// With the position known, the clock is linear-Gaussian and the linearised proposal
