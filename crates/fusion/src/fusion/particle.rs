@@ -1669,7 +1669,8 @@ impl<const N: usize> ParticleFilter<N> {
     /// take their `D Dᵀ`, the weighted covariance of the cloud, the same way after a
     /// linearised proposal: given the centres, the draws `x_i = c_i + G ε_i` give it the
     /// expectation `Σ w_i (c_i − c̄)(c_i − c̄)ᵀ + (1 − Σ w_i²) Σ`, which is used in its
-    /// place (and `c̄` as the mean the static components shrink towards). It is the
+    /// place (and `c̄` as the mean the static components shrink towards, the drawn mean
+    /// for the Rao-Blackwellised filter as above). It is the
     /// covariance Musso et al. define, with the draws' noise integrated out; their
     /// bandwidth and inflation are unchanged. Without it the rows with the linearised
     /// proposal and Musso's kernel were over-confident on some seeds (seed 003,
@@ -1763,7 +1764,8 @@ impl<const N: usize> ParticleFilter<N> {
                         (m, v, Some(between * (1.0 - unbiased) + v / n))
                     }
                     KernelPlacement::Plain | KernelPlacement::ShrunkStatic => {
-                        let spread = 1.0 - self.weight_square_sum();
+                        // Σ w_i² ≤ 1; the clamp only guards its rounding.
+                        let spread = (1.0 - self.weight_square_sum()).max(0.0);
                         (m, self.mask(&c) + sigma * spread, None)
                     }
                 }
