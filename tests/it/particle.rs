@@ -61,7 +61,7 @@ fn normal4(rng: &mut StreamRng) -> V4 {
 }
 
 /// The members of the family that run on a position-and-clock state, on the same buffers.
-fn family(n: usize) -> [ParticleFilter<4>; 6] {
+fn family(n: usize) -> [ParticleFilter<4>; 8] {
     let make =
         |scheme| ParticleFilter::new(ParticleBuffer::<4>::new(n).unwrap(), scheme, 0.5).unwrap();
     [
@@ -82,13 +82,21 @@ fn family(n: usize) -> [ParticleFilter<4>; 6] {
                 (s == System::Dtmb.index()).then_some(3)
             }))
             .unwrap(),
+        make(Resampling::Systematic)
+            .regularised()
+            .with_kernel(KernelPlacement::Plain),
+        make(Resampling::Systematic)
+            .regularised()
+            .with_kernel(KernelPlacement::ShrunkStatic)
+            .with_static_components([false, false, false, true]),
     ]
 }
 
 /// No member of the family allocates in an epoch (predict, the linearised proposal,
 /// weight by ranges, resample with or without the kernel, moments) once built: SIR,
-/// regularised and Rao-Blackwellised (also with progressive correction), Gaussian (its prediction factors the cloud's covariance
-/// and redraws it; its linearised update factors the EKF update) and marginalised.
+/// regularised (with each kernel placement) and Rao-Blackwellised (also with progressive
+/// correction), Gaussian (its prediction factors the cloud's covariance and redraws it;
+/// its linearised update factors the EKF update) and marginalised.
 #[test]
 fn no_particle_filter_allocates_per_epoch() {
     let layout = StateLayout {
