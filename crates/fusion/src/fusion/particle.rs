@@ -1670,9 +1670,9 @@ impl<const N: usize> ParticleFilter<N> {
     /// linearised proposal: given the centres, the draws `x_i = c_i + G ε_i` give it the
     /// expectation `Σ w_i (c_i − c̄)(c_i − c̄)ᵀ + (1 − Σ w_i²) Σ`, which is used in its
     /// place (and `c̄` as the mean the static components shrink towards, the drawn mean
-    /// for the Rao-Blackwellised filter as above). It is the
-    /// covariance Musso et al. define, with the draws' noise integrated out; their
-    /// bandwidth and inflation are unchanged. Without it the rows with the linearised
+    /// for the Rao-Blackwellised filter as above). It is the covariance Musso et al.
+    /// define, with the draws' noise integrated out; their bandwidth and inflation are
+    /// unchanged. Without it the rows with the linearised
     /// proposal and Musso's kernel were over-confident on some seeds (seed 003,
     /// RPF-100-lin-Musso-LW-static over seeds 1–5: mean NEES 3.5–17.7 for 3 dof, with it
     /// 3.2–4.2; seed 001's RPF-20-lin-Musso-theta1 0.8 on every seed against 0.9–5.5;
