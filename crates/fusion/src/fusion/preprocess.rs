@@ -122,11 +122,22 @@ impl DtmbClockCorrector {
     /// exists), then corrects them in place and removes those of towers without a
     /// calibration. Returns how many were removed.
     pub fn correct(&mut self, t: GpsTime, ranges: &mut Vec<RangeMeasurement>) -> u32 {
+        self.calibrate(t, ranges.iter());
+        self.apply(ranges)
+    }
+
+    /// Calibrates from the DTMB ranges among `ranges` when a reference of the same
+    /// instant `t` exists (the other ranges are passed over).
+    pub fn calibrate<'a>(
+        &mut self,
+        t: GpsTime,
+        ranges: impl Iterator<Item = &'a RangeMeasurement>,
+    ) {
         let reference = self
             .reference
             .filter(|(t_ref, _, _)| t.seconds_since(*t_ref).abs() < 1e-3);
         if let Some((_, pos, clock_m)) = reference {
-            for m in ranges.iter().filter(|m| m.system() == System::Dtmb) {
+            for m in ranges.filter(|m| m.system() == System::Dtmb) {
                 let sample = m.pseudorange_m - (m.emitter_pos_ecef_m - pos).norm() - clock_m;
                 if !sample.is_finite() {
                     continue;
@@ -145,6 +156,11 @@ impl DtmbClockCorrector {
                 }
             }
         }
+    }
+
+    /// Corrects the DTMB ranges in `ranges` in place by their towers' calibrated biases
+    /// and removes those of towers without a calibration. Returns how many were removed.
+    pub fn apply(&self, ranges: &mut Vec<RangeMeasurement>) -> u32 {
         let before = ranges.len();
         let towers = &self.towers;
         ranges.retain_mut(|m| {
@@ -243,17 +259,27 @@ impl FrontEnd {
             }
             None => Admission::all(),
         };
-        self.ranges.clear();
         let systems = &self.systems;
+        // Seed 000's preprocessing (§3.1, Fig. 2) corrects the DTMB clock whenever the GPS
+        // geometry allows it, before and apart from the mode selection, whose GDOP_GPS+DTMB
+        // input it prepares: a tower is calibrated from its ranges in every instant with a
+        // good GPS fix, also when the selected mode leaves DTMB out of the filter.
+        if let Some(c) = self.corrector.as_mut() {
+            c.observe(batch);
+            c.calibrate(
+                batch.t,
+                batch.ranges().filter(|m| systems.contains(&m.system())),
+            );
+        }
+        self.ranges.clear();
         self.ranges.extend(
             batch
                 .ranges()
                 .filter(|m| systems.contains(&m.system()) && admitted.admits(m.system()))
                 .copied(),
         );
-        if let Some(c) = self.corrector.as_mut() {
-            c.observe(batch);
-            out.rejected += c.correct(batch.t, &mut self.ranges);
+        if let Some(c) = self.corrector.as_ref() {
+            out.rejected += c.apply(&mut self.ranges);
         }
         self.fixes_admitted = admitted.fixes && self.fixes.contains(&batch.source);
     }
@@ -306,17 +332,20 @@ mod tests {
         }
     }
 
-    /// Noise-free ranges: the calibration recovers the tower's bias exactly (relative to
-    /// the GPS clock), withholds the tower before its first calibration, and corrects its
-    /// range to the GPS clock afterwards.
-    #[test]
-    fn a_good_gps_fix_calibrates_the_tower_bias() {
+    /// A receiver near Beijing, six GPS satellites of a good geometry around it, and a
+    /// DTMB tower 12 km north on a 300 m mast.
+    struct Sky {
+        rx: Vector3<f64>,
+        sats: Vec<Vector3<f64>>,
+        tower_pos: Vector3<f64>,
+    }
+
+    fn sky() -> Sky {
         let rx = Vector3::new(-2_178_000.0, 4_388_000.0, 4_069_000.0);
-        let clock_m = 1234.5;
         let up = rx.normalize();
         let east = Vector3::new(-rx.y, rx.x, 0.0).normalize();
         let north = up.cross(&east);
-        let sats: Vec<Vector3<f64>> = [
+        let sats = [
             (0.0, 80.0),
             (0.0, 30.0),
             (90.0, 35.0),
@@ -330,26 +359,51 @@ mod tests {
             rx + (north * a.cos() * e.cos() + east * a.sin() * e.cos() + up * e.sin()) * 2.2e7
         })
         .collect();
-        let gnss = MeasurementBatch {
-            t: GpsTime::from_week_tow(2000, 100.0),
-            source: SourceKind::Gnss,
-            items: sats
+        Sky {
+            rx,
+            sats,
+            tower_pos: rx + north * 12_000.0 + up * 300.0,
+        }
+    }
+
+    /// A batch at `tow_s` of noise-free ranges from `emitters` of `system`, every one
+    /// offset by `bias_m`.
+    fn batch(
+        source: SourceKind,
+        system: System,
+        tow_s: f64,
+        emitters: &[Vector3<f64>],
+        rx: &Vector3<f64>,
+        bias_m: f64,
+    ) -> MeasurementBatch {
+        MeasurementBatch {
+            t: GpsTime::from_week_tow(2000, tow_s),
+            source,
+            items: emitters
                 .iter()
                 .enumerate()
-                .map(|(i, s)| {
-                    Measurement::Range(range(
-                        EmitterId::new(System::Gps, i as u16 + 1),
-                        *s,
-                        &rx,
-                        clock_m,
-                    ))
+                .map(|(i, e)| {
+                    Measurement::Range(range(EmitterId::new(system, i as u16 + 1), *e, rx, bias_m))
                 })
                 .collect(),
             unscored: false,
             raw: None,
-        };
+        }
+    }
+
+    /// Noise-free ranges: the calibration recovers the tower's bias exactly (relative to
+    /// the GPS clock), withholds the tower before its first calibration, and corrects its
+    /// range to the GPS clock afterwards.
+    #[test]
+    fn a_good_gps_fix_calibrates_the_tower_bias() {
+        let Sky {
+            rx,
+            sats,
+            tower_pos,
+        } = sky();
+        let clock_m = 1234.5;
+        let gnss = batch(SourceKind::Gnss, System::Gps, 100.0, &sats, &rx, clock_m);
         let tower = EmitterId::new(System::Dtmb, 1);
-        let tower_pos = rx + north * 12_000.0 + up * 300.0;
         let tower_bias_m = 45.0 + 17.0;
         let mut c = DtmbClockCorrector::new(ClockCorrectionConfig::default());
         // Before any GPS fix the tower is unknown: its range is withheld.
@@ -370,5 +424,78 @@ mod tests {
         strict.observe(&gnss);
         let mut r = vec![range(tower, tower_pos, &rx, clock_m + tower_bias_m)];
         assert_eq!(strict.correct(gnss.t, &mut r), 1);
+    }
+
+    /// Seed 000's preprocessing calibrates the tower whenever the GPS geometry is good,
+    /// whatever mode the selection then picks (§3.1, Fig. 2). In the open the fuzzy
+    /// selection keeps DTMB out (mode A); when the sky closes to three satellites it
+    /// admits the tower, which must arrive corrected to the GPS clock rather than be
+    /// withheld as never calibrated.
+    #[test]
+    fn the_tower_is_calibrated_while_the_mode_leaves_it_out() {
+        use crate::fusion::mode::FuzzyConfig;
+        let Sky {
+            rx,
+            sats,
+            tower_pos,
+        } = sky();
+        let clock_m = 1234.5;
+        let tower_bias_m = 62.0;
+        let mut fe = FrontEnd::new(
+            &[System::Gps, System::Dtmb],
+            &[],
+            Some(&ModeSelection::Fuzzy(Box::new(FuzzyConfig::default()))),
+            Some(ClockCorrectionConfig::default()),
+        )
+        .unwrap();
+        let tower = [tower_pos];
+        let dtmb = |tow_s| {
+            batch(
+                SourceKind::Dtmb,
+                System::Dtmb,
+                tow_s,
+                &tower,
+                &rx,
+                clock_m + tower_bias_m,
+            )
+        };
+        // Open sky: mode A, the tower's range stays out of the filter.
+        for tow_s in [100.0, 101.0] {
+            let mut out = EpochOutcome::default();
+            fe.admit(
+                &batch(SourceKind::Gnss, System::Gps, tow_s, &sats, &rx, clock_m),
+                Some(&rx),
+                &mut out,
+            );
+            let mut out = EpochOutcome::default();
+            fe.admit(&dtmb(tow_s), Some(&rx), &mut out);
+            assert_eq!(out.mode, Some("A"));
+            assert!(fe.ranges.is_empty());
+            assert_eq!(out.rejected, 0);
+        }
+        // Three satellites: the selection admits the tower.
+        let mut out = EpochOutcome::default();
+        fe.admit(
+            &batch(
+                SourceKind::Gnss,
+                System::Gps,
+                102.0,
+                &sats[..3],
+                &rx,
+                clock_m,
+            ),
+            Some(&rx),
+            &mut out,
+        );
+        let mut out = EpochOutcome::default();
+        fe.admit(&dtmb(102.0), Some(&rx), &mut out);
+        assert_ne!(out.mode, Some("A"));
+        assert_eq!(
+            out.rejected, 0,
+            "the tower was withheld as never calibrated"
+        );
+        assert_eq!(fe.ranges.len(), 1);
+        let corrected = fe.ranges[0].pseudorange_m - (tower_pos - rx).norm();
+        assert!((corrected - clock_m).abs() < 1e-4, "{corrected}");
     }
 }
