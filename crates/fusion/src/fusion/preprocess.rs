@@ -433,7 +433,6 @@ mod tests {
     /// withheld as never calibrated.
     #[test]
     fn the_tower_is_calibrated_while_the_mode_leaves_it_out() {
-        use crate::fusion::mode::FuzzyConfig;
         let Sky {
             rx,
             sats,
@@ -444,7 +443,7 @@ mod tests {
         let mut fe = FrontEnd::new(
             &[System::Gps, System::Dtmb],
             &[],
-            Some(&ModeSelection::Fuzzy(Box::new(FuzzyConfig::default()))),
+            Some(&ModeSelection::Fuzzy(Box::default())),
             Some(ClockCorrectionConfig::default()),
         )
         .unwrap();
