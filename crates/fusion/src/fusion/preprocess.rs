@@ -16,7 +16,9 @@
 //! carry a single clock state. The smoothing (a running mean that becomes an exponential
 //! average after `window` samples) follows the tower clock's slow drift. A tower never
 //! calibrated has an unknown bias of up to microseconds, so its ranges are withheld (and
-//! counted as rejected) until its first calibration.
+//! counted as rejected) until its first calibration. The calibration runs in every instant
+//! with a good GPS fix, before the mode selection decides what the filter may use (the
+//! paper's Fig. 2), so a tower left out in the open is ready when the sky closes.
 
 use crate::core::{EmitterId, GpsTime, System};
 use crate::fusion::selection::{Admission, ModeSelection, ModeSelector};
