@@ -120,14 +120,6 @@ impl DtmbClockCorrector {
         self.towers.iter().find(|t| t.id == id).map(|t| t.bias_m)
     }
 
-    /// Calibrates from the DTMB ranges in `ranges` (when a reference of the same instant
-    /// exists), then corrects them in place and removes those of towers without a
-    /// calibration. Returns how many were removed.
-    pub fn correct(&mut self, t: GpsTime, ranges: &mut Vec<RangeMeasurement>) -> u32 {
-        self.calibrate(t, ranges.iter());
-        self.apply(ranges)
-    }
-
     /// Calibrates from the DTMB ranges among `ranges` when a reference of the same
     /// instant `t` exists (the other ranges are passed over).
     pub fn calibrate<'a>(
@@ -410,11 +402,13 @@ mod tests {
         let mut c = DtmbClockCorrector::new(ClockCorrectionConfig::default());
         // Before any GPS fix the tower is unknown: its range is withheld.
         let mut r = vec![range(tower, tower_pos, &rx, clock_m + tower_bias_m)];
-        assert_eq!(c.correct(gnss.t, &mut r), 1);
+        c.calibrate(gnss.t, r.iter());
+        assert_eq!(c.apply(&mut r), 1);
         assert!(r.is_empty());
         c.observe(&gnss);
         let mut r = vec![range(tower, tower_pos, &rx, clock_m + tower_bias_m)];
-        assert_eq!(c.correct(gnss.t, &mut r), 0);
+        c.calibrate(gnss.t, r.iter());
+        assert_eq!(c.apply(&mut r), 0);
         assert!((c.bias_m(tower).unwrap() - tower_bias_m).abs() < 1e-4);
         let corrected = r[0].pseudorange_m - (tower_pos - rx).norm();
         assert!((corrected - clock_m).abs() < 1e-4, "{corrected}");
@@ -425,7 +419,8 @@ mod tests {
         });
         strict.observe(&gnss);
         let mut r = vec![range(tower, tower_pos, &rx, clock_m + tower_bias_m)];
-        assert_eq!(strict.correct(gnss.t, &mut r), 1);
+        strict.calibrate(gnss.t, r.iter());
+        assert_eq!(strict.apply(&mut r), 1);
     }
 
     /// Seed 000's preprocessing calibrates the tower whenever the GPS geometry is good,
